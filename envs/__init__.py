@@ -1,0 +1,45 @@
+"""GridNav: a jit-compiled, vmapped stand-in for AI2-THOR object-target navigation.
+
+    import jax, envs
+    env, params = envs.make("GridNav-v0", setup="savn", split="train")
+    obs, state = env.reset(key, params)
+    obs, state, reward, terminated, truncated, info = env.step(key, state, action, params)
+
+``envs`` knows nothing of the agent.
+"""
+
+from envs import catalog, spaces, wrappers
+from envs.bank import SceneBank, pose_from_index, pose_index
+from envs.catalog import ACTIONS, ROOM_TYPES, SPLITS
+from envs.gridnav import EnvParams, EnvState, GridNav, time_limits
+
+REGISTERED = ("GridNav-v0",)
+
+
+def make(env_id: str = "GridNav-v0", setup: str = "savn", split: str = "train", room_types=None,
+         training: bool | None = None, **env_kwargs):
+    """Build the environment and the params of one split.
+
+    Args:
+      env_id: "GridNav-v0".
+      setup: "savn" or "org" (see DESIGN.md).
+      split: "train" (layouts 1-20), "val" (21, 23, ..., 29) or "test" (22, 24, ..., 30).
+      room_types: None for all four, or some of "kitchen", "living_room", "bedroom",
+        "bathroom" (names or indices).
+      training: time limits of training (30 steps) or evaluation (100, 200 in living
+        rooms); by default training limits on "train" and evaluation limits otherwise.
+      env_kwargs: static constructor arguments of GridNav (grid_size, view_width,
+        precomputed_views).
+    Returns:
+      (env, params).
+    """
+    if env_id not in REGISTERED:
+        raise ValueError(f"unknown environment {env_id!r}; registered: {list(REGISTERED)}")
+    env = GridNav(setup=setup, **env_kwargs)
+    return env, env.make_params(split, room_types=room_types, training=training)
+
+
+__all__ = [
+    "ACTIONS", "ROOM_TYPES", "SPLITS", "EnvParams", "EnvState", "GridNav", "SceneBank", "catalog",
+    "make", "pose_from_index", "pose_index", "spaces", "time_limits", "wrappers",
+]  # fmt: skip

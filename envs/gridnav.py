@@ -1,0 +1,257 @@
+"""GridNav-v0: object-target visual navigation on a grid, a jit-compiled stand-in for AI2-THOR.
+
+The gymnax 1.0 contract: ``reset(key, params) -> (obs, state)`` and
+``step(key, state, action, params) -> (obs, state, reward, terminated, truncated, info)``
+with automatic reset inside ``step`` (by ``jnp.where``, not ``lax.cond``) and
+``info["final_observation"]`` holding the last real observation of an episode that ended.
+Everything is a pure function of explicit keys, states and params; vmap it for batches.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from envs import catalog as C
+from envs import spaces
+from envs.bank import UNREACHABLE, SceneBank, make_bank, move_ahead, pose_index, transition
+from envs.raycast import DEPTH_RESOLUTION, NUM_ROWS, cast_view
+
+TRAIN_TIME_LIMIT = 30  # SAVN's training episode length
+EVAL_TIME_LIMIT = 100
+EVAL_TIME_LIMIT_LIVING_ROOM = 200
+NUM_DETECTION_FEATURES = 7  # visible, col min/max, row min/max, confidence, is target
+
+
+@struct.dataclass
+class EnvState:
+    agent_pos: jax.Array  # int32 [2] (row, col)
+    heading: jax.Array  # int32 [] 0..7, 45 degree steps clockwise from north
+    horizon: jax.Array  # int32 [] 0 = level, 1 = 30 degrees down
+    scene: jax.Array  # int32 [] index into the scene bank
+    room_type: jax.Array  # int32 [] catalog.KITCHEN, LIVING_ROOM, BEDROOM, BATHROOM
+    target: jax.Array  # int32 [] category index in the setup's category list
+    target_slot: jax.Array  # int32 [] index of the target in bank.targets[scene]
+    time: jax.Array  # int32 [] steps taken in this episode
+    optimal_length: jax.Array  # int32 [] shortest number of actions to success from the start
+
+
+@struct.dataclass
+class EnvParams:
+    bank: SceneBank  # the scenes of the split, with their precomputed tables
+    max_steps: jax.Array  # int32 [4] time limit by room type (kitchen, living, bed, bath)
+    success_reward: float = 5.0
+    step_penalty: float = -0.01
+
+
+def time_limits(training: bool) -> jax.Array:
+    """Episode limits by room type: 30 for training; 100 (200 in living rooms) for evaluation."""
+    if training:
+        return jnp.full(4, TRAIN_TIME_LIMIT, jnp.int32)
+    limits = [EVAL_TIME_LIMIT] * 4
+    limits[C.LIVING_ROOM] = EVAL_TIME_LIMIT_LIVING_ROOM
+    return jnp.asarray(limits, jnp.int32)
+
+
+class GridNav:
+    """The environment.  Shape-setting values are static constructor arguments.
+
+    Args:
+      setup: "savn" (18 categories, 1.0 m, 300-d word-vector targets) or "org"
+        (22 categories, 1.5 m, one-hot targets, detector features in the observation).
+      grid_size: side of the padded scene grid, in 0.25 m cells.
+      view_width: number of view columns (rays) across the 100 degree field of view.
+      precomputed_views: gather each pose's view from the scene bank's table (fast) or
+        ray cast it at every step (same pixels; for checking and benchmarking).
+    """
+
+    def __init__(self, setup: str = "savn", grid_size: int = 20, view_width: int = 16, precomputed_views: bool = True):
+        C.check_setup(setup)
+        if view_width < 1:
+            raise ValueError(f"view_width must be positive, got {view_width}")
+        self.setup = setup
+        self.grid_size = grid_size
+        self.view_width = view_width
+        self.precomputed_views = precomputed_views
+        self.categories = C.categories(setup)
+        self.num_categories = len(self.categories)
+        self.success_radius_m = C.SETUPS[setup][2]
+        self.num_semantic = C.NUM_STRUCTURAL + self.num_categories
+        self.max_depth = float(grid_size) * 1.5
+
+    # ----------------------------------------------------------------- gymnax API
+    @property
+    def name(self) -> str:
+        return "GridNav-v0"
+
+    @property
+    def num_actions(self) -> int:
+        return C.NUM_ACTIONS
+
+    def make_params(self, split: str = "train", room_types=None, training: bool | None = None) -> EnvParams:
+        """Params holding the scene bank of ``split`` (optionally some room types only)."""
+        C.check_split(split)
+        rooms = tuple(range(4)) if room_types is None else tuple(_room_index(r) for r in room_types)
+        bank = make_bank(self.setup, C.scene_numbers(split, rooms), self.grid_size, self.view_width)
+        return EnvParams(bank=bank, max_steps=time_limits(split == "train" if training is None else training))
+
+    @property
+    def default_params(self) -> EnvParams:
+        return self.make_params("train")
+
+    def action_space(self, params: EnvParams | None = None) -> spaces.Discrete:
+        return spaces.Discrete(C.NUM_ACTIONS)
+
+    def observation_space(self, params: EnvParams | None = None) -> spaces.Dict:
+        target_dim = C.WORD_VECTOR_DIM if C.SETUPS[self.setup][3] == "word_vector" else self.num_categories
+        parts = {
+            "view": spaces.Box(0.0, 1.0, (NUM_ROWS, self.view_width, self.num_semantic + 1), jnp.float32),
+            "target": spaces.Box(-jnp.inf, jnp.inf, (target_dim,), jnp.float32),
+        }
+        if self.setup == "org":
+            parts["detections"] = spaces.Box(0.0, 1.0, (self.num_categories, NUM_DETECTION_FEATURES), jnp.float32)
+        return spaces.Dict(parts)
+
+    def reset(self, key: jax.Array, params: EnvParams | None = None):
+        params = self.default_params if params is None else params
+        return self.reset_env(key, params)
+
+    def step(self, key: jax.Array, state: EnvState, action, params: EnvParams | None = None):
+        """One step with auto-reset.  Returns obs, state, reward, terminated, truncated, info."""
+        params = self.default_params if params is None else params
+        key_step, key_reset = jax.random.split(key)
+        obs_st, state_st, reward, terminated, truncated, info = self.step_env(key_step, state, action, params)
+        obs_re, state_re = self.reset_env(key_reset, params)
+        done = terminated | truncated
+        state = jax.tree.map(lambda r, s: jnp.where(done, r, s), state_re, state_st)
+        obs = jax.tree.map(lambda r, s: jnp.where(done, r, s), obs_re, obs_st)
+        info["final_observation"] = obs_st
+        return obs, state, reward, terminated, truncated, info
+
+    # ----------------------------------------------------------------- dynamics
+    def reset_env(self, key: jax.Array, params: EnvParams):
+        bank = params.bank
+        k_scene, k_target, k_start = jax.random.split(key, 3)
+        scene = jax.random.randint(k_scene, (), 0, bank.numbers.shape[0])
+        slot = jax.random.randint(k_target, (), 0, bank.num_targets[scene])
+        which = jax.random.randint(k_start, (), 0, bank.num_starts[scene, slot])
+        start = bank.starts[scene, slot, which].astype(jnp.int32)  # pose index // 2 (horizon 0)
+        heading = start % C.NUM_HEADINGS
+        cell = start // C.NUM_HEADINGS
+        state = EnvState(
+            agent_pos=jnp.stack([cell // self.grid_size, cell % self.grid_size]).astype(jnp.int32),
+            heading=heading.astype(jnp.int32),
+            horizon=jnp.zeros((), jnp.int32),
+            scene=scene.astype(jnp.int32),
+            room_type=bank.room_type[scene],
+            target=bank.targets[scene, slot],
+            target_slot=slot.astype(jnp.int32),
+            time=jnp.zeros((), jnp.int32),
+            optimal_length=bank.distance[scene, slot, start * C.NUM_HORIZONS].astype(jnp.int32),
+        )
+        return self.get_obs(state, params), state
+
+    def step_env(self, key: jax.Array, state: EnvState, action, params: EnvParams):
+        del key  # the dynamics are deterministic
+        action = jnp.asarray(action, jnp.int32)
+        walkable = params.bank.cell_type[state.scene] == C.CELL_FLOOR
+        is_done = action == C.DONE
+        success = is_done & self.target_in_view(state, params)
+        pos, heading, horizon = transition(walkable, state.agent_pos, state.heading, state.horizon, action)
+        time = state.time + 1
+        new_state = state.replace(agent_pos=pos, heading=heading, horizon=horizon, time=time)
+        reward = jnp.where(success, params.success_reward, params.step_penalty).astype(jnp.float32)
+        terminated = is_done
+        truncated = ~terminated & (time >= params.max_steps[state.room_type])
+        info = {
+            "success": success,
+            "episode_length": time,
+            "optimal_length": state.optimal_length,
+            "room_type": state.room_type,
+            "scene": params.bank.numbers[state.scene],
+            "target": state.target,
+            "terminated": terminated,
+            "truncated": truncated,
+        }
+        return self.get_obs(new_state, params), new_state, reward, terminated, truncated, info
+
+    # ----------------------------------------------------------------- observation
+    def view(self, state: EnvState, params: EnvParams):
+        """(sem int32 [3, W], depth float32 [3, W] in cells) seen from the state's pose."""
+        bank = params.bank
+        if self.precomputed_views:
+            pose = pose_index(state.agent_pos, state.heading, state.horizon, self.grid_size)
+            sem = bank.view_sem[state.scene, pose].astype(jnp.int32)
+            depth = bank.view_depth[state.scene, pose].astype(jnp.float32) / DEPTH_RESOLUTION
+            return sem, depth
+        s = state.scene
+        return cast_view(
+            bank.cell_type[s], bank.obj_cat[s], bank.obj_band[s],
+            state.agent_pos, state.heading, state.horizon, self.view_width,
+        )  # fmt: skip
+
+    def get_obs(self, state: EnvState, params: EnvParams) -> dict[str, jax.Array]:
+        sem, depth = self.view(state, params)
+        view = jnp.concatenate(
+            [jax.nn.one_hot(sem, self.num_semantic, dtype=jnp.float32), (depth / self.max_depth)[..., None]], -1
+        )  # [3, W, num_semantic + 1]
+        obs = {"view": view, "target": params.bank.target_vectors[state.target]}
+        if self.setup == "org":
+            obs["detections"] = self.detections(sem, depth, state.target)
+        return obs
+
+    def detections(self, sem, depth, target):
+        """[n_categories, 7] detector features: visible, column box, row box, confidence, is target."""
+        cats = jnp.arange(self.num_categories)
+        mask = sem[None] == (C.NUM_STRUCTURAL + cats)[:, None, None]  # [n, 3, W]
+        visible = mask.any((1, 2))
+        cols = jnp.arange(self.view_width)[None, None, :]
+        rows = jnp.arange(NUM_ROWS)[None, :, None]
+        col_min = jnp.where(mask, cols, self.view_width).min((1, 2)) / self.view_width
+        col_max = (jnp.where(mask, cols, -1).max((1, 2)) + 1) / self.view_width
+        row_min = jnp.where(mask, rows, NUM_ROWS).min((1, 2)) / NUM_ROWS
+        row_max = (jnp.where(mask, rows, -1).max((1, 2)) + 1) / NUM_ROWS
+        nearest = jnp.where(mask, depth[None], jnp.inf).min((1, 2))
+        confidence = 1.0 / (1.0 + nearest / 4.0)
+        feats = jnp.stack([jnp.ones_like(col_min), col_min, col_max, row_min, row_max, confidence], -1)
+        feats = jnp.where(visible[:, None], feats, 0.0)
+        is_target = (cats == target).astype(jnp.float32)[:, None]
+        return jnp.concatenate([feats, is_target], -1).astype(jnp.float32)
+
+    def target_in_view(self, state: EnvState, params: EnvParams) -> jax.Array:
+        """Whether Done would succeed now: the target is visible within the success radius."""
+        return self.shortest_path_length(state, params) == 1
+
+    # ----------------------------------------------------------------- oracle
+    def shortest_path_length(self, state: EnvState, params: EnvParams) -> jax.Array:
+        """Shortest number of actions to success from the current pose, counting Done."""
+        pose = pose_index(state.agent_pos, state.heading, state.horizon, self.grid_size)
+        return params.bank.distance[state.scene, state.target_slot, pose].astype(jnp.int32)
+
+    def optimal_action(self, state: EnvState, params: EnvParams) -> jax.Array:
+        """An action on a shortest path to success (Done when the target is in view and range)."""
+        bank = params.bank
+        walkable = bank.cell_type[state.scene] == C.CELL_FLOOR
+
+        def cost(action):
+            pos, heading, horizon = transition(walkable, state.agent_pos, state.heading, state.horizon, action)
+            pose = pose_index(pos, heading, horizon, self.grid_size)
+            return bank.distance[state.scene, state.target_slot, pose].astype(jnp.int32)
+
+        costs = jnp.stack([cost(a) for a in range(C.DONE)])
+        here = self.shortest_path_length(state, params)
+        return jnp.where(here == 1, C.DONE, jnp.argmin(costs)).astype(jnp.int32)
+
+
+def _room_index(room) -> int:
+    if isinstance(room, str):
+        if room not in C.ROOM_TYPES:
+            raise ValueError(f"unknown room type {room!r}; choose from {list(C.ROOM_TYPES)}")
+        return C.ROOM_TYPES.index(room)
+    if not 0 <= int(room) < 4:
+        raise ValueError(f"room type index must be in 0..3, got {room}")
+    return int(room)
+
+
+__all__ = ["EnvParams", "EnvState", "GridNav", "time_limits", "UNREACHABLE", "move_ahead"]

@@ -1,0 +1,159 @@
+"""Procedural but fixed scene layouts, one per AI2-THOR scene number (numpy, host side).
+
+A layout is a padded ``[G, G]`` grid of cell types (floor, wall, furniture, floor object)
+plus an object layer (category index and height band per cell).  The walls, room size and
+furniture depend only on the scene number; the object placements depend on the scene
+number and the setup (``savn`` and ``org`` place their objects differently, as the two
+AI2-THOR configurations do).  Generation is deterministic: the same number always gives
+the same scene.
+"""
+
+from __future__ import annotations
+
+import zlib
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from envs import catalog as C
+
+# Interior size ranges (rows, cols) in 0.25 m cells, by room type: bathrooms smallest,
+# living rooms largest.
+ROOM_SIZE_RANGES = {
+    C.KITCHEN: ((10, 13), (11, 14)),
+    C.LIVING_ROOM: ((13, 16), (14, 18)),
+    C.BEDROOM: ((9, 11), (10, 12)),
+    C.BATHROOM: ((6, 8), (7, 9)),
+}
+MIN_GRID_SIZE = 20  # the largest living room (16 x 18 interior) plus its walls
+
+# Furniture pieces by room type: (rows, cols, against_wall).  Pieces are tried in order
+# (random orientation and place); a piece that would cut the floor in two is skipped.
+FURNITURE = {
+    C.KITCHEN: [(1, 5, True), (1, 4, True), (1, 4, True), (1, 3, True), (2, 3, False), (1, 2, False)],
+    C.LIVING_ROOM: [(1, 4, True), (2, 2, False), (1, 3, True), (1, 2, False), (1, 1, False),
+                    (1, 2, True), (2, 3, False)],
+    C.BEDROOM: [(3, 2, True), (1, 1, True), (1, 3, True), (1, 2, True), (1, 1, False)],
+    C.BATHROOM: [(1, 3, True), (1, 2, True), (1, 1, True)],
+}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Layout:
+    """One generated scene (numpy arrays, row-major ``[row, col]``)."""
+
+    number: int  # AI2-THOR scene number
+    room_type: int  # catalog.KITCHEN ...
+    cell_type: np.ndarray  # int8 [G, G], catalog.CELL_*
+    obj_cat: np.ndarray  # int8 [G, G], category index in the setup's list, -1 for none
+    obj_band: np.ndarray  # int8 [G, G], catalog.BAND_*, -1 for none
+
+
+def _rng(*parts) -> np.random.Generator:
+    return np.random.default_rng(zlib.crc32("/".join(map(str, parts)).encode()))
+
+
+def _walkable_connected(cell_type: np.ndarray) -> bool:
+    free = np.argwhere(cell_type == C.CELL_FLOOR)
+    if len(free) == 0:
+        return False
+    seen = np.zeros(cell_type.shape, bool)
+    queue = deque([tuple(free[0])])
+    seen[tuple(free[0])] = True
+    count = 1
+    while queue:
+        r, c = queue.popleft()
+        for dr, dc in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+            nr, nc = r + dr, c + dc
+            if cell_type[nr, nc] == C.CELL_FLOOR and not seen[nr, nc]:
+                seen[nr, nc] = True
+                count += 1
+                queue.append((nr, nc))
+    return count == len(free)
+
+
+def _next_to(mask: np.ndarray, cell_type: np.ndarray, kind: int) -> np.ndarray:
+    """Cells of ``mask`` with a 4-neighbour of cell type ``kind``."""
+    near = np.zeros_like(mask)
+    is_kind = cell_type == kind
+    near[1:, :] |= is_kind[:-1, :]
+    near[:-1, :] |= is_kind[1:, :]
+    near[:, 1:] |= is_kind[:, :-1]
+    near[:, :-1] |= is_kind[:, 1:]
+    return mask & near
+
+
+def generate_layout(number: int, setup: str, grid_size: int = MIN_GRID_SIZE) -> Layout:
+    """The scene with AI2-THOR number ``number`` under ``setup``'s object placements."""
+    room = C.room_type_of(number)
+    C.check_setup(setup)
+    if grid_size < MIN_GRID_SIZE:
+        raise ValueError(f"grid_size must be at least {MIN_GRID_SIZE}, got {grid_size}")
+    rng = _rng("layout", number)
+    (r_lo, r_hi), (c_lo, c_hi) = ROOM_SIZE_RANGES[room]
+    rows, cols = rng.integers(r_lo, r_hi + 1), rng.integers(c_lo, c_hi + 1)
+    if rng.random() < 0.5:
+        rows, cols = cols, rows
+    rows, cols = min(rows, grid_size - 2), min(cols, grid_size - 2)
+    top = rng.integers(1, grid_size - rows)  # interior starts at row `top`
+    left = rng.integers(1, grid_size - cols)
+    cell = np.full((grid_size, grid_size), C.CELL_WALL, np.int8)
+    cell[top : top + rows, left : left + cols] = C.CELL_FLOOR
+
+    if room == C.LIVING_ROOM:  # a partition with a doorway: long trajectories
+        if rows >= cols:
+            r = top + rows // 2 + rng.integers(-2, 3)
+            door = left + rng.integers(0, cols - 2)
+            cell[r, left : left + cols] = C.CELL_WALL
+            cell[r, door : door + 3] = C.CELL_FLOOR
+        else:
+            c = left + cols // 2 + rng.integers(-2, 3)
+            door = top + rng.integers(0, rows - 2)
+            cell[top : top + rows, c] = C.CELL_WALL
+            cell[door : door + 3, c] = C.CELL_FLOOR
+
+    for h, w, against_wall in FURNITURE[room]:
+        if rng.random() < 0.5:
+            h, w = w, h
+        for _ in range(30):
+            r = rng.integers(top, top + rows - h + 1)
+            c = rng.integers(left, left + cols - w + 1)
+            block = cell[r : r + h, c : c + w]
+            if (block != C.CELL_FLOOR).any():
+                continue
+            ring = cell[r - 1 : r + h + 1, c - 1 : c + w + 1]
+            if against_wall and not (ring == C.CELL_WALL).any():
+                continue
+            trial = cell.copy()
+            trial[r : r + h, c : c + w] = C.CELL_FURNITURE
+            if _walkable_connected(trial):
+                cell = trial
+                break
+
+    obj_cat = np.full(cell.shape, -1, np.int8)
+    obj_band = np.full(cell.shape, -1, np.int8)
+    names = C.categories(setup)
+    targets = C.SETUPS[setup][1][room]
+    rng = _rng("objects", setup, number)
+    interior = np.zeros(cell.shape, bool)
+    interior[1:-1, 1:-1] = True
+    for name in targets:
+        band = C.category_band(name)
+        if band == C.BAND_MID:
+            candidates = _next_to((cell == C.CELL_FURNITURE) & (obj_cat < 0), cell, C.CELL_FLOOR)
+        elif band == C.BAND_HIGH:
+            candidates = _next_to((cell == C.CELL_WALL) & (obj_cat < 0), cell, C.CELL_FLOOR)
+        else:
+            candidates = (cell == C.CELL_FLOOR) & interior
+        for r, c in rng.permutation(np.argwhere(candidates)):
+            if band == C.BAND_FLOOR:
+                trial = cell.copy()
+                trial[r, c] = C.CELL_OBJECT
+                if not _walkable_connected(trial):
+                    continue
+                cell = trial
+            obj_cat[r, c] = names.index(name)
+            obj_band[r, c] = band
+            break
+    return Layout(number, room, cell, obj_cat, obj_band)
