@@ -1,0 +1,328 @@
+"""Flax (linen) modules of the ForeSIT agent (Sections 3-4, implementation in 5.2).
+
+* `Encoder`: SAVN's observation encoder, one LSTM step; s_t is the LSTM hidden state.
+* `PolicyHead`: one linear layer over [s_t : i_tau] (over s_t alone without ForeSIT).
+* `Critic`: value head, plain (MLP on s_t, A3C baseline) or with the attention of
+  Eq. 3-4 over the current episode's states (MLP on s*_t, ForeSIT).
+* `ImaginationNet`: f_w, 6 tanh layers with a bottleneck, [s_0 : g_tau] -> imagined s.
+* `ActorCritic`: Encoder + PolicyHead + Critic under one parameter tree (theta, omega),
+  with methods `step` (acting) and `critic` (values over an episode).
+* Pure helpers: `initial_carry`, `reset_carry`, `unroll`, `last_valid_index`,
+  `last_step_attention`, `select_subgoal`.
+
+Every module works unbatched or with any leading batch dims (Dense acts on the last
+axis); the critic's time axis is the second to last of `states`.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Mapping, NamedTuple, Optional, Sequence
+
+import chex
+import flax.linen as nn
+import jax
+import jax.numpy as jnp
+
+from foresit_jax import distributions
+
+LSTMCarry = tuple[chex.Array, chex.Array]  # (c, h), each [..., hidden_size]
+
+# f_w layer widths: 6 tanh layers, bottleneck 64, output = LSTM size (512).
+IMAGINATION_LAYER_SIZES: tuple[int, ...] = (512, 256, 64, 256, 512, 512)
+
+
+def initial_carry(batch_shape: Sequence[int], hidden_size: int = 512) -> LSTMCarry:
+    """Zero LSTM carry (c, h), each `[*batch_shape, hidden_size]`."""
+    zeros = jnp.zeros((*batch_shape, hidden_size), jnp.float32)
+    return (zeros, zeros)
+
+
+def reset_carry(done: chex.Array, carry: LSTMCarry) -> LSTMCarry:
+    """Zero the carry where `done` `[...]` is true (use the PREVIOUS step's done)."""
+    return jax.tree.map(lambda x: jnp.where(done[..., None], jnp.zeros_like(x), x), carry)
+
+
+class Encoder(nn.Module):
+    """SAVN encoder: observation, target and previous action probabilities -> s_t.
+
+    view `[..., 3, W, Cv]` -> 1x1 conv to `conv_features` (ReLU);
+    target `[..., D]` -> linear `target_features` (ReLU), tiled over the 3 x W grid;
+    previous action probabilities `[..., A]` -> linear `action_features` (ReLU), tiled;
+    concat -> 1x1 conv to `conv_features` (ReLU) -> flatten -> LSTM cell `hidden_size`.
+    A 1x1 convolution is a Dense layer over the channel axis, which is how it is written.
+
+    `object_graph` is the hook for the ORG baseline (setup 'org'): a module called as
+    `object_graph(obs["detections"] [..., n_cat, 7], obs["target"] [..., D])` returning
+    features `[..., F]` that are concatenated to the flattened grid before the LSTM.
+    Unset (None), `obs["detections"]` is ignored.
+    """
+
+    hidden_size: int = 512
+    conv_features: int = 64
+    target_features: int = 64
+    action_features: int = 10
+    object_graph: Optional[nn.Module] = None
+
+    @nn.compact
+    def __call__(
+        self, carry: LSTMCarry, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array
+    ) -> tuple[LSTMCarry, chex.Array]:
+        view = obs["view"]  # [..., 3, W, Cv]
+        target = obs["target"]  # [..., D]
+        batch_shape = target.shape[:-1]
+        chex.assert_rank(view, len(batch_shape) + 3)
+        chex.assert_equal_shape_prefix([view, target, prev_action_probs], len(batch_shape))
+        grid_shape = view.shape[-3:-1]  # (3, W)
+
+        image = nn.relu(nn.Dense(self.conv_features, name="view_conv")(view))  # [..., 3, W, 64]
+        goal = nn.relu(nn.Dense(self.target_features, name="target_embed")(target))  # [..., 64]
+        action = nn.relu(
+            nn.Dense(self.action_features, name="action_embed")(prev_action_probs)
+        )  # [..., 10]
+
+        def tile(x):  # [..., F] -> [..., 3, W, F]
+            return jnp.broadcast_to(x[..., None, None, :], (*batch_shape, *grid_shape, x.shape[-1]))
+
+        x = jnp.concatenate([image, tile(goal), tile(action)], axis=-1)  # [..., 3, W, 138]
+        x = nn.relu(nn.Dense(self.conv_features, name="pointwise_conv")(x))  # [..., 3, W, 64]
+        x = x.reshape(*batch_shape, -1)  # [..., 3 * W * 64]
+
+        if self.object_graph is not None:
+            if "detections" not in obs:
+                raise ValueError("Encoder.object_graph is set but obs has no 'detections'.")
+            graph_features = self.object_graph(obs["detections"], target)  # [..., F]
+            x = jnp.concatenate([x, graph_features], axis=-1)
+
+        carry, s_t = nn.OptimizedLSTMCell(self.hidden_size, name="lstm")(carry, x)
+        return carry, s_t  # s_t: [..., hidden_size]
+
+
+class PolicyHead(nn.Module):
+    """One linear layer -> action logits, over [s_t : i_tau] (or s_t alone).
+
+    Initialised with a small orthogonal scale (0.01), as SAVN initialises its actor
+    (norm_col_init 0.01), so the initial policy is near uniform.
+    """
+
+    num_actions: int = 6
+    use_imagination: bool = True
+
+    @nn.compact
+    def __call__(self, s_t: chex.Array, imagined: Optional[chex.Array] = None) -> chex.Array:
+        if self.use_imagination:
+            if imagined is None:
+                raise ValueError("PolicyHead(use_imagination=True) needs the imagined sub-goal.")
+            chex.assert_equal_shape([s_t, imagined])
+            x = jnp.concatenate([s_t, imagined], axis=-1)  # [..., 2H]
+        else:
+            x = s_t  # [..., H]
+        return nn.Dense(
+            self.num_actions, kernel_init=nn.initializers.orthogonal(0.01), name="actor"
+        )(x)  # [..., A]
+
+
+class ValueHead(nn.Module):
+    """Two-layer MLP `[..., H] -> [...]` (Dense hidden, ReLU, Dense 1)."""
+
+    hidden: int = 256
+
+    @nn.compact
+    def __call__(self, x: chex.Array) -> chex.Array:
+        x = nn.relu(nn.Dense(self.hidden, name="hidden")(x))
+        return nn.Dense(1, name="out")(x)[..., 0]
+
+
+def causal_episode_mask(valid: chex.Array) -> chex.Array:
+    """`[..., T] -> [..., T, T]` bool: entry (t, j) true iff j <= t and step j is valid."""
+    num_steps = valid.shape[-1]
+    causal = jnp.tril(jnp.ones((num_steps, num_steps), bool))  # [T, T]
+    return causal & valid.astype(bool)[..., None, :]
+
+
+def masked_softmax(scores: chex.Array, mask: chex.Array) -> chex.Array:
+    """Softmax over the last axis restricted to `mask`; rows with no entry give zeros."""
+    chex.assert_equal_shape([scores, mask])
+    masked = jnp.where(mask, scores, jnp.finfo(scores.dtype).min)
+    shifted = masked - jax.lax.stop_gradient(jnp.max(masked, axis=-1, keepdims=True))
+    weights = jnp.exp(shifted) * mask
+    return weights / jnp.maximum(jnp.sum(weights, axis=-1, keepdims=True), 1e-30)
+
+
+class CriticOutput(NamedTuple):
+    value: chex.Array  # [..., T] V(s*_t) (V(s_t) for the plain critic)
+    alpha: Optional[chex.Array]  # [..., T, T] row t: attention of step t over j <= t; None if plain
+    attended_state: chex.Array  # [..., T, H] s*_t (= s_t for the plain critic)
+
+
+class Critic(nn.Module):
+    """State-value critic over the states of one episode.
+
+    `attention=False` (A3C baseline): value = MLP(s_t).
+    `attention=True` (ForeSIT, Eq. 3-4): for every step t at once (causal, masked),
+      alpha_t = softmax_j( q(s_t) . k(s_j) / sqrt(t+1) ), j = 0..t valid steps of the episode,
+      s*_t = sum_j alpha_tj v(s_j) + s_t,  value_t = MLP(s*_t).
+    q, k: linear `attention_size`; v: linear to the state size (for the residual).
+
+    Call with `states [..., T, H]` whose index 0 is the episode's first state (t in
+    sqrt(t+1) is the position), and `valid [..., T]` (1 on the episode's steps).
+    """
+
+    attention: bool = True
+    attention_size: int = 512
+    value_hidden: int = 256
+
+    @nn.compact
+    def __call__(self, states: chex.Array, valid: chex.Array) -> CriticOutput:
+        chex.assert_equal_shape_prefix([states, valid], valid.ndim)
+        chex.assert_rank(states, valid.ndim + 1)
+        value_head = ValueHead(self.value_hidden, name="value_head")
+        if not self.attention:
+            return CriticOutput(value_head(states), None, states)
+
+        num_steps, state_size = states.shape[-2:]
+        query = nn.Dense(self.attention_size, name="query")(states)  # [..., T, Q]
+        key = nn.Dense(self.attention_size, name="key")(states)  # [..., T, Q]
+        value = nn.Dense(state_size, name="value")(states)  # [..., T, H]
+        scale = jnp.sqrt(jnp.arange(1, num_steps + 1, dtype=states.dtype))  # [T] sqrt(t+1)
+        scores = jnp.einsum("...tq,...jq->...tj", query, key) / scale[:, None]  # [..., T, T]
+        alpha = masked_softmax(scores, causal_episode_mask(valid))  # [..., T, T]
+        attended = jnp.einsum("...tj,...jh->...th", alpha, value) + states  # [..., T, H]
+        return CriticOutput(value_head(attended), alpha, attended)
+
+
+class ImaginationNet(nn.Module):
+    """f_w: [s_0 : g_tau] -> imagined sub-goal state, 6 fully-connected tanh layers.
+
+    Widths `layer_sizes` (default 512, 256, 64, 256, 512, 512): a bottleneck of 64
+    (the sub-goal structure is assumed low-dimensional, Section 4.3) and an output of
+    the LSTM size; tanh everywhere, so the output lies in (-1, 1) like the LSTM's h.
+    """
+
+    layer_sizes: Sequence[int] = IMAGINATION_LAYER_SIZES
+
+    @nn.compact
+    def __call__(self, s_0: chex.Array, goal: chex.Array) -> chex.Array:
+        x = jnp.concatenate([s_0, goal], axis=-1)  # [..., H + D]
+        for i, size in enumerate(self.layer_sizes):
+            x = jnp.tanh(nn.Dense(size, name=f"layer_{i}")(x))
+        return x  # [..., layer_sizes[-1]]
+
+
+class ActorCritic(nn.Module):
+    """theta (encoder + policy) and omega (critic) under one parameter tree.
+
+    Methods (use with `apply(params, ..., method=ActorCritic.step)` etc.):
+      encode(carry, obs, prev_action_probs) -> (carry, s_t [..., H])
+      policy_logits(s_t, imagined) -> logits [..., A]
+      step(carry, obs, prev_action_probs, imagined) -> (carry, s_t, logits)  (both above)
+      critic(states [..., T, H], valid [..., T]) -> CriticOutput
+    `__call__` runs both once (for `init`).
+    """
+
+    num_actions: int = 6
+    hidden_size: int = 512
+    use_imagination: bool = True
+    attention_critic: bool = True
+    attention_size: int = 512
+    value_hidden: int = 256
+    object_graph: Optional[nn.Module] = None
+
+    def setup(self):
+        self.encoder = Encoder(hidden_size=self.hidden_size, object_graph=self.object_graph)
+        self.policy = PolicyHead(self.num_actions, self.use_imagination)
+        self.value_critic = Critic(self.attention_critic, self.attention_size, self.value_hidden)
+
+    def encode(
+        self, carry: LSTMCarry, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array
+    ) -> tuple[LSTMCarry, chex.Array]:
+        """One encoder step -> (carry, s_t). Acting splits `step` in two so that i_tau
+        can be imagined from s_0 before the first action."""
+        return self.encoder(carry, obs, prev_action_probs)
+
+    def policy_logits(self, s_t: chex.Array, imagined: Optional[chex.Array] = None) -> chex.Array:
+        """pi(. | s_t, i_tau) logits `[..., A]`."""
+        return self.policy(s_t, imagined)
+
+    def step(
+        self,
+        carry: LSTMCarry,
+        obs: Mapping[str, chex.Array],
+        prev_action_probs: chex.Array,
+        imagined: Optional[chex.Array] = None,
+    ) -> tuple[LSTMCarry, chex.Array, chex.Array]:
+        """`encode` then `policy_logits` -> (carry, s_t, logits)."""
+        carry, s_t = self.encoder(carry, obs, prev_action_probs)
+        return carry, s_t, self.policy(s_t, imagined)
+
+    def critic(self, states: chex.Array, valid: chex.Array) -> CriticOutput:
+        return self.value_critic(states, valid)
+
+    def __call__(self, carry, obs, prev_action_probs, imagined=None):
+        carry, s_t, logits = self.step(carry, obs, prev_action_probs, imagined)
+        out = self.critic(s_t[..., None, :], jnp.ones(s_t.shape[:-1] + (1,), bool))
+        return carry, s_t, logits, out.value
+
+
+def unroll(
+    model: ActorCritic,
+    params: Any,
+    carry: LSTMCarry,
+    obs_t: Mapping[str, chex.Array],
+    prev_action_probs_t: chex.Array,
+    imagined_t: Optional[chex.Array] = None,
+) -> tuple[LSTMCarry, chex.Array, chex.Array]:
+    """Run `ActorCritic.step` over a time-major sequence (for the loss).
+
+    obs_t leaves `[T, ...]`, prev_action_probs_t `[T, ..., A]`, imagined_t `[T, ..., H]`
+    (or None without imagination); carry `[..., H]` is the carry before step 0 (zeros at
+    an episode start; no reset inside, one episode per lane). Returns
+    (final carry, states [T, ..., H], logits [T, ..., A]).
+    """
+
+    def body(carry, inputs):
+        obs, prev_probs, imagined = inputs
+        carry, s_t, logits = model.apply(
+            params, carry, obs, prev_probs, imagined, method=ActorCritic.step
+        )
+        return carry, (s_t, logits)
+
+    carry, (states, logits) = jax.lax.scan(
+        body, carry, (obs_t, prev_action_probs_t, imagined_t)
+    )
+    return carry, states, logits
+
+
+def last_valid_index(valid: chex.Array) -> chex.Array:
+    """Index T of the last valid step, `[..., T] -> [...]` int32 (valid is a prefix)."""
+    return jnp.sum(valid.astype(jnp.int32), axis=-1) - 1
+
+
+def last_step_attention(alpha: chex.Array, valid: chex.Array) -> chex.Array:
+    """alpha of the last valid step T over s_0..s_T: `[..., T, T], [..., T] -> [..., T]`."""
+    index = last_valid_index(valid)  # [...]
+    return jnp.take_along_axis(alpha, index[..., None, None], axis=-2)[..., 0, :]
+
+
+def select_subgoal(
+    states: chex.Array, alpha_last: chex.Array, mode: str = "argmax"
+) -> chex.Array:
+    """Sub-goal ŝ_tau from an episode's states `[..., T, H]` and `alpha_last [..., T]`.
+
+    mode 'argmax' (ForeSIT): s_{t*}, t* = argmax_t alpha_t (first index on ties).
+    mode 'attention_average' (the `att` ablation): sum_j alpha_j s_j.
+    Both are stop-gradient (targets for f_w). Padding steps must carry alpha = 0
+    (`last_step_attention` guarantees it).
+    """
+    chex.assert_equal_shape_prefix([states, alpha_last], alpha_last.ndim)
+    states, alpha_last = jax.lax.stop_gradient((states, alpha_last))
+    if mode == "argmax":
+        index = jnp.argmax(alpha_last, axis=-1)  # [...]
+        return jnp.take_along_axis(states, index[..., None, None], axis=-2)[..., 0, :]
+    if mode == "attention_average":
+        return jnp.einsum("...t,...th->...h", alpha_last, states)
+    raise ValueError(f"Unknown sub-goal mode {mode!r}; use 'argmax' or 'attention_average'.")
+
+
+def action_probs(logits: chex.Array) -> chex.Array:
+    """Softmax of the logits (the encoder's next `prev_action_probs`)."""
+    return distributions.probs(logits)
