@@ -1,0 +1,90 @@
+"""Re-evaluate a trained run: `python -m experiments.evaluate --run runs/x --split test`.
+
+Loads the model selected on validation (`best/`) or, with `--which last`, the last
+checkpoint, and writes results_<split>.json and .md into the run folder (refusing to
+replace existing ones without --overwrite).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import sys
+from pathlib import Path
+from typing import Literal, Optional
+
+import jax
+import tyro
+
+from experiments import runs
+
+
+@dataclasses.dataclass(frozen=True)
+class Args:
+    """Evaluate a trained agent on the validation or test split."""
+
+    run: Path
+    """Run folder written by experiments.train."""
+    split: str = "test"
+    """Split: val or test."""
+    which: Literal["best", "last"] = "best"
+    """The model selected on validation (best) or the last checkpoint (last)."""
+    episodes_per_room: Optional[int] = None
+    """Episodes per room type (default: the run's test_episodes_per_room, 250 in the paper)."""
+    greedy: bool = False
+    """Take the most likely action instead of sampling (SAVN samples)."""
+    seed: int = 0
+    """Evaluation seed."""
+    overwrite: bool = False
+    """Replace existing results files."""
+
+
+def main(args: Args) -> dict:
+    from foresit_jax.config import Config
+    from foresit_jax.evaluate import agent_params, evaluate
+    from foresit_jax.train import make_trainer
+
+    if args.split not in ("val", "test"):
+        raise runs.UserError(f"--split must be val or test, got {args.split!r}")
+    info = runs.read_run_info(args.run)
+    config = Config(**info["config"])
+    episodes = args.episodes_per_room or info["schedule"]["test_episodes_per_room"]
+    if episodes < 1:
+        raise runs.UserError(f"--episodes-per-room must be >= 1, got {episodes}")
+    suffix = "" if (args.which, args.greedy) == ("best", False) else f"_{args.which}" + ("_greedy" if args.greedy else "")
+    out_json = args.run / f"results_{args.split}{suffix}.json"
+    if out_json.exists() and not args.overwrite:
+        raise runs.UserError(f"{out_json} exists; pass --overwrite to replace it")
+
+    trainer = make_trainer(config)
+    like_state = trainer.init(jax.random.PRNGKey(0))
+    like = agent_params(like_state, config.sigma2_max)
+    folder = args.run / ("best" if args.which == "best" else "checkpoints")
+    manager = runs.checkpoint_manager(folder, 100)
+    step = manager.latest_step()
+    if step is None:
+        raise runs.UserError(f"{folder} holds no checkpoint; was the run interrupted before its first chunk?")
+    if args.which == "best":
+        chosen = runs.restore(manager, step, like)
+    else:
+        chosen = agent_params(runs.restore(manager, step, like_state), config.sigma2_max)
+    results = evaluate(chosen, config, args.split, jax.random.PRNGKey(args.seed), episodes, greedy=args.greedy)
+    out_json.write_text(json.dumps({"selected_update": step, "which": args.which, "results": results}, indent=2))
+    title = f"{config.method}, seed {info['seed']}: {args.split} split ({args.which} model, update {step})"
+    md = runs.results_markdown(results, title)
+    out_json.with_suffix(".md").write_text(md)
+    print(md)
+    print(f"wrote {out_json} and {out_json.with_suffix('.md')}")
+    return results
+
+
+def cli(argv=None) -> None:
+    args = tyro.cli(Args, args=argv)
+    try:
+        main(args)
+    except (runs.UserError, ValueError) as e:
+        runs.fail(str(e))
+
+
+if __name__ == "__main__":
+    cli(sys.argv[1:])

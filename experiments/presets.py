@@ -1,0 +1,68 @@
+"""Named presets: a Config plus the run's schedule (chunks, evaluation sizes).
+
+`quick` is the README's main command: a visible result in a few minutes on a 2-core CPU
+(a smaller network and a larger learning rate than the paper, more lanes per update).
+`paper` is the paper's sizes and schedule (512-unit LSTM, Adam 1e-4), for long runs on
+accelerators.  `tiny` is for tests and smoke runs (seconds).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from foresit_jax.config import METHODS, PLANNED_METHODS, Config
+
+
+@dataclasses.dataclass(frozen=True)
+class Schedule:
+    """How a run is cut into chunks and evaluated."""
+
+    chunk_updates: int
+    """Updates per jitted chunk; between chunks the host logs, checkpoints, validates."""
+    val_episodes_per_room: int
+    """Validation episodes per room type after each chunk (model selection)."""
+    test_episodes_per_room: int
+    """Test episodes per room type for the final report (the paper uses 250)."""
+    keep_checkpoints: int = 2
+    """Most recent checkpoints kept on disk."""
+
+
+_SMALL_NET = dict(hidden_size=128, attention_size=128, value_hidden=128,
+                  imagination_layer_sizes=(128, 64, 32, 64, 128, 128))  # fmt: skip
+
+PRESETS: dict[str, tuple[dict, Schedule]] = {
+    "tiny": (
+        dict(num_lanes=4, num_updates=4, hidden_size=32, attention_size=32, value_hidden=32,
+             imagination_layer_sizes=(32, 16, 8, 16, 32, 32), buffer_size=2, imagination_epochs=1),
+        Schedule(chunk_updates=2, val_episodes_per_room=2, test_episodes_per_room=2),
+    ),  # fmt: skip
+    "quick": (
+        dict(num_lanes=32, num_updates=1500, learning_rate=2e-3, **_SMALL_NET),
+        Schedule(chunk_updates=250, val_episodes_per_room=25, test_episodes_per_room=250),
+    ),
+    "paper": (
+        dict(num_lanes=64, num_updates=50_000),
+        Schedule(chunk_updates=500, val_episodes_per_room=250, test_episodes_per_room=250, keep_checkpoints=3),
+    ),
+}
+
+
+def check_method(method: str) -> None:
+    if method not in METHODS:
+        extra = f" ({method} is planned, not implemented yet)" if method in PLANNED_METHODS else ""
+        raise ValueError(f"unknown method {method!r}{extra}; valid methods: {', '.join(METHODS)}")
+
+
+def preset(name: str, method: str, **overrides) -> tuple[Config, Schedule]:
+    """The Config and Schedule of a preset for a method, with field overrides
+    (None values are ignored)."""
+    if name not in PRESETS:
+        raise ValueError(f"unknown preset {name!r}; valid presets: {', '.join(PRESETS)}")
+    check_method(method)
+    fields, schedule = PRESETS[name]
+    given = {k: v for k, v in overrides.items() if v is not None}
+    unknown = set(given) - {f.name for f in dataclasses.fields(Config)}
+    if unknown:
+        raise ValueError(f"unknown config fields {sorted(unknown)}")
+    config = Config(method=method, **{**fields, **given})
+    return config, schedule

@@ -1,0 +1,198 @@
+"""Run folders: config, metrics files, orbax checkpoints, reports and plots.
+
+A run folder holds:
+  run.json            what was run (method, preset, seed, config, schedule)
+  metrics.jsonl/.csv  one row per update
+  validation.jsonl    one row per validation (after each chunk)
+  checkpoints/        orbax checkpoints of the whole training state (latest few)
+  best/               the agent with the best validation SR (model selection)
+  results_<split>.json/.md, learning_curve.png
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import math
+import shutil
+import sys
+from pathlib import Path
+
+import jax
+import numpy as np
+
+RUN_FILE = "run.json"
+
+
+class UserError(Exception):
+    """A problem with what the user asked for: printed as one line, exit status 2."""
+
+
+def fail(message: str, status: int = 2) -> None:
+    print(f"error: {message}", file=sys.stderr)
+    raise SystemExit(status)
+
+
+def is_run(path: Path) -> bool:
+    return (path / RUN_FILE).is_file()
+
+
+def prepare_run_dir(path: Path, resume: bool, overwrite: bool) -> None:
+    """Create a fresh run folder, or check the one to resume.  Never overwrites a
+    user's folder silently."""
+    if resume and overwrite:
+        raise UserError("--resume and --overwrite exclude each other")
+    if resume:
+        if not is_run(path):
+            raise UserError(f"{path} is not a run folder (no {RUN_FILE}); nothing to resume")
+        return
+    if path.exists() and any(path.iterdir()):
+        if not overwrite:
+            raise UserError(f"{path} already exists and is not empty; use --resume to continue it or --overwrite to replace it")
+        if not is_run(path):
+            raise UserError(f"{path} is not a run folder (no {RUN_FILE}); refusing to delete it, choose another --out")
+        shutil.rmtree(path)
+    path.mkdir(parents=True, exist_ok=True)
+
+
+def write_run_info(path: Path, info: dict) -> None:
+    (path / RUN_FILE).write_text(json.dumps(info, indent=2, default=_jsonable))
+
+
+def read_run_info(path: Path) -> dict:
+    if not is_run(path):
+        raise UserError(f"{path} is not a run folder (no {RUN_FILE}); pass the --out folder of experiments.train")
+    return json.loads((path / RUN_FILE).read_text())
+
+
+def _jsonable(x):
+    if dataclasses.is_dataclass(x):
+        return dataclasses.asdict(x)
+    if isinstance(x, (np.generic,)):
+        return x.item()
+    if isinstance(x, tuple):
+        return list(x)
+    raise TypeError(f"not JSON serialisable: {type(x)}")
+
+
+# ---------------------------------------------------------------------- metrics files
+def metric_rows(metrics: dict, first_update: int, lanes: int, steps_per_update: int) -> list[dict]:
+    """Per-update rows from stacked chunk metrics ({name: [n]})."""
+    arrays = {k: np.asarray(v) for k, v in metrics.items()}
+    n = len(next(iter(arrays.values())))
+    rows = []
+    for i in range(n):
+        update = first_update + i + 1
+        row = {"update": update, "episodes": update * lanes, "frames": update * lanes * steps_per_update}
+        row.update({k: float(v[i]) for k, v in arrays.items()})
+        rows.append(row)
+    return rows
+
+
+def append_rows(path: Path, rows: list[dict]) -> None:
+    with open(path.with_suffix(".jsonl"), "a") as f:
+        for row in rows:
+            f.write(json.dumps(row) + "\n")
+    csv_path = path.with_suffix(".csv")
+    new = not csv_path.exists()
+    with open(csv_path, "a", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        if new:
+            writer.writeheader()
+        writer.writerows(rows)
+
+
+def read_rows(path: Path) -> list[dict]:
+    path = path.with_suffix(".jsonl")
+    if not path.exists():
+        return []
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+
+
+def truncate_rows(path: Path, last_update: int) -> None:
+    """Drop rows after `last_update` (written after the checkpoint a resume starts from)."""
+    rows = [r for r in read_rows(path) if r["update"] <= last_update]
+    for suffix in (".jsonl", ".csv"):
+        path.with_suffix(suffix).unlink(missing_ok=True)
+    if rows:
+        append_rows(path, rows)
+
+
+def first_nonfinite(metrics: dict) -> int | None:
+    """Index of the first update whose loss is NaN or inf, or None."""
+    loss = np.asarray(metrics["losses/total_loss"])
+    bad = np.flatnonzero(~np.isfinite(loss))
+    return int(bad[0]) if len(bad) else None
+
+
+# ---------------------------------------------------------------------- checkpoints
+def checkpoint_manager(path: Path, keep: int):
+    import orbax.checkpoint as ocp
+
+    options = ocp.CheckpointManagerOptions(max_to_keep=keep, create=True)
+    return ocp.CheckpointManager(path.absolute(), options=options)
+
+
+def save(manager, step: int, tree) -> None:
+    import orbax.checkpoint as ocp
+
+    manager.save(step, args=ocp.args.StandardSave(tree), force=True)
+    manager.wait_until_finished()
+
+
+def restore(manager, step: int, like):
+    import orbax.checkpoint as ocp
+
+    abstract = jax.tree.map(lambda x: jax.ShapeDtypeStruct(np.shape(x), x.dtype), like)
+    return manager.restore(step, args=ocp.args.StandardRestore(abstract))
+
+
+# ---------------------------------------------------------------------- reports
+def results_markdown(results: dict, title: str) -> str:
+    cols = ("SPL", "SR", "SPL>=5", "SR>=5")
+    lines = [f"# {title}", "", "| rooms | " + " | ".join(cols) + " | episodes |", "|---" * (len(cols) + 2) + "|"]
+    for room, m in results.items():
+        lines.append(f"| {room} | " + " | ".join(_fmt(m[c]) for c in cols) + f" | {m['episodes']} |")
+    return "\n".join(lines) + "\n"
+
+
+def _fmt(x: float) -> str:
+    return "n/a" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.2f}"
+
+
+def learning_curve_png(path: Path, curves: dict, ylabel: str = "training success rate", val_points=None) -> None:
+    """curves: {label: (x [n], y [n]) or (x [n], y [seeds, n])}; bands over seeds."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for label, (x, y) in curves.items():
+        y = np.atleast_2d(np.asarray(y, float))
+        mean, std = y.mean(0), y.std(0)
+        ax.plot(x, mean, label=label)
+        if y.shape[0] > 1:
+            ax.fill_between(x, mean - std, mean + std, alpha=0.25)
+    if val_points:
+        vx, vy = zip(*val_points)
+        ax.plot(vx, vy, "o--", label="validation SR", color="black", markersize=4)
+    ax.set_xlabel("updates")
+    ax.set_ylabel(ylabel)
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def smooth(y, window: int = 20):
+    """Trailing moving average (same length)."""
+    y = np.asarray(y, float)
+    out = np.empty_like(y)
+    csum = np.cumsum(np.insert(y, 0, 0.0, axis=-1), axis=-1)
+    for i in range(y.shape[-1]):
+        lo = max(0, i + 1 - window)
+        out[..., i] = (csum[..., i + 1] - csum[..., lo]) / (i + 1 - lo)
+    return out

@@ -1,0 +1,193 @@
+"""Train one agent: `python -m experiments.train --method a3c+foresit --preset quick --seed 0 --out runs/x`.
+
+Shows a progress bar (updates, frames/s, success rate, ETA); writes per-update metrics
+(JSONL and CSV), an orbax checkpoint after each chunk, a validation evaluation after each
+chunk (the best model by validation SR is kept: model selection), and at the end the test
+evaluation of the selected model (JSON and Markdown) and a learning-curve PNG.
+
+`--resume` continues an interrupted run from its last checkpoint and ends bit-identical to
+an uninterrupted run with the same seed.  An existing run folder is never overwritten
+without `--resume` or `--overwrite`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Optional
+
+import jax
+import numpy as np
+import tyro
+
+from experiments import runs
+from experiments.presets import PRESETS, Schedule, preset
+
+
+@dataclasses.dataclass(frozen=True)
+class Args:
+    """Train one ForeSIT (or baseline) agent."""
+
+    method: str = "a3c+foresit"
+    """Method: a3c, a3c+foresit, or an ablation (rnd, att, int)."""
+    preset: str = "quick"
+    """Preset: tiny (seconds), quick (minutes on a laptop CPU), paper (the paper's sizes)."""
+    seed: int = 0
+    """Random seed (same seed, same result, bit for bit, on the same machine)."""
+    out: Path = Path("runs/x")
+    """Run folder."""
+    resume: bool = False
+    """Continue the run in --out from its last checkpoint."""
+    overwrite: bool = False
+    """Delete an existing run in --out and start again."""
+    num_updates: Optional[int] = None
+    """Override the preset's number of updates."""
+    num_lanes: Optional[int] = None
+    """Override the preset's number of parallel lanes."""
+    learning_rate: Optional[float] = None
+    """Override the preset's learning rate."""
+    chunk_updates: Optional[int] = None
+    """Override the preset's updates per chunk (checkpoint/validation interval)."""
+    test_episodes_per_room: Optional[int] = None
+    """Override the preset's test episodes per room type."""
+    val_episodes_per_room: Optional[int] = None
+    """Override the preset's validation episodes per room type."""
+    stop_after_chunks: Optional[int] = None
+    """Stop (as if interrupted) after this many chunks of this invocation; for testing --resume."""
+    progress: bool = True
+    """Show the progress bar."""
+
+
+def build(args: Args):
+    """Config and Schedule from the arguments (or from the run folder when resuming)."""
+    overrides = dict(num_updates=args.num_updates, num_lanes=args.num_lanes, learning_rate=args.learning_rate)
+    config, schedule = preset(args.preset, args.method, **overrides)
+    sched = {k: getattr(args, k) for k in ("chunk_updates", "test_episodes_per_room", "val_episodes_per_room")}
+    schedule = dataclasses.replace(schedule, **{k: v for k, v in sched.items() if v is not None})
+    for name in ("chunk_updates", "test_episodes_per_room", "val_episodes_per_room"):
+        if getattr(schedule, name) < 1:
+            raise ValueError(f"{name} must be >= 1, got {getattr(schedule, name)}")
+    return config, schedule
+
+
+def main(args: Args) -> dict:
+    from foresit_jax.config import Config
+    from foresit_jax.evaluate import agent_params, evaluate
+    from foresit_jax.train import make_trainer
+
+    out = args.out
+    runs.prepare_run_dir(out, args.resume, args.overwrite)
+    if args.resume:
+        info = runs.read_run_info(out)
+        config = Config(**info["config"])
+        schedule = Schedule(**info["schedule"])
+        seed = info["seed"]
+    else:
+        config, schedule = build(args)
+        seed = args.seed
+        info = {"method": config.method, "preset": args.preset, "seed": seed,
+                "config": dataclasses.asdict(config), "schedule": dataclasses.asdict(schedule)}  # fmt: skip
+        runs.write_run_info(out, info)
+
+    trainer = make_trainer(config)
+    env_params = trainer.env_params
+    state = trainer.init(jax.random.PRNGKey(seed))
+    manager = runs.checkpoint_manager(out / "checkpoints", schedule.keep_checkpoints)
+    best_manager = runs.checkpoint_manager(out / "best", 1)
+    done = 0
+    if args.resume and manager.latest_step() is not None:
+        done = int(manager.latest_step())
+        state = runs.restore(manager, done, state)
+        print(f"resuming {out} from update {done}")
+    runs.truncate_rows(out / "metrics", done)
+    runs.truncate_rows(out / "validation", done)
+    val_history = runs.read_rows(out / "validation")
+    best_sr = max((r["SR"] for r in val_history), default=-1.0)
+
+    run_chunk = jax.jit(trainer.run, static_argnums=2)
+    steps_per_update = config.num_steps
+    total = config.num_updates
+    bar = _progress(total, done, args.progress)
+    chunks_run = 0
+    t_start = time.time()
+    while done < total:
+        n = min(schedule.chunk_updates, total - done)
+        t0 = time.time()
+        new_state, metrics = run_chunk(state, env_params, n)
+        metrics = jax.tree.map(np.asarray, metrics)
+        bad = runs.first_nonfinite(metrics)
+        if bad is not None:
+            runs.fail(f"non-finite loss at update {done + bad + 1}; training stopped, the last good checkpoint "
+                      f"(update {done}) is kept in {out / 'checkpoints'}", status=1)  # fmt: skip
+        state = new_state
+        rows = runs.metric_rows(metrics, done, config.num_lanes, steps_per_update)
+        runs.append_rows(out / "metrics", rows)
+        done += n
+        runs.save(manager, done, state)
+        # Model selection on the validation split.
+        key = jax.random.fold_in(jax.random.PRNGKey(seed), done)
+        val = evaluate(agent_params(state, config.sigma2_max), config, "val", key, schedule.val_episodes_per_room)
+        row = {"update": done, **val["overall"]}
+        runs.append_rows(out / "validation", [row])
+        if val["overall"]["SR"] > best_sr:
+            best_sr = val["overall"]["SR"]
+            runs.save(best_manager, done, agent_params(state, config.sigma2_max))
+        dt = time.time() - t0
+        frames = n * config.num_lanes * steps_per_update
+        bar(n, {"fps": f"{frames / dt:,.0f}", "SR": f"{metrics['charts/success_rate'].mean():.3f}",
+                "val SR": f"{val['overall']['SR']:.1f}%"})  # fmt: skip
+        chunks_run += 1
+        if args.stop_after_chunks is not None and chunks_run >= args.stop_after_chunks and done < total:
+            bar(0, None)
+            print(f"stopped after {chunks_run} chunks at update {done} (resume with --resume)")
+            return {"stopped_at": done}
+    bar(0, None)
+
+    # Final test evaluation of the model selected on validation.
+    best_step = best_manager.latest_step()
+    chosen = runs.restore(best_manager, best_step, agent_params(state, config.sigma2_max))
+    test = evaluate(chosen, config, "test", jax.random.PRNGKey(seed + 10_000), schedule.test_episodes_per_room)
+    (out / "results_test.json").write_text(json.dumps({"selected_update": best_step, "results": test}, indent=2))
+    title = f"{config.method}, preset {info['preset']}, seed {seed}: test split (model of update {best_step}, best validation SR)"
+    (out / "results_test.md").write_text(runs.results_markdown(test, title))
+    rows = runs.read_rows(out / "metrics")
+    x = np.array([r["update"] for r in rows])
+    y = runs.smooth([r["charts/success_rate"] for r in rows])
+    vals = [(r["update"], r["SR"] / 100.0) for r in runs.read_rows(out / "validation")]
+    runs.learning_curve_png(out / "learning_curve.png", {config.method: (x, y)}, val_points=vals)
+    print(runs.results_markdown(test, title))
+    print(f"wrote {out}/results_test.md, results_test.json, learning_curve.png, metrics.csv "
+          f"({time.time() - t_start:.0f} s)")  # fmt: skip
+    return test
+
+
+def _progress(total: int, initial: int, enabled: bool):
+    """A tqdm bar advanced per chunk; call with (n, postfix) and (0, None) to close."""
+    from tqdm import tqdm
+
+    bar = tqdm(total=total, initial=initial, unit="upd", disable=not enabled, dynamic_ncols=True,
+               bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} updates [{elapsed}<{remaining}{postfix}]")  # fmt: skip
+
+    def advance(n, postfix):
+        if postfix is None:
+            bar.close()
+            return
+        bar.set_postfix(postfix, refresh=False)
+        bar.update(n)
+
+    return advance
+
+
+def cli(argv=None) -> None:
+    args = tyro.cli(Args, args=argv)
+    try:
+        main(args)
+    except (runs.UserError, ValueError, NotImplementedError) as e:
+        runs.fail(str(e))
+
+
+if __name__ == "__main__":
+    cli(sys.argv[1:])
