@@ -39,7 +39,7 @@ class SceneBank:
     view_sem: jax.Array  # int8 [S, P, 3, W] semantic class of each view pixel of each pose
     view_depth: jax.Array  # uint8 [S, P, 3, W] depth in 1/8 cells
     distance: jax.Array  # int16 [S, K, P] shortest number of actions to success (Done included)
-    starts: jax.Array  # int16 [S, K, G*G*8] start poses (pose index // 2), valid ones first
+    starts: jax.Array  # int32 [S, K, G*G*8] start poses (pose index // 2), valid ones first
     num_starts: jax.Array  # int32 [S, K]
     target_vectors: jax.Array  # float32 [n_categories, D] what the agent is given as target
 
@@ -162,7 +162,7 @@ def build_bank(setup: str, scene_numbers: tuple[int, ...], grid_size: int, view_
         targets[:k] = [present[i] for i in keep]
         distance = np.full((max_targets, num_poses), UNREACHABLE, np.int16)
         distance[:k] = dist[keep]
-        starts = np.zeros((max_targets, num_poses // 2), np.int16)
+        starts = np.zeros((max_targets, num_poses // 2), np.int32)
         num_starts = np.zeros(max_targets, np.int32)
         for j, i in enumerate(keep):
             valid = np.flatnonzero(ok[i])

@@ -78,7 +78,10 @@ class GridNav:
         self.num_categories = len(self.categories)
         self.success_radius_m = C.SETUPS[setup][2]
         self.num_semantic = C.NUM_STRUCTURAL + self.num_categories
-        self.max_depth = float(grid_size) * 1.5
+        self.max_depth = float(grid_size) * 1.5  # depth channel = depth in cells / max_depth
+        # Multiply by reciprocals, never divide by constants: XLA rewrites x / c as
+        # x * (1 / c) under jit only, which would make jit and no-jit differ in the last bit.
+        self._inv_max_depth = jnp.float32(1.0 / self.max_depth)
 
     # ----------------------------------------------------------------- gymnax API
     @property
@@ -92,6 +95,8 @@ class GridNav:
     def make_params(self, split: str = "train", room_types=None, training: bool | None = None) -> EnvParams:
         """Params holding the scene bank of ``split`` (optionally some room types only)."""
         C.check_split(split)
+        if isinstance(room_types, (str, int)):
+            room_types = (room_types,)
         rooms = tuple(range(4)) if room_types is None else tuple(_room_index(r) for r in room_types)
         bank = make_bank(self.setup, C.scene_numbers(split, rooms), self.grid_size, self.view_width)
         return EnvParams(bank=bank, max_steps=time_limits(split == "train" if training is None else training))
@@ -194,7 +199,7 @@ class GridNav:
     def get_obs(self, state: EnvState, params: EnvParams) -> dict[str, jax.Array]:
         sem, depth = self.view(state, params)
         view = jnp.concatenate(
-            [jax.nn.one_hot(sem, self.num_semantic, dtype=jnp.float32), (depth / self.max_depth)[..., None]], -1
+            [jax.nn.one_hot(sem, self.num_semantic, dtype=jnp.float32), (depth * self._inv_max_depth)[..., None]], -1
         )  # [3, W, num_semantic + 1]
         obs = {"view": view, "target": params.bank.target_vectors[state.target]}
         if self.setup == "org":
@@ -208,12 +213,13 @@ class GridNav:
         visible = mask.any((1, 2))
         cols = jnp.arange(self.view_width)[None, None, :]
         rows = jnp.arange(NUM_ROWS)[None, :, None]
-        col_min = jnp.where(mask, cols, self.view_width).min((1, 2)) / self.view_width
-        col_max = (jnp.where(mask, cols, -1).max((1, 2)) + 1) / self.view_width
-        row_min = jnp.where(mask, rows, NUM_ROWS).min((1, 2)) / NUM_ROWS
-        row_max = (jnp.where(mask, rows, -1).max((1, 2)) + 1) / NUM_ROWS
+        inv_w, inv_rows = jnp.float32(1.0 / self.view_width), jnp.float32(1.0 / NUM_ROWS)
+        col_min = jnp.where(mask, cols, self.view_width).min((1, 2)) * inv_w
+        col_max = (jnp.where(mask, cols, -1).max((1, 2)) + 1) * inv_w
+        row_min = jnp.where(mask, rows, NUM_ROWS).min((1, 2)) * inv_rows
+        row_max = (jnp.where(mask, rows, -1).max((1, 2)) + 1) * inv_rows
         nearest = jnp.where(mask, depth[None], jnp.inf).min((1, 2))
-        confidence = 1.0 / (1.0 + nearest / 4.0)
+        confidence = 1.0 / (1.0 + nearest * 0.25)
         feats = jnp.stack([jnp.ones_like(col_min), col_min, col_max, row_min, row_max, confidence], -1)
         feats = jnp.where(visible[:, None], feats, 0.0)
         is_target = (cats == target).astype(jnp.float32)[:, None]

@@ -91,7 +91,10 @@ def _first_hit(cell_t, cat, band, entry, row_band, lo, hi):
             jnp.where(floor_obj[first], obj_sem[first], C.SEM_FLOOR),
         ),
     )
-    depth = jnp.where(floor_end[first] & ~(is_wall[first] | is_furn[first] | floor_obj[first]), hi, entry[first])
+    # A floor row whose first hit lies at or past its far edge sees floor there.
+    past = entry[first] >= hi
+    sem = jnp.where(past, C.SEM_FLOOR, sem)
+    depth = jnp.where(past, hi, entry[first])
     return sem, depth
 
 
