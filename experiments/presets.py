@@ -1,7 +1,11 @@
 """Named presets: a Config plus the run's schedule (chunks, evaluation sizes).
 
-`quick` is the README's main command: a visible result in a few minutes on a 2-core CPU
-(a smaller network and a larger learning rate than the paper, more lanes per update).
+`quick` is the README's main command: a visible result in a few minutes on a 2-core CPU.
+It trains and evaluates on the two small room types (bathrooms and bedrooms), with a
+smaller network and a larger learning rate than the paper: on all four room types A3C
+needs far more episodes than a CPU gives in minutes (measured: ~5% training SR, no better
+than random, after 1,100 updates of 32 lanes), while on these two it reaches ~20-25%
+(random: ~4%) in 600 updates.
 `paper` is the paper's sizes and schedule (512-unit LSTM, Adam 1e-4), for long runs on
 accelerators.  `tiny` is for tests and smoke runs (seconds).
 """
@@ -37,7 +41,7 @@ PRESETS: dict[str, tuple[dict, Schedule]] = {
         Schedule(chunk_updates=2, val_episodes_per_room=2, test_episodes_per_room=2),
     ),  # fmt: skip
     "quick": (
-        dict(num_lanes=32, num_updates=1500, learning_rate=2e-3, **_SMALL_NET),
+        dict(num_lanes=32, num_updates=1000, learning_rate=2e-3, room_types=("bathroom", "bedroom"), **_SMALL_NET),
         Schedule(chunk_updates=250, val_episodes_per_room=25, test_episodes_per_room=250),
     ),
     "paper": (

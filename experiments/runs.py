@@ -149,9 +149,9 @@ def restore(manager, step: int, like):
 
 
 # ---------------------------------------------------------------------- reports
-def results_markdown(results: dict, title: str) -> str:
+def results_markdown(results: dict, title: str, level: int = 1) -> str:
     cols = ("SPL", "SR", "SPL>=5", "SR>=5")
-    lines = [f"# {title}", "", "| rooms | " + " | ".join(cols) + " | episodes |", "|---" * (len(cols) + 2) + "|"]
+    lines = ["#" * level + f" {title}", "", "| rooms | " + " | ".join(cols) + " | episodes |", "|---" * (len(cols) + 2) + "|"]
     for room, m in results.items():
         lines.append(f"| {room} | " + " | ".join(_fmt(m[c]) for c in cols) + f" | {m['episodes']} |")
     return "\n".join(lines) + "\n"

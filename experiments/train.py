@@ -75,7 +75,7 @@ def build(args: Args):
 
 def main(args: Args) -> dict:
     from foresit_jax.config import Config
-    from foresit_jax.evaluate import agent_params, evaluate
+    from foresit_jax.evaluate import agent_params, evaluate, evaluate_random_policy
     from foresit_jax.train import make_trainer
 
     out = args.out
@@ -150,15 +150,19 @@ def main(args: Args) -> dict:
     best_step = best_manager.latest_step()
     chosen = runs.restore(best_manager, best_step, agent_params(state, config.sigma2_max))
     test = evaluate(chosen, config, "test", jax.random.PRNGKey(seed + 10_000), schedule.test_episodes_per_room)
-    (out / "results_test.json").write_text(json.dumps({"selected_update": best_step, "results": test}, indent=2))
+    random = evaluate_random_policy(config, "test", jax.random.PRNGKey(seed + 10_000), schedule.test_episodes_per_room)
+    (out / "results_test.json").write_text(
+        json.dumps({"selected_update": best_step, "results": test, "random_policy": random}, indent=2)
+    )
     title = f"{config.method}, preset {info['preset']}, seed {seed}: test split (model of update {best_step}, best validation SR)"
-    (out / "results_test.md").write_text(runs.results_markdown(test, title))
+    report = runs.results_markdown(test, title) + "\n" + runs.results_markdown(random, "Uniformly random policy, same rooms", level=2)
+    (out / "results_test.md").write_text(report)
     rows = runs.read_rows(out / "metrics")
     x = np.array([r["update"] for r in rows])
     y = runs.smooth([r["charts/success_rate"] for r in rows])
     vals = [(r["update"], r["SR"] / 100.0) for r in runs.read_rows(out / "validation")]
     runs.learning_curve_png(out / "learning_curve.png", {config.method: (x, y)}, val_points=vals)
-    print(runs.results_markdown(test, title))
+    print(report)
     print(f"wrote {out}/results_test.md, results_test.json, learning_curve.png, metrics.csv "
           f"({time.time() - t_start:.0f} s)")  # fmt: skip
     return test

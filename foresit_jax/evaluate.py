@@ -98,6 +98,49 @@ def evaluate(
     return results
 
 
+def evaluate_random_policy(
+    config: Config, split: str = "test", key: chex.PRNGKey | None = None, episodes_per_room: int = 250
+) -> dict[str, dict[str, float]]:
+    """The uniformly random policy on the same room types and episodes count: the
+    reference a trained agent must beat."""
+    key = jax.random.PRNGKey(0) if key is None else key
+    rooms = tuple(config.room_types or ROOM_TYPES)
+    results, pooled = {}, []
+    for room, k in zip(rooms, jax.random.split(key, len(rooms))):
+        env, env_params = _room_env(config.setup, split, room)
+        num_steps = int(jnp.max(env_params.max_steps))
+        stats = jax.tree.map(np.asarray, _random_stats(env, num_steps, episodes_per_room)(env_params, k))
+        results[room] = summarize(*stats)
+        pooled.append(stats)
+    results["overall"] = summarize(*(np.concatenate(parts) for parts in zip(*pooled)))
+    return results
+
+
+@functools.lru_cache(maxsize=32)
+def _random_stats(env, num_steps: int, episodes: int):
+    def run(env_params, key):
+        k_reset, k_steps = jax.random.split(key)
+        _, state = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k_reset, episodes), env_params)
+        optimal = state.optimal_length  # [N] L^g of each episode
+
+        def step(carry, key):
+            state, alive = carry
+            k_act, k_env = jax.random.split(key)
+            action = jax.random.randint(k_act, (episodes,), 0, env.num_actions)
+            _, state, _, term, trunc, info = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
+                jax.random.split(k_env, episodes), state, action, env_params
+            )
+            return (state, alive & ~(term | trunc)), (info["success"] & alive, alive)
+
+        _, (success, valid) = jax.lax.scan(step, (state, jnp.ones(episodes, bool)), jax.random.split(k_steps, num_steps))
+        success = success.any(0)
+        length = valid.sum(0)
+        spl = success * optimal / jnp.maximum(length, optimal)
+        return success, spl, optimal
+
+    return jax.jit(run)
+
+
 @functools.lru_cache(maxsize=32)
 def _rollout_stats(config: Config, env, num_steps: int, greedy: bool):
     agent = Agent(config)
