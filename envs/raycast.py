@@ -48,27 +48,34 @@ def column_angles_deg(view_width: int) -> np.ndarray:
 
 
 def ray_cells(pos: jax.Array, angle_deg: jax.Array, grid_size: int):
-    """The cells one ray crosses, in order, and the distance at which it enters each.
+    """The cells one ray enters and the distance at which it enters each, in no particular order.
+
+    The ray leaves the centre of cell ``pos``; it enters a new cell at each grid line it
+    crosses.  Crossing the i-th horizontal line (i = 0, 1, ...) moves it one row on, to
+    row ``pos[0] + (i + 1) * sign(d_row)``, in the column where it crosses; likewise for
+    vertical lines.  No sort is needed: the first cell that stops a view row is the one
+    with the smallest entry distance among the cells that stop it.
 
     pos: int32 [2] (row, col); angle_deg: scalar, clockwise from north.
-    Returns rows, cols: int32 [2G+1]; entry: float32 [2G+1] (cells).
+    Returns rows, cols: int32 [2G+2]; entry: float32 [2G+2] (cells).
     """
     phi = jnp.deg2rad(angle_deg)
     direction = jnp.stack([-jnp.cos(phi), jnp.sin(phi)])  # [2] (d_row, d_col)
     k = jnp.arange(grid_size + 1, dtype=jnp.float32) + 0.5
-    # Crossing times of the horizontal and vertical grid lines (the origin is a cell centre).
     inv = jnp.where(jnp.abs(direction) > 1e-9, 1.0 / jnp.maximum(jnp.abs(direction), 1e-9), INF)
-    crossings = jnp.sort(jnp.concatenate([k * inv[0], k * inv[1]]))  # [2G+2]
-    entry = crossings[:-1]
-    mid = 0.5 * (crossings[:-1] + crossings[1:])
+    t_row, t_col = k * inv[0], k * inv[1]  # [G+1] crossing times of horizontal / vertical lines
+    steps = jnp.arange(1, grid_size + 2, dtype=jnp.int32)
+    sign = jnp.where(direction > 0, 1, -1).astype(jnp.int32)
     origin = pos.astype(jnp.float32) + 0.5
-    points = origin[None, :] + mid[:, None] * direction[None, :]  # [2G+1, 2]
-    cells = jnp.clip(jnp.floor(points).astype(jnp.int32), 0, grid_size - 1)
-    return cells[:, 0], cells[:, 1], entry
+    cell = lambda x: jnp.clip(jnp.floor(x), -1, grid_size).astype(jnp.int32)  # noqa: E731 (no int overflow)
+    rows = jnp.concatenate([pos[0] + sign[0] * steps, cell(origin[0] + t_col * direction[0])])
+    cols = jnp.concatenate([cell(origin[1] + t_row * direction[1]), pos[1] + sign[1] * steps])
+    entry = jnp.concatenate([t_row, t_col])
+    return jnp.clip(rows, 0, grid_size - 1), jnp.clip(cols, 0, grid_size - 1), entry
 
 
 def _first_hit(cell_t, cat, band, entry, row_band, lo, hi):
-    """Category and depth one row sees along one ray ([K] arrays in ray order)."""
+    """Category and depth one row sees along one ray ([K] arrays of the cells it enters)."""
     is_wall = cell_t == C.CELL_WALL
     is_furn = cell_t == C.CELL_FURNITURE
     in_window = (entry >= lo) & (entry < hi)
@@ -81,7 +88,7 @@ def _first_hit(cell_t, cat, band, entry, row_band, lo, hi):
         is_wall,
         jnp.where(row_band == C.BAND_MID, is_wall | is_furn, is_wall | is_furn | floor_obj | floor_end),
     )
-    first = jnp.argmax(hit)
+    first = jnp.argmin(jnp.where(hit, entry, INF))  # the nearest cell that stops this row
     sem = jnp.where(
         is_wall[first],
         jnp.where(shows_obj[first], obj_sem[first], C.SEM_WALL),
