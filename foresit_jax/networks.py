@@ -8,7 +8,8 @@
 * `ActorCritic`: Encoder + PolicyHead + Critic under one parameter tree (theta, omega),
   with methods `step` (acting) and `critic` (values over an episode).
 * Pure helpers: `initial_carry`, `reset_carry`, `unroll`, `last_valid_index`,
-  `last_step_attention`, `select_subgoal`.
+  `last_step_attention`, `select_subgoal`; the LSTM cell split into its input part and
+  its recurrent step (`lstm_kernels`, `lstm_input_gates`, `lstm_step`).
 
 Every module works unbatched or with any leading batch dims (Dense acts on the last
 axis); the critic's time axis is the second to last of `states`.
@@ -22,6 +23,7 @@ import chex
 import flax.linen as nn
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from foresit_jax import distributions
 
@@ -63,10 +65,18 @@ class Encoder(nn.Module):
     action_features: int = 10
     object_graph: Optional[nn.Module] = None
 
-    @nn.compact
-    def __call__(
-        self, carry: LSTMCarry, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array
-    ) -> tuple[LSTMCarry, chex.Array]:
+    def setup(self):
+        self.view_conv = nn.Dense(self.conv_features)
+        self.target_embed = nn.Dense(self.target_features)
+        self.action_embed = nn.Dense(self.action_features)
+        self.pointwise_conv = nn.Dense(self.conv_features)
+        self.lstm = nn.OptimizedLSTMCell(self.hidden_size)
+
+    def features(self, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array) -> chex.Array:
+        """The LSTM's input `[..., 3 * W * conv_features (+ F)]`: everything before the cell.
+
+        It depends on no carry, so a whole episode's features can be computed at once
+        (`Agent.replay`)."""
         view = obs["view"]  # [..., 3, W, Cv]
         target = obs["target"]  # [..., D]
         batch_shape = target.shape[:-1]
@@ -74,17 +84,15 @@ class Encoder(nn.Module):
         chex.assert_equal_shape_prefix([view, target, prev_action_probs], len(batch_shape))
         grid_shape = view.shape[-3:-1]  # (3, W)
 
-        image = nn.relu(nn.Dense(self.conv_features, name="view_conv")(view))  # [..., 3, W, 64]
-        goal = nn.relu(nn.Dense(self.target_features, name="target_embed")(target))  # [..., 64]
-        action = nn.relu(
-            nn.Dense(self.action_features, name="action_embed")(prev_action_probs)
-        )  # [..., 10]
+        image = nn.relu(self.view_conv(view))  # [..., 3, W, 64]
+        goal = nn.relu(self.target_embed(target))  # [..., 64]
+        action = nn.relu(self.action_embed(prev_action_probs))  # [..., 10]
 
         def tile(x):  # [..., F] -> [..., 3, W, F]
             return jnp.broadcast_to(x[..., None, None, :], (*batch_shape, *grid_shape, x.shape[-1]))
 
         x = jnp.concatenate([image, tile(goal), tile(action)], axis=-1)  # [..., 3, W, 138]
-        x = nn.relu(nn.Dense(self.conv_features, name="pointwise_conv")(x))  # [..., 3, W, 64]
+        x = nn.relu(self.pointwise_conv(x))  # [..., 3, W, 64]
         x = x.reshape(*batch_shape, -1)  # [..., 3 * W * 64]
 
         if self.object_graph is not None:
@@ -92,9 +100,94 @@ class Encoder(nn.Module):
                 raise ValueError("Encoder.object_graph is set but obs has no 'detections'.")
             graph_features = self.object_graph(obs["detections"], target)  # [..., F]
             x = jnp.concatenate([x, graph_features], axis=-1)
+        return x
 
-        carry, s_t = nn.OptimizedLSTMCell(self.hidden_size, name="lstm")(carry, x)
+    def __call__(
+        self, carry: LSTMCarry, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array
+    ) -> tuple[LSTMCarry, chex.Array]:
+        carry, s_t = self.lstm(carry, self.features(obs, prev_action_probs))
         return carry, s_t  # s_t: [..., hidden_size]
+
+
+# The LSTM cell in two parts (the input part has no recurrence, so training applies it
+# to all steps of an episode in one matmul). Together they compute exactly what
+# `nn.OptimizedLSTMCell` computes: the same concatenated kernels, the same dots, the same
+# additions in the same order.
+LSTM_GATES: tuple[str, ...] = ("i", "f", "g", "o")
+
+
+class LSTMKernels(NamedTuple):
+    input_kernel: chex.Array  # [F, 4H] (ii, if, ig, io)
+    recurrent_kernel: chex.Array  # [H, 4H] (hi, hf, hg, ho)
+    bias: chex.Array  # [4H]
+    recurrent_kernel_t: Optional[chex.Array] = None  # [4H, H]: see `with_transposed_recurrent_kernel`
+
+
+def lstm_kernels(lstm_params: Mapping[str, Any]) -> LSTMKernels:
+    """The concatenated kernels of an `nn.OptimizedLSTMCell`'s parameters (its `params`
+    subtree, e.g. `params["params"]["encoder"]["lstm"]`)."""
+    return LSTMKernels(
+        jnp.concatenate([lstm_params["i" + g]["kernel"] for g in LSTM_GATES], axis=-1),
+        jnp.concatenate([lstm_params["h" + g]["kernel"] for g in LSTM_GATES], axis=-1),
+        jnp.concatenate([lstm_params["h" + g]["bias"] for g in LSTM_GATES], axis=-1),
+    )
+
+
+def materialized_transpose(kernel: chex.Array) -> chex.Array:
+    """`kernel.T` as an array of its own (XLA may not fold it back into a matmul).
+
+    XLA:CPU runs `g @ kernel.T` (a dot contracting both operands' last axes: what
+    autodiff emits for the input gradient of `x @ kernel`) about 4x slower than a plain
+    matmul (measured on jax 0.7.2); with the transpose materialised once, every such
+    product is a plain matmul."""
+    return jax.lax.optimization_barrier(jnp.transpose(kernel))
+
+
+@jax.custom_vjp
+def dot_with_transposed_kernel(x: chex.Array, kernel: chex.Array, kernel_t: chex.Array) -> chex.Array:
+    """`jnp.dot(x, kernel)`, whose gradient for x is `g @ kernel_t` (kernel_t = the
+    `materialized_transpose` of kernel; it gets no gradient of its own, kernel gets all)."""
+    return jnp.dot(x, kernel)
+
+
+def _dot_with_transposed_kernel_fwd(x, kernel, kernel_t):
+    return jnp.dot(x, kernel), (x, kernel_t)
+
+
+def _dot_with_transposed_kernel_bwd(residuals, g):
+    x, kernel_t = residuals
+    x_2d, g_2d = x.reshape(-1, x.shape[-1]), g.reshape(-1, g.shape[-1])
+    return jnp.dot(g, kernel_t), jnp.dot(x_2d.T, g_2d), jnp.zeros_like(kernel_t)
+
+
+dot_with_transposed_kernel.defvjp(_dot_with_transposed_kernel_fwd, _dot_with_transposed_kernel_bwd)
+
+
+def with_transposed_recurrent_kernel(kernels: LSTMKernels) -> LSTMKernels:
+    """Kernels whose `lstm_step` differentiates with plain matmuls (same values; for an
+    unroll that is differentiated, the transpose made once outside the loop)."""
+    return kernels._replace(recurrent_kernel_t=materialized_transpose(kernels.recurrent_kernel))
+
+
+def lstm_input_gates(kernels: LSTMKernels, x: chex.Array) -> chex.Array:
+    """The input's contribution to the four gates, `[..., F] -> [..., 4H]`."""
+    return jnp.dot(x, kernels.input_kernel)
+
+
+def lstm_step(kernels: LSTMKernels, carry: LSTMCarry, input_gates: chex.Array) -> tuple[LSTMCarry, chex.Array]:
+    """One step of the cell from its input gates `[..., 4H]` -> ((c, h), h)."""
+    c, h = carry
+    if kernels.recurrent_kernel_t is None:
+        recurrent = jnp.dot(h, kernels.recurrent_kernel)
+    else:
+        recurrent = dot_with_transposed_kernel(h, kernels.recurrent_kernel, kernels.recurrent_kernel_t)
+    recurrent += jnp.reshape(kernels.bias, (1,) * (recurrent.ndim - 1) + (-1,))
+    split = np.cumsum([h.shape[-1]] * 3)
+    i, f, g, o = (r + x for r, x in zip(jnp.split(recurrent, split, axis=-1), jnp.split(input_gates, split, axis=-1)))
+    i, f, g, o = nn.sigmoid(i), nn.sigmoid(f), jnp.tanh(g), nn.sigmoid(o)
+    new_c = f * c + i * g
+    new_h = o * jnp.tanh(new_c)
+    return (new_c, new_h), new_h
 
 
 class PolicyHead(nn.Module):
@@ -213,6 +306,7 @@ class ActorCritic(nn.Module):
 
     Methods (use with `apply(params, ..., method=ActorCritic.step)` etc.):
       encode(carry, obs, prev_action_probs) -> (carry, s_t [..., H])
+      encoder_features(obs, prev_action_probs) -> LSTM input [..., F]
       policy_logits(s_t, imagined) -> logits [..., A]
       step(carry, obs, prev_action_probs, imagined) -> (carry, s_t, logits)  (both above)
       critic(states [..., T, H], valid [..., T]) -> CriticOutput
@@ -238,6 +332,10 @@ class ActorCritic(nn.Module):
         """One encoder step -> (carry, s_t). Acting splits `step` in two so that i_tau
         can be imagined from s_0 before the first action."""
         return self.encoder(carry, obs, prev_action_probs)
+
+    def encoder_features(self, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array) -> chex.Array:
+        """The encoder up to the LSTM's input `[..., F]` (see `Encoder.features`)."""
+        return self.encoder.features(obs, prev_action_probs)
 
     def policy_logits(self, s_t: chex.Array, imagined: Optional[chex.Array] = None) -> chex.Array:
         """pi(. | s_t, i_tau) logits `[..., A]`."""

@@ -51,10 +51,23 @@ def make_env(config: Config, split: str = "train", room_types=None, training: bo
     return envs.make("GridNav-v0", setup=config.setup, split=split, room_types=rooms, training=training)
 
 
-class Trainer:
-    """The pure functions of one training run of `config` (see module docstring)."""
+GRADIENTS: tuple[str, ...] = ("replay", "through_rollout")
 
-    def __init__(self, config: Config, env=None, env_params=None):
+
+class Trainer:
+    """The pure functions of one training run of `config` (see module docstring).
+
+    gradient: how the loss's gradient is computed; both give the gradient of the same
+    loss (equal up to float rounding: the sums run in a different order).
+      'replay' (default): act without gradients, then recompute s_t and the logits from
+        the recorded inputs, differentiably (`Agent.replay`: batched, padding skipped).
+      'through_rollout': differentiate through the acting scan, environment steps
+        included (the reference; several times slower at the paper's sizes on a CPU).
+    """
+
+    def __init__(self, config: Config, env=None, env_params=None, gradient: str = "replay"):
+        if gradient not in GRADIENTS:
+            raise ValueError(f"gradient must be one of {GRADIENTS}, got {gradient!r}")
         if env is None:
             env, env_params = make_env(config)
         limit = int(jnp.max(env_params.max_steps))
@@ -64,6 +77,7 @@ class Trainer:
                 f"time limit ({limit}): one update runs whole episodes"
             )
         self.config = config
+        self.gradient = gradient
         self.env = env
         self.env_params = env_params
         self.agent = Agent(config)
@@ -92,7 +106,13 @@ class Trainer:
     def loss(self, params, w_params, env_params, key, sigma2):
         """Roll out one episode per lane with `params` and return the A3C loss (Eq. 8-9)."""
         cfg = self.config
-        traj = self.agent.rollout(params, w_params, self.env, env_params, key, sigma2, cfg.num_steps)
+        if self.gradient == "replay":
+            acting = jax.lax.stop_gradient(params)
+            traj = self.agent.rollout(acting, w_params, self.env, env_params, key, sigma2, cfg.num_steps, record_inputs=True)
+            states, logits = self.agent.replay(params, traj)
+            traj = traj._replace(states=states, logits=logits, inputs=None)
+        else:
+            traj = self.agent.rollout(params, w_params, self.env, env_params, key, sigma2, cfg.num_steps)
         critic = self.agent.critic(params, traj)
         bootstrap = jnp.zeros_like(critic.value[0])  # whole episodes: nothing to bootstrap
         advantage, returns = losses.advantages_and_returns(
@@ -158,8 +178,8 @@ class Trainer:
         return self.run(self.init(key), self.env_params, self.config.num_updates)
 
 
-def make_trainer(config: Config, env=None, env_params=None) -> Trainer:
-    return Trainer(config, env, env_params)
+def make_trainer(config: Config, env=None, env_params=None, gradient: str = "replay") -> Trainer:
+    return Trainer(config, env, env_params, gradient)
 
 
 def make_train(config: Config, env=None, env_params=None) -> Callable[[chex.PRNGKey], tuple[RunnerState, dict]]:
