@@ -48,7 +48,7 @@ def main(args: Args) -> dict:
         raise runs.UserError(f"--split must be val or test, got {args.split!r}")
     info = runs.read_run_info(args.run)
     config = Config(**info["config"])
-    episodes = args.episodes_per_room or info["schedule"]["test_episodes_per_room"]
+    episodes = info["schedule"]["test_episodes_per_room"] if args.episodes_per_room is None else args.episodes_per_room
     if episodes < 1:
         raise runs.UserError(f"--episodes-per-room must be >= 1, got {episodes}")
     suffix = "" if (args.which, args.greedy) == ("best", False) else f"_{args.which}" + ("_greedy" if args.greedy else "")

@@ -77,7 +77,7 @@ def run_method(method: str, args: Args, bar) -> tuple[list[dict], np.ndarray, np
         curves.append(metrics["charts/success_rate"])
         done += n
         bar(n, {"method": method, "SR": f"{metrics['charts/success_rate'].mean():.3f}"})
-    episodes = args.test_episodes_per_room or schedule.test_episodes_per_room
+    episodes = schedule.test_episodes_per_room if args.test_episodes_per_room is None else args.test_episodes_per_room
     results = []
     for i in range(args.seeds):
         state_i = jax.tree.map(lambda x: x[i], states)
@@ -114,6 +114,8 @@ def main(args: Args) -> list[dict]:
         raise runs.UserError(f"--seeds must be >= 1, got {args.seeds}")
     if not args.methods:
         raise runs.UserError("--methods needs at least one method")
+    if args.test_episodes_per_room is not None and args.test_episodes_per_room < 1:
+        raise runs.UserError(f"--test-episodes-per-room must be >= 1, got {args.test_episodes_per_room}")
     for method in args.methods:  # fail before any training
         preset(args.preset, method, num_updates=args.num_updates)
     out = args.out

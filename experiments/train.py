@@ -79,6 +79,10 @@ def main(args: Args) -> dict:
     from foresit_jax.train import make_trainer
 
     out = args.out
+    if not args.resume:
+        # Validate the arguments before touching --out (with --overwrite, a typo must not
+        # delete the existing run and then fail).
+        config, schedule = build(args)
     runs.prepare_run_dir(out, args.resume, args.overwrite)
     if args.resume:
         info = runs.read_run_info(out)
@@ -86,7 +90,6 @@ def main(args: Args) -> dict:
         schedule = Schedule(**info["schedule"])
         seed = info["seed"]
     else:
-        config, schedule = build(args)
         seed = args.seed
         info = {"method": config.method, "preset": args.preset, "seed": seed,
                 "config": dataclasses.asdict(config), "schedule": dataclasses.asdict(schedule)}  # fmt: skip

@@ -1,0 +1,166 @@
+"""foresit_jax.agent: parameter trees per method, the shared rollout (invariants against
+the environment's rules), the differentiable replay, the critic, and episode statistics
+against hand-computed values."""
+
+import functools
+
+import chex
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import train_helpers as H
+from foresit_jax.agent import Agent, EpisodeStats, Trajectory, episode_stats
+
+DONE = 5
+LANES = 8
+FORESIT = H.tiny_config("a3c+foresit")
+
+
+def observation():
+    env, env_params = H.bathroom_env()
+    return jax.tree.map(np.asarray, env.reset(jax.random.PRNGKey(0), env_params)[0])
+
+
+# ---------------------------------------------------------------------- parameters
+@pytest.mark.parametrize("method", H.METHODS)
+def test_parameter_tree_of_each_method(method):
+    config = H.tiny_config(method)
+    obs = observation()
+    params, w_params = jax.eval_shape(Agent(config).init, jax.random.PRNGKey(0), obs)
+    flags, hidden = config.flags, config.hidden_size
+    critic = params["params"]["value_critic"]
+    # Only the attention critic has q, k, v (Eq. 3-4); the plain A3C critic is an MLP.
+    assert {"query", "key", "value"} <= set(critic) if flags.attention_critic else set(critic) == {"value_head"}
+    # The policy is linear over [s_t : i_tau] with imagination, over s_t without.
+    policy_inputs = 2 * hidden if flags.uses_imagination else hidden
+    chex.assert_shape(params["params"]["policy"]["actor"]["kernel"], (policy_inputs, config.num_actions))
+    # f_w maps [s_0 : g_tau] to an imagined state.
+    layers = w_params["params"]
+    assert len(layers) == len(config.imagination_layer_sizes)
+    chex.assert_shape(layers["layer_0"]["kernel"], (hidden + obs["target"].shape[-1], config.imagination_layer_sizes[0]))
+    chex.assert_shape(layers[f"layer_{len(layers) - 1}"]["kernel"], (config.imagination_layer_sizes[-2], hidden))
+
+
+# ---------------------------------------------------------------------- episode statistics
+def test_episode_stats_hand_computed():
+    T, B = 5, 5
+    valid = np.zeros((T, B), bool)
+    terminated = np.zeros((T, B), bool)
+    truncated = np.zeros((T, B), bool)
+    success = np.zeros((T, B), bool)
+    # lane 0: success on the 4th action, L^g = 2     -> L 4, SPL 2/4
+    valid[:4, 0], terminated[3, 0], success[3, 0] = True, True, True
+    # lane 1: Done at once, failed                  -> L 1, SPL 0
+    valid[:1, 1], terminated[0, 1] = True, True
+    # lane 2: time limit at the 5th step             -> L 5, ended, SPL 0
+    valid[:, 2], truncated[4, 2] = True, True
+    # lane 3: optimal success (L = L^g = 3)          -> SPL 1
+    valid[:3, 3], terminated[2, 3], success[2, 3] = True, True, True
+    # lane 4: still running at the end of the rollout, and garbage after a lane's end
+    valid[:, 4] = True
+    success[4, 1] = terminated[4, 1] = True  # padding of lane 1: ignored
+    traj = Trajectory(
+        states=np.zeros((T, B, 2), np.float32), logits=np.zeros((T, B, 6), np.float32),
+        actions=np.zeros((T, B), np.int32), rewards=np.zeros((T, B), np.float32),
+        terminated=terminated, truncated=truncated, valid=valid, success=success,
+        target=np.zeros((B, 3), np.float32), optimal_length=np.array([2, 3, 4, 3, 6], np.int32),
+        room_type=np.full((B,), 3, np.int32),
+    )  # fmt: skip
+    stats = jax.tree.map(np.asarray, episode_stats(traj))
+    assert isinstance(stats, EpisodeStats)
+    np.testing.assert_array_equal(stats.success, [True, False, False, True, False])
+    np.testing.assert_array_equal(stats.length, [4, 1, 5, 3, 5])
+    np.testing.assert_array_equal(stats.ended, [True, True, True, True, False])
+    np.testing.assert_allclose(stats.spl, [0.5, 0.0, 0.0, 1.0, 0.0])
+    np.testing.assert_array_equal(stats.optimal_length, [2, 3, 4, 3, 6])
+
+
+# ---------------------------------------------------------------------- the shared rollout
+@functools.lru_cache(maxsize=None)
+def _rollout(greedy: bool):
+    """jit(rollout with recorded inputs, then replay) of the tiny ForeSIT agent, once."""
+    agent, (env, _) = Agent(FORESIT), H.bathroom_env()
+
+    def run(params, w_params, env_params, key, sigma2):
+        traj = agent.rollout(params, w_params, env, env_params, key, sigma2, FORESIT.num_steps, greedy, record_inputs=not greedy)
+        replayed = None if greedy else agent.replay(params, traj)
+        return traj, replayed, agent.critic(params, traj)
+
+    return jax.jit(run, compiler_options=H.FAST_COMPILE)
+
+
+@pytest.fixture(scope="module")
+def rollout():
+    """A sampled rollout of 8 lanes with freshly initialised parameters."""
+    env, env_params = H.bathroom_env()
+    params, w_params = Agent(FORESIT).init(jax.random.PRNGKey(0), observation())
+    sigma2 = jnp.full((LANES,), 0.5)
+    out = _rollout(False)(params, w_params, env_params, jax.random.PRNGKey(1), sigma2)
+    return (params, w_params, env_params, sigma2), jax.tree.map(np.asarray, out)
+
+
+def test_rollout_follows_the_environment_rules(rollout):
+    _, (traj, _, _) = rollout
+    T = FORESIT.num_steps
+    chex.assert_shape([traj.actions, traj.rewards, traj.valid, traj.success], (T, LANES))
+    chex.assert_shape(traj.states, (T, LANES, FORESIT.hidden_size))
+    chex.assert_shape(traj.logits, (T, LANES, FORESIT.num_actions))
+    valid = traj.valid
+    assert valid[0].all()
+    assert (valid[1:] <= valid[:-1]).all(), "a lane's episode is a prefix of the rollout"
+    ends = (traj.terminated | traj.truncated) & valid
+    assert (ends.sum(0) == 1).all(), "num_steps >= the time limit: every episode ends exactly once"
+    length = valid.sum(0)
+    last = length - 1
+    lanes = np.arange(LANES)
+    assert ends[last, lanes].all(), "the episode ends at its last valid step"
+    # Done always ends the episode, and only Done terminates it (SAVN's rule).
+    np.testing.assert_array_equal(traj.terminated & valid, (traj.actions == DONE) & valid)
+    # Success only on a Done; +5 on a successful Done, -0.01 on every other real step.
+    assert not (traj.success & ~traj.terminated).any()
+    assert not (traj.success & ~valid).any()
+    np.testing.assert_allclose(traj.rewards[valid], np.where(traj.success, 5.0, -0.01)[valid])
+    # The time limit (30 for training) is truncation, after exactly 30 actions.
+    np.testing.assert_array_equal(traj.truncated[last, lanes] & ~traj.terminated[last, lanes], length == 30)
+    assert (traj.optimal_length >= 2).all(), "never solved at the start, Done counted"
+    assert (traj.actions >= 0).all() and (traj.actions < FORESIT.num_actions).all()
+    assert np.isfinite(traj.logits).all()
+    assert (np.abs(traj.states) < 1).all()  # LSTM h = o * tanh(c)
+
+
+def test_replay_recomputes_the_acting_pass_bit_for_bit(rollout):
+    """Training differentiates `replay`: on the real steps it must give exactly what the
+    agent computed while acting."""
+    _, (traj, (states, logits), _) = rollout
+    valid = traj.valid
+    np.testing.assert_array_equal(states[valid], traj.states[valid])
+    np.testing.assert_array_equal(logits[valid], traj.logits[valid])
+
+
+def test_critic_over_each_lane_episode(rollout):
+    _, (traj, _, critic) = rollout
+    T = FORESIT.num_steps
+    chex.assert_shape(critic.value, (T, LANES))
+    chex.assert_shape(critic.alpha, (LANES, T, T))
+    alpha = critic.alpha
+    valid = traj.valid.T  # [B, T]
+    for b in range(LANES):
+        n = int(valid[b].sum())
+        # Attention of each real step over the real steps up to it (Eq. 3), summing to 1.
+        np.testing.assert_allclose(alpha[b, :n, :n].sum(-1), 1.0, rtol=1e-5)
+        assert (np.triu(alpha[b, :n, :n], 1) == 0).all()
+        assert (alpha[b, :n, n:] == 0).all()
+    assert np.isfinite(critic.value[traj.valid]).all()
+
+
+def test_greedy_rollout_takes_the_most_likely_action(rollout):
+    (params, w_params, env_params, sigma2), (sampled, _, _) = rollout
+    traj, _, _ = jax.tree.map(np.asarray, _rollout(True)(params, w_params, env_params, jax.random.PRNGKey(1), sigma2))
+    valid = traj.valid
+    np.testing.assert_array_equal(traj.actions[valid], traj.logits.argmax(-1)[valid])
+    # Same key, same start states: only the action choice differs.
+    np.testing.assert_array_equal(traj.optimal_length, sampled.optimal_length)
+    np.testing.assert_array_equal(traj.target, sampled.target)
+    assert (sampled.actions[sampled.valid] != sampled.logits.argmax(-1)[sampled.valid]).any()

@@ -1,0 +1,153 @@
+"""Shared, process-wide cached builders for the agent/training/experiment tests.
+
+Compiling one training update takes 10-20 s on a 2-core CPU even at tiny sizes, so the
+tests share compiled functions: every builder here is `functools.lru_cache`d (one
+Trainer and one jitted function per config for the whole pytest session, across test
+modules).  Test programs are compiled with XLA's backend optimisation level 0
+(`FAST_COMPILE`): about 3x faster to compile, slower to run, which is the right trade for
+a handful of tiny updates.  Bitwise comparisons are only ever made between programs
+compiled with the same options.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import chex
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import envs
+from foresit_jax.config import Config
+from foresit_jax.train import Trainer
+
+FAST_COMPILE = {"xla_backend_optimization_level": 0}
+
+# The smallest sensible agent: bathrooms only (the smallest scene bank and the shortest
+# paths), 4 lanes, 16 hidden units.  num_steps stays 30 (the training time limit).
+TINY = dict(
+    room_types=("bathroom",), num_lanes=4, num_updates=2, hidden_size=16, attention_size=16,
+    value_hidden=16, imagination_layer_sizes=(16, 8, 4, 8, 16, 16), buffer_size=1,
+    imagination_epochs=1, learning_rate=1e-3,
+)  # fmt: skip
+
+METHODS = ("a3c", "a3c+foresit", "rnd", "att", "int")
+
+
+def tiny_config(method: str = "a3c+foresit", **overrides) -> Config:
+    return Config(method=method, **{**TINY, **overrides})
+
+
+@functools.lru_cache(maxsize=None)
+def bathroom_env(split: str = "train", training: bool | None = None):
+    """(env, params) of the savn bathrooms (the bank is shared with `make_env` of a
+    bathroom-only config through envs' own cache)."""
+    return envs.make("GridNav-v0", setup="savn", split=split, room_types=("bathroom",), training=training)
+
+
+@functools.lru_cache(maxsize=None)
+def trainer(config: Config) -> Trainer:
+    env, env_params = bathroom_env()
+    return Trainer(config, env, env_params)
+
+
+@functools.lru_cache(maxsize=None)
+def jitted_init(config: Config):
+    return jax.jit(trainer(config).init, compiler_options=FAST_COMPILE)
+
+
+@functools.lru_cache(maxsize=None)
+def jitted_update(config: Config):
+    """`jit(update)`; wrapped in `chex.assert_max_traces(n=1)`, so every test that
+    calls it also checks that chained updates never re-trace."""
+    update = trainer(config).update
+
+    def update_of_config(state, env_params):
+        return update(state, env_params)
+
+    # chex counts traces per (call stack, source, name): give each config its own name.
+    update_of_config.__name__ = f"update_{config.method}_{abs(hash(config))}"
+    return jax.jit(chex.assert_max_traces(update_of_config, n=1), compiler_options=FAST_COMPILE)
+
+
+def run_updates(config: Config, state, num_updates: int):
+    """`num_updates` calls of the shared jitted update; metrics stacked `[n]` (numpy)."""
+    update, env_params = jitted_update(config), trainer(config).env_params
+    history = []
+    for _ in range(num_updates):
+        state, metrics = update(state, env_params)
+        history.append(metrics)
+    return state, jax.tree.map(lambda *m: np.stack([np.asarray(x) for x in m]), *history)
+
+
+def init_and_run(config: Config, seed: int, num_updates: int):
+    return run_updates(config, jitted_init(config)(jax.random.PRNGKey(seed)), num_updates)
+
+
+# ------------------------------------------------------------------ tree comparisons
+def assert_trees_bitwise_equal(a, b) -> None:
+    chex.assert_trees_all_equal_structs(a, b)
+    for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)):
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+
+
+def trees_bitwise_equal(a, b) -> bool:
+    return all(np.array_equal(np.asarray(x), np.asarray(y)) for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b)))
+
+
+def assert_tree_finite(tree) -> None:
+    for path, leaf in jax.tree_util.tree_leaves_with_path(tree):
+        leaf = np.asarray(leaf)
+        if np.issubdtype(leaf.dtype, np.floating):
+            assert np.isfinite(leaf).all(), f"non-finite values in {jax.tree_util.keystr(path)}"
+
+
+def subtree(params, *names):
+    """params['params'][names[0]][names[1]]..."""
+    node = params["params"]
+    for name in names:
+        node = node[name]
+    return node
+
+
+def max_abs(tree) -> float:
+    leaves = [jnp.max(jnp.abs(x)) for x in jax.tree.leaves(tree)]
+    return float(max(leaves)) if leaves else 0.0
+
+
+# ------------------------------------------------------------------ experiments in-process
+@functools.lru_cache(maxsize=None)
+def cached_trainer(config: Config, **kwargs) -> Trainer:
+    return Trainer(config, **kwargs)
+
+
+def _make_trainer_cached(config, env=None, env_params=None, **kwargs):
+    if env is not None or env_params is not None:
+        return Trainer(config, env, env_params, **kwargs)
+    return cached_trainer(config, **kwargs)
+
+
+def _fast_jit(real_jit):
+    def jit(fun=None, /, **kwargs):
+        kwargs.setdefault("compiler_options", FAST_COMPILE)
+        if fun is None:
+            return functools.partial(jit, **kwargs)
+        return real_jit(fun, **kwargs)
+
+    return jit
+
+
+def patch_for_experiments(mp) -> None:
+    """Make in-process calls of the experiments CLIs cheap, without changing what they do:
+    the `tiny` preset trains on bathrooms only (one scene bank, 2 evaluation programs
+    instead of 8), `make_trainer` returns one Trainer per config (so every `main()` call
+    reuses the same jitted chunk instead of recompiling it: a Trainer is pure), and jit
+    compiles with FAST_COMPILE."""
+    import experiments.presets as presets
+    import foresit_jax.train as train
+
+    fields, schedule = presets.PRESETS["tiny"]
+    mp.setitem(presets.PRESETS, "tiny", ({**fields, "room_types": ("bathroom",)}, schedule))
+    mp.setattr(train, "make_trainer", _make_trainer_cached)
+    mp.setattr(jax, "jit", _fast_jit(jax.jit))
