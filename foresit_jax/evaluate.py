@@ -57,11 +57,19 @@ def summarize(success, spl, optimal_length) -> dict[str, float]:
     }
 
 
-@functools.lru_cache(maxsize=32)
-def _room_env(setup: str, split: str, room: str):
+@functools.lru_cache(maxsize=8)
+def _setup_env(setup: str):
     import envs
 
-    return envs.make("GridNav-v0", setup=setup, split=split, room_types=(room,), training=False)
+    return envs.GridNav(setup=setup)
+
+
+@functools.lru_cache(maxsize=32)
+def _room_env(setup: str, split: str, room: str):
+    """One env object per setup (so the jitted rollouts are shared by every room type and
+    split of the same episode length) and the params of one room type of a split."""
+    env = _setup_env(setup)
+    return env, env.make_params(split, room_types=(room,), training=False)
 
 
 def evaluate(
