@@ -156,7 +156,7 @@ class Trainer:
                 "charts/padded_fraction": 1.0 - jnp.mean(traj.valid.astype(jnp.float32)),
                 "charts/noise_variance": jnp.mean(sigma2),
                 "charts/moving_success_rate": jnp.mean(rho),
-                "losses/grad_norm": optax.global_norm(grads),
+                "losses/grad_norm": optax.tree.norm(grads),
             }
         )
         new_state = RunnerState(params, opt_state, w_params, buffers, trackers, key, state.update + 1)
