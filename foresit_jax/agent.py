@@ -32,7 +32,7 @@ from foresit_jax.networks import (
     lstm_input_gates,
     lstm_kernels,
     lstm_step,
-    materialized_transpose,
+    lstm_input_kernel_t,
     with_transposed_recurrent_kernel,
 )
 
@@ -269,36 +269,25 @@ def _recorded_input_gates_fwd(agent, rows, params, obs, probs, recorded, valid):
 def _recorded_input_gates_bwd(agent, rows, residuals, cotangent):
     params, obs, probs, valid = residuals
     size = valid.shape[0]
-    encoder = params["params"]["encoder"]
-    kernels = lstm_kernels(encoder["lstm"])
-    input_kernel_t = materialized_transpose(kernels.input_kernel)  # [4H, F]
-    feature_params = {name: p for name, p in encoder.items() if name != "lstm"}  # convs (+ object graph)
-
-    def features(feature_params, index):  # [rows, F]
-        encoder_params = {**feature_params, "lstm": encoder["lstm"]}
-        chunk_params = {**params, "params": {**params["params"], "encoder": encoder_params}}
-        chunk_obs = jax.tree.map(lambda x: x[index], obs)
-        return agent.model.apply(chunk_params, chunk_obs, probs[index], method=ActorCritic.encoder_features)
-
+    input_kernel_t = lstm_input_kernel_t(params["params"]["encoder"]["lstm"])  # [4H, F], once for all chunks
     order = jnp.argsort(jnp.logical_not(valid), stable=True)  # valid rows first
     num_chunks = -(-size // rows)
-    order = jnp.pad(order, (0, num_chunks * rows - size))  # (row 0 again: its cotangent counts once per chunk it is in, see below)
+    order = jnp.pad(order, (0, num_chunks * rows - size))
     needed = -(-jnp.sum(valid.astype(jnp.int32)) // rows)
 
-    def chunk(k, grads):
-        d_features_params, d_input_kernel = grads
+    def chunk(k):
         index = jax.lax.dynamic_slice_in_dim(order, k * rows, rows)
-        # Rows past the valid ones are padding (zero cotangent) or, in a last partial
-        # chunk, repeats of row 0: mask them so that no row counts twice.
-        mask = (k * rows + jnp.arange(rows)) < size
-        g = jnp.where(mask[:, None], cotangent[index], 0.0)  # [rows, 4H]
-        x, features_vjp = jax.vjp(lambda p: features(p, index), feature_params)
-        (d_chunk,) = features_vjp(jnp.dot(g, input_kernel_t))  # d x = g @ W^T, a plain matmul
-        d_features_params = jax.tree.map(jnp.add, d_features_params, d_chunk)
-        return d_features_params, d_input_kernel + jnp.dot(x.T, g)  # d W = x^T g
+        # Rows past the valid ones have a zero cotangent, except the repeats of row 0
+        # that pad a last partial chunk: masked, so that no row counts twice.
+        in_range = (k * rows + jnp.arange(rows)) < size
+        g = jnp.where(in_range[:, None], cotangent[index], 0.0)  # [rows, 4H]
+        return input_gates_chunk_vjp(agent, params, obs, probs, input_kernel_t, index, g)
 
-    zeros = (jax.tree.map(jnp.zeros_like, feature_params), jnp.zeros_like(kernels.input_kernel))
-    d_feature_params, d_input_kernel = jax.lax.fori_loop(0, needed, chunk, zeros)
+    # Chunk 0 outside the loop (right whatever `needed` is: a chunk of padding adds
+    # zeros), so the loop needs no zero-filled accumulator.
+    d_feature_params, d_input_kernel = jax.lax.fori_loop(
+        1, needed, lambda k, grads: jax.tree.map(jnp.add, grads, chunk(k)), chunk(0)
+    )
 
     grads = jax.tree.map(jnp.zeros_like, params)
     d_encoder = {**grads["params"]["encoder"], **d_feature_params}
@@ -306,8 +295,29 @@ def _recorded_input_gates_bwd(agent, rows, residuals, cotangent):
     for gate, d_kernel in zip(LSTM_GATES, jnp.split(d_input_kernel, len(LSTM_GATES), axis=-1)):
         d_lstm["i" + gate] = {**d_lstm["i" + gate], "kernel": d_kernel}
     d_encoder["lstm"] = d_lstm
-    grads = {**grads, "params": {**grads["params"], "encoder": d_encoder}}
-    return grads, None, None, None, None
+    return {**grads, "params": {**grads["params"], "encoder": d_encoder}}, None, None, None, None
+
+
+def _feature_params(params):
+    """The encoder's parameters before the LSTM (convolutions, embeddings, object graph)."""
+    return {name: p for name, p in params["params"]["encoder"].items() if name != "lstm"}
+
+
+def input_gates_chunk_vjp(agent: Agent, params, obs, probs, input_kernel_t, index, g):
+    """The gradient of `vdot(g, agent.input_gates(params, obs[index], probs[index]))`:
+    (for the encoder's feature parameters, for the LSTM's concatenated input kernel
+    `[F, 4H]`), with `input_kernel_t` its `materialized_transpose` (so that both
+    products are plain matmuls). One chunk of `Agent.replay`'s gradient."""
+    encoder = params["params"]["encoder"]
+
+    def features(feature_params):  # [rows, F]
+        chunk_params = {**params, "params": {**params["params"], "encoder": {**encoder, **feature_params}}}
+        chunk_obs = jax.tree.map(lambda x: x[index], obs)
+        return agent.model.apply(chunk_params, chunk_obs, probs[index], method=ActorCritic.encoder_features)
+
+    x, features_vjp = jax.vjp(features, _feature_params(params))
+    (d_feature_params,) = features_vjp(jnp.dot(g, input_kernel_t))  # d x = g W^T
+    return d_feature_params, jnp.dot(x.T, g)  # d W = x^T g
 
 
 _recorded_input_gates.defvjp(_recorded_input_gates_fwd, _recorded_input_gates_bwd)

@@ -163,6 +163,13 @@ def _dot_with_transposed_kernel_bwd(residuals, g):
 dot_with_transposed_kernel.defvjp(_dot_with_transposed_kernel_fwd, _dot_with_transposed_kernel_bwd)
 
 
+def lstm_input_kernel_t(lstm_params: Mapping[str, Any]) -> chex.Array:
+    """The transpose `[4H, F]` of `lstm_kernels(lstm_params).input_kernel`, built in one
+    pass and materialised (see `materialized_transpose`)."""
+    kernels_t = [jnp.transpose(lstm_params["i" + g]["kernel"]) for g in LSTM_GATES]
+    return jax.lax.optimization_barrier(jnp.concatenate(kernels_t, axis=0))
+
+
 def with_transposed_recurrent_kernel(kernels: LSTMKernels) -> LSTMKernels:
     """Kernels whose `lstm_step` differentiates with plain matmuls (same values; for an
     unroll that is differentiated, the transpose made once outside the loop)."""
