@@ -355,7 +355,7 @@ def print_table(results: list[Measurement], roofline: float) -> None:
         roof = f"{100 * m.flops / m.best_s / roofline:5.1f}%" if m.flops is not None else f"{'-':>6s}"
         fps = f"{m.fps:10,.0f} ({m.median_fps:9,.0f})"
         print(
-            f"| {m.lanes:5d} | {m.gradient:16s} | {fps:>23s} | {100 * m.padded:5.1f}% | {gflop} | {rate} | "
+            f"| {m.lanes:5d} | {m.gradient:16s} | {fps:>23s} | {abs(100 * m.padded):5.1f}% | {gflop} | {rate} | "
             f"{roof} | {100 * m.env_best_s / m.best_s:4.1f}% | {m.compile_s:9.1f} |"
         )
 
