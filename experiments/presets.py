@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import dataclasses
 
-from foresit_jax.config import METHODS, PLANNED_METHODS, Config
+from foresit_jax.config import Config
+from foresit_jax.methods import IMPLEMENTED_METHODS, parse_method
 
 
 @dataclasses.dataclass(frozen=True)
@@ -41,7 +42,7 @@ PRESETS: dict[str, tuple[dict, Schedule]] = {
         Schedule(chunk_updates=2, val_episodes_per_room=2, test_episodes_per_room=2),
     ),  # fmt: skip
     "quick": (
-        dict(num_lanes=32, num_updates=3000, learning_rate=2e-3, room_types=("bathroom", "bedroom"), **_SMALL_NET),
+        dict(num_lanes=32, num_steps=16, num_updates=3000, learning_rate=1e-3, **_SMALL_NET),
         Schedule(chunk_updates=500, val_episodes_per_room=25, test_episodes_per_room=250),
     ),
     "paper": (
@@ -52,9 +53,13 @@ PRESETS: dict[str, tuple[dict, Schedule]] = {
 
 
 def check_method(method: str) -> None:
-    if method not in METHODS:
-        extra = f" ({method} is planned, not implemented yet)" if method in PLANNED_METHODS else ""
-        raise ValueError(f"unknown method {method!r}{extra}; valid methods: {', '.join(METHODS)}")
+    """A one-line error for a method name that does not parse or is not built yet."""
+    pieces = parse_method(method)  # ValueError naming the valid pieces
+    if pieces.planned_pieces:
+        raise ValueError(
+            f"method {method!r} is planned, not implemented yet ({', '.join(pieces.planned_pieces)}); "
+            f"valid methods: {', '.join(IMPLEMENTED_METHODS)}"
+        )
 
 
 def preset(name: str, method: str, **overrides) -> tuple[Config, Schedule]:

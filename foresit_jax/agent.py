@@ -1,53 +1,72 @@
 """The acting agent: one rollout function shared by training and evaluation.
 
 An `Agent` ties the networks of a `Config` together (encoder + policy + critic under one
-parameter tree, theta and omega; f_w under its own tree, w) and runs batched episodes
-against any environment with the GridNav API (``reset``/``step`` on a batch via vmap).
-Evaluation calls `rollout` alone. Training calls it without gradients, recording what
-the encoder saw at each step, then `replay` recomputes s_t and the logits from those
-inputs, differentiably (the environment's outputs carry no gradient, so this is the same
-function of the parameters as the acting pass, and the gradient is that of
-differentiating through the rollout). The replay applies everything before the LSTM's
-recurrence to all the episode's real steps at once (a few large matmuls instead of one
-small one per step) and skips the padding; only the recurrent step is sequential.
+parameter tree, theta and omega; f_w under its own tree, w) and its method's pieces
+(`foresit_jax.methods`), and drives any environment with the GridNav API (``reset`` /
+``step`` vmapped over lanes; per-episode facts read from the step's ``info``:
+``success``, ``optimal_length``, ``room_type``), never from the environment's state.
+
+`act` runs every lane for a window of `num_steps` steps from an `ActorState` and returns
+the next `ActorState` and the window's `Trajectory`. Lanes never idle: episodes follow one
+another inside a window (the environment auto-resets), and an episode cut at the window's
+edge continues in the next one with its LSTM carry, s_0, i_tau, step count and (for the
+attention critic) the states it has seen so far (`ActorState.memory`). At each episode's
+start the LSTM carry and the previous action probabilities are zeroed and i_tau is
+imagined from s_0 with the lane's current noise variance (Eq. 6-7; every K steps for the
+`int` ablation); each ended episode's outcome updates the lane's success tracker (rho).
+
+`whole_episodes=True` is SAVN's layout: every lane starts a fresh episode and only its
+first episode counts (`valid`); what follows it in the window is padding. Evaluation uses
+it (`rollout`), and so does training with `Config.rollout='episodes'` (the reference).
 """
 
 from __future__ import annotations
 
-import functools
 from typing import Any, NamedTuple, Optional
 
 import chex
 import jax
 import jax.numpy as jnp
 
+import envs.metrics
 from foresit_jax import distributions, imagination
 from foresit_jax.config import Config
-from foresit_jax.networks import (
-    LSTM_GATES,
-    ActorCritic,
-    ImaginationNet,
-    LSTMKernels,
+from foresit_jax.lstm import (
+    LSTMCarry,
+    encoder_lstm_params,
     initial_carry,
     lstm_input_gates,
     lstm_kernels,
     lstm_step,
-    lstm_input_kernel_t,
-    with_transposed_recurrent_kernel,
+    reset_carry,
 )
+from foresit_jax.networks import ActorCritic, CriticOutput, ImaginationNet, window_attention_mask
+
+
+class ActorState(NamedTuple):
+    """What each lane carries from one window to the next; leaves `[B, ...]`."""
+
+    env_state: Any  # the environment's state (opaque to the agent)
+    obs: Any  # observation dict to act on next, leaves [B, ...]
+    lstm: LSTMCarry  # (c, h) [B, H] each; zeros when a new episode begins
+    prev_probs: chex.Array  # [B, A] previous action probabilities (zeros at an episode start)
+    imagined: chex.Array  # [B, H] the running episode's i_tau
+    s_0: chex.Array  # [B, H] the running episode's first state
+    episode_step: chex.Array  # [B] int32 index of the next state in its episode (0: new episode)
+    memory: chex.Array  # [B, M, H] the running episode's states so far (attention critic; M = 0 without)
+    tracker: imagination.SuccessTracker  # [B, window] outcomes of each lane's last episodes (rho)
 
 
 class StepInputs(NamedTuple):
-    """What the encoder and the policy saw at each step of a rollout (for `Agent.replay`)."""
+    """What the encoder and the policy saw at each step of a window (for the replay)."""
 
     obs: Any  # observation dict, leaves [T, B, ...]
     prev_action_probs: chex.Array  # [T, B, A]
     imagined: Optional[chex.Array]  # [T, B, H] i_tau given to the policy; None without imagination
-    input_gates: chex.Array  # [T, B, 4H] the LSTM input's part of the gates, as computed while acting
 
 
 class Trajectory(NamedTuple):
-    """One padded episode per lane, time-major."""
+    """One window of `num_steps` steps per lane, time-major."""
 
     states: chex.Array  # [T, B, H] s_t (LSTM hidden state)
     logits: chex.Array  # [T, B, A]
@@ -55,12 +74,15 @@ class Trajectory(NamedTuple):
     rewards: chex.Array  # [T, B]
     terminated: chex.Array  # [T, B] bool, Done taken
     truncated: chex.Array  # [T, B] bool, time limit reached
-    valid: chex.Array  # [T, B] bool, step belongs to the lane's first episode
+    valid: chex.Array  # [T, B] bool, the step enters the loss (all of them when packed)
     success: chex.Array  # [T, B] bool, successful Done at this step
-    target: chex.Array  # [B, D] g_tau of the episode
-    optimal_length: chex.Array  # [B] int32 L^g of the episode
-    room_type: chex.Array  # [B] int32
-    inputs: Optional[StepInputs] = None  # recorded by rollout(record_inputs=True)
+    episode_step: chex.Array  # [T, B] int32 position of s_t in its episode (0 at its start)
+    s_0: chex.Array  # [T, B, H] first state of the step's episode
+    optimal_length: chex.Array  # [T, B] int32 L^g of the step's episode
+    room_type: chex.Array  # [T, B] int32
+    next_state: chex.Array  # [B, H] s_T: the state after the window (bootstraps a cut episode)
+    next_episode_step: chex.Array  # [B] int32 its position in its episode
+    inputs: Optional[StepInputs] = None  # recorded with record_inputs=True
 
 
 class EpisodeStats(NamedTuple):
@@ -73,35 +95,38 @@ class EpisodeStats(NamedTuple):
 
 
 def episode_stats(traj: Trajectory) -> EpisodeStats:
+    """Per-lane statistics of a whole-episode rollout (each lane's first episode)."""
     valid = traj.valid
     length = jnp.sum(valid.astype(jnp.int32), axis=0)
     success = jnp.any(traj.success & valid, axis=0)
     ended = jnp.any((traj.terminated | traj.truncated) & valid, axis=0)
-    opt = traj.optimal_length
-    spl = success * opt / jnp.maximum(length, opt).astype(jnp.float32)
-    return EpisodeStats(success, length, opt, spl.astype(jnp.float32), ended, traj.room_type)
+    opt = traj.optimal_length[0]
+    spl = envs.metrics.spl(success, length, opt)
+    return EpisodeStats(success, length, opt, spl, ended, traj.room_type[0])
 
 
-def replay_chunk_rows(num_steps: int, num_lanes: int) -> int:
-    """Steps per chunk of `Agent.replay`'s gradient: a quarter of the rollout (so with a
-    fraction p of padding, about ceil(4 (1 - p)) chunks are differentiated), and at least
-    128 rows (or the whole rollout) for an efficient matmul."""
-    size = num_steps * num_lanes
-    return min(size, max(128, -(-size // 4)))
+def ended_episodes(traj: Trajectory) -> tuple[chex.Array, EpisodeStats]:
+    """The episodes that ended inside a window: (`ended [T, B]` bool, per-step
+    `EpisodeStats` `[T, B]` meaningful where `ended`), for metrics over packed windows."""
+    ended = (traj.terminated | traj.truncated) & traj.valid
+    length = traj.episode_step + 1
+    success = traj.success & ended
+    spl = envs.metrics.spl(success, length, traj.optimal_length)
+    return ended, EpisodeStats(success, length, traj.optimal_length, spl, ended, traj.room_type)
 
 
 class Agent:
-    """Networks and acting for one method (a `Config`)."""
+    """Networks, method pieces and acting for one `Config`."""
 
     def __init__(self, config: Config):
         self.config = config
-        flags = config.flags
-        self.flags = flags
+        self.method = config.pieces
+        self.imagination = self.method.imagination
         self.model = ActorCritic(
             num_actions=config.num_actions,
             hidden_size=config.hidden_size,
-            use_imagination=flags.uses_imagination,
-            attention_critic=flags.attention_critic,
+            use_imagination=self.imagination.uses_imagination,
+            attention_critic=self.imagination.attention_critic,
             attention_size=config.attention_size,
             value_hidden=config.value_hidden,
         )
@@ -114,7 +139,7 @@ class Agent:
         hidden = self.config.hidden_size
         carry = initial_carry((), hidden)
         probs = jnp.zeros((self.config.num_actions,), jnp.float32)
-        imagined = jnp.zeros((hidden,), jnp.float32) if self.flags.uses_imagination else None
+        imagined = jnp.zeros((hidden,), jnp.float32) if self.imagination.uses_imagination else None
         params = self.model.init(k_model, carry, obs, probs, imagined)
         w_params = self.imagination_net.init(k_imag, jnp.zeros((hidden,)), obs["target"])
         return params, w_params
@@ -123,201 +148,166 @@ class Agent:
         """f_w([s_0 : g_tau]) `[..., H]`."""
         return self.imagination_net.apply(w_params, s_0, goal)
 
-    def _imagined_subgoal(self, w_params, s_t, goal, key, sigma2):
-        """i_tau for the policy (stop-gradient: the policy loss never trains f_w or,
-        through it, s_0).  ForeSIT: f_w + N(0, sigma2); rnd: tanh(N(0, 0.5))."""
-        if self.flags.imagination == "random":
-            return imagination.random_imagination(key, s_t.shape, self.config.rnd_variance)
-        imagined = self.imagine(w_params, jax.lax.stop_gradient(s_t), goal)
-        return jax.lax.stop_gradient(imagination.add_imagination_noise(key, imagined, sigma2))
+    def start(self, key, env, env_params, num_lanes: int, memory_size: int = 0, tracker=None) -> ActorState:
+        """Every lane at the start of a fresh episode. memory_size: states of an episode
+        the attention critic can remember across windows (the training time limit; 0 when
+        nothing is carried across windows). tracker: per-lane success trackers to keep
+        (fresh ones by default)."""
+        if isinstance(num_lanes, bool) or not isinstance(num_lanes, int) or num_lanes < 1:
+            raise ValueError(f"num_lanes must be a positive int, got {num_lanes!r}")
+        cfg = self.config
+        obs, env_state = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(key, num_lanes), env_params)
+        hidden = cfg.hidden_size
+        zeros = jnp.zeros((num_lanes, hidden), jnp.float32)
+        if tracker is None:
+            one = imagination.tracker_init(cfg.success_window)
+            tracker = jax.tree.map(lambda x: jnp.broadcast_to(x, (num_lanes,) + x.shape), one)
+        return ActorState(
+            env_state=env_state,
+            obs=obs,
+            lstm=initial_carry((num_lanes,), hidden),
+            prev_probs=jnp.zeros((num_lanes, cfg.num_actions), jnp.float32),
+            imagined=zeros,
+            s_0=zeros,
+            episode_step=jnp.zeros((num_lanes,), jnp.int32),
+            memory=jnp.zeros((num_lanes, memory_size, hidden), jnp.float32),
+            tracker=tracker,
+        )
 
     # ------------------------------------------------------------------ acting
-    def rollout(
-        self, params, w_params, env, env_params, key, sigma2, num_steps: int, greedy: bool = False,
-        record_inputs: bool = False,
-    ):  # fmt: skip
-        """Reset every lane and run its episode for `num_steps` steps (padded, masked).
-
-        sigma2: `[B]` imagination-noise variance per lane; its length sets the batch.
-        Returns a `Trajectory`.  Steps after a lane's episode ended are padding
-        (valid=False): the environment auto-resets, and what follows is ignored.
-        record_inputs: also return each step's encoder and policy inputs
-        (`Trajectory.inputs`, for `replay`).
-        """
-        num_lanes = sigma2.shape[0]
-        hidden = self.config.hidden_size
-        k_reset, k_steps = jax.random.split(key)
-        obs, env_state = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k_reset, num_lanes), env_params)
-        goal = obs["target"]  # [B, D]
-        optimal_length = env_state.optimal_length
-        room_type = env_state.room_type
-        model = self.model
-        flags, interval = self.flags, self.config.int_interval
-        kernels = self._lstm_kernels(params)  # concatenated once, outside the loop
-
-        def step(carry, inputs):
-            t, key = inputs
-            lstm, prev_probs, imagined, env_state, obs, alive = carry
-            k_imag, k_act, k_env = jax.random.split(key, 3)
-            # Together, model.apply(params, lstm, obs, prev_probs, method=ActorCritic.encode).
-            input_gates = self.input_gates(params, obs, prev_probs, kernels)  # [B, 4H]
-            lstm, s_t = lstm_step(kernels, lstm, input_gates)
-            if flags.uses_imagination:
-                renew = t == 0
-                if flags.reimagine_every_k:
-                    renew = t % interval == 0
-                imagined = jax.lax.cond(
-                    renew,
-                    lambda: self._imagined_subgoal(w_params, s_t, goal, k_imag, sigma2),
-                    lambda: imagined,
-                )
-            policy_input = imagined if flags.uses_imagination else None
-            logits = model.apply(params, s_t, policy_input, method=ActorCritic.policy_logits)
-            action = distributions.greedy(logits) if greedy else distributions.sample(k_act, logits)
-            seen = StepInputs(obs, prev_probs, policy_input, input_gates) if record_inputs else None
-            obs, env_state, reward, term, trunc, info = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
-                jax.random.split(k_env, num_lanes), env_state, action, env_params
-            )
-            out = (s_t, logits, action, reward, term, trunc, alive, info["success"] & alive, seen)
-            probs = jax.lax.stop_gradient(distributions.probs(logits))
-            return (lstm, probs, imagined, env_state, obs, alive & ~(term | trunc)), out
-
-        init = (
-            initial_carry((num_lanes,), hidden),
-            jnp.zeros((num_lanes, self.config.num_actions), jnp.float32),
-            jnp.zeros((num_lanes, hidden), jnp.float32),
-            env_state,
-            obs,
-            jnp.ones((num_lanes,), bool),
-        )
-        steps = (jnp.arange(num_steps), jax.random.split(k_steps, num_steps))
-        _, out = jax.lax.scan(step, init, steps)
-        states, logits, actions, rewards, term, trunc, valid, success, seen = out
-        return Trajectory(states, logits, actions, rewards, term, trunc, valid, success, goal,
-                          optimal_length, room_type, seen)  # fmt: skip
-
-    def _lstm_kernels(self, params) -> LSTMKernels:
-        return lstm_kernels(params["params"]["encoder"]["lstm"])
-
-    def input_gates(self, params, obs, prev_action_probs, kernels: Optional[LSTMKernels] = None):
+    def input_gates(self, params, obs, prev_action_probs, kernels=None):
         """The encoder up to the LSTM's input gates `[..., 4H]`: everything of a step
         that does not depend on the LSTM carry."""
-        kernels = self._lstm_kernels(params) if kernels is None else kernels
+        kernels = lstm_kernels(encoder_lstm_params(params)) if kernels is None else kernels
         features = self.model.apply(params, obs, prev_action_probs, method=ActorCritic.encoder_features)
         return lstm_input_gates(kernels, features)
 
-    def replay(self, params, traj: Trajectory):
-        """Recompute (states `[T, B, H]`, logits `[T, B, A]`) of a rollout recorded with
-        `record_inputs=True`, as a differentiable function of `params`.
+    def act(
+        self, params, w_params, env, env_params, actor: ActorState, key: chex.PRNGKey, num_steps: int,
+        *, greedy: bool = False, whole_episodes: bool = False, noise_variance: Optional[chex.Array] = None,
+        record_inputs: bool = True, step_keys: Optional[chex.Array] = None,
+    ) -> tuple[ActorState, Trajectory]:  # fmt: skip
+        """Run every lane `num_steps` steps from `actor` (see the module docstring).
 
-        The values are the acting pass's, bit for bit: the LSTM's input gates are the
-        recorded ones, then the recurrent step and the policy run step by step on them,
-        as when acting. The gradient is that of the same function, computed for speed:
-        everything before the recurrence (encoder and input projection) is
-        differentiated for all the real steps of all lanes at once, in chunks of
-        `replay_chunk_rows` steps, skipping the padding (which the loss masks: its
-        gradient is zero); see `_recorded_input_gates`.
+        noise_variance: `[B]` imagination-noise variance per lane, fixed (evaluation); by
+          default each lane's Eq. 7 from its success tracker at the episode's start.
+        record_inputs: keep each step's encoder and policy inputs (`Trajectory.inputs`,
+          for the replay gradient).
+        step_keys: `[num_steps, 2]` the keys of the steps, instead of splitting `key`
+          (so that two windows can replay exactly one longer window's steps).
+        Returns (the actor state after the window, the window's Trajectory).
         """
-        inputs = jax.lax.stop_gradient(traj.inputs)
-        num_steps, num_lanes = traj.valid.shape
-        size = num_steps * num_lanes
-        model = self.model
-        kernels = with_transposed_recurrent_kernel(self._lstm_kernels(params))
+        cfg, imag = self.config, self.imagination
+        num_lanes = actor.episode_step.shape[0]
+        lanes = jnp.arange(num_lanes)
+        memory_size = actor.memory.shape[1]
+        kernels = lstm_kernels(encoder_lstm_params(params))  # concatenated once, outside the loop
 
-        def flat(x):  # [T, B, ...] -> [T * B, ...]
-            return x.reshape((size,) + x.shape[2:])
+        def step(carry, key):
+            actor, alive = carry
+            k_imag, k_act, k_env = jax.random.split(key, 3)
+            first = actor.episode_step == 0  # [B]
+            input_gates = self.input_gates(params, actor.obs, actor.prev_probs, kernels)  # [B, 4H]
+            lstm, s_t = lstm_step(kernels, actor.lstm, input_gates)
+            s_0 = jnp.where(first[:, None], s_t, actor.s_0)
+            imagined = actor.imagined
+            if imag.uses_imagination:
+                if noise_variance is None:
+                    rho = jax.vmap(imagination.success_rate)(actor.tracker)
+                    variance = imagination.noise_variance(rho, cfg.sigma2_max)  # [B]
+                else:
+                    variance = noise_variance
+                renew = imag.renews(actor.episode_step, cfg.int_interval)  # [B]
+                goal = actor.obs["target"]
+                imagined = jax.lax.cond(
+                    jnp.any(renew),
+                    lambda: jnp.where(
+                        renew[:, None],
+                        imag.imagine(self.imagine, w_params, s_t, goal, k_imag, variance, cfg.rnd_variance),
+                        actor.imagined,
+                    ),
+                    lambda: actor.imagined,
+                )
+            policy_input = imagined if imag.uses_imagination else None
+            logits = self.model.apply(params, s_t, policy_input, method=ActorCritic.policy_logits)
+            action = distributions.greedy(logits) if greedy else distributions.sample(k_act, logits)
+            memory = actor.memory
+            if memory_size:
+                memory = memory.at[lanes, jnp.minimum(actor.episode_step, memory_size - 1)].set(
+                    jax.lax.stop_gradient(s_t)
+                )
+            obs, env_state, reward, term, trunc, info = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
+                jax.random.split(k_env, num_lanes), actor.env_state, action, env_params
+            )
+            done = term | trunc
+            tracker = jax.vmap(imagination.tracker_update)(actor.tracker, info["success"], done & alive)
+            seen = StepInputs(actor.obs, actor.prev_probs, policy_input) if record_inputs else None
+            out = (
+                s_t, logits, action, reward, term, trunc, alive, info["success"] & alive, actor.episode_step,
+                s_0, info["optimal_length"], info["room_type"], seen,
+            )  # fmt: skip
+            probs = jax.lax.stop_gradient(distributions.probs(logits))
+            next_actor = ActorState(
+                env_state=env_state,
+                obs=obs,
+                lstm=reset_carry(done, lstm),
+                prev_probs=jnp.where(done[:, None], 0.0, probs),
+                imagined=imagined,
+                s_0=s_0,
+                episode_step=jnp.where(done, 0, actor.episode_step + 1),
+                memory=memory,
+                tracker=tracker,
+            )
+            return (next_actor, alive & ~done if whole_episodes else alive), out
 
-        obs, probs, recorded = jax.tree.map(flat, (inputs.obs, inputs.prev_action_probs, inputs.input_gates))
-        rows = replay_chunk_rows(num_steps, num_lanes)
-        gates = _recorded_input_gates(self, rows, params, obs, probs, recorded, flat(traj.valid))
-        gates = gates.reshape(num_steps, num_lanes, -1)  # [T, B, 4H]
-
-        def step(carry, xs):
-            input_gates, imagined = xs
-            carry, s_t = lstm_step(kernels, carry, input_gates)
-            logits = model.apply(params, s_t, imagined, method=ActorCritic.policy_logits)
-            return carry, (s_t, logits)
-
-        carry = initial_carry((num_lanes,), self.config.hidden_size)
-        _, (states, logits) = jax.lax.scan(step, carry, (gates, inputs.imagined))
-        return states, logits
-
-    def critic(self, params, traj: Trajectory):
-        """Critic over each lane's episode: CriticOutput with value `[T, B]`, alpha
-        `[B, T, T]` (None for the plain critic)."""
-        out = self.model.apply(
-            params, jnp.swapaxes(traj.states, 0, 1), jnp.swapaxes(traj.valid, 0, 1),
-            method=ActorCritic.critic,
+        step_keys = jax.random.split(key, num_steps) if step_keys is None else step_keys
+        (actor, _), out = jax.lax.scan(step, (actor, jnp.ones((num_lanes,), bool)), step_keys)
+        states, logits, actions, rewards, term, trunc, valid, success, episode_step, s_0, opt, room, seen = out
+        if whole_episodes:  # nothing is bootstrapped: every counted episode ended (or is cut by design)
+            next_state = jnp.zeros_like(actor.s_0)
+        else:  # s_T, for V(s*_T) at the cut (Eq. 8); the next window computes it again
+            _, next_state = lstm_step(kernels, actor.lstm, self.input_gates(params, actor.obs, actor.prev_probs, kernels))
+        traj = Trajectory(
+            states, logits, actions, rewards, term, trunc, valid, success, episode_step, s_0, opt, room,
+            jax.lax.stop_gradient(next_state), actor.episode_step, seen,
         )  # fmt: skip
-        return out._replace(value=jnp.swapaxes(out.value, 0, 1))
+        return actor, traj
 
+    def rollout(
+        self, params, w_params, env, env_params, key, noise_variance, num_steps: int, greedy: bool = False,
+        record_inputs: bool = False, num_lanes: Optional[int] = None,
+    ) -> Trajectory:  # fmt: skip
+        """One whole episode per lane from a fresh start, padded to `num_steps`
+        (evaluation). noise_variance `[B]` (or a scalar with `num_lanes`)."""
+        noise_variance = jnp.asarray(noise_variance, jnp.float32)
+        if num_lanes is None:
+            if noise_variance.ndim != 1:
+                raise ValueError("rollout: give num_lanes, or noise_variance with one entry per lane")
+            num_lanes = noise_variance.shape[0]
+        noise_variance = jnp.broadcast_to(noise_variance, (num_lanes,))
+        k_start, k_act = jax.random.split(key)
+        actor = self.start(k_start, env, env_params, num_lanes)
+        _, traj = self.act(
+            params, w_params, env, env_params, actor, k_act, num_steps, greedy=greedy, whole_episodes=True,
+            noise_variance=noise_variance, record_inputs=record_inputs,
+        )  # fmt: skip
+        return traj
 
-@functools.partial(jax.custom_vjp, nondiff_argnums=(0, 1))
-def _recorded_input_gates(agent: Agent, rows: int, params, obs, probs, recorded, valid):
-    """`agent.input_gates(params, obs, probs)` `[N, 4H]`, whose value was computed while
-    acting and is `recorded` `[N, 4H]`: returns it. Its gradient differentiates the
-    `valid` `[N]` rows only (the loss gives the padding a zero cotangent), `rows` at a
-    time: the valid rows are gathered first, and a `while_loop` visits only the chunks
-    that hold some."""
-    return recorded
+    # ------------------------------------------------------------------ critic
+    def critic(self, params, traj: Trajectory, memory: chex.Array) -> tuple[CriticOutput, chex.Array]:
+        """The critic over a window, the state after it included: (CriticOutput with
+        value `[T + 1, B]` (row T: V(s*_T), the bootstrap), alpha `[B, T + 1, M + T + 1]`
+        or None; keys `[B, M + T + 1, H]`, what alpha weighs).
 
-
-def _recorded_input_gates_fwd(agent, rows, params, obs, probs, recorded, valid):
-    return recorded, (params, obs, probs, valid)
-
-
-def _recorded_input_gates_bwd(agent, rows, residuals, cotangent):
-    params, obs, probs, valid = residuals
-    size = valid.shape[0]
-    input_kernel_t = lstm_input_kernel_t(params["params"]["encoder"]["lstm"])  # [4H, F], once for all chunks
-    order = jnp.argsort(jnp.logical_not(valid), stable=True)  # valid rows first
-    num_chunks = -(-size // rows)
-    order = jnp.pad(order, (0, num_chunks * rows - size))
-    needed = -(-jnp.sum(valid.astype(jnp.int32)) // rows)
-
-    def chunk(k):
-        index = jax.lax.dynamic_slice_in_dim(order, k * rows, rows)
-        # Rows past the valid ones have a zero cotangent, except the repeats of row 0
-        # that pad a last partial chunk: masked, so that no row counts twice.
-        in_range = (k * rows + jnp.arange(rows)) < size
-        g = jnp.where(in_range[:, None], cotangent[index], 0.0)  # [rows, 4H]
-        return input_gates_chunk_vjp(agent, params, obs, probs, input_kernel_t, index, g)
-
-    # Chunk 0 outside the loop (right whatever `needed` is: a chunk of padding adds
-    # zeros), so the loop needs no zero-filled accumulator.
-    d_feature_params, d_input_kernel = jax.lax.fori_loop(
-        1, needed, lambda k, grads: jax.tree.map(jnp.add, grads, chunk(k)), chunk(0)
-    )
-
-    grads = jax.tree.map(jnp.zeros_like, params)
-    d_encoder = {**grads["params"]["encoder"], **d_feature_params}
-    d_lstm = dict(d_encoder["lstm"])
-    for gate, d_kernel in zip(LSTM_GATES, jnp.split(d_input_kernel, len(LSTM_GATES), axis=-1)):
-        d_lstm["i" + gate] = {**d_lstm["i" + gate], "kernel": d_kernel}
-    d_encoder["lstm"] = d_lstm
-    return {**grads, "params": {**grads["params"], "encoder": d_encoder}}, None, None, None, None
-
-
-def _feature_params(params):
-    """The encoder's parameters before the LSTM (convolutions, embeddings, object graph)."""
-    return {name: p for name, p in params["params"]["encoder"].items() if name != "lstm"}
-
-
-def input_gates_chunk_vjp(agent: Agent, params, obs, probs, input_kernel_t, index, g):
-    """The gradient of `vdot(g, agent.input_gates(params, obs[index], probs[index]))`:
-    (for the encoder's feature parameters, for the LSTM's concatenated input kernel
-    `[F, 4H]`), with `input_kernel_t` its `materialized_transpose` (so that both
-    products are plain matmuls). One chunk of `Agent.replay`'s gradient."""
-    encoder = params["params"]["encoder"]
-
-    def features(feature_params):  # [rows, F]
-        chunk_params = {**params, "params": {**params["params"], "encoder": {**encoder, **feature_params}}}
-        chunk_obs = jax.tree.map(lambda x: x[index], obs)
-        return agent.model.apply(chunk_params, chunk_obs, probs[index], method=ActorCritic.encoder_features)
-
-    x, features_vjp = jax.vjp(features, _feature_params(params))
-    (d_feature_params,) = features_vjp(jnp.dot(g, input_kernel_t))  # d x = g W^T
-    return d_feature_params, jnp.dot(x.T, g)  # d W = x^T g
-
-
-_recorded_input_gates.defvjp(_recorded_input_gates_fwd, _recorded_input_gates_bwd)
+        Each step attends over the states of its own episode up to itself (Eq. 3-4):
+        those of earlier windows (`memory` `[B, M, H]`, the ActorState's at the window's
+        start, without gradient) and the window's."""
+        states = jnp.concatenate([traj.states, traj.next_state[None]], axis=0)  # [T + 1, B, H]
+        steps = jnp.concatenate([traj.episode_step, traj.next_episode_step[None]], axis=0)  # [T + 1, B]
+        states, steps = jnp.swapaxes(states, 0, 1), jnp.swapaxes(steps, 0, 1)  # [B, T + 1, ...]
+        keys = jnp.concatenate([jax.lax.stop_gradient(memory), states], axis=1)  # [B, M + T + 1, H]
+        mask = window_attention_mask(steps, memory.shape[1])
+        out = self.model.apply(
+            params, states, jnp.ones(steps.shape, bool), keys, mask, steps, method=ActorCritic.critic
+        )
+        return out._replace(value=jnp.swapaxes(out.value, 0, 1)), keys

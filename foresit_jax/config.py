@@ -1,81 +1,19 @@
-"""Hyperparameters (a frozen dataclass) and the method registry.
+"""Hyperparameters of one training run (a frozen dataclass).
 
-Every method of the paper is a set of flags on one agent (`MethodFlags`), looked up by
-name in `METHODS`; `Config.flags` is the looked-up entry. Nothing mutates a config:
-use `dataclasses.replace(config, field=value)` for a variant (it re-validates).
+`Config.method` names a composition of pieces (`foresit_jax.methods`); `Config.pieces`
+is the parsed `Method`, validated with the setup and the gradient path. Nothing mutates
+a config: use `dataclasses.replace(config, field=value)` for a variant (it re-validates).
 """
 
 from __future__ import annotations
 
 import dataclasses
-from typing import Mapping
+
+from foresit_jax.methods import GRADIENTS, Method, parse_method
 
 SETUPS: tuple[str, ...] = ("savn", "org")
-SUBGOAL_MODES: tuple[str, ...] = ("argmax", "attention_average")
-IMAGINATION_SOURCES: tuple[str, ...] = ("none", "learned", "random")
 IMAGINATION_OPTIMIZERS: tuple[str, ...] = ("sgd", "adam")
-
-
-@dataclasses.dataclass(frozen=True)
-class MethodFlags:
-    """What a method switches on. A method is one agent with these flags."""
-
-    imagination: str = "none"
-    """Source of i_tau: 'none' (policy sees s_t only), 'learned' (f_w + noise, ForeSIT),
-    'random' (tanh of Gaussian noise, the `rnd` ablation)."""
-    attention_critic: bool = False
-    """Value from the attention of Eq. 3-4 (V(s*_t)); False: plain MLP on s_t."""
-    subgoal_mode: str = "argmax"
-    """What f_w learns to imagine: 'argmax' (s_{t*}, ForeSIT) or 'attention_average'
-    (sum_j alpha_j s_j, the `att` ablation)."""
-    reimagine_every_k: bool = False
-    """The `int` ablation: re-imagine from s_t every `Config.int_interval` steps."""
-
-    @property
-    def uses_imagination(self) -> bool:
-        return self.imagination != "none"
-
-    @property
-    def trains_imagination(self) -> bool:
-        """Whether buffers are filled and f_w is trained."""
-        return self.imagination == "learned"
-
-
-_FORESIT = MethodFlags(imagination="learned", attention_critic=True)
-
-METHODS: Mapping[str, MethodFlags] = {
-    # SAVN's non-adaptive A3C: LSTM encoder, linear policy on s_t, value MLP on s_t.
-    "a3c": MethodFlags(),
-    # ForeSIT on A3C: attention critic, sub-goal selection, f_w, noisy i_tau.
-    "a3c+foresit": _FORESIT,
-    # Table 3 ablations, each ForeSIT with one change.
-    "rnd": dataclasses.replace(_FORESIT, imagination="random"),
-    "att": dataclasses.replace(_FORESIT, subgoal_mode="attention_average"),
-    "int": dataclasses.replace(_FORESIT, reimagine_every_k=True),
-}
-
-# Methods of the paper not implemented yet (clearly marked placeholders).
-PLANNED_METHODS: Mapping[str, str] = {
-    "a3c+maml": "SAVN's self-adaptive meta-learning (inner SGD on a learned interaction loss)",
-    "a3c+maml+foresit": "SAVN's self-adaptive meta-learning with ForeSIT",
-    "a3c+org": "the object-relation-graph encoder (Encoder.object_graph hook)",
-    "a3c+org+foresit": "the object-relation-graph encoder with ForeSIT",
-}
-
-
-def method_flags(name: str) -> MethodFlags:
-    """Look up a method. Planned ones raise NotImplementedError, unknown ValueError."""
-    if name in METHODS:
-        return METHODS[name]
-    if name in PLANNED_METHODS:
-        raise NotImplementedError(
-            f"Method {name!r} ({PLANNED_METHODS[name]}) is not implemented yet; "
-            f"implemented: {sorted(METHODS)}."
-        )
-    raise ValueError(
-        f"Unknown method {name!r}; valid names: {sorted(METHODS)} "
-        f"(planned: {sorted(PLANNED_METHODS)})."
-    )
+ROLLOUTS: tuple[str, ...] = ("packed", "episodes")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -83,7 +21,7 @@ class Config:
     """All hyperparameters of one training run (paper values where the paper gives one)."""
 
     method: str = "a3c+foresit"
-    """Method name, a key of METHODS (see `method_flags`)."""
+    """Method: '+'-joined pieces, e.g. 'a3c', 'a3c+foresit', 'a3c+rnd' (see `foresit_jax.methods`)."""
     setup: str = "savn"
     """Environment setup: 'savn' (first setup, 300-d word-vector targets) or 'org'
     (second setup, one-hot targets + detector features)."""
@@ -92,12 +30,23 @@ class Config:
     """Room types to train on (e.g. ('bathroom',) for an easy setting); () for all four."""
 
     # Training loop (synchronous batched A3C).
+    rollout: str = "packed"
+    """'packed': every lane steps continuously through windows of `num_steps` (A3C's
+    n-step window), episodes back to back, an episode cut at a window's edge carried into
+    the next update and bootstrapped (Eq. 8). 'episodes': SAVN's whole-episode updates,
+    every lane reset at each update and run for one episode padded to `num_steps` (the
+    reference; `num_steps` must be at least the training time limit)."""
+    gradient: str = "replay"
+    """How the loss's gradient is computed: 'replay' (act without gradients, then re-run
+    the modules over the recorded inputs, the feed-forward part batched over the whole
+    window) or 'through_rollout' (differentiate through the acting scan; the reference).
+    Equal up to float rounding; each method declares which it supports."""
     num_lanes: int = 16
-    """Parallel env lanes (A3C agents); one episode each per update."""
+    """Parallel env lanes (A3C agents)."""
     num_updates: int = 2000
-    """Gradient updates (each on one padded episode per lane)."""
+    """Gradient updates (each on one window of `num_steps` steps per lane)."""
     num_steps: int = 30
-    """Padded rollout length T; at least the env's training episode limit (30, SAVN)."""
+    """Window length T (steps per lane per update)."""
 
     # A3C loss (Eq. 8-9) and optimiser.
     gamma: float = 0.99
@@ -151,9 +100,26 @@ class Config:
 
     def validate(self) -> None:
         """Raise ValueError (NotImplementedError for planned methods) on bad values."""
-        method_flags(self.method)
+        pieces = parse_method(self.method)
         if self.setup not in SETUPS:
             raise ValueError(f"setup must be one of {SETUPS}, got {self.setup!r}.")
+        if pieces.required_setup not in (None, self.setup):
+            raise ValueError(
+                f"method {self.method!r} needs setup {pieces.required_setup!r} (its {pieces.encoder!r} "
+                f"encoder reads the detector features), got setup {self.setup!r}."
+            )
+        if pieces.planned_pieces:
+            raise NotImplementedError(
+                f"method {self.method!r}: {', '.join(pieces.planned_pieces)} is not implemented yet."
+            )
+        if self.rollout not in ROLLOUTS:
+            raise ValueError(f"rollout must be one of {ROLLOUTS}, got {self.rollout!r}.")
+        if self.gradient not in GRADIENTS:
+            raise ValueError(f"gradient must be one of {GRADIENTS}, got {self.gradient!r}.")
+        if self.gradient not in pieces.gradients:
+            raise ValueError(
+                f"method {self.method!r} supports gradient {pieces.gradients}, not {self.gradient!r}."
+            )
         if self.imagination_optimizer not in IMAGINATION_OPTIMIZERS:
             raise ValueError(
                 f"imagination_optimizer must be one of {IMAGINATION_OPTIMIZERS}, "
@@ -189,11 +155,11 @@ class Config:
             )
 
     @property
-    def flags(self) -> MethodFlags:
-        """The method's switches (from METHODS)."""
-        return method_flags(self.method)
+    def pieces(self) -> Method:
+        """The method's pieces (base, encoder, imagination), parsed from `method`."""
+        return parse_method(self.method)
 
     @property
-    def num_episodes(self) -> int:
-        """Training episodes in the whole run (one per lane per update)."""
-        return self.num_lanes * self.num_updates
+    def frames_per_update(self) -> int:
+        """Environment steps per update (all lanes)."""
+        return self.num_lanes * self.num_steps

@@ -35,7 +35,7 @@ class AgentParams(NamedTuple):
 def agent_params(state, sigma2_max: float) -> AgentParams:
     """From a training RunnerState.  The evaluation noise variance is the lanes' mean of
     Eq. 7 at the end of training: the imagination the policy was trained with."""
-    rho = jax.vmap(imagination.success_rate)(state.trackers)  # [B]
+    rho = jax.vmap(imagination.success_rate)(state.actor.tracker)  # [B]
     variance = jnp.mean(imagination.noise_variance(rho, sigma2_max))
     return AgentParams(state.params, state.imagination_params, variance)
 

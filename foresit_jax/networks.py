@@ -7,9 +7,9 @@
 * `ImaginationNet`: f_w, 6 tanh layers with a bottleneck, [s_0 : g_tau] -> imagined s.
 * `ActorCritic`: Encoder + PolicyHead + Critic under one parameter tree (theta, omega),
   with methods `step` (acting) and `critic` (values over an episode).
-* Pure helpers: `initial_carry`, `reset_carry`, `unroll`, `last_valid_index`,
-  `last_step_attention`, `select_subgoal`; the LSTM cell split into its input part and
-  its recurrent step (`lstm_kernels`, `lstm_input_gates`, `lstm_step`).
+* Pure helpers: `unroll`, `last_valid_index`, `last_step_attention`, `select_subgoal`,
+  `episode_attention_mask`. The LSTM cell's split form (used by acting and the replay
+  gradient) is in `foresit_jax.lstm`.
 
 Every module works unbatched or with any leading batch dims (Dense acts on the last
 axis); the critic's time axis is the second to last of `states`.
@@ -23,25 +23,12 @@ import chex
 import flax.linen as nn
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from foresit_jax import distributions
-
-LSTMCarry = tuple[chex.Array, chex.Array]  # (c, h), each [..., hidden_size]
+from foresit_jax.lstm import LSTMCarry, initial_carry, reset_carry  # noqa: F401 (re-exported)
 
 # f_w layer widths: 6 tanh layers, bottleneck 64, output = LSTM size (512).
 IMAGINATION_LAYER_SIZES: tuple[int, ...] = (512, 256, 64, 256, 512, 512)
-
-
-def initial_carry(batch_shape: Sequence[int], hidden_size: int = 512) -> LSTMCarry:
-    """Zero LSTM carry (c, h), each `[*batch_shape, hidden_size]`."""
-    zeros = jnp.zeros((*batch_shape, hidden_size), jnp.float32)
-    return (zeros, zeros)
-
-
-def reset_carry(done: chex.Array, carry: LSTMCarry) -> LSTMCarry:
-    """Zero the carry where `done` `[...]` is true (use the PREVIOUS step's done)."""
-    return jax.tree.map(lambda x: jnp.where(done[..., None], jnp.zeros_like(x), x), carry)
 
 
 class Encoder(nn.Module):
@@ -109,94 +96,6 @@ class Encoder(nn.Module):
         return carry, s_t  # s_t: [..., hidden_size]
 
 
-# The LSTM cell in two parts (the input part has no recurrence, so training applies it
-# to all steps of an episode in one matmul). Together they compute exactly what
-# `nn.OptimizedLSTMCell` computes: the same concatenated kernels, the same dots, the same
-# additions in the same order.
-LSTM_GATES: tuple[str, ...] = ("i", "f", "g", "o")
-
-
-class LSTMKernels(NamedTuple):
-    input_kernel: chex.Array  # [F, 4H] (ii, if, ig, io)
-    recurrent_kernel: chex.Array  # [H, 4H] (hi, hf, hg, ho)
-    bias: chex.Array  # [4H]
-    recurrent_kernel_t: Optional[chex.Array] = None  # [4H, H]: see `with_transposed_recurrent_kernel`
-
-
-def lstm_kernels(lstm_params: Mapping[str, Any]) -> LSTMKernels:
-    """The concatenated kernels of an `nn.OptimizedLSTMCell`'s parameters (its `params`
-    subtree, e.g. `params["params"]["encoder"]["lstm"]`)."""
-    return LSTMKernels(
-        jnp.concatenate([lstm_params["i" + g]["kernel"] for g in LSTM_GATES], axis=-1),
-        jnp.concatenate([lstm_params["h" + g]["kernel"] for g in LSTM_GATES], axis=-1),
-        jnp.concatenate([lstm_params["h" + g]["bias"] for g in LSTM_GATES], axis=-1),
-    )
-
-
-def materialized_transpose(kernel: chex.Array) -> chex.Array:
-    """`kernel.T` as an array of its own (XLA may not fold it back into a matmul).
-
-    XLA:CPU runs `g @ kernel.T` (a dot contracting both operands' last axes: what
-    autodiff emits for the input gradient of `x @ kernel`) about 4x slower than a plain
-    matmul (measured on jax 0.7.2); with the transpose materialised once, every such
-    product is a plain matmul."""
-    return jax.lax.optimization_barrier(jnp.transpose(kernel))
-
-
-@jax.custom_vjp
-def dot_with_transposed_kernel(x: chex.Array, kernel: chex.Array, kernel_t: chex.Array) -> chex.Array:
-    """`jnp.dot(x, kernel)`, whose gradient for x is `g @ kernel_t` (kernel_t = the
-    `materialized_transpose` of kernel; it gets no gradient of its own, kernel gets all)."""
-    return jnp.dot(x, kernel)
-
-
-def _dot_with_transposed_kernel_fwd(x, kernel, kernel_t):
-    return jnp.dot(x, kernel), (x, kernel_t)
-
-
-def _dot_with_transposed_kernel_bwd(residuals, g):
-    x, kernel_t = residuals
-    x_2d, g_2d = x.reshape(-1, x.shape[-1]), g.reshape(-1, g.shape[-1])
-    return jnp.dot(g, kernel_t), jnp.dot(x_2d.T, g_2d), jnp.zeros_like(kernel_t)
-
-
-dot_with_transposed_kernel.defvjp(_dot_with_transposed_kernel_fwd, _dot_with_transposed_kernel_bwd)
-
-
-def lstm_input_kernel_t(lstm_params: Mapping[str, Any]) -> chex.Array:
-    """The transpose `[4H, F]` of `lstm_kernels(lstm_params).input_kernel`, built in one
-    pass and materialised (see `materialized_transpose`)."""
-    kernels_t = [jnp.transpose(lstm_params["i" + g]["kernel"]) for g in LSTM_GATES]
-    return jax.lax.optimization_barrier(jnp.concatenate(kernels_t, axis=0))
-
-
-def with_transposed_recurrent_kernel(kernels: LSTMKernels) -> LSTMKernels:
-    """Kernels whose `lstm_step` differentiates with plain matmuls (same values; for an
-    unroll that is differentiated, the transpose made once outside the loop)."""
-    return kernels._replace(recurrent_kernel_t=materialized_transpose(kernels.recurrent_kernel))
-
-
-def lstm_input_gates(kernels: LSTMKernels, x: chex.Array) -> chex.Array:
-    """The input's contribution to the four gates, `[..., F] -> [..., 4H]`."""
-    return jnp.dot(x, kernels.input_kernel)
-
-
-def lstm_step(kernels: LSTMKernels, carry: LSTMCarry, input_gates: chex.Array) -> tuple[LSTMCarry, chex.Array]:
-    """One step of the cell from its input gates `[..., 4H]` -> ((c, h), h)."""
-    c, h = carry
-    if kernels.recurrent_kernel_t is None:
-        recurrent = jnp.dot(h, kernels.recurrent_kernel)
-    else:
-        recurrent = dot_with_transposed_kernel(h, kernels.recurrent_kernel, kernels.recurrent_kernel_t)
-    recurrent += jnp.reshape(kernels.bias, (1,) * (recurrent.ndim - 1) + (-1,))
-    split = np.cumsum([h.shape[-1]] * 3)
-    i, f, g, o = (r + x for r, x in zip(jnp.split(recurrent, split, axis=-1), jnp.split(input_gates, split, axis=-1)))
-    i, f, g, o = nn.sigmoid(i), nn.sigmoid(f), jnp.tanh(g), nn.sigmoid(o)
-    new_c = f * c + i * g
-    new_h = o * jnp.tanh(new_c)
-    return (new_c, new_h), new_h
-
-
 class PolicyHead(nn.Module):
     """One linear layer -> action logits, over [s_t : i_tau] (or s_t alone).
 
@@ -248,9 +147,31 @@ def masked_softmax(scores: chex.Array, mask: chex.Array) -> chex.Array:
     return weights / jnp.maximum(jnp.sum(weights, axis=-1, keepdims=True), 1e-30)
 
 
+def window_attention_mask(episode_step: chex.Array, memory_size: int) -> chex.Array:
+    """Which keys each step of a packed window may attend to (Eq. 3-4: the states s_0..s_t
+    of its own episode), `[..., T] -> [..., T, memory_size + T]` bool.
+
+    `episode_step [..., T]` is each step's index in its episode (0 at an episode's first
+    state). The keys are `[memory ; window]`: `memory [..., memory_size, H]` holds the
+    states of the episode running when the window began (positions 0..episode_step[0]-1,
+    from earlier windows), then the window's own states. Step t sees memory entry j iff
+    no episode started in the window up to t and j < episode_step[0]; it sees window step
+    j iff j <= t and j belongs to the same episode. No information crosses episodes.
+    """
+    first = episode_step == 0  # [..., T]
+    episode_id = jnp.cumsum(first.astype(jnp.int32), axis=-1)  # [..., T] 0 = the carried episode
+    carried = episode_id == 0  # [..., T]
+    memory_count = episode_step[..., :1]  # [..., 1] states already in memory
+    num_steps = episode_step.shape[-1]
+    memory = carried[..., :, None] & (jnp.arange(memory_size) < memory_count[..., None])  # [..., T, M]
+    causal = jnp.tril(jnp.ones((num_steps, num_steps), bool))  # [T, T]
+    same_episode = episode_id[..., :, None] == episode_id[..., None, :]  # [..., T, T]
+    return jnp.concatenate([memory, causal & same_episode], axis=-1)
+
+
 class CriticOutput(NamedTuple):
     value: chex.Array  # [..., T] V(s*_t) (V(s_t) for the plain critic)
-    alpha: Optional[chex.Array]  # [..., T, T] row t: attention of step t over j <= t; None if plain
+    alpha: Optional[chex.Array]  # [..., T, K] row t: attention of step t over the keys; None if plain
     attended_state: chex.Array  # [..., T, H] s*_t (= s_t for the plain critic)
 
 
@@ -264,7 +185,11 @@ class Critic(nn.Module):
     q, k: linear `attention_size`; v: linear to the state size (for the residual).
 
     Call with `states [..., T, H]` whose index 0 is the episode's first state (t in
-    sqrt(t+1) is the position), and `valid [..., T]` (1 on the episode's steps).
+    sqrt(t+1) is the position), and `valid [..., T]` (1 on the episode's steps): the keys
+    are the states themselves, masked causally. Packed windows (episodes back to back,
+    an episode begun in an earlier window) pass the keys, the mask and each step's
+    position in its episode explicitly: `keys [..., K, H]`, `key_mask [..., T, K]`
+    (see `window_attention_mask`), `positions [..., T]` (t of sqrt(t+1)).
     """
 
     attention: bool = True
@@ -272,7 +197,10 @@ class Critic(nn.Module):
     value_hidden: int = 256
 
     @nn.compact
-    def __call__(self, states: chex.Array, valid: chex.Array) -> CriticOutput:
+    def __call__(
+        self, states: chex.Array, valid: chex.Array, keys: Optional[chex.Array] = None,
+        key_mask: Optional[chex.Array] = None, positions: Optional[chex.Array] = None,
+    ) -> CriticOutput:  # fmt: skip
         chex.assert_equal_shape_prefix([states, valid], valid.ndim)
         chex.assert_rank(states, valid.ndim + 1)
         value_head = ValueHead(self.value_hidden, name="value_head")
@@ -280,12 +208,16 @@ class Critic(nn.Module):
             return CriticOutput(value_head(states), None, states)
 
         num_steps, state_size = states.shape[-2:]
+        if keys is None:
+            keys, key_mask = states, causal_episode_mask(valid)
+        if positions is None:
+            positions = jnp.arange(num_steps)
         query = nn.Dense(self.attention_size, name="query")(states)  # [..., T, Q]
-        key = nn.Dense(self.attention_size, name="key")(states)  # [..., T, Q]
-        value = nn.Dense(state_size, name="value")(states)  # [..., T, H]
-        scale = jnp.sqrt(jnp.arange(1, num_steps + 1, dtype=states.dtype))  # [T] sqrt(t+1)
-        scores = jnp.einsum("...tq,...jq->...tj", query, key) / scale[:, None]  # [..., T, T]
-        alpha = masked_softmax(scores, causal_episode_mask(valid))  # [..., T, T]
+        key = nn.Dense(self.attention_size, name="key")(keys)  # [..., K, Q]
+        value = nn.Dense(state_size, name="value")(keys)  # [..., K, H]
+        scale = jnp.sqrt(positions.astype(states.dtype) + 1.0)  # [..., T] sqrt(t+1)
+        scores = jnp.einsum("...tq,...jq->...tj", query, key) / scale[..., None]  # [..., T, K]
+        alpha = masked_softmax(scores, key_mask)  # [..., T, K]
         attended = jnp.einsum("...tj,...jh->...th", alpha, value) + states  # [..., T, H]
         return CriticOutput(value_head(attended), alpha, attended)
 
@@ -359,8 +291,8 @@ class ActorCritic(nn.Module):
         carry, s_t = self.encoder(carry, obs, prev_action_probs)
         return carry, s_t, self.policy(s_t, imagined)
 
-    def critic(self, states: chex.Array, valid: chex.Array) -> CriticOutput:
-        return self.value_critic(states, valid)
+    def critic(self, states: chex.Array, valid: chex.Array, keys=None, key_mask=None, positions=None) -> CriticOutput:
+        return self.value_critic(states, valid, keys, key_mask, positions)
 
     def __call__(self, carry, obs, prev_action_probs, imagined=None):
         carry, s_t, logits = self.step(carry, obs, prev_action_probs, imagined)
@@ -425,6 +357,21 @@ def select_subgoal(
         return jnp.take_along_axis(states, index[..., None, None], axis=-2)[..., 0, :]
     if mode == "attention_average":
         return jnp.einsum("...t,...th->...h", alpha_last, states)
+    raise ValueError(f"Unknown sub-goal mode {mode!r}; use 'argmax' or 'attention_average'.")
+
+
+def subgoals_of_rows(keys: chex.Array, alpha: chex.Array, mode: str = "argmax") -> chex.Array:
+    """The sub-goal each attention row would select: `keys [..., K, H]`, `alpha [..., R, K]`
+    -> `[..., R, H]` (stop-gradient), as `select_subgoal` does for one row: the key with
+    the largest weight ('argmax', first on ties) or the weighted average
+    ('attention_average'). Masked keys carry alpha = 0."""
+    chex.assert_equal_shape_prefix([keys, alpha], keys.ndim - 2)
+    keys, alpha = jax.lax.stop_gradient((keys, alpha))
+    if mode == "argmax":
+        index = jnp.argmax(alpha, axis=-1)  # [..., R]
+        return jnp.take_along_axis(keys, index[..., None], axis=-2)  # [..., R, H]
+    if mode == "attention_average":
+        return jnp.einsum("...rk,...kh->...rh", alpha, keys)
     raise ValueError(f"Unknown sub-goal mode {mode!r}; use 'argmax' or 'attention_average'.")
 
 

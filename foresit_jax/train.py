@@ -1,10 +1,14 @@
 """Synchronous batched actor-critic standing in for A3C (PureJaxRL shape).
 
-One update = every lane resets and runs one episode to Done or the time limit (a padded,
-masked rollout of `num_steps`), then one gradient step on the mean A3C loss (Eq. 8-9);
-then the ForeSIT bookkeeping of Algorithm 1: successful lanes add (s_0, g_tau, ŝ_tau) to
-their buffers, every lane records its outcome (the moving success rate rho that sets the
-imagination noise), and full buffers train the shared f_w and are emptied.
+One update = every lane acts for a window of `num_steps` steps (`Agent.act`; with
+`Config.rollout='packed'` lanes never idle: episodes follow one another and an episode
+cut at the window's edge continues in the next update, its cut bootstrapped with
+V(s*_T), Eq. 8), then one gradient step on the mean A3C loss over the window (Eq. 8-9),
+then the ForeSIT bookkeeping of Algorithm 1 for every episode that ended in the window,
+in time order: a successful one adds (s_0, g_tau, ŝ_tau) to its lane's buffer (ŝ_tau:
+the argmax of its last step's attention over all its states, earlier windows' included),
+and full buffers train the shared f_w and are emptied. Each lane's success tracker
+(rho, which sets the imagination noise of Eq. 7) is updated while acting.
 
     trainer = make_trainer(config)
     state = trainer.init(key)
@@ -13,7 +17,9 @@ imagination noise), and full buffers train the shared f_w and are emptied.
     final_state, metrics = jax.jit(jax.vmap(train))(keys)    # a seed sweep in one program
 
 Metrics are reduced per update inside the scan (scalars per update, nothing grows with
-the number of environment steps).
+the number of environment steps). `frames/useful` counts the steps that enter the loss,
+`frames/stepped` every environment step taken (they differ only with whole-episode
+updates, whose padding is stepped and masked away).
 """
 
 from __future__ import annotations
@@ -26,9 +32,10 @@ import jax.numpy as jnp
 import optax
 
 from foresit_jax import imagination, losses
-from foresit_jax.agent import Agent, Trajectory, episode_stats
+from foresit_jax.agent import ActorState, Agent, Trajectory, ended_episodes
 from foresit_jax.config import Config
-from foresit_jax.networks import last_step_attention, select_subgoal
+from foresit_jax.networks import subgoals_of_rows
+from foresit_jax.replay import replayed
 
 
 class RunnerState(NamedTuple):
@@ -38,7 +45,7 @@ class RunnerState(NamedTuple):
     opt_state: Any  # Adam state of params
     imagination_params: Any  # w, the shared f_w
     buffers: imagination.ReplayBuffer  # per lane, leaves [B, M, ...]
-    trackers: imagination.SuccessTracker  # per lane, leaves [B, window]
+    actor: ActorState  # per lane: env, LSTM carry, running episode (tracker included)
     key: chex.PRNGKey
     update: chex.Array  # int32 [] updates done
 
@@ -51,36 +58,27 @@ def make_env(config: Config, split: str = "train", room_types=None, training: bo
     return envs.make("GridNav-v0", setup=config.setup, split=split, room_types=rooms, training=training)
 
 
-GRADIENTS: tuple[str, ...] = ("replay", "through_rollout")
-
-
 class Trainer:
-    """The pure functions of one training run of `config` (see module docstring).
+    """The pure functions of one training run of `config` (see module docstring)."""
 
-    gradient: how the loss's gradient is computed; both give the gradient of the same
-    loss (equal up to float rounding: the sums run in a different order).
-      'replay' (default): act without gradients, then recompute s_t and the logits from
-        the recorded inputs, differentiably (`Agent.replay`: batched, padding skipped).
-      'through_rollout': differentiate through the acting scan, environment steps
-        included (the reference; several times slower at the paper's sizes on a CPU).
-    """
-
-    def __init__(self, config: Config, env=None, env_params=None, gradient: str = "replay"):
-        if gradient not in GRADIENTS:
-            raise ValueError(f"gradient must be one of {GRADIENTS}, got {gradient!r}")
+    def __init__(self, config: Config, env=None, env_params=None):
         if env is None:
             env, env_params = make_env(config)
         limit = int(jnp.max(env_params.max_steps))
-        if config.num_steps < limit:
+        self.packed = config.rollout == "packed"
+        if not self.packed and config.num_steps < limit:
             raise ValueError(
-                f"num_steps ({config.num_steps}) must be at least the environment's training "
-                f"time limit ({limit}): one update runs whole episodes"
+                f"num_steps ({config.num_steps}) must be at least the environment's training time limit "
+                f"({limit}) with rollout='episodes' (one update runs whole episodes); use rollout='packed' "
+                f"for shorter windows"
             )
         self.config = config
-        self.gradient = gradient
         self.env = env
         self.env_params = env_params
         self.agent = Agent(config)
+        # The attention critic remembers a running episode's states across windows: at most
+        # the time limit's worth. Whole-episode updates carry nothing across updates.
+        self.memory_size = limit if self.packed and self.agent.imagination.attention_critic else 0
         self.optimizer = optax.chain(
             optax.clip_by_global_norm(config.max_grad_norm), optax.adam(config.learning_rate)
         )
@@ -91,83 +89,141 @@ class Trainer:
     # ------------------------------------------------------------------ state
     def init(self, key: chex.PRNGKey) -> RunnerState:
         cfg = self.config
-        k_obs, k_params, key = jax.random.split(key, 3)
+        k_obs, k_params, k_actor, key = jax.random.split(key, 4)
         obs, _ = self.env.reset(k_obs, self.env_params)
         params, w_params = self.agent.init(k_params, obs)
         goal_size = obs["target"].shape[-1]
         lanes = lambda x: jnp.broadcast_to(x, (cfg.num_lanes,) + x.shape)  # noqa: E731
         buffers = jax.tree.map(lanes, imagination.buffer_init(cfg.buffer_size, cfg.hidden_size, goal_size))
-        trackers = jax.tree.map(lanes, imagination.tracker_init(cfg.success_window))
+        actor = self.agent.start(k_actor, self.env, self.env_params, cfg.num_lanes, self.memory_size)
         return RunnerState(
-            params, self.optimizer.init(params), w_params, buffers, trackers, key, jnp.zeros((), jnp.int32)
+            params, self.optimizer.init(params), w_params, buffers, actor, key, jnp.zeros((), jnp.int32)
         )
 
-    # ------------------------------------------------------------------ one update
-    def loss(self, params, w_params, env_params, key, sigma2):
-        """Roll out one episode per lane with `params` and return the A3C loss (Eq. 8-9)."""
+    # ------------------------------------------------------------------ the loss
+    def window_loss(self, params, traj: Trajectory, memory: chex.Array):
+        """The A3C loss (Eq. 8-9) of one window whose states and logits are differentiable
+        in `params`. memory: the critic's memory at the window's start `[B, M, H]`.
+        Returns (loss, (alpha `[B, T + 1, K]` or None, keys `[B, K, H]`, metrics))."""
         cfg = self.config
-        if self.gradient == "replay":
-            acting = jax.lax.stop_gradient(params)
-            traj = self.agent.rollout(acting, w_params, self.env, env_params, key, sigma2, cfg.num_steps, record_inputs=True)
-            states, logits = self.agent.replay(params, traj)
-            traj = traj._replace(states=states, logits=logits, inputs=None)
-        else:
-            traj = self.agent.rollout(params, w_params, self.env, env_params, key, sigma2, cfg.num_steps)
-        critic = self.agent.critic(params, traj)
-        bootstrap = jnp.zeros_like(critic.value[0])  # whole episodes: nothing to bootstrap
+        critic, keys = self.agent.critic(params, traj, memory)
+        value, bootstrap = critic.value[:-1], critic.value[-1]  # [T, B], [B] V(s*_T)
+        if not self.packed:
+            bootstrap = jnp.zeros_like(bootstrap)  # whole episodes: nothing to bootstrap
         advantage, returns = losses.advantages_and_returns(
-            traj.rewards, critic.value, traj.terminated, traj.truncated, traj.valid,
-            bootstrap, cfg.gamma, cfg.gae_lambda,
+            traj.rewards, value, traj.terminated, traj.truncated, traj.valid, bootstrap, cfg.gamma, cfg.gae_lambda,
         )  # fmt: skip
         loss, metrics = losses.a3c_loss(
-            traj.logits, traj.actions, critic.value, advantage, returns, traj.valid,
-            cfg.entropy_coef, cfg.value_coef,
+            traj.logits, traj.actions, value, advantage, returns, traj.valid, cfg.entropy_coef, cfg.value_coef,
         )  # fmt: skip
-        return loss, (traj, critic.alpha, metrics)
+        return loss, (critic.alpha, keys, metrics)
 
+    def act(self, params, w_params, env_params, actor: ActorState, key) -> tuple[ActorState, Trajectory]:
+        """One window of every lane (inputs recorded, for the replay and the buffers)."""
+        return self.agent.act(
+            params, w_params, self.env, env_params, actor, key, self.config.num_steps,
+            whole_episodes=not self.packed, record_inputs=True,
+        )  # fmt: skip
+
+    def loss_and_grad(self, params, w_params, env_params, actor: ActorState, key):
+        """((loss, (next actor, traj, alpha, keys, metrics)), grads) of one window, by the
+        config's gradient path (see `Config.gradient`; both give the same gradient)."""
+        if self.config.gradient == "replay":
+            next_actor, traj = self.act(params, w_params, env_params, actor, key)
+
+            def loss_fn(p):
+                replay_traj = replayed(self.agent, p, traj, actor.lstm)
+                loss, aux = self.window_loss(p, replay_traj, actor.memory)
+                return loss, (next_actor, replay_traj, *aux)
+
+        else:
+
+            def loss_fn(p):
+                next_actor, traj = self.act(p, w_params, env_params, actor, key)
+                loss, aux = self.window_loss(p, traj, actor.memory)
+                return loss, (next_actor, traj, *aux)
+
+        return jax.value_and_grad(loss_fn, has_aux=True)(params)
+
+    # ------------------------------------------------------------------ one update
     def update(self, state: RunnerState, env_params) -> tuple[RunnerState, dict]:
-        cfg, flags = self.config, self.agent.flags
-        key, k_roll = jax.random.split(state.key)
-        rho = jax.vmap(imagination.success_rate)(state.trackers)  # [B]
-        sigma2 = imagination.noise_variance(rho, cfg.sigma2_max)  # [B]
-        grad_fn = jax.value_and_grad(self.loss, has_aux=True)
-        (loss, (traj, alpha, metrics)), grads = grad_fn(state.params, state.imagination_params, env_params, k_roll, sigma2)
+        cfg, imag = self.config, self.agent.imagination
+        key, k_act, k_start = jax.random.split(state.key, 3)
+        actor = state.actor
+        if not self.packed:  # SAVN's layout: every lane starts a fresh episode
+            actor = self.agent.start(k_start, self.env, env_params, cfg.num_lanes, 0, tracker=actor.tracker)
+        rho = jax.vmap(imagination.success_rate)(actor.tracker)  # [B] at the window's start
+        (loss, (next_actor, traj, alpha, keys, metrics)), grads = self.loss_and_grad(
+            state.params, state.imagination_params, env_params, actor, k_act
+        )
         updates, opt_state = self.optimizer.update(grads, state.opt_state, state.params)
         params = optax.apply_updates(state.params, updates)
 
-        stats = episode_stats(traj)
-        trackers = jax.vmap(imagination.tracker_update)(state.trackers, stats.success, stats.ended)
         buffers, w_params = state.buffers, state.imagination_params
         metrics = dict(metrics)
-        if flags.trains_imagination:
-            subgoal = self.subgoals(traj, alpha)  # [B, H]
-            item = (traj.states[0], traj.target, subgoal)
-            buffers = jax.vmap(imagination.buffer_add)(buffers, *item, stats.success)
-            w_params, buffers, imag_metrics = imagination.train_full_buffers(
-                w_params, buffers, self.agent.imagine, self.imagination_optimizer, cfg.imagination_epochs
-            )
+        ended, stats = ended_episodes(traj)
+        if imag.trains_imagination:
+            subgoals = jnp.swapaxes(subgoals_of_rows(keys, alpha[:, :-1], imag.subgoal_mode), 0, 1)  # [T, B, H]
+            items = (traj.s_0, traj.inputs.obs["target"], subgoals, stats.success)
+            w_params, buffers, imag_metrics = self.store_and_train(w_params, buffers, items)
             metrics.update(imag_metrics)
+        num_ended = jnp.sum(ended.astype(jnp.float32))
+
+        def per_episode(x):  # mean over the episodes that ended in this window
+            return jnp.sum(jnp.where(ended, x, 0).astype(jnp.float32)) / jnp.maximum(num_ended, 1.0)
+
+        useful = jnp.sum(traj.valid.astype(jnp.float32))
+        stepped = float(traj.valid.size)
         metrics.update(
             {
-                "charts/success_rate": jnp.mean(stats.success.astype(jnp.float32)),
-                "charts/spl": jnp.mean(stats.spl),
-                "charts/episode_length": jnp.mean(stats.length.astype(jnp.float32)),
-                "charts/optimal_length": jnp.mean(stats.optimal_length.astype(jnp.float32)),
-                "charts/padded_fraction": 1.0 - jnp.mean(traj.valid.astype(jnp.float32)),
-                "charts/noise_variance": jnp.mean(sigma2),
+                "charts/success_rate": per_episode(stats.success),
+                "charts/spl": per_episode(stats.spl),
+                "charts/episode_length": per_episode(stats.length),
+                "charts/optimal_length": per_episode(stats.optimal_length),
+                "charts/episodes": num_ended,
+                "charts/useful_fraction": useful / stepped,
+                "charts/padded_fraction": (stepped - useful) / stepped,
+                "charts/noise_variance": jnp.mean(imagination.noise_variance(rho, cfg.sigma2_max)),
                 "charts/moving_success_rate": jnp.mean(rho),
+                "frames/useful": useful,
+                "frames/stepped": jnp.asarray(stepped, jnp.float32),
                 "losses/grad_norm": optax.tree.norm(grads),
             }
         )
-        new_state = RunnerState(params, opt_state, w_params, buffers, trackers, key, state.update + 1)
+        new_state = RunnerState(params, opt_state, w_params, buffers, next_actor, key, state.update + 1)
         return new_state, metrics
 
-    def subgoals(self, traj: Trajectory, alpha) -> chex.Array:
-        """ŝ_tau per lane `[B, H]`: the state with the largest attention of the episode's
-        last step (ForeSIT) or the attention-weighted average (`att` ablation)."""
-        states = jnp.swapaxes(traj.states, 0, 1)  # [B, T, H]
-        alpha_last = last_step_attention(alpha, jnp.swapaxes(traj.valid, 0, 1))  # [B, T]
-        return select_subgoal(states, alpha_last, self.agent.flags.subgoal_mode)
+    def store_and_train(self, w_params, buffers, items):
+        """Algorithm 1 for each step of the window in time order: lanes whose episode
+        ended successfully there add (s_0, g_tau, ŝ_tau) to their buffer; full buffers
+        train the shared f_w and are emptied. items: (s_0 `[T, B, H]`, goal `[T, B, D]`,
+        subgoal `[T, B, H]`, add `[T, B]` bool)."""
+        cfg = self.config
+
+        def step(carry, item):
+            w_params, buffers, trained, loss_sum, first_sum, last_sum = carry
+            buffers = jax.vmap(imagination.buffer_add)(buffers, *item)
+            w_params, buffers, m = imagination.train_full_buffers(
+                w_params, buffers, self.agent.imagine, self.imagination_optimizer, cfg.imagination_epochs
+            )
+            n = m["imagination/num_trained_lanes"].astype(jnp.float32)
+            return (
+                w_params, buffers, trained + n, loss_sum + n * m["imagination/loss"],
+                first_sum + n * m["imagination/first_epoch_loss"], last_sum + n * m["imagination/last_epoch_loss"],
+            ), None  # fmt: skip
+
+        zero = jnp.zeros((), jnp.float32)
+        (w_params, buffers, trained, loss_sum, first_sum, last_sum), _ = jax.lax.scan(
+            step, (w_params, buffers, zero, zero, zero, zero), items
+        )
+        denominator = jnp.maximum(trained, 1.0)
+        metrics = {
+            "imagination/num_trained_lanes": trained,
+            "imagination/loss": loss_sum / denominator,
+            "imagination/first_epoch_loss": first_sum / denominator,
+            "imagination/last_epoch_loss": last_sum / denominator,
+        }
+        return w_params, buffers, metrics
 
     def run(self, state: RunnerState, env_params, num_updates: int) -> tuple[RunnerState, dict]:
         """`num_updates` updates in a `lax.scan`; metrics stacked `[num_updates]`."""
@@ -178,8 +234,8 @@ class Trainer:
         return self.run(self.init(key), self.env_params, self.config.num_updates)
 
 
-def make_trainer(config: Config, env=None, env_params=None, gradient: str = "replay") -> Trainer:
-    return Trainer(config, env, env_params, gradient)
+def make_trainer(config: Config, env=None, env_params=None) -> Trainer:
+    return Trainer(config, env, env_params)
 
 
 def make_train(config: Config, env=None, env_params=None) -> Callable[[chex.PRNGKey], tuple[RunnerState, dict]]:

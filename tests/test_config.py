@@ -1,10 +1,11 @@
-"""foresit_jax.config: defaults, validation and the method registry."""
+"""foresit_jax.config: defaults, validation, and the methods it accepts."""
 
 import dataclasses
 
 import pytest
 
-from foresit_jax.config import METHODS, PLANNED_METHODS, Config, MethodFlags, method_flags
+from foresit_jax.config import Config
+from foresit_jax.methods import IMAGINATIONS, Imagination
 
 
 def test_paper_defaults():
@@ -13,7 +14,8 @@ def test_paper_defaults():
     assert (c.learning_rate, c.hidden_size, c.buffer_size) == (1e-4, 512, 32)
     assert (c.sigma2_max, c.success_window, c.rnd_variance) == (0.9, 100, 0.5)
     assert len(c.imagination_layer_sizes) == 6 and min(c.imagination_layer_sizes) == 64
-    assert c.num_episodes == c.num_lanes * c.num_updates
+    assert c.frames_per_update == c.num_lanes * c.num_steps
+    assert (c.rollout, c.gradient) == ("packed", "replay")
 
 
 def test_frozen_and_hashable():
@@ -42,6 +44,8 @@ def test_frozen_and_hashable():
         ("imagination_optimizer", "rmsprop", "imagination_optimizer"),
         ("imagination_layer_sizes", (512, 64, 256), "hidden_size"),
         ("num_steps", True, "num_steps"),
+        ("rollout", "async", "rollout"),
+        ("gradient", "finite_differences", "gradient"),
     ],
 )
 def test_invalid_values_raise(field, value, match):
@@ -55,27 +59,29 @@ def test_replace_revalidates():
 
 
 def test_unknown_and_planned_methods():
-    with pytest.raises(ValueError, match="a3c\\+foresit"):  # lists valid names
+    with pytest.raises(ValueError, match="imagination \\['none', 'foresit'"):  # lists valid pieces
         Config(method="a3c+magic")
-    for name in PLANNED_METHODS:
+    for name in ("a3c+maml", "a3c+maml+foresit"):
         with pytest.raises(NotImplementedError, match="not implemented"):
-            method_flags(name)
-    assert set(PLANNED_METHODS) == {"a3c+maml", "a3c+maml+foresit", "a3c+org", "a3c+org+foresit"}
+            Config(method=name)
+    for name in ("a3c+org", "a3c+org+foresit"):
+        with pytest.raises(NotImplementedError, match="not implemented"):
+            Config(method=name, setup="org")
 
 
-def changed_fields(a: MethodFlags, b: MethodFlags):
-    return {f.name for f in dataclasses.fields(MethodFlags) if getattr(a, f.name) != getattr(b, f.name)}
+def changed_fields(a: Imagination, b: Imagination):
+    return {f.name for f in dataclasses.fields(Imagination) if getattr(a, f.name) != getattr(b, f.name)} - {"name"}
 
 
-def test_method_flags():
-    a3c, foresit = METHODS["a3c"], METHODS["a3c+foresit"]
+def test_method_pieces():
+    a3c, foresit = Config(method="a3c").pieces.imagination, Config(method="a3c+foresit").pieces.imagination
     assert not a3c.uses_imagination and not a3c.attention_critic
     assert foresit.trains_imagination and foresit.attention_critic
-    assert foresit.subgoal_mode == "argmax" and not foresit.reimagine_every_k
+    assert foresit.subgoal_mode == "argmax" and not foresit.renew_every_k
     # Each ablation is ForeSIT with exactly one change.
-    assert changed_fields(METHODS["rnd"], foresit) == {"imagination"}
-    assert METHODS["rnd"].uses_imagination and not METHODS["rnd"].trains_imagination
-    assert changed_fields(METHODS["att"], foresit) == {"subgoal_mode"}
-    assert METHODS["att"].subgoal_mode == "attention_average"
-    assert changed_fields(METHODS["int"], foresit) == {"reimagine_every_k"}
-    assert Config(method="int").flags.reimagine_every_k
+    assert changed_fields(IMAGINATIONS["rnd"], foresit) == {"source"}
+    assert IMAGINATIONS["rnd"].uses_imagination and not IMAGINATIONS["rnd"].trains_imagination
+    assert changed_fields(IMAGINATIONS["att"], foresit) == {"subgoal_mode"}
+    assert IMAGINATIONS["att"].subgoal_mode == "attention_average"
+    assert changed_fields(IMAGINATIONS["int"], foresit) == {"renew_every_k"}
+    assert Config(method="int").pieces.imagination.renew_every_k

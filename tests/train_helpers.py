@@ -85,6 +85,23 @@ def init_and_run(config: Config, seed: int, num_updates: int):
     return run_updates(config, jitted_init(config)(jax.random.PRNGKey(seed)), num_updates)
 
 
+def easy_env_params(env_params, max_optimal_length: int = 3):
+    """An easy setting: one bathroom, one target, starts within `max_optimal_length`
+    actions of success (Done included)."""
+    b = env_params.bank
+    per_scene = ("numbers", "room_type", "cell_type", "obj_cat", "obj_band", "targets", "num_targets",
+                 "view_sem", "view_depth", "distance", "starts", "num_starts")  # fmt: skip
+    b = b.replace(**{f: getattr(b, f)[:1] for f in per_scene})
+    starts = np.asarray(b.starts[0, 0]).astype(np.int64)[: int(b.num_starts[0, 0])]
+    near = starts[np.asarray(b.distance[0, 0])[starts * 2] <= max_optimal_length]  # pose index = start * 2 (level)
+    assert len(near) > 10
+    new_starts = np.zeros_like(np.asarray(b.starts))
+    new_starts[0, 0, : len(near)] = near
+    b = b.replace(starts=jnp.asarray(new_starts), num_starts=b.num_starts.at[0, 0].set(len(near)),
+                  num_targets=jnp.ones_like(b.num_targets))  # fmt: skip
+    return env_params.replace(bank=b)
+
+
 # ------------------------------------------------------------------ tree comparisons
 def assert_trees_bitwise_equal(a, b) -> None:
     chex.assert_trees_all_equal_structs(a, b)

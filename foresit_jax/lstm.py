@@ -1,0 +1,119 @@
+"""The LSTM cell of the encoder, split in two parts for speed (an optimisation of its own,
+tested equal to flax's `nn.OptimizedLSTMCell` in tests/test_lstm.py).
+
+The encoder's LSTM is an `nn.OptimizedLSTMCell` (its parameters are what flax creates:
+`ii, if, ig, io` input kernels without bias, `hi, hf, hg, ho` recurrent kernels with bias).
+Its input part has no recurrence, so the training replay applies it to every step of a
+window in one large matmul (`lstm_input_gates`), and only the recurrent part
+(`lstm_step`) runs step by step. Together they compute what `nn.OptimizedLSTMCell`
+computes: the same concatenated kernels, the same dots, the same additions in the same
+order. The parameter names are flax's: a flax upgrade that renames or reorders them
+fails `tests/test_lstm.py`, not a run.
+
+`encoder_lstm_params(params)` is the one place that knows where the LSTM sits in the
+agent's parameter tree.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Mapping, NamedTuple, Optional
+
+import chex
+import flax.linen as nn
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+LSTMCarry = tuple[chex.Array, chex.Array]  # (c, h), each [..., hidden_size]
+
+LSTM_GATES: tuple[str, ...] = ("i", "f", "g", "o")
+
+
+def encoder_lstm_params(params: Mapping[str, Any]) -> Mapping[str, Any]:
+    """The encoder LSTM's subtree of an `ActorCritic` parameter tree."""
+    return params["params"]["encoder"]["lstm"]
+
+
+class LSTMKernels(NamedTuple):
+    input_kernel: chex.Array  # [F, 4H] (ii, if, ig, io)
+    recurrent_kernel: chex.Array  # [H, 4H] (hi, hf, hg, ho)
+    bias: chex.Array  # [4H]
+    recurrent_kernel_t: Optional[chex.Array] = None  # [4H, H]: see `with_transposed_recurrent_kernel`
+
+
+def lstm_kernels(lstm_params: Mapping[str, Any]) -> LSTMKernels:
+    """The concatenated kernels of an `nn.OptimizedLSTMCell`'s parameters (its `params`
+    subtree, e.g. `encoder_lstm_params(params)`)."""
+    return LSTMKernels(
+        jnp.concatenate([lstm_params["i" + g]["kernel"] for g in LSTM_GATES], axis=-1),
+        jnp.concatenate([lstm_params["h" + g]["kernel"] for g in LSTM_GATES], axis=-1),
+        jnp.concatenate([lstm_params["h" + g]["bias"] for g in LSTM_GATES], axis=-1),
+    )
+
+
+def materialized_transpose(kernel: chex.Array) -> chex.Array:
+    """`kernel.T` as an array of its own (XLA may not fold it back into a matmul).
+
+    XLA:CPU runs `g @ kernel.T` (a dot contracting both operands' last axes: what
+    autodiff emits for the input gradient of `x @ kernel`) about 4x slower than a plain
+    matmul (measured on jax 0.7.2); with the transpose materialised once, every such
+    product is a plain matmul."""
+    return jax.lax.optimization_barrier(jnp.transpose(kernel))
+
+
+@jax.custom_vjp
+def dot_with_transposed_kernel(x: chex.Array, kernel: chex.Array, kernel_t: chex.Array) -> chex.Array:
+    """`jnp.dot(x, kernel)`, whose gradient for x is `g @ kernel_t` (kernel_t = the
+    `materialized_transpose` of kernel; it gets no gradient of its own, kernel gets all)."""
+    return jnp.dot(x, kernel)
+
+
+def _dot_with_transposed_kernel_fwd(x, kernel, kernel_t):
+    return jnp.dot(x, kernel), (x, kernel_t)
+
+
+def _dot_with_transposed_kernel_bwd(residuals, g):
+    x, kernel_t = residuals
+    x_2d, g_2d = x.reshape(-1, x.shape[-1]), g.reshape(-1, g.shape[-1])
+    return jnp.dot(g, kernel_t), jnp.dot(x_2d.T, g_2d), jnp.zeros_like(kernel_t)
+
+
+dot_with_transposed_kernel.defvjp(_dot_with_transposed_kernel_fwd, _dot_with_transposed_kernel_bwd)
+
+
+def with_transposed_recurrent_kernel(kernels: LSTMKernels) -> LSTMKernels:
+    """Kernels whose `lstm_step` differentiates with plain matmuls (same values; for an
+    unroll that is differentiated, the transpose made once outside the loop)."""
+    return kernels._replace(recurrent_kernel_t=materialized_transpose(kernels.recurrent_kernel))
+
+
+def lstm_input_gates(kernels: LSTMKernels, x: chex.Array) -> chex.Array:
+    """The input's contribution to the four gates, `[..., F] -> [..., 4H]`."""
+    return jnp.dot(x, kernels.input_kernel)
+
+
+def lstm_step(kernels: LSTMKernels, carry: LSTMCarry, input_gates: chex.Array) -> tuple[LSTMCarry, chex.Array]:
+    """One step of the cell from its input gates `[..., 4H]` -> ((c, h), h)."""
+    c, h = carry
+    if kernels.recurrent_kernel_t is None:
+        recurrent = jnp.dot(h, kernels.recurrent_kernel)
+    else:
+        recurrent = dot_with_transposed_kernel(h, kernels.recurrent_kernel, kernels.recurrent_kernel_t)
+    recurrent += jnp.reshape(kernels.bias, (1,) * (recurrent.ndim - 1) + (-1,))
+    split = np.cumsum([h.shape[-1]] * 3)
+    i, f, g, o = (r + x for r, x in zip(jnp.split(recurrent, split, axis=-1), jnp.split(input_gates, split, axis=-1)))
+    i, f, g, o = nn.sigmoid(i), nn.sigmoid(f), jnp.tanh(g), nn.sigmoid(o)
+    new_c = f * c + i * g
+    new_h = o * jnp.tanh(new_c)
+    return (new_c, new_h), new_h
+
+
+def initial_carry(batch_shape, hidden_size: int = 512) -> LSTMCarry:
+    """Zero LSTM carry (c, h), each `[*batch_shape, hidden_size]`."""
+    zeros = jnp.zeros((*batch_shape, hidden_size), jnp.float32)
+    return (zeros, zeros)
+
+
+def reset_carry(done: chex.Array, carry: LSTMCarry) -> LSTMCarry:
+    """Zero the carry where `done` `[...]` is true (use the PREVIOUS step's done)."""
+    return jax.tree.map(lambda x: jnp.where(done[..., None], jnp.zeros_like(x), x), carry)

@@ -1,0 +1,174 @@
+"""Methods as compositions of small named pieces (NAVIX style).
+
+A method is a base learner x an encoder x an imagination variant:
+
+* base: `a3c` (SAVN's non-adaptive A3C) or `maml` (SAVN's self-adaptive learner; planned);
+* encoder: `plain` (SAVN's observation encoder) or `org` (ORG's object-relation graph on
+  the `org` setup's detector features; planned);
+* imagination: `none`, `foresit` (Sections 4.2-4.4), or a Table 3 ablation: `rnd`
+  (i_tau = tanh(z)), `att` (imagine the attention-weighted average state), `int`
+  (re-imagine from s_t every K steps).
+
+Names are '+'-joined pieces in any order, the base defaulting to a3c (and `a3c+maml`
+naming the maml base, A3C trained by MAML, as the paper does): `a3c`,
+`a3c+foresit`, `a3c+org+foresit`, `a3c+maml+foresit`, `org+rnd`; the Table 3 names alone
+(`rnd`, `att`, `int`) mean `a3c+rnd` etc. `parse_method` turns a name into a `Method`;
+`Config` validates it with the setup. The agent holds the pieces and calls them; nothing
+else tests a method's name.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Callable
+
+import chex
+import jax
+import jax.numpy as jnp
+
+from foresit_jax import imagination as imag
+
+BASES: tuple[str, ...] = ("a3c", "maml")
+ENCODERS: tuple[str, ...] = ("plain", "org")
+GRADIENTS: tuple[str, ...] = ("replay", "through_rollout")
+
+# Pieces that are designed but not built yet: parsing accepts them, Config refuses them.
+PLANNED: dict[str, str] = {
+    "maml": "SAVN's self-adaptive meta-learning (inner SGD on a learned interaction loss)",
+    "org": "ORG's object-relation-graph encoder",
+}
+
+
+@dataclasses.dataclass(frozen=True)
+class Imagination:
+    """An imagination variant: where i_tau comes from, when it is renewed, what f_w learns.
+
+    source: 'none' (the policy sees s_t only), 'learned' (f_w([s_0 : g_tau]) + noise,
+      Eq. 6-7), 'random' (tanh(z), z ~ N(0, rnd_variance I)).
+    attention_critic: value from the attention of Eq. 3-4 (V(s*_t)); else an MLP on s_t.
+    subgoal_mode: what f_w learns to imagine: 'argmax' (s_{argmax alpha}) or
+      'attention_average' (sum_j alpha_j s_j).
+    renew_every_k: renew i_tau from s_t every `Config.int_interval` steps of the episode
+      (the `int` ablation) instead of once, from s_0, at its start.
+    """
+
+    name: str
+    source: str = "none"
+    attention_critic: bool = False
+    subgoal_mode: str = "argmax"
+    renew_every_k: bool = False
+
+    @property
+    def uses_imagination(self) -> bool:
+        return self.source != "none"
+
+    @property
+    def trains_imagination(self) -> bool:
+        """Whether buffers are filled and f_w is trained."""
+        return self.source == "learned"
+
+    def renews(self, episode_step: chex.Array, interval: int) -> chex.Array:
+        """Whether i_tau is (re)imagined at this step of the episode, `[...]` bool."""
+        if self.renew_every_k:
+            return episode_step % interval == 0
+        return episode_step == 0
+
+    def imagine(
+        self, imagine_fn: Callable, w_params, s_t: chex.Array, goal: chex.Array, key: chex.PRNGKey,
+        noise_variance: chex.Array, rnd_variance: float,
+    ) -> chex.Array:  # fmt: skip
+        """i_tau `[B, H]` for the policy (stop-gradient: the policy loss never trains f_w
+        or, through it, s_0). learned: f_w([s_t : g]) + N(0, sigma2); random: tanh(N(0, v))."""
+        if self.source == "random":
+            return imag.random_imagination(key, s_t.shape, rnd_variance)
+        imagined = imagine_fn(w_params, jax.lax.stop_gradient(s_t), goal)
+        return jax.lax.stop_gradient(imag.add_imagination_noise(key, imagined, noise_variance))
+
+    def zeros(self, batch: int, hidden: int) -> chex.Array:
+        return jnp.zeros((batch, hidden), jnp.float32)
+
+
+_FORESIT = Imagination("foresit", source="learned", attention_critic=True)
+
+IMAGINATIONS: dict[str, Imagination] = {
+    "none": Imagination("none"),
+    "foresit": _FORESIT,
+    "rnd": dataclasses.replace(_FORESIT, name="rnd", source="random"),
+    "att": dataclasses.replace(_FORESIT, name="att", subgoal_mode="attention_average"),
+    "int": dataclasses.replace(_FORESIT, name="int", renew_every_k=True),
+}
+
+
+@dataclasses.dataclass(frozen=True)
+class Method:
+    """One method of the paper: base x encoder x imagination."""
+
+    base: str = "a3c"
+    encoder: str = "plain"
+    imagination: Imagination = IMAGINATIONS["none"]
+
+    @property
+    def name(self) -> str:
+        parts = ["a3c", "maml"] if self.base == "maml" else [self.base]
+        if self.encoder != "plain":
+            parts.append(self.encoder)
+        if self.imagination.name != "none":
+            parts.append(self.imagination.name)
+        return "+".join(parts)
+
+    @property
+    def gradients(self) -> tuple[str, ...]:
+        """Gradient paths this method supports. The replay re-runs the modules over a
+        window's recorded inputs under ONE parameter set: right for a3c, wrong for maml,
+        whose steps run under the parameters adapted so far in the episode."""
+        return ("through_rollout",) if self.base == "maml" else GRADIENTS
+
+    @property
+    def planned_pieces(self) -> tuple[str, ...]:
+        return tuple(p for p in (self.base, self.encoder) if p in PLANNED)
+
+    @property
+    def required_setup(self) -> str | None:
+        """The object graph needs the `org` setup's detector features."""
+        return "org" if self.encoder == "org" else None
+
+
+# The paper's names for its rows, for reference (Table 1 and Table 3).
+PAPER_METHODS: tuple[str, ...] = (
+    "a3c", "a3c+foresit", "a3c+maml", "a3c+maml+foresit", "a3c+org", "a3c+org+foresit",
+    "a3c+org+rnd", "a3c+org+att", "a3c+org+int",
+)  # fmt: skip
+# Methods that run today (every combination of implemented pieces).
+IMPLEMENTED_METHODS: tuple[str, ...] = ("a3c", "a3c+foresit", "a3c+rnd", "a3c+att", "a3c+int")
+
+
+def parse_method(name: str) -> Method:
+    """`'a3c+org+foresit'` -> Method(base='a3c', encoder='org', imagination=foresit).
+
+    Raises ValueError naming the valid pieces on an unknown or repeated piece."""
+    if not isinstance(name, str) or not name.strip():
+        raise ValueError(f"method must be a non-empty name like 'a3c+foresit', got {name!r}")
+    base, encoder, imagination = None, None, None
+    valid = f"bases {list(BASES)}, encoders {[e for e in ENCODERS if e != 'plain']}, imagination {list(IMAGINATIONS)}"
+    pieces = name.strip().lower().split("+")
+    if "a3c" in pieces and "maml" in pieces:  # 'a3c+maml': MAML trains the A3C learner
+        pieces.remove("a3c")
+    for piece in pieces:
+        if piece in BASES:
+            slot, value = "base", piece
+        elif piece in ENCODERS:
+            slot, value = "encoder", piece
+        elif piece in IMAGINATIONS:
+            slot, value = "imagination", piece
+        else:
+            raise ValueError(f"unknown piece {piece!r} in method {name!r}; pieces are '+'-joined {valid}")
+        current = {"base": base, "encoder": encoder, "imagination": imagination}[slot]
+        if current is not None:
+            raise ValueError(f"method {name!r} names two {slot} pieces ({current!r} and {value!r})")
+        if slot == "base":
+            base = value
+        elif slot == "encoder":
+            encoder = value
+        else:
+            imagination = value
+    return Method(base or "a3c", encoder or "plain", IMAGINATIONS[imagination or "none"])

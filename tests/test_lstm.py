@@ -1,0 +1,87 @@
+"""foresit_jax.lstm: the split LSTM cell against flax's own `nn.OptimizedLSTMCell` on the
+same parameters (a flax upgrade that renames or reorders its gates fails here), and the
+transposed-kernel product's gradient against plain autodiff."""
+
+import chex
+import flax.linen as nn
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from foresit_jax import lstm
+
+F, H, B, T = 7, 5, 3, 4
+
+
+def flax_cell_params(key):
+    cell = nn.OptimizedLSTMCell(H)
+    carry = lstm.initial_carry((B,), H)
+    return cell, cell.init(key, carry, jnp.zeros((B, F)))["params"]
+
+
+def test_parameter_names_are_flax_gates():
+    _, params = flax_cell_params(jax.random.PRNGKey(0))
+    assert set(params) == {"i" + g for g in lstm.LSTM_GATES} | {"h" + g for g in lstm.LSTM_GATES}
+    kernels = lstm.lstm_kernels(params)
+    chex.assert_shape(kernels.input_kernel, (F, 4 * H))
+    chex.assert_shape(kernels.recurrent_kernel, (H, 4 * H))
+    chex.assert_shape(kernels.bias, (4 * H,))
+
+
+def test_split_step_equals_flax_cell_over_several_steps():
+    cell, params = flax_cell_params(jax.random.PRNGKey(0))
+    # Non-zero biases, so that a gate order mix-up cannot hide behind zeros.
+    params = jax.tree.map(lambda x: x + 0.3 * jax.random.normal(jax.random.PRNGKey(3), x.shape), params)
+    xs = jax.random.normal(jax.random.PRNGKey(1), (T, B, F))
+    kernels = lstm.lstm_kernels(params)
+    for transposed in (False, True):
+        k = lstm.with_transposed_recurrent_kernel(kernels) if transposed else kernels
+        ours = theirs = lstm.initial_carry((B,), H)
+        for t in range(T):
+            theirs, h_theirs = cell.apply({"params": params}, theirs, xs[t])
+            ours, h_ours = lstm.lstm_step(k, ours, lstm.lstm_input_gates(k, xs[t]))
+            np.testing.assert_allclose(h_ours, h_theirs, rtol=1e-6, atol=1e-6)
+            jax.tree.map(lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-6), ours, theirs)
+
+
+def test_split_step_gradient_equals_flax_cell_gradient():
+    cell, params = flax_cell_params(jax.random.PRNGKey(2))
+    xs = jax.random.normal(jax.random.PRNGKey(4), (T, B, F))
+
+    def unroll_flax(p):
+        carry = lstm.initial_carry((B,), H)
+        total = 0.0
+        for t in range(T):
+            carry, h = cell.apply({"params": p}, carry, xs[t])
+            total += jnp.sum(h * (t + 1))
+        return total
+
+    def unroll_split(p):
+        k = lstm.with_transposed_recurrent_kernel(lstm.lstm_kernels(p))
+        carry = lstm.initial_carry((B,), H)
+        total = 0.0
+        for t in range(T):
+            carry, h = lstm.lstm_step(k, carry, lstm.lstm_input_gates(k, xs[t]))
+            total += jnp.sum(h * (t + 1))
+        return total
+
+    g_flax, g_split = jax.grad(unroll_flax)(params), jax.grad(unroll_split)(params)
+    jax.tree.map(lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-6), g_split, g_flax)
+
+
+def test_dot_with_transposed_kernel_gradient_is_the_plain_one():
+    x = jax.random.normal(jax.random.PRNGKey(0), (B, H))
+    w = jax.random.normal(jax.random.PRNGKey(1), (H, 4 * H))
+    g = jax.random.normal(jax.random.PRNGKey(2), (B, 4 * H))
+    plain = jax.grad(lambda x, w: jnp.vdot(g, jnp.dot(x, w)), argnums=(0, 1))(x, w)
+    fast = jax.grad(
+        lambda x, w: jnp.vdot(g, lstm.dot_with_transposed_kernel(x, w, lstm.materialized_transpose(w))), argnums=(0, 1)
+    )(x, w)
+    jax.tree.map(lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-6), fast, plain)
+
+
+def test_reset_carry_zeroes_only_done_lanes():
+    carry = (jnp.ones((3, H)), 2 * jnp.ones((3, H)))
+    c, h = lstm.reset_carry(jnp.array([True, False, True]), carry)
+    np.testing.assert_array_equal(c[:, 0], [0, 1, 0])
+    np.testing.assert_array_equal(h[:, 0], [0, 2, 0])
