@@ -5,7 +5,12 @@
     obs, state = env.reset(key, params)
     obs, state, reward, terminated, truncated, info = env.step(key, state, action, params)
 
-``envs`` knows nothing of the agent.
+``envs`` knows nothing of the agent.  Building a split's scene bank takes seconds the first
+time; it is then cached on disk (``envs.bank``: ``$FORESIT_CACHE_DIR``, default
+``~/.cache/foresit_jax``; ``FORESIT_NO_CACHE=1`` turns that off).  gymnax-style code:
+``envs.spaces`` mirrors gymnax's space classes (``envs.spaces.to_gymnax`` converts them),
+``envs.wrappers`` has ``FlattenObservationWrapper``, ``LogWrapper`` and
+``LegacyStepAPIWrapper`` (five-value step).
 """
 
 from envs import catalog, spaces, wrappers
@@ -29,7 +34,8 @@ def make(env_id: str = "GridNav-v0", setup: str = "savn", split: str = "train", 
       training: time limits of training (30 steps) or evaluation (100, 200 in living
         rooms); by default training limits on "train" and evaluation limits otherwise.
       env_kwargs: static constructor arguments of GridNav (grid_size, view_width,
-        precomputed_views).
+        precomputed_views, final_observation=False to leave ``info["final_observation"]``
+        out of every step).
     Returns:
       (env, params).
     """

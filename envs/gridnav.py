@@ -2,9 +2,11 @@
 
 The gymnax 1.0 contract: ``reset(key, params) -> (obs, state)`` and
 ``step(key, state, action, params) -> (obs, state, reward, terminated, truncated, info)``
-with automatic reset inside ``step`` (by ``jnp.where``, not ``lax.cond``) and
-``info["final_observation"]`` holding the last real observation of an episode that ended.
-Everything is a pure function of explicit keys, states and params; vmap it for batches.
+with automatic reset inside ``step`` (by ``jnp.where``, not ``lax.cond``) and (unless
+constructed with ``final_observation=False``) ``info["final_observation"]`` holding the
+last real observation of an episode that ended.  Everything is a pure function of explicit
+keys, states and params; vmap it for batches.  The full contract (observation, actions,
+reward, termination, ``info`` keys) is in the docstring of ``GridNav``.
 """
 
 from __future__ import annotations
@@ -57,6 +59,46 @@ def time_limits(training: bool) -> jax.Array:
 class GridNav:
     """The environment.  Shape-setting values are static constructor arguments.
 
+    - Observation (a dict; ``observation_space`` gives shapes and bounds):
+        - ``view``: float32 [3, W, n_semantic + 1], the first-person view (3 vertical
+          bands x W rays over a 100 degree field of view): a one-hot of the semantic class
+          of each pixel (nothing, wall, floor, furniture, then the setup's categories) and,
+          last, its depth divided by ``max_depth`` (in (0, 1]).
+        - ``target``: float32 [300] word vector (savn) or [22] one-hot (org) of the target
+          category.
+        - ``detections`` (org only): float32 [22, 7] per category: visible, column box
+          (min, max), row box (min, max), confidence, is the target.
+      ``envs.wrappers.FlattenObservationWrapper`` turns it into one float32 vector.
+    - Actions: ``Discrete(6)``: 0 MoveAhead (blocked by walls, furniture and floor objects:
+      the pose is unchanged), 1 RotateLeft, 2 RotateRight (45 degrees), 3 LookUp, 4 LookDown
+      (camera horizon 0 or 30 degrees down), 5 Done.
+    - Reward: ``params.success_reward`` (+5) on a successful Done (the target visible within
+      the success radius), ``params.step_penalty`` (-0.01) on every other step.
+    - Termination: ``terminated`` when the agent takes Done (successful or not);
+      ``truncated`` when the time limit of the room type (``params.max_steps``) is reached
+      without Done.  ``step`` resets automatically when either is set: the returned
+      observation and state are then those of the next episode.
+    - ``info`` (about the step just taken, so about the episode that was being stepped even
+      when ``step`` has just reset to a new one):
+        - ``success`` bool: the Done succeeded.
+        - ``episode_length`` int32: steps taken in the episode, this one included.
+        - ``optimal_length`` int32: the oracle's shortest number of actions to success from
+          the episode's start (Done counted), SPL's L^g.
+        - ``room_type`` int32 (catalog.KITCHEN ...), ``scene`` int32 (AI2-THOR number),
+          ``target`` int32 (category index in the setup's list).
+        - ``terminated``, ``truncated`` bool: the two flags again (kept by wrappers that
+          merge them into ``done``).
+        - ``final_observation``: the observation reached by this step, before any automatic
+          reset (the last real observation of an episode that ended).  Only when
+          ``final_observation=True`` (the default).  It is a whole observation per step
+          (about 5.6 KB: 1404 float32 in savn with W = 16), which loops that keep ``info``
+          as per-step metrics pay for in memory; pass ``final_observation=False`` when
+          nothing reads it (under jit XLA drops it anyway when it is neither used
+          nor returned).
+      Agents should read per-episode facts (optimal length, room type, scene, target) from
+      ``info``, not from ``EnvState`` fields: after an automatic reset the returned state
+      already belongs to the next episode, and ``EnvState``'s layout is not part of the API.
+
     Args:
       setup: "savn" (18 categories, 1.0 m, 300-d word-vector targets) or "org"
         (22 categories, 1.5 m, one-hot targets, detector features in the observation).
@@ -64,9 +106,17 @@ class GridNav:
       view_width: number of view columns (rays) across the 100 degree field of view.
       precomputed_views: gather each pose's view from the scene bank's table (fast) or
         ray cast it at every step (same pixels; for checking and benchmarking).
+      final_observation: whether ``step`` puts ``final_observation`` in ``info`` (see above).
     """
 
-    def __init__(self, setup: str = "savn", grid_size: int = 20, view_width: int = 16, precomputed_views: bool = True):
+    def __init__(
+        self,
+        setup: str = "savn",
+        grid_size: int = 20,
+        view_width: int = 16,
+        precomputed_views: bool = True,
+        final_observation: bool = True,
+    ):
         C.check_setup(setup)
         if view_width < 1:
             raise ValueError(f"view_width must be positive, got {view_width}")
@@ -74,6 +124,7 @@ class GridNav:
         self.grid_size = grid_size
         self.view_width = view_width
         self.precomputed_views = precomputed_views
+        self.final_observation = bool(final_observation)
         self.categories = C.categories(setup)
         self.num_categories = len(self.categories)
         self.success_radius_m = C.SETUPS[setup][2]
@@ -135,7 +186,8 @@ class GridNav:
             obs = jax.tree.map(lambda r, s: jnp.where(done, r, s), self.get_obs(state_re, params), obs_st)
         else:  # one ray cast of the selected state; obs_st is dead code unless info is used
             obs = self.get_obs(state, params)
-        info["final_observation"] = obs_st
+        if self.final_observation:
+            info["final_observation"] = obs_st
         return obs, state, reward, terminated, truncated, info
 
     # ----------------------------------------------------------------- dynamics
