@@ -13,7 +13,7 @@ time; it is then cached on disk (``envs.bank``: ``$FORESIT_CACHE_DIR``, default
 ``LegacyStepAPIWrapper`` (five-value step).
 """
 
-from envs import catalog, spaces, wrappers
+from envs import catalog, metrics, spaces, wrappers
 from envs.bank import SceneBank, pose_from_index, pose_index
 from envs.catalog import ACTIONS, ROOM_TYPES, SPLITS
 from envs.gridnav import EnvParams, EnvState, GridNav, time_limits
@@ -47,5 +47,5 @@ def make(env_id: str = "GridNav-v0", setup: str = "savn", split: str = "train", 
 
 __all__ = [
     "ACTIONS", "ROOM_TYPES", "SPLITS", "EnvParams", "EnvState", "GridNav", "SceneBank", "catalog",
-    "make", "pose_from_index", "pose_index", "spaces", "time_limits", "wrappers",
+    "make", "metrics", "pose_from_index", "pose_index", "spaces", "time_limits", "wrappers",
 ]  # fmt: skip

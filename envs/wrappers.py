@@ -1,10 +1,27 @@
-"""Wrappers: the five-value legacy step API and episode statistics (gymnax style)."""
+"""Wrappers (gymnax style): a flat observation vector, the five-value legacy step API and
+episode statistics.
+
+A PureJaxRL-style stack over GridNav::
+
+    env, params = envs.make("GridNav-v0")
+    env = LegacyStepAPIWrapper(LogWrapper(FlattenObservationWrapper(env)))
+    # env.observation_space(params).shape == (N,), env.action_space(params).n == 6
+    # obs, state, reward, done, info = env.step(key, state, action, params)
+
+``FlattenObservationWrapper`` and ``LogWrapper`` (ours) take the six-value step of GridNav;
+``FlattenObservationWrapper`` also takes a five-value one, so PureJaxRL's own
+``LogWrapper`` can go over ``LegacyStepAPIWrapper(FlattenObservationWrapper(env))``.
+"""
 
 from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from flax import struct
+
+from envs import spaces
+from envs.metrics import spl as spl_term
 
 
 class Wrapper:
@@ -15,6 +32,83 @@ class Wrapper:
 
     def __getattr__(self, name):
         return getattr(self._env, name)
+
+
+class FlattenObservationWrapper(Wrapper):
+    """Observations as one flat float32 vector, with a ``Box`` observation space of that size.
+
+    A dict observation is flattened key by key in the order of ``KEY_ORDER`` (GridNav:
+    ``view`` [3, W, C], then ``target``, then, in the org setup, ``detections``
+    [22, 7]), any other keys after them in sorted order; each part row-major (C order)
+    and cast to float32.  ``unflatten`` inverts it; ``layout`` gives each part's slice.
+    A Box (array) observation is simply raveled.  The space's ``low``/``high`` are the
+    parts' bounds, broadcast and concatenated (float32 [N]).
+
+    ``info["final_observation"]``, when present, is flattened the same way.  ``step`` may
+    return six values (GridNav) or five (``LegacyStepAPIWrapper``): the observation is the
+    first value, ``info`` the last.  This stands in for gymnax's ``FlattenObservationWrapper``,
+    which accepts only gymnax's own ``Box`` (see ``envs.spaces``).
+    """
+
+    KEY_ORDER = ("view", "target", "detections")
+
+    def layout(self, params=None) -> tuple[tuple[str, tuple[int, ...], int, int], ...]:
+        """(key, shape, start, stop) of each part of the flat vector, in order (dict
+        observations only)."""
+        space = self._env.observation_space(params)
+        if not isinstance(space, spaces.Dict):
+            raise TypeError(f"layout needs a Dict observation space, got {space!r}")
+        keys = [k for k in self.KEY_ORDER if k in space.spaces]
+        keys += sorted(k for k in space.spaces if k not in self.KEY_ORDER)
+        parts, start = [], 0
+        for key in keys:
+            shape = tuple(space.spaces[key].shape)
+            size = int(np.prod(shape, dtype=np.int64))
+            parts.append((key, shape, start, start + size))
+            start += size
+        return tuple(parts)
+
+    def observation_space(self, params=None) -> spaces.Box:
+        space = self._env.observation_space(params)
+        if not isinstance(space, spaces.Dict):
+            size = int(np.prod(space.shape, dtype=np.int64))
+            bound = lambda b: np.broadcast_to(np.asarray(b, np.float32), space.shape).reshape(size)  # noqa: E731
+            return spaces.Box(bound(space.low), bound(space.high), (size,), jnp.float32)
+        lows, highs = [], []
+        for key, shape, start, stop in self.layout(params):
+            sub = space.spaces[key]
+            lows.append(np.broadcast_to(np.asarray(sub.low, np.float32), shape).reshape(-1))
+            highs.append(np.broadcast_to(np.asarray(sub.high, np.float32), shape).reshape(-1))
+        low, high = np.concatenate(lows), np.concatenate(highs)
+        return spaces.Box(low, high, low.shape, jnp.float32)
+
+    def flatten(self, obs, params=None) -> jax.Array:
+        """float32 [..., N] from an observation of the wrapped env (leading batch axes kept)."""
+        space = self._env.observation_space(params)
+        if not isinstance(space, spaces.Dict):
+            x = jnp.asarray(obs, jnp.float32)
+            return x.reshape(x.shape[: x.ndim - len(space.shape)] + (-1,))
+        parts = []
+        for key, shape, _, _ in self.layout(params):
+            x = jnp.asarray(obs[key], jnp.float32)
+            parts.append(x.reshape(x.shape[: x.ndim - len(shape)] + (-1,)))
+        return jnp.concatenate(parts, -1)
+
+    def unflatten(self, flat, params=None) -> dict:
+        """The dict observation (float32 parts) from a flat vector [..., N]."""
+        flat = jnp.asarray(flat)
+        return {key: flat[..., a:b].reshape(flat.shape[:-1] + shape) for key, shape, a, b in self.layout(params)}
+
+    def reset(self, key, params=None):
+        obs, state = self._env.reset(key, params)
+        return self.flatten(obs, params), state
+
+    def step(self, key, state, action, params=None):
+        obs, *rest, info = self._env.step(key, state, action, params)
+        if "final_observation" in info:
+            info = dict(info)
+            info["final_observation"] = self.flatten(info["final_observation"], params)
+        return (self.flatten(obs, params), *rest, info)
 
 
 class LegacyStepAPIWrapper(Wrapper):
@@ -34,14 +128,15 @@ class LogEnvState:
     returned_episode_return: jax.Array  # float32 [] return of the last finished episode
     returned_episode_length: jax.Array  # int32 []
     returned_episode_success: jax.Array  # bool []
-    returned_episode_spl: jax.Array  # float32 [] success * L_opt / max(L, L_opt)
+    returned_episode_spl: jax.Array  # float32 [] envs.metrics.spl: success * L_opt / max(L, L_opt)
 
 
 class LogWrapper(Wrapper):
     """Keeps the statistics of the last finished episode in the state and in ``info``:
     ``returned_episode_return``, ``..._length``, ``..._success``, ``..._spl`` and
-    ``returned_episode`` (whether an episode ended at this step).  Works over the
-    six-value step of GridNav."""
+    ``returned_episode`` (whether an episode ended at this step).  SPL is
+    ``envs.metrics.spl`` of the episode.  Works over the six-value step of GridNav (the
+    env's ``info`` must carry ``success`` and ``optimal_length``)."""
 
     def reset(self, key, params=None):
         obs, env_state = self._env.reset(key, params)
@@ -53,7 +148,7 @@ class LogWrapper(Wrapper):
         done = terminated | truncated
         ret = state.episode_return + reward
         length = state.episode_length + 1
-        spl = info["success"] * info["optimal_length"] / jnp.maximum(length, info["optimal_length"])
+        spl = spl_term(info["success"], length, info["optimal_length"])
         state = LogEnvState(
             env_state=env_state,
             episode_return=jnp.where(done, 0.0, ret),

@@ -1,4 +1,4 @@
-"""Wrappers (five-value legacy step, episode statistics), a PureJaxRL-style loop, the
+"""Wrappers (five-value legacy step, episode statistics, flat observations), a PureJaxRL-style loop, the
 spaces and the default params."""
 
 import chex
@@ -9,7 +9,7 @@ import pytest
 
 import envs
 from envs import catalog as C
-from envs.wrappers import LegacyStepAPIWrapper, LogWrapper
+from envs.wrappers import FlattenObservationWrapper, LegacyStepAPIWrapper, LogWrapper
 from env_helpers import index_tree, to_numpy
 
 
@@ -185,3 +185,73 @@ def test_default_params_work(savn_train_narrow):
     assert int(state.time) == 0 and obs["view"].shape == (3, 2, env.num_semantic + 1)
     obs, state, reward, terminated, truncated, info = env.step(jax.random.key(1), state, C.ROTATE_RIGHT)
     assert int(state.time) == 1 and reward == np.float32(-0.01) and not terminated
+
+
+# --------------------------------------------------------------------------- flat observations
+@pytest.mark.parametrize("kit_name", ["savn_kit", "org_kit"])
+def test_flatten_wrapper_gives_one_float32_vector_in_the_documented_order(request, kit_name):
+    kit = request.getfixturevalue(kit_name)
+    base, params = kit.env, kit.params
+    env = FlattenObservationWrapper(base)
+    dict_space = base.observation_space(params)
+    space = env.observation_space(params)
+    n = envs.spaces.flat_size(dict_space)
+    assert isinstance(space, envs.spaces.Box) and space.shape == (n,) and space.dtype == jnp.float32
+    assert n == 3 * base.view_width * (base.num_semantic + 1) + dict_space["target"].shape[0] + (
+        base.num_categories * 7 if base.setup == "org" else 0
+    )
+    keys = [k for k, *_ in env.layout(params)]
+    assert keys == (["view", "target", "detections"] if base.setup == "org" else ["view", "target"])
+    chex.assert_shape([space.low, space.high], (n,))
+    view_size = int(np.prod(dict_space["view"].shape))
+    assert (space.low[:view_size] == 0).all() and (space.high[:view_size] == 1).all()
+    assert np.isinf(space.low[view_size : view_size + dict_space["target"].shape[0]]).all()
+
+    obs, state = jax.jit(env.reset)(jax.random.key(0), params)
+    dict_obs, _ = base.reset(jax.random.key(0), params)
+    chex.assert_shape(obs, (n,))
+    assert obs.dtype == jnp.float32 and bool(space.contains(obs))
+    parts = [dict_obs[k].reshape(-1) for k in keys]
+    np.testing.assert_array_equal(obs, np.concatenate(parts))  # row-major parts, in order
+    chex.assert_trees_all_equal(env.unflatten(obs, params), dict_obs)
+    # Batches: leading axes are kept.
+    batch = jax.vmap(base.reset, in_axes=(0, None))(jax.random.split(jax.random.key(1), 3), params)[0]
+    flat = env.flatten(batch, params)
+    chex.assert_shape(flat, (3, n))
+    chex.assert_trees_all_equal(env.unflatten(flat, params), batch)
+    # Step: six values, the observation and info["final_observation"] flattened, the rest as is.
+    out = jax.jit(env.step)(jax.random.key(2), state, C.DONE, params)
+    ref = base.step(jax.random.key(2), state, C.DONE, params)
+    assert len(out) == 6
+    np.testing.assert_array_equal(out[0], env.flatten(ref[0], params))
+    chex.assert_trees_all_equal(out[1:5], ref[1:5])
+    info, ref_info = out[5], ref[5]
+    np.testing.assert_array_equal(info["final_observation"], env.flatten(ref_info["final_observation"], params))
+    np.testing.assert_array_equal(info["final_observation"], obs)  # Done: the last real observation
+    chex.assert_trees_all_equal({k: v for k, v in info.items() if k != "final_observation"},
+                                {k: v for k, v in ref_info.items() if k != "final_observation"})  # fmt: skip
+
+
+def test_flatten_wrapper_takes_a_five_value_step_and_box_observations():
+    class BoxEnv(StubEnv):
+        def observation_space(self, params=None):
+            return envs.spaces.Box(0.0, np.arange(6.0).reshape(2, 3), (2, 3), jnp.int32)
+
+        def reset(self, key, params=None):
+            return jnp.arange(6, dtype=jnp.int32).reshape(2, 3), jnp.zeros((), jnp.int32)
+
+        def step(self, key, state, action, params=None):
+            obs, state, reward, terminated, truncated, info = super().step(key, state, action, params)
+            return jnp.ones((2, 3), jnp.int32), state, reward, terminated, truncated, info
+
+    env = FlattenObservationWrapper(LegacyStepAPIWrapper(BoxEnv(True, False)))
+    space = env.observation_space()
+    assert space.shape == (6,) and space.dtype == jnp.float32
+    np.testing.assert_array_equal(space.high, np.arange(6.0))
+    obs, state = env.reset(jax.random.key(0))
+    np.testing.assert_array_equal(obs, np.arange(6.0))
+    assert obs.dtype == jnp.float32
+    obs, state, reward, done, info = env.step(jax.random.key(1), state, 1)
+    np.testing.assert_array_equal(obs, np.ones(6))
+    assert obs.dtype == jnp.float32 and bool(done) and int(info["marker"]) == 7 and int(state) == 1
+    assert env.num_actions == 6
