@@ -55,10 +55,12 @@ def base_config(args: Args, overrides: dict) -> Config:
     return Config(method=args.method, **{**fields, **overrides})
 
 
-def run_variant(args: Args, overrides: dict) -> dict:
+def run_variant(args: Args, overrides: dict, keys=None) -> dict:
+    """Train one variant (seeds vmapped) for `args.frames` useful frames per seed.
+    keys: the seeds' PRNG keys `[S, 2]` (default: `args.seeds` keys split from key 0)."""
     config = base_config(args, overrides)
     trainer = Trainer(config)
-    keys = jax.random.split(jax.random.PRNGKey(0), args.seeds)
+    keys = jax.random.split(jax.random.PRNGKey(0), args.seeds) if keys is None else keys
     start = time.perf_counter()
     init = jax.jit(jax.vmap(trainer.init))
     run = jax.jit(jax.vmap(lambda s: trainer.run(s, trainer.env_params, args.chunk)))
@@ -81,7 +83,7 @@ def run_variant(args: Args, overrides: dict) -> dict:
     final = np.mean([c[3] for c in last], axis=0)
     return {
         "overrides": overrides,
-        "seeds": args.seeds,
+        "seeds": int(keys.shape[0]),
         "compile_s": round(compile_s, 1),
         "seconds": curve[-1][0],
         "frames": int(frames),

@@ -53,7 +53,7 @@ class ActorState(NamedTuple):
     imagined: chex.Array  # [B, H] the running episode's i_tau
     s_0: chex.Array  # [B, H] the running episode's first state
     episode_step: chex.Array  # [B] int32 index of the next state in its episode (0: new episode)
-    memory: chex.Array  # [B, M, H] the running episode's states so far (attention critic; M = 0 without)
+    memory: Optional[chex.Array]  # [B, M, H] the running episode's states so far (attention critic; else None)
     tracker: imagination.SuccessTracker  # [B, window] outcomes of each lane's last episodes (rho)
 
 
@@ -151,7 +151,7 @@ class Agent:
     def start(self, key, env, env_params, num_lanes: int, memory_size: int = 0, tracker=None) -> ActorState:
         """Every lane at the start of a fresh episode. memory_size: states of an episode
         the attention critic can remember across windows (the training time limit; 0 when
-        nothing is carried across windows). tracker: per-lane success trackers to keep
+        nothing is carried across windows: `memory` is then None). tracker: per-lane success trackers to keep
         (fresh ones by default)."""
         if isinstance(num_lanes, bool) or not isinstance(num_lanes, int) or num_lanes < 1:
             raise ValueError(f"num_lanes must be a positive int, got {num_lanes!r}")
@@ -170,7 +170,7 @@ class Agent:
             imagined=zeros,
             s_0=zeros,
             episode_step=jnp.zeros((num_lanes,), jnp.int32),
-            memory=jnp.zeros((num_lanes, memory_size, hidden), jnp.float32),
+            memory=jnp.zeros((num_lanes, memory_size, hidden), jnp.float32) if memory_size else None,
             tracker=tracker,
         )
 
@@ -200,7 +200,7 @@ class Agent:
         cfg, imag = self.config, self.imagination
         num_lanes = actor.episode_step.shape[0]
         lanes = jnp.arange(num_lanes)
-        memory_size = actor.memory.shape[1]
+        memory_size = 0 if actor.memory is None else actor.memory.shape[1]
         kernels = lstm_kernels(encoder_lstm_params(params))  # concatenated once, outside the loop
 
         def step(carry, key):
@@ -294,14 +294,16 @@ class Agent:
         return traj
 
     # ------------------------------------------------------------------ critic
-    def critic(self, params, traj: Trajectory, memory: chex.Array) -> tuple[CriticOutput, chex.Array]:
+    def critic(self, params, traj: Trajectory, memory: Optional[chex.Array]) -> tuple[CriticOutput, chex.Array]:
         """The critic over a window, the state after it included: (CriticOutput with
         value `[T + 1, B]` (row T: V(s*_T), the bootstrap), alpha `[B, T + 1, M + T + 1]`
         or None; keys `[B, M + T + 1, H]`, what alpha weighs).
 
         Each step attends over the states of its own episode up to itself (Eq. 3-4):
         those of earlier windows (`memory` `[B, M, H]`, the ActorState's at the window's
-        start, without gradient) and the window's."""
+        start, without gradient; None: no memory) and the window's."""
+        if memory is None:
+            memory = jnp.zeros((traj.states.shape[1], 0, traj.states.shape[2]), traj.states.dtype)
         states = jnp.concatenate([traj.states, traj.next_state[None]], axis=0)  # [T + 1, B, H]
         steps = jnp.concatenate([traj.episode_step, traj.next_episode_step[None]], axis=0)  # [T + 1, B]
         states, steps = jnp.swapaxes(states, 0, 1), jnp.swapaxes(steps, 0, 1)  # [B, T + 1, ...]

@@ -103,7 +103,7 @@ class Trainer:
     # ------------------------------------------------------------------ the loss
     def window_loss(self, params, traj: Trajectory, memory: chex.Array):
         """The A3C loss (Eq. 8-9) of one window whose states and logits are differentiable
-        in `params`. memory: the critic's memory at the window's start `[B, M, H]`.
+        in `params`. memory: the critic's memory at the window's start `[B, M, H]` (or None).
         Returns (loss, (alpha `[B, T + 1, K]` or None, keys `[B, K, H]`, metrics))."""
         cfg = self.config
         critic, keys = self.agent.critic(params, traj, memory)
