@@ -48,6 +48,8 @@ class BenchConfig:
     """methods to compare (see foresit_jax.methods)"""
     preset: str = "quick"
     """preset giving the network sizes and the window length"""
+    setup: str = "savn"
+    """environment setup: savn, or org (needed by the object-graph methods, e.g. a3c+org)"""
     lanes: tuple[int, ...] = (32,)
     """numbers of env lanes (A3C agents) per update"""
     rollouts: tuple[str, ...] = ("packed",)
@@ -128,7 +130,7 @@ def temp_megabytes(compiled) -> float | None:
 
 def combinations(bench: BenchConfig):
     for method, rollout, gradient, lanes in itertools.product(bench.methods, bench.rollouts, bench.gradients, bench.lanes):
-        overrides = dict(num_lanes=lanes, num_updates=bench.updates, rollout=rollout, gradient=gradient)
+        overrides = dict(num_lanes=lanes, num_updates=bench.updates, rollout=rollout, gradient=gradient, setup=bench.setup)
         if rollout == "episodes":
             overrides["num_steps"] = 30  # the training time limit: one whole episode per lane
         elif bench.num_steps:
@@ -140,7 +142,7 @@ def combinations(bench: BenchConfig):
 def main(bench: BenchConfig) -> list[Measurement]:
     print(
         f"jax {jax.__version__} on {jax.devices()[0].platform} ({jax.device_count()} device(s)); "
-        f"preset={bench.preset} updates/call={bench.updates} repeats={bench.repeats}",
+        f"preset={bench.preset} setup={bench.setup} updates/call={bench.updates} repeats={bench.repeats}",
         flush=True,
     )
     programs = []

@@ -52,7 +52,10 @@ PRESETS: dict[str, tuple[dict, Schedule]] = {
 
 def check_method(method: str) -> None:
     """A one-line error for a method name that does not parse or is not built yet."""
-    pieces = parse_method(method)  # ValueError naming the valid pieces
+    try:
+        pieces = parse_method(method)
+    except ValueError as e:
+        raise ValueError(f"unknown method {method!r} ({e}); valid methods: {', '.join(IMPLEMENTED_METHODS)}") from None
     if pieces.planned_pieces:
         raise ValueError(
             f"method {method!r} is planned, not implemented yet ({', '.join(pieces.planned_pieces)}); "

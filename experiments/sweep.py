@@ -31,7 +31,9 @@ class Args:
     """Train several methods over several seeds and tabulate them as in Table 1."""
 
     methods: tuple[str, ...] = ("a3c", "a3c+foresit")
-    """Methods to compare."""
+    """Methods to compare ('+'-joined pieces, see foresit_jax.methods)."""
+    setup: str = "savn"
+    """Environment setup: savn or org (the object-graph methods need org)."""
     seeds: int = 5
     """Seeds per method (vmapped in one program)."""
     preset: str = "quick"
@@ -60,7 +62,7 @@ def run_method(method: str, args: Args, bar) -> tuple[list[dict], np.ndarray, np
     from foresit_jax.evaluate import agent_params, evaluate
     from foresit_jax.train import make_trainer
 
-    config, schedule = preset(args.preset, method, num_updates=args.num_updates)
+    config, schedule = preset(args.preset, method, num_updates=args.num_updates, setup=args.setup)
     trainer = make_trainer(config)
     env_params = trainer.env_params
     states = jax.vmap(trainer.init)(seed_keys(args.seed, args.seeds))
@@ -117,7 +119,7 @@ def main(args: Args) -> list[dict]:
     if args.test_episodes_per_room is not None and args.test_episodes_per_room < 1:
         raise runs.UserError(f"--test-episodes-per-room must be >= 1, got {args.test_episodes_per_room}")
     for method in args.methods:  # fail before any training
-        preset(args.preset, method, num_updates=args.num_updates)
+        preset(args.preset, method, num_updates=args.num_updates, setup=args.setup)
     out = args.out
     if out.exists() and any(out.iterdir()):
         if not args.overwrite:
@@ -130,7 +132,7 @@ def main(args: Args) -> list[dict]:
     out.mkdir(parents=True, exist_ok=True)
     (out / "sweep.json").write_text(json.dumps(dataclasses.asdict(args), indent=2, default=str))
 
-    config, _ = preset(args.preset, args.methods[0], num_updates=args.num_updates)
+    config, _ = preset(args.preset, args.methods[0], num_updates=args.num_updates, setup=args.setup)
     bar = _progress(config.num_updates * len(args.methods), 0, args.progress)
     t0 = time.time()
     results, curves = {}, {}

@@ -32,7 +32,9 @@ class Args:
     """Train one ForeSIT (or baseline) agent."""
 
     method: str = "a3c+foresit"
-    """Method: a3c, a3c+foresit, or an ablation (rnd, att, int)."""
+    """Method: '+'-joined pieces, e.g. a3c, a3c+foresit, a3c+rnd/att/int, a3c+org, a3c+org+foresit."""
+    setup: str = "savn"
+    """Environment setup: savn (first setup, word-vector targets) or org (second setup, detector features)."""
     preset: str = "quick"
     """Preset: tiny (seconds), quick (minutes on a laptop CPU), paper (the paper's sizes)."""
     seed: int = 0
@@ -63,7 +65,8 @@ class Args:
 
 def build(args: Args):
     """Config and Schedule from the arguments (or from the run folder when resuming)."""
-    overrides = dict(num_updates=args.num_updates, num_lanes=args.num_lanes, learning_rate=args.learning_rate)
+    overrides = dict(num_updates=args.num_updates, num_lanes=args.num_lanes, learning_rate=args.learning_rate,
+                     setup=args.setup)  # fmt: skip
     config, schedule = preset(args.preset, args.method, **overrides)
     sched = {k: getattr(args, k) for k in ("chunk_updates", "test_episodes_per_room", "val_episodes_per_room")}
     schedule = dataclasses.replace(schedule, **{k: v for k, v in sched.items() if v is not None})

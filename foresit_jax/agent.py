@@ -41,6 +41,7 @@ from foresit_jax.lstm import (
     reset_carry,
 )
 from foresit_jax.networks import ActorCritic, CriticOutput, ImaginationNet, window_attention_mask
+from foresit_jax.org import ObjectGraph
 
 
 class ActorState(NamedTuple):
@@ -122,7 +123,10 @@ class Agent:
         self.config = config
         self.method = config.pieces
         self.imagination = self.method.imagination
+        # The object-relation graph (ORG) reads the `org` setup's detector features.
+        object_graph = ObjectGraph() if self.method.encoder == "org" else None
         self.model = ActorCritic(
+            object_graph=object_graph,
             num_actions=config.num_actions,
             hidden_size=config.hidden_size,
             use_imagination=self.imagination.uses_imagination,

@@ -3,7 +3,8 @@
 SPL = (1/N) sum_i s_i L^g_i / max(L_i, L^g_i), where L^g is the oracle's shortest number of
 actions to success (Done included) and L the number of actions taken.  Episodes use the
 evaluation time limits (100 steps, 200 in living rooms); by default 250 per room type.
-Actions are sampled from the policy, as SAVN does; ``greedy=True`` takes the argmax.
+Actions are sampled from the policy, as SAVN does, except for methods on ORG's encoder, which
+take the argmax as ORG's own evaluation does (`Method.greedy_evaluation`); ``greedy`` overrides.
 """
 
 from __future__ import annotations
@@ -78,7 +79,7 @@ def evaluate(
     split: str = "test",
     key: chex.PRNGKey | None = None,
     episodes_per_room: int = 250,
-    greedy: bool = False,
+    greedy: bool | None = None,
     room_types: tuple[str, ...] | None = None,
 ) -> dict[str, dict[str, float]]:
     """Run `episodes_per_room` episodes in each room type of `split` ("val" or "test").
@@ -90,6 +91,7 @@ def evaluate(
     if episodes_per_room < 1:
         raise ValueError(f"episodes_per_room must be >= 1, got {episodes_per_room}")
     key = jax.random.PRNGKey(0) if key is None else key
+    greedy = config.pieces.greedy_evaluation if greedy is None else bool(greedy)
     rooms = tuple(room_types or config.room_types or ROOM_TYPES)
     results, pooled = {}, []
     for room, k in zip(rooms, jax.random.split(key, len(rooms))):

@@ -4,7 +4,7 @@ A method is a base learner x an encoder x an imagination variant:
 
 * base: `a3c` (SAVN's non-adaptive A3C) or `maml` (SAVN's self-adaptive learner; planned);
 * encoder: `plain` (SAVN's observation encoder) or `org` (ORG's object-relation graph on
-  the `org` setup's detector features; planned);
+  the `org` setup's detector features, `foresit_jax.org`);
 * imagination: `none`, `foresit` (Sections 4.2-4.4), or a Table 3 ablation: `rnd`
   (i_tau = tanh(z)), `att` (imagine the attention-weighted average state), `int`
   (re-imagine from s_t every K steps).
@@ -35,7 +35,6 @@ GRADIENTS: tuple[str, ...] = ("replay", "through_rollout")
 # Pieces that are designed but not built yet: parsing accepts them, Config refuses them.
 PLANNED: dict[str, str] = {
     "maml": "SAVN's self-adaptive meta-learning (inner SGD on a learned interaction loss)",
-    "org": "ORG's object-relation-graph encoder",
 }
 
 
@@ -128,6 +127,12 @@ class Method:
         return tuple(p for p in (self.base, self.encoder) if p in PLANNED)
 
     @property
+    def greedy_evaluation(self) -> bool:
+        """Whether evaluation takes the argmax action: ORG's own protocol (its evaluation
+        is greedy); SAVN's (and the paper's other rows) sample from the policy."""
+        return self.encoder == "org"
+
+    @property
     def required_setup(self) -> str | None:
         """The object graph needs the `org` setup's detector features."""
         return "org" if self.encoder == "org" else None
@@ -139,7 +144,10 @@ PAPER_METHODS: tuple[str, ...] = (
     "a3c+org+rnd", "a3c+org+att", "a3c+org+int",
 )  # fmt: skip
 # Methods that run today (every combination of implemented pieces).
-IMPLEMENTED_METHODS: tuple[str, ...] = ("a3c", "a3c+foresit", "a3c+rnd", "a3c+att", "a3c+int")
+IMPLEMENTED_METHODS: tuple[str, ...] = (
+    "a3c", "a3c+foresit", "a3c+rnd", "a3c+att", "a3c+int",
+    "a3c+org", "a3c+org+foresit", "a3c+org+rnd", "a3c+org+att", "a3c+org+int",
+)  # fmt: skip
 
 
 def parse_method(name: str) -> Method:

@@ -65,8 +65,8 @@ def test_unknown_and_planned_methods():
         with pytest.raises(NotImplementedError, match="not implemented"):
             Config(method=name)
     for name in ("a3c+org", "a3c+org+foresit"):
-        with pytest.raises(NotImplementedError, match="not implemented"):
-            Config(method=name, setup="org")
+        with pytest.raises(ValueError, match="needs setup 'org'"):
+            Config(method=name, setup="savn")
 
 
 def changed_fields(a: Imagination, b: Imagination):

@@ -181,8 +181,10 @@ def test_non_finite_loss_stops_training_naming_the_update_and_keeps_the_last_goo
 
 # ---------------------------------------------------------------------- one-line errors
 TRAIN_ERRORS = [
-    (["--method", "bogus"], ["unknown method 'bogus'", "a3c, a3c+foresit, rnd, att, int"]),
+    (["--method", "bogus"], ["unknown method 'bogus'", "a3c, a3c+foresit, a3c+rnd, a3c+att, a3c+int, a3c+org"]),
     (["--method", "a3c+maml"], ["not implemented"]),
+    (["--method", "a3c+org+foresit"], ["needs setup 'org'"]),
+    (["--setup", "thor"], ["setup must be one of"]),
     (["--preset", "huge"], ["unknown preset 'huge'", "tiny, quick, paper"]),
     (["--num-lanes", "0"], ["num_lanes must be >= 1"]),
     (["--num-updates", "0"], ["num_updates must be >= 1"]),
@@ -273,6 +275,12 @@ def test_evaluate_cli_reproduces_the_test_results_of_training(finished_run, tmp_
 README = (REPO / "README.md").read_text()
 BLOCKS = re.findall(r"```(\w+)\n(.*?)```", README, flags=re.S)
 CLI_MODULES = {"experiments.train": train_cli, "experiments.evaluate": evaluate_cli, "experiments.sweep": sweep}
+# Benchmarks the README documents: their flags must parse (they run in their own tests or
+# take minutes by design).
+BENCH_ARGS = {
+    "experiments.bench_train": lambda: importlib.import_module("experiments.bench_train").BenchConfig,
+    "experiments.bench_learning": lambda: importlib.import_module("experiments.bench_learning").BenchLearning,
+}
 
 
 def readme_commands() -> list[list[str]]:
@@ -295,7 +303,8 @@ def test_readme_commands_parse():
     commands = readme_commands()
     assert {c[0] for c in commands} >= set(CLI_MODULES)
     for module, *argv in commands:
-        args = tyro.cli(CLI_MODULES[module].Args, args=argv)
+        parser = CLI_MODULES[module].Args if module in CLI_MODULES else BENCH_ARGS[module]()
+        args = tyro.cli(parser, args=argv)
         assert dataclasses.is_dataclass(args)
     for module in set(re.findall(r"python -m (experiments\.\w+)", README)):
         assert importlib.util.find_spec(module) is not None, module
@@ -319,6 +328,8 @@ def tiny_argv(module: str, argv: list[str], folder: Path) -> list[str]:
 @pytest.mark.timeout(600)
 def test_readme_commands_run_at_a_tiny_size(tmp_path, capsys):
     for module, *argv in readme_commands():
+        if module not in CLI_MODULES:  # benchmarks: parsed above, run by their own tests
+            continue
         args = tyro.cli(CLI_MODULES[module].Args, args=tiny_argv(module, argv, tmp_path))
         CLI_MODULES[module].main(args)
     # What each command promises to write.

@@ -55,9 +55,9 @@ def test_bad_names(name, match):
 def test_object_graph_on_the_savn_setup_is_a_clear_error():
     with pytest.raises(ValueError, match="needs setup 'org'"):
         Config(method="a3c+org+foresit", setup="savn")
-    # On its own setup it is only not built yet.
-    with pytest.raises(NotImplementedError, match="org"):
-        Config(method="a3c+org+foresit", setup="org")
+    config = Config(method="a3c+org+foresit", setup="org")
+    assert config.pieces.encoder == "org" and config.pieces.greedy_evaluation  # ORG evaluates greedily
+    assert not Config(method="a3c+foresit").pieces.greedy_evaluation  # SAVN samples
 
 
 def test_gradient_paths_are_declared_per_method():

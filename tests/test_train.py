@@ -186,6 +186,61 @@ def test_every_method_trains_without_nan(method, foresit_run):
     assert ("query" in state.params["params"]["value_critic"]) == flags.attention_critic
 
 
+@pytest.mark.parametrize("method", H.ORG_METHODS)
+def test_every_object_graph_method_trains_without_nan_on_the_org_setup(method):
+    config = H.tiny_config(method, setup="org")
+    state, metrics = H.init_and_run(config, 0, 2)
+    H.assert_tree_finite(state)
+    H.assert_tree_finite(metrics)
+    graph = state.params["params"]["object_graph"]  # ORG's graph, read by the encoder
+    assert "appearance_embedding" in graph and "adjacency_0" in graph
+    assert config.pieces.greedy_evaluation  # ORG's evaluation takes the argmax
+
+
+def test_the_encoder_really_uses_the_detections():
+    """ORG's graph reads the detector features: the policy logits have a non-zero gradient
+    with respect to them, and blanking one visible category's detection changes them."""
+    config = H.tiny_config("a3c+org", setup="org")
+    trainer = H.trainer(config)
+    state = H.jitted_init(config)(jax.random.PRNGKey(0))
+    agent, obs = trainer.agent, jax.tree.map(lambda x: x[0], state.actor.obs)  # lane 0
+    probs = jnp.zeros((config.num_actions,))
+
+    def logits(detections):
+        seen = {**obs, "detections": detections}
+        gates = agent.input_gates(state.params, seen, probs)
+        from foresit_jax.lstm import encoder_lstm_params, initial_carry, lstm_kernels, lstm_step
+
+        _, s_t = lstm_step(lstm_kernels(encoder_lstm_params(state.params)), initial_carry((), config.hidden_size), gates)
+        return agent.model.apply(state.params, s_t, None, method=type(agent.model).policy_logits)
+
+    detections = obs["detections"]
+    grad = jax.grad(lambda d: jnp.sum(logits(d) * jnp.arange(1.0, 7.0)))(detections)
+    assert float(jnp.max(jnp.abs(grad))) > 0
+    visible = np.flatnonzero(np.asarray(detections[:, 0]) > 0)
+    if visible.size:  # blank the first visible category
+        blanked = detections.at[visible[0]].set(0.0)
+    else:  # nothing in view: make one category visible instead
+        blanked = detections.at[0, :6].set(jnp.asarray([1.0, 0.2, 0.4, 0.0, 0.34, 0.5]))
+    assert not np.allclose(logits(detections), logits(blanked))
+
+
+@pytest.mark.timeout(400)
+def test_object_graph_training_on_an_easy_org_setting_raises_the_success_rate():
+    """As the savn easy-setting test, on the org setup with ORG's encoder."""
+    config = H.tiny_config(
+        "a3c+org", setup="org", num_lanes=16, hidden_size=64, attention_size=64, value_hidden=64,
+        imagination_layer_sizes=(64, 32, 16, 32, 64, 64), learning_rate=5e-3,
+    )  # fmt: skip
+    env, env_params = H.org_bathroom_env()
+    trainer = Trainer(config, env, H.easy_env_params(env_params))
+    state = jax.jit(trainer.init)(jax.random.PRNGKey(0))
+    _, metrics = jax.jit(trainer.run, static_argnums=2)(state, trainer.env_params, 150)
+    success = np.asarray(metrics["charts/success_rate"])
+    first, last = success[:20].mean(), success[-20:].mean()
+    assert last > 0.5 and last > first + 0.25, (first, last)
+
+
 # ---------------------------------------------------------------------- vmapped seed sweep
 def test_vmapped_sweep_matches_seeds_run_one_by_one():
     """What experiments.sweep runs: vmap(run) over seeds in one jit.  Compared with each

@@ -33,6 +33,7 @@ TINY = dict(
 )  # fmt: skip
 
 METHODS = ("a3c", "a3c+foresit", "rnd", "att", "int")
+ORG_METHODS = ("a3c+org", "a3c+org+foresit", "a3c+org+rnd", "a3c+org+att", "a3c+org+int")
 
 
 def tiny_config(method: str = "a3c+foresit", **overrides) -> Config:
@@ -47,8 +48,14 @@ def bathroom_env(split: str = "train", training: bool | None = None):
 
 
 @functools.lru_cache(maxsize=None)
+def org_bathroom_env(split: str = "train", training: bool | None = None):
+    """(env, params) of the org setup's bathrooms (detector features in the observation)."""
+    return envs.make("GridNav-v0", setup="org", split=split, room_types=("bathroom",), training=training)
+
+
+@functools.lru_cache(maxsize=None)
 def trainer(config: Config) -> Trainer:
-    env, env_params = bathroom_env()
+    env, env_params = org_bathroom_env() if config.setup == "org" else bathroom_env()
     return Trainer(config, env, env_params)
 
 
