@@ -31,8 +31,9 @@ class Args:
     """The model selected on validation (best) or the last checkpoint (last)."""
     episodes_per_room: Optional[int] = None
     """Episodes per room type (default: the run's test_episodes_per_room, 250 in the paper)."""
-    greedy: bool = False
-    """Take the most likely action instead of sampling (SAVN samples)."""
+    greedy: Optional[bool] = None
+    """Take the most likely action (--greedy) or sample (--no-greedy); default: the method's
+    own protocol (SAVN samples, ORG takes the argmax)."""
     seed: int = 0
     """Evaluation seed."""
     overwrite: bool = False
@@ -51,7 +52,9 @@ def main(args: Args) -> dict:
     episodes = info["schedule"]["test_episodes_per_room"] if args.episodes_per_room is None else args.episodes_per_room
     if episodes < 1:
         raise runs.UserError(f"--episodes-per-room must be >= 1, got {episodes}")
-    suffix = "" if (args.which, args.greedy) == ("best", False) else f"_{args.which}" + ("_greedy" if args.greedy else "")
+    # The method's own protocol (sampled; greedy for ORG) writes the plain file names.
+    mode = {None: "", True: "_greedy", False: "_sampled"}[args.greedy]
+    suffix = "" if (args.which, args.greedy) == ("best", None) else f"_{args.which}" + mode
     out_json = args.run / f"results_{args.split}{suffix}.json"
     if out_json.exists() and not args.overwrite:
         raise runs.UserError(f"{out_json} exists; pass --overwrite to replace it")

@@ -77,14 +77,22 @@ def _jsonable(x):
 
 
 # ---------------------------------------------------------------------- metrics files
-def metric_rows(metrics: dict, first_update: int, lanes: int, steps_per_update: int) -> list[dict]:
-    """Per-update rows from stacked chunk metrics ({name: [n]})."""
+def metric_rows(metrics: dict, first_update: int, previous: dict | None = None) -> list[dict]:
+    """Per-update rows from stacked chunk metrics ({name: [n]}), with running totals:
+    `episodes` (ended), `frames` (useful: entering the loss) and `stepped_frames`
+    (environment steps), continued from `previous` (the last row written, on resume)."""
     arrays = {k: np.asarray(v) for k, v in metrics.items()}
     n = len(next(iter(arrays.values())))
+    previous = previous or {}
+    episodes = float(previous.get("episodes", 0.0))
+    frames = float(previous.get("frames", 0.0))
+    stepped = float(previous.get("stepped_frames", 0.0))
     rows = []
     for i in range(n):
-        update = first_update + i + 1
-        row = {"update": update, "episodes": update * lanes, "frames": update * lanes * steps_per_update}
+        episodes += float(arrays["charts/episodes"][i])
+        frames += float(arrays["frames/useful"][i])
+        stepped += float(arrays["frames/stepped"][i])
+        row = {"update": first_update + i + 1, "episodes": episodes, "frames": frames, "stepped_frames": stepped}
         row.update({k: float(v[i]) for k, v in arrays.items()})
         rows.append(row)
     return rows

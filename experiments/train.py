@@ -114,7 +114,8 @@ def main(args: Args) -> dict:
     best_sr = max((r["SR"] for r in val_history), default=-1.0)
 
     run_chunk = jax.jit(trainer.run, static_argnums=2)
-    steps_per_update = config.num_steps
+    previous_rows = runs.read_rows(out / "metrics")
+    last_row = previous_rows[-1] if previous_rows else None
     total = config.num_updates
     bar = _progress(total, done, args.progress)
     chunks_run = 0
@@ -129,7 +130,8 @@ def main(args: Args) -> dict:
             runs.fail(f"non-finite loss at update {done + bad + 1}; training stopped, the last good checkpoint "
                       f"(update {done}) is kept in {out / 'checkpoints'}", status=1)  # fmt: skip
         state = new_state
-        rows = runs.metric_rows(metrics, done, config.num_lanes, steps_per_update)
+        rows = runs.metric_rows(metrics, done, last_row)
+        last_row = rows[-1]
         runs.append_rows(out / "metrics", rows)
         done += n
         runs.save(manager, done, state)
@@ -142,8 +144,8 @@ def main(args: Args) -> dict:
             best_sr = val["overall"]["SR"]
             runs.save(best_manager, done, agent_params(state, config.sigma2_max))
         dt = time.time() - t0
-        frames = n * config.num_lanes * steps_per_update
-        bar(n, {"fps": f"{frames / dt:,.0f}", "SR": f"{metrics['charts/success_rate'].mean():.3f}",
+        useful = float(np.sum(metrics["frames/useful"]))  # steps that entered the loss
+        bar(n, {"useful fps": f"{useful / dt:,.0f}", "SR": f"{metrics['charts/success_rate'].mean():.3f}",
                 "val SR": f"{val['overall']['SR']:.1f}%"})  # fmt: skip
         chunks_run += 1
         if args.stop_after_chunks is not None and chunks_run >= args.stop_after_chunks and done < total:

@@ -91,7 +91,9 @@ def test_finished_run_folder(finished_run):
     rows = runs.read_rows(finished_run / "metrics")
     assert [r["update"] for r in rows] == [1, 2, 3, 4]
     assert all(np.isfinite(r["losses/total_loss"]) for r in rows)
-    assert rows[-1]["episodes"] == 4 * 4 and rows[-1]["frames"] == 4 * 4 * 30
+    # Running totals: ended episodes, useful frames (packed windows: every step is useful).
+    assert rows[-1]["episodes"] == sum(r["charts/episodes"] for r in rows) > 0
+    assert rows[-1]["frames"] == rows[-1]["stepped_frames"] == 4 * 4 * 30
     assert [r["update"] for r in runs.read_rows(finished_run / "validation")] == [2, 4]
     results = json.loads((finished_run / "results_test.json").read_text())
     assert results["selected_update"] in (2, 4)
