@@ -1,15 +1,19 @@
 """Evaluation as in Section 5: SR, SPL, and both over episodes with L^g >= 5, per room type.
 
 SPL = (1/N) sum_i s_i L^g_i / max(L_i, L^g_i), where L^g is the oracle's shortest number of
-actions to success (Done included) and L the number of actions taken.  Episodes use the
-evaluation time limits (100 steps, 200 in living rooms); by default 250 per room type.
-Actions are sampled from the policy, as SAVN does, except for methods on ORG's encoder, which
-take the argmax as ORG's own evaluation does (`Method.greedy_evaluation`); ``greedy`` overrides.
+actions to success (Done included) and L the number of actions taken (`envs.metrics`).
+Episodes use the evaluation time limits (100 steps, 200 in living rooms); by default 250 per
+room type. Actions are sampled from the policy, as SAVN does, except for methods on ORG's
+encoder, which take the argmax as ORG's own evaluation does (`Method.greedy_evaluation`);
+``greedy`` overrides.
+
+An `Evaluator` holds the environments and the compiled rollouts of one setup: hold one for
+a run (validation after every chunk then reuses them) and drop it to free them. The
+functions `evaluate` and `evaluate_random_policy` make one when none is given.
 """
 
 from __future__ import annotations
 
-import functools
 from typing import Any, NamedTuple
 
 import chex
@@ -17,12 +21,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+import envs
+from envs.catalog import ROOM_TYPES
+from envs.metrics import summarize  # (also re-exported: foresit_jax.evaluate.summarize)
 from foresit_jax import imagination
 from foresit_jax.agent import Agent, episode_stats
 from foresit_jax.config import Config
-
-ROOM_TYPES = ("kitchen", "living_room", "bedroom", "bathroom")
-LONG_EPISODE = 5  # the L >= 5 bucket of Table 1
 
 
 class AgentParams(NamedTuple):
@@ -41,122 +45,164 @@ def agent_params(state, sigma2_max: float) -> AgentParams:
     return AgentParams(state.params, state.imagination_params, variance)
 
 
-def summarize(success, spl, optimal_length) -> dict[str, float]:
-    """SR, SPL, SR>=5, SPL>=5 (in %) and counts from per-episode numpy arrays."""
-    success = np.asarray(success, np.float64)
-    spl = np.asarray(spl, np.float64)
-    long = np.asarray(optimal_length) >= LONG_EPISODE
-    mean = lambda x, m: float(100.0 * x[m].mean()) if m.any() else float("nan")  # noqa: E731
-    every = np.ones_like(long)
-    return {
-        "SR": mean(success, every),
-        "SPL": mean(spl, every),
-        "SR>=5": mean(success, long),
-        "SPL>=5": mean(spl, long),
-        "episodes": int(len(success)),
-        "episodes>=5": int(long.sum()),
-    }
+class EpisodeOutcomes(NamedTuple):
+    """Per-episode facts of a batch of evaluation episodes (one episode per lane)."""
+
+    success: chex.Array  # [N] bool, a successful Done
+    length: chex.Array  # [N] int32 L: actions taken, Done included
+    optimal_length: chex.Array  # [N] int32 L^g: the oracle's shortest number of actions
+    ended: chex.Array  # [N] bool, the episode ended (Done or time limit) within the rollout
 
 
-@functools.lru_cache(maxsize=8)
-def _setup_env(setup: str):
-    import envs
+def outcome_metrics(outcomes: EpisodeOutcomes) -> dict[str, float]:
+    """SR, SPL, SR>=5, SPL>=5 (in %) and counts of per-episode outcomes (`envs.metrics`)."""
+    success, length, optimal = (np.asarray(x) for x in outcomes[:3])
+    return summarize(success, np.asarray(envs.metrics.spl(success, length, optimal)), optimal)
 
-    return envs.GridNav(setup=setup)
+
+def random_policy_rollout(env, env_params, key: chex.PRNGKey, episodes: int, num_steps: int) -> EpisodeOutcomes:
+    """The uniformly random policy: `episodes` episodes, one per lane, each lane stepped
+    `num_steps` times and only its first episode kept (the reference a trained agent must
+    beat). Jittable; per-episode facts come from the environment's `info`.
+
+    Keys: `k_reset, k_steps = split(key)`; lanes reset with `split(k_reset, episodes)`; step
+    t splits its key into the actions' key and the lanes' step keys, so a policy that
+    derives its keys the same way (experiments.demo's oracle) sees the same episodes."""
+    k_reset, k_steps = jax.random.split(key)
+    _, state = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k_reset, episodes), env_params)
+
+    def step(carry, key):
+        state, alive = carry  # alive [N]: the lane's first episode has not ended yet
+        k_act, k_env = jax.random.split(key)
+        action = jax.random.randint(k_act, (episodes,), 0, env.num_actions)
+        _, state, _, terminated, truncated, info = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
+            jax.random.split(k_env, episodes), state, action, env_params
+        )
+        return (state, alive & ~(terminated | truncated)), (info["success"] & alive, alive, info["optimal_length"])
+
+    (_, alive), (success, acted, optimal) = jax.lax.scan(
+        step, (state, jnp.ones(episodes, bool)), jax.random.split(k_steps, num_steps)
+    )  # [T, N] each
+    return EpisodeOutcomes(success.any(0), acted.sum(0, dtype=jnp.int32), optimal[0], ~alive)
 
 
-@functools.lru_cache(maxsize=32)
-def _room_env(setup: str, split: str, room: str):
-    """One env object per setup (so the jitted rollouts are shared by every room type and
-    split of the same episode length) and the params of one room type of a split."""
-    env = _setup_env(setup)
-    return env, env.make_params(split, room_types=(room,), training=False)
+class Evaluator:
+    """The environment, scene banks and compiled rollouts that evaluate agents of one setup.
+
+    Hold one for a run (validation after every chunk then compiles nothing new) and drop
+    it, or call `clear()`, to free them: nothing is cached at module level. One env object
+    serves every split and room type, so a compiled rollout is shared by all room types of
+    the same episode length. Attributes: `env`, `params` ({(split, room): EnvParams}) and
+    `compiled` ({key: jitted rollout}, keyed by (policy, config, num_steps, greedy))."""
+
+    def __init__(self, setup: str = "savn"):
+        self.setup = setup
+        self.env = envs.GridNav(setup=setup)
+        self.params: dict[tuple[str, str], Any] = {}
+        self.compiled: dict[tuple, Any] = {}
+
+    def clear(self) -> None:
+        """Drop the compiled rollouts and the scene banks."""
+        self.params.clear()
+        self.compiled.clear()
+
+    def room_params(self, split: str, room: str):
+        """EnvParams of one room type of `split`, with the evaluation time limits."""
+        if (split, room) not in self.params:
+            self.params[(split, room)] = self.env.make_params(split, room_types=(room,), training=False)
+        return self.params[(split, room)]
+
+    def agent_rollout(self, config: Config, num_steps: int, greedy: bool):
+        """Jitted (params, w_params, env_params, key, sigma2 [N]) -> EpisodeOutcomes [N]."""
+        key = ("agent", config, num_steps, greedy)
+        if key not in self.compiled:
+            agent, env = Agent(config), self.env
+
+            def run(params, w_params, env_params, key, sigma2):
+                traj = agent.rollout(params, w_params, env, env_params, key, sigma2, num_steps, greedy)
+                stats = episode_stats(traj)
+                return EpisodeOutcomes(stats.success, stats.length, stats.optimal_length, stats.ended)
+
+            self.compiled[key] = jax.jit(run)
+        return self.compiled[key]
+
+    def random_rollout(self, num_steps: int, episodes: int):
+        """Jitted (env_params, key) -> EpisodeOutcomes [episodes] of `random_policy_rollout`."""
+        key = ("random", num_steps, episodes)
+        if key not in self.compiled:
+            env = self.env
+            self.compiled[key] = jax.jit(lambda env_params, k: random_policy_rollout(env, env_params, k, episodes, num_steps))
+        return self.compiled[key]
+
+    def _per_room(self, rooms, split, key, run_room) -> dict[str, dict[str, float]]:
+        """{room: metrics, ..., "overall": metrics over the pooled episodes}; `run_room`
+        (env_params, num_steps, key) -> EpisodeOutcomes; rooms get keys split from `key`."""
+        results, pooled = {}, []
+        for room, k in zip(rooms, jax.random.split(key, len(rooms))):
+            env_params = self.room_params(split, room)
+            num_steps = int(jnp.max(env_params.max_steps))
+            outcomes = jax.tree.map(np.asarray, run_room(env_params, num_steps, k))
+            results[room] = outcome_metrics(outcomes)
+            pooled.append(outcomes)
+        results["overall"] = outcome_metrics(EpisodeOutcomes(*(np.concatenate(parts) for parts in zip(*pooled))))
+        return results
+
+    def _check(self, config: Config, split: str, episodes_per_room: int) -> None:
+        if split not in ("train", "val", "test"):
+            raise ValueError(f"split must be 'val' or 'test' (or 'train'), got {split!r}")
+        if episodes_per_room < 1:
+            raise ValueError(f"episodes_per_room must be >= 1, got {episodes_per_room}")
+        if config.setup != self.setup:
+            raise ValueError(f"this Evaluator is for setup {self.setup!r}, the config's is {config.setup!r}")
+
+    def evaluate(
+        self, agent_params: AgentParams, config: Config, split: str = "test", key: chex.PRNGKey | None = None,
+        episodes_per_room: int = 250, greedy: bool | None = None, room_types: tuple[str, ...] | None = None,
+    ) -> dict[str, dict[str, float]]:  # fmt: skip
+        """Run `episodes_per_room` episodes in each room type of `split` ("val" or "test").
+
+        Returns {"overall": metrics, "kitchen": metrics, ...} with metrics from `summarize`.
+        """
+        self._check(config, split, episodes_per_room)
+        key = jax.random.PRNGKey(0) if key is None else key
+        greedy = config.pieces.greedy_evaluation if greedy is None else bool(greedy)
+        rooms = tuple(room_types or config.room_types or ROOM_TYPES)
+        sigma2 = jnp.full((episodes_per_room,), agent_params.noise_variance, jnp.float32)
+
+        def run_room(env_params, num_steps, k):
+            run = self.agent_rollout(config, num_steps, greedy)
+            return run(agent_params.params, agent_params.imagination_params, env_params, k, sigma2)
+
+        return self._per_room(rooms, split, key, run_room)
+
+    def evaluate_random_policy(
+        self, config: Config, split: str = "test", key: chex.PRNGKey | None = None, episodes_per_room: int = 250
+    ) -> dict[str, dict[str, float]]:
+        """The uniformly random policy on the same room types and number of episodes."""
+        self._check(config, split, episodes_per_room)
+        key = jax.random.PRNGKey(0) if key is None else key
+        rooms = tuple(config.room_types or ROOM_TYPES)
+
+        def run_room(env_params, num_steps, k):
+            return self.random_rollout(num_steps, episodes_per_room)(env_params, k)
+
+        return self._per_room(rooms, split, key, run_room)
 
 
 def evaluate(
-    agent_params: AgentParams,
-    config: Config,
-    split: str = "test",
-    key: chex.PRNGKey | None = None,
-    episodes_per_room: int = 250,
-    greedy: bool | None = None,
-    room_types: tuple[str, ...] | None = None,
-) -> dict[str, dict[str, float]]:
-    """Run `episodes_per_room` episodes in each room type of `split` ("val" or "test").
-
-    Returns {"overall": metrics, "kitchen": metrics, ...} with metrics from `summarize`.
-    """
-    if split not in ("train", "val", "test"):
-        raise ValueError(f"split must be 'val' or 'test' (or 'train'), got {split!r}")
-    if episodes_per_room < 1:
-        raise ValueError(f"episodes_per_room must be >= 1, got {episodes_per_room}")
-    key = jax.random.PRNGKey(0) if key is None else key
-    greedy = config.pieces.greedy_evaluation if greedy is None else bool(greedy)
-    rooms = tuple(room_types or config.room_types or ROOM_TYPES)
-    results, pooled = {}, []
-    for room, k in zip(rooms, jax.random.split(key, len(rooms))):
-        env, env_params = _room_env(config.setup, split, room)
-        num_steps = int(jnp.max(env_params.max_steps))
-        sigma2 = jnp.full((episodes_per_room,), agent_params.noise_variance, jnp.float32)
-        stats = _rollout_stats(config, env, num_steps, greedy)(
-            agent_params.params, agent_params.imagination_params, env_params, k, sigma2
-        )
-        stats = jax.tree.map(np.asarray, stats)
-        results[room] = summarize(stats.success, stats.spl, stats.optimal_length)
-        pooled.append(stats)
-    results["overall"] = summarize(*(np.concatenate([getattr(s, f) for s in pooled]) for f in ("success", "spl", "optimal_length")))
-    return results
+    agent_params: AgentParams, config: Config, split: str = "test", key: chex.PRNGKey | None = None,
+    episodes_per_room: int = 250, greedy: bool | None = None, room_types: tuple[str, ...] | None = None,
+    evaluator: Evaluator | None = None,
+) -> dict[str, dict[str, float]]:  # fmt: skip
+    """`Evaluator.evaluate` (with a new Evaluator unless one is given)."""
+    evaluator = Evaluator(config.setup) if evaluator is None else evaluator
+    return evaluator.evaluate(agent_params, config, split, key, episodes_per_room, greedy, room_types)
 
 
 def evaluate_random_policy(
-    config: Config, split: str = "test", key: chex.PRNGKey | None = None, episodes_per_room: int = 250
-) -> dict[str, dict[str, float]]:
-    """The uniformly random policy on the same room types and episodes count: the
-    reference a trained agent must beat."""
-    key = jax.random.PRNGKey(0) if key is None else key
-    rooms = tuple(config.room_types or ROOM_TYPES)
-    results, pooled = {}, []
-    for room, k in zip(rooms, jax.random.split(key, len(rooms))):
-        env, env_params = _room_env(config.setup, split, room)
-        num_steps = int(jnp.max(env_params.max_steps))
-        stats = jax.tree.map(np.asarray, _random_stats(env, num_steps, episodes_per_room)(env_params, k))
-        results[room] = summarize(*stats)
-        pooled.append(stats)
-    results["overall"] = summarize(*(np.concatenate(parts) for parts in zip(*pooled)))
-    return results
-
-
-@functools.lru_cache(maxsize=32)
-def _random_stats(env, num_steps: int, episodes: int):
-    def run(env_params, key):
-        k_reset, k_steps = jax.random.split(key)
-        _, state = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k_reset, episodes), env_params)
-        optimal = state.optimal_length  # [N] L^g of each episode
-
-        def step(carry, key):
-            state, alive = carry
-            k_act, k_env = jax.random.split(key)
-            action = jax.random.randint(k_act, (episodes,), 0, env.num_actions)
-            _, state, _, term, trunc, info = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
-                jax.random.split(k_env, episodes), state, action, env_params
-            )
-            return (state, alive & ~(term | trunc)), (info["success"] & alive, alive)
-
-        _, (success, valid) = jax.lax.scan(step, (state, jnp.ones(episodes, bool)), jax.random.split(k_steps, num_steps))
-        success = success.any(0)
-        length = valid.sum(0)
-        spl = success * optimal / jnp.maximum(length, optimal)
-        return success, spl, optimal
-
-    return jax.jit(run)
-
-
-@functools.lru_cache(maxsize=32)
-def _rollout_stats(config: Config, env, num_steps: int, greedy: bool):
-    agent = Agent(config)
-
-    def run(params, w_params, env_params, key, sigma2):
-        traj = agent.rollout(params, w_params, env, env_params, key, sigma2, num_steps, greedy)
-        return episode_stats(traj)
-
-    return jax.jit(run)
+    config: Config, split: str = "test", key: chex.PRNGKey | None = None, episodes_per_room: int = 250,
+    evaluator: Evaluator | None = None,
+) -> dict[str, dict[str, float]]:  # fmt: skip
+    """`Evaluator.evaluate_random_policy` (with a new Evaluator unless one is given)."""
+    evaluator = Evaluator(config.setup) if evaluator is None else evaluator
+    return evaluator.evaluate_random_policy(config, split, key, episodes_per_room)

@@ -1,8 +1,10 @@
 """foresit_jax.evaluate: SR/SPL summaries against hand-computed values, the evaluation
-noise variance, and evaluate() over the validation split."""
+noise variance, evaluate() over the validation split, the random-policy rollout against an
+independent per-episode record, and an Evaluator that compiles once."""
 
 import math
 
+import chex
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -11,7 +13,17 @@ import pytest
 import train_helpers as H
 from experiments.presets import preset
 from foresit_jax import imagination
-from foresit_jax.evaluate import agent_params, evaluate, summarize
+from envs import metrics
+from foresit_jax.evaluate import (
+    EpisodeOutcomes,
+    Evaluator,
+    agent_params,
+    evaluate,
+    evaluate_random_policy,
+    outcome_metrics,
+    random_policy_rollout,
+    summarize,
+)
 
 KEYS = {"SR", "SPL", "SR>=5", "SPL>=5", "episodes", "episodes>=5"}
 
@@ -91,3 +103,89 @@ def test_evaluate_rejects_bad_arguments(tiny_agent):
         evaluate(params, config, "holdout")
     with pytest.raises(ValueError, match="episodes_per_room"):
         evaluate(params, config, "val", episodes_per_room=0)
+
+
+def test_summarize_is_the_one_in_envs_metrics():
+    assert summarize is metrics.summarize
+    outcomes = EpisodeOutcomes(np.array([1, 0, 1, 1, 0], bool), np.array([4, 30, 5, 3, 12]), np.array([2, 6, 5, 3, 9]),
+                               np.ones(5, bool))  # fmt: skip
+    assert outcome_metrics(outcomes) == pytest.approx(summarize(outcomes.success, [0.5, 0, 1, 1, 0], outcomes.optimal_length))
+
+
+# ---------------------------------------------------------------------- the random policy
+def recorded_random_episodes(env, env_params, key, episodes, num_steps):
+    """Reference: the same random actions on the same keys, each lane's first episode read
+    from `info` at the step that ends it (the bookkeeping experiments.demo used)."""
+    k_reset, k_steps = jax.random.split(key)
+    _, state = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k_reset, episodes), env_params)
+    record = {k: np.zeros(episodes, int) for k in ("success", "length", "optimal_length")}
+    active = np.ones(episodes, bool)
+    step = jax.jit(jax.vmap(env.step, in_axes=(0, 0, 0, None)))
+    for key_t in jax.random.split(k_steps, num_steps):
+        k_act, k_env = jax.random.split(key_t)
+        action = jax.random.randint(k_act, (episodes,), 0, env.num_actions)
+        _, state, _, terminated, truncated, info = step(jax.random.split(k_env, episodes), state, action, env_params)
+        ending = active & np.asarray(terminated | truncated)
+        for k, name in (("success", "success"), ("length", "episode_length"), ("optimal_length", "optimal_length")):
+            record[k] = np.where(ending, np.asarray(info[name]), record[k])
+        active &= ~ending
+    return record, ~active
+
+
+@pytest.mark.parametrize("num_steps", [6, 100])
+def test_random_policy_rollout_matches_a_per_episode_record(num_steps):
+    env, env_params = H.bathroom_env("val", training=False)
+    key, episodes = jax.random.PRNGKey(7), 128
+    got = jax.tree.map(np.asarray, jax.jit(random_policy_rollout, static_argnums=(0, 3, 4))(
+        env, env_params, key, episodes, num_steps))  # fmt: skip
+    chex.assert_shape(list(got), (episodes,))
+    record, ended = recorded_random_episodes(env, env_params, key, episodes, num_steps)
+    np.testing.assert_array_equal(got.ended, ended)
+    for name in ("success", "length", "optimal_length"):
+        np.testing.assert_array_equal(getattr(got, name)[ended], record[name][ended], err_msg=name)
+    # Invariants: every episode acts at least once and at most num_steps times; an
+    # unfinished one acted every step and did not succeed; success needs L >= L^g >= 1.
+    assert (got.length >= 1).all() and (got.length <= num_steps).all() and (got.optimal_length >= 1).all()
+    assert (got.length[~got.ended] == num_steps).all() and not got.success[~got.ended].any()
+    assert (got.length[got.success] >= got.optimal_length[got.success]).all()
+    if num_steps == 100:  # the evaluation time limit: every episode ends
+        assert got.ended.all()
+        assert got.success.any() and not got.success.all()  # (about 8% of random episodes succeed)
+
+
+def test_random_policy_rollout_reproduces_with_a_key():
+    env, env_params = H.bathroom_env("val", training=False)
+    run = jax.jit(lambda k: random_policy_rollout(env, env_params, k, 8, 10))
+    chex.assert_trees_all_equal(run(jax.random.PRNGKey(1)), run(jax.random.PRNGKey(1)))
+
+
+# ---------------------------------------------------------------------- Evaluator
+def test_an_evaluator_compiles_once_for_repeated_validation(tiny_agent):
+    config, params = tiny_agent
+    evaluator = Evaluator(config.setup)
+    first = evaluator.evaluate(params, config, "val", jax.random.PRNGKey(0), episodes_per_room=2)
+    compiled = dict(evaluator.compiled)
+    assert len(compiled) == 1
+    second = evaluator.evaluate(params, config, "val", jax.random.PRNGKey(1), episodes_per_room=2)
+    assert evaluator.compiled == compiled  # the same jitted rollout ...
+    assert next(iter(compiled.values()))._cache_size() == 1  # ... traced and compiled once
+    assert set(first) == set(second) == {"bathroom", "overall"}
+    # The same results as a fresh Evaluator (what `evaluate` makes without `evaluator=`).
+    np.testing.assert_equal(evaluate(params, config, "val", jax.random.PRNGKey(1), 2, evaluator=evaluator), second)
+    evaluator.clear()
+    assert not evaluator.compiled and not evaluator.params
+
+
+def test_evaluate_random_policy_pools_the_rooms(tiny_agent):
+    config, _ = tiny_agent
+    evaluator = Evaluator(config.setup)
+    results = evaluate_random_policy(config, "val", jax.random.PRNGKey(0), episodes_per_room=16, evaluator=evaluator)
+    assert set(results) == {"bathroom", "overall"}
+    np.testing.assert_equal(results["overall"], results["bathroom"])  # (NaN == NaN here)
+    assert results["overall"]["episodes"] == 16 and 0.0 <= results["overall"]["SPL"] <= results["overall"]["SR"]
+
+
+def test_an_evaluator_refuses_a_config_of_another_setup(tiny_agent):
+    config, params = tiny_agent
+    with pytest.raises(ValueError, match="setup 'org'"):
+        Evaluator("org").evaluate(params, config, "val", episodes_per_room=1)
