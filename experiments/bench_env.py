@@ -34,9 +34,9 @@ import jax
 import tyro
 
 import envs
+from experiments.tables import markdown_table
 
 XMINIGRID_ENV = "MiniGrid-DoorKey-8x8"
-WIDTHS = (32, 5, 5, 14, 14, 9)  # table columns
 XMINIGRID_INSTALL = 'xminigrid is not installed: pip install xminigrid==0.9.3 (or pip install -e ".[bench]")'
 
 
@@ -188,13 +188,9 @@ def main(config: BenchConfig) -> int:
             print(f"  measured {name:32s} B={batch_size:<5d} best {max(rates):14,.0f} steps/s", flush=True)
 
     print()
-    names = ("env", "batch", "steps", "best steps/s", "median steps/s", "compile s")
-    columns = "| " + " | ".join(f"{n:32s}" if i == 0 else f"{n:>{w}s}" for i, (n, w) in enumerate(zip(names, WIDTHS))) + " |"
-    print(columns)
-    print("|" + "|".join("-" * len(c) for c in columns.split("|")[1:-1]) + "|")
-    for m, steps in results:
-        print(f"| {m.name:32s} | {m.batch_size:5d} | {steps:5d} | {m.best_sps:14,.0f} | {m.median_sps:14,.0f} "
-              f"| {m.compile_s:9.2f} |")  # fmt: skip
+    rows = [[m.name, m.batch_size, steps, f"{m.best_sps:,.0f}", f"{m.median_sps:,.0f}", f"{m.compile_s:.2f}"]
+            for m, steps in results]  # fmt: skip
+    print(markdown_table(rows, ("env", "batch", "steps", "best steps/s", "median steps/s", "compile s"), align="<>>>>>"))
     if config.compare == "xminigrid":
         print()
         print(f"ratio ours / {XMINIGRID_ENV} (best steps/s)")

@@ -35,8 +35,10 @@ import tyro
 import envs
 from envs import catalog as C
 from envs import render
+from envs.metrics import LONG_PATH_MIN
+from experiments.tables import markdown_table
+from foresit_jax.evaluate import EpisodeOutcomes, outcome_metrics, random_policy_rollout
 
-LONG_EPISODE = 5  # the L^g >= 5 bucket of Table 1
 RANDOM_SR_MAX = 10.0  # %
 LONG_FRACTION_RANGE = (40.0, 80.0)  # % of episodes with L^g >= 5
 LENGTH_ORDER = ("bathroom", "bedroom", "kitchen", "living_room")  # rising mean L^g
@@ -64,12 +66,13 @@ def output_files(out: Path) -> list[Path]:
     return [out / n for n in names] + [out / "results.md"]
 
 
-def make_rollout(env, num_lanes: int, num_steps: int, policy: str):
-    """Jitted (params, key) -> per-lane records of each lane's first episode.
+def oracle_rollout(env, num_lanes: int, num_steps: int):
+    """Jitted (params, key) -> (obs, state, EpisodeOutcomes [lanes], poses) of the oracle
+    (``env.optimal_action``), each lane's first episode; poses: [T, lanes, ...] the pose
+    after each step, before any auto-reset (for the pictures).
 
-    Every lane starts with ``env.reset`` and steps ``num_steps`` times (auto-reset included);
-    only the first episode of each lane is recorded.
-    """
+    Keys are derived as `random_policy_rollout` derives them, so with the same key both
+    policies play the same episodes (scene, target, start pose)."""
     vreset = jax.vmap(env.reset, in_axes=(0, None))
     vstep = jax.vmap(env.step, in_axes=(0, 0, 0, None))
     voptimal = jax.vmap(env.optimal_action, in_axes=(0, None))
@@ -84,55 +87,46 @@ def make_rollout(env, num_lanes: int, num_steps: int, policy: str):
 
         def body(carry, key_t):
             state, active, record = carry
-            key_act, key_env = jax.random.split(key_t)
-            if policy == "random":
-                action = jax.random.randint(key_act, (num_lanes,), 0, env.num_actions)
-            else:
-                action = voptimal(state, params)
+            _, key_env = jax.random.split(key_t)  # (the random policy's action key)
+            action = voptimal(state, params)
             keys = jax.random.split(key_env, num_lanes)
             _, state_next, _, terminated, truncated, info = vstep(keys, state, action, params)
             _, after, *_ = vstep_state(keys, state, action, params)  # the pose before any auto-reset
             ending = active & (terminated | truncated)
-            record = {
-                "success": jnp.where(ending, info["success"], record["success"]),
-                "length": jnp.where(ending, info["episode_length"], record["length"]),
-                "optimal_length": jnp.where(ending, info["optimal_length"], record["optimal_length"]),
-            }
+            record = {k: jnp.where(ending, info[name], record[k])
+                      for k, name in (("success", "success"), ("length", "episode_length"),
+                                      ("optimal_length", "optimal_length"))}  # fmt: skip
             pose = (after.agent_pos, after.heading, after.horizon)
             return (state_next, active & ~ending, record), pose
 
         (_, active, record), poses = jax.lax.scan(
             body, (state, jnp.ones(num_lanes, bool), record), jax.random.split(key_steps, num_steps)
         )
-        record["finished"] = ~active
-        return obs, state, record, poses  # poses: [T, lanes, ...] pose after each step
+        return obs, state, EpisodeOutcomes(record["success"], record["length"], record["optimal_length"], ~active), poses
 
     return rollout
 
 
-def metrics(success, length, optimal_length) -> dict[str, float]:
-    """SR, SPL, SR>=5, SPL>=5 in %, mean L^g, episode count (numpy arrays over episodes)."""
-    success = np.asarray(success, np.float64)
-    spl = success * optimal_length / np.maximum(length, optimal_length)
-    long = np.asarray(optimal_length) >= LONG_EPISODE
-    pct = lambda x, m: 100.0 * float(x[m].mean()) if m.any() else float("nan")  # noqa: E731
-    every = np.ones_like(long)
+def metrics(outcomes: EpisodeOutcomes) -> dict[str, float]:
+    """SR, SPL, SR>=5, SPL>=5 in % (as evaluation computes them), mean L^g, share of
+    L^g >= 5, episode count."""
+    table = outcome_metrics(outcomes)
+    optimal_length = np.asarray(outcomes.optimal_length)
     return {
-        "SR": pct(success, every), "SPL": pct(spl, every), "SR>=5": pct(success, long), "SPL>=5": pct(spl, long),
-        "mean L^g": float(np.mean(optimal_length)), "L^g>=5 %": pct(long.astype(np.float64), every),
-        "episodes": len(success),
-    }  # fmt: skip
+        **{k: table[k] for k in ("SR", "SPL", "SR>=5", "SPL>=5")},
+        "mean L^g": float(np.mean(optimal_length)),
+        "L^g>=5 %": 100.0 * float(np.mean(optimal_length >= LONG_PATH_MIN)),
+        "episodes": table["episodes"],
+    }
 
 
 def results_table(results: dict) -> str:
     cols = ("SR", "SPL", "SR>=5", "SPL>=5", "mean L^g", "L^g>=5 %", "episodes")
-    lines = ["| policy | room type | " + " | ".join(cols) + " |", "|" + "---|" * (len(cols) + 2)]
-    for policy in POLICIES:
-        for room in ("overall",) + C.ROOM_TYPES:
-            m = results[policy][room]
-            cells = [f"{m[c]:.1f}" if c != "episodes" else str(m[c]) for c in cols]
-            lines.append(f"| {policy} | {room.replace('_', ' ')} | " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+    rows = [
+        [policy, room.replace("_", " "), *(f"{results[policy][room][c]:.1f}" if c != "episodes" else str(results[policy][room][c]) for c in cols)]
+        for policy in POLICIES for room in ("overall",) + C.ROOM_TYPES
+    ]  # fmt: skip
+    return markdown_table(rows, ["policy", "room type", *cols])
 
 
 def calibration(results: dict) -> list[tuple[str, bool]]:
@@ -145,7 +139,7 @@ def calibration(results: dict) -> list[tuple[str, bool]]:
     order = " < ".join(f"{room.replace('_', ' ')} {v:.2f}" for room, v in zip(LENGTH_ORDER, lengths))
     return [
         (f"random policy SR {random_sr:.1f}% <= {RANDOM_SR_MAX:.0f}%", random_sr <= RANDOM_SR_MAX),
-        (f"episodes with L^g >= {LONG_EPISODE}: {long:.1f}% in [{lo:.0f}%, {hi:.0f}%]", lo <= long <= hi),
+        (f"episodes with L^g >= {LONG_PATH_MIN}: {long:.1f}% in [{lo:.0f}%, {hi:.0f}%]", lo <= long <= hi),
         (f"mean L^g rises: {order}", all(a < b for a, b in zip(lengths, lengths[1:]))),
         (f"oracle SR {oracle['SR']:.1f}% and SPL {oracle['SPL']:.1f}% are 100%",
          oracle["SR"] == 100.0 and oracle["SPL"] == 100.0),
@@ -182,23 +176,28 @@ def main(config: DemoConfig) -> int:
     pictures = {}
     for policy in POLICIES:
         t = time.perf_counter()
-        rollout = make_rollout(env, lanes, num_steps, policy)
+        if policy == "random":
+            random = jax.jit(lambda params, key: random_policy_rollout(env, params, key, lanes, num_steps))
+        else:
+            oracle = oracle_rollout(env, lanes, num_steps)
         for i, room in enumerate(C.ROOM_TYPES):
             _, params = rooms[room]
             # The same key for both policies: the same episodes (scene, target, start pose).
-            obs, state, record, poses = jax.block_until_ready(rollout(params, jax.random.fold_in(key, i)))
-            record = {k: np.asarray(v)[: per_room[i]] for k, v in record.items()}
-            if not record["finished"].all():
+            key_room = jax.random.fold_in(key, i)
+            if policy == "random":
+                outcomes = random(params, key_room)
+            else:
+                obs, state, outcomes, poses = oracle(params, key_room)
+            outcomes = EpisodeOutcomes(*(np.asarray(x)[: per_room[i]] for x in outcomes))
+            if not outcomes.ended.all():
                 raise RuntimeError(f"{room}: an episode outlived {num_steps} steps (the time limit should end it)")
-            m = metrics(record["success"], record["length"], record["optimal_length"])
-            results[policy][room] = m
-            pooled[policy].append(record)
+            results[policy][room] = metrics(outcomes)
+            pooled[policy].append(outcomes)
             if policy == "oracle":
                 pictures[room] = (params, jax.tree.map(lambda x: np.asarray(x[0]), (obs, state)),
-                                  [np.asarray(p[:, 0]) for p in poses], int(record["length"][0]))  # fmt: skip
+                                  [np.asarray(p[:, 0]) for p in poses], int(outcomes.length[0]))  # fmt: skip
         timings[f"{policy} rollouts (compile included)"] = time.perf_counter() - t
-        cat = {k: np.concatenate([r[k] for r in pooled[policy]]) for k in ("success", "length", "optimal_length")}
-        results[policy]["overall"] = metrics(cat["success"], cat["length"], cat["optimal_length"])
+        results[policy]["overall"] = metrics(EpisodeOutcomes(*(np.concatenate(x) for x in zip(*pooled[policy]))))
 
     t = time.perf_counter()
     for room, (params, (obs, state), (pos, heading, horizon), length) in pictures.items():

@@ -8,7 +8,6 @@ replace existing ones without --overwrite).
 from __future__ import annotations
 
 import dataclasses
-import json
 import sys
 from pathlib import Path
 from typing import Literal, Optional
@@ -41,6 +40,7 @@ class Args:
 
 
 def main(args: Args) -> dict:
+    """Evaluate and write the results; returns them as written (NaN as None)."""
     from foresit_jax.config import Config
     from foresit_jax.evaluate import agent_params, evaluate
     from foresit_jax.train import make_trainer
@@ -72,7 +72,8 @@ def main(args: Args) -> dict:
     else:
         chosen = agent_params(runs.restore(manager, step, like_state), config.sigma2_max)
     results = evaluate(chosen, config, args.split, jax.random.PRNGKey(args.seed), episodes, greedy=args.greedy)
-    out_json.write_text(json.dumps({"selected_update": step, "which": args.which, "results": results}, indent=2))
+    runs.write_json(out_json, {"selected_update": step, "which": args.which, "results": results})
+    results = runs.jsonable(results)  # as written: an empty L>=5 bucket is None (JSON null)
     title = f"{config.method}, seed {info['seed']}: {args.split} split ({args.which} model, update {step})"
     md = runs.results_markdown(results, title)
     out_json.with_suffix(".md").write_text(md)

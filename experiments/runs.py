@@ -11,7 +11,6 @@ A run folder holds:
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import json
 import math
@@ -21,6 +20,8 @@ from pathlib import Path
 
 import jax
 import numpy as np
+
+from experiments.tables import markdown_table, write_csv
 
 RUN_FILE = "run.json"
 
@@ -38,26 +39,29 @@ def is_run(path: Path) -> bool:
     return (path / RUN_FILE).is_file()
 
 
-def prepare_run_dir(path: Path, resume: bool, overwrite: bool) -> None:
-    """Create a fresh run folder, or check the one to resume.  Never overwrites a
-    user's folder silently."""
+def prepare_run_dir(path: Path, resume: bool, overwrite: bool, marker: str = RUN_FILE, kind: str = "run") -> None:
+    """Create a fresh output folder, or check the one to resume. Never overwrites a user's
+    folder silently: only a folder holding `marker` (what this program writes first, e.g.
+    run.json or sweep.json) is ever deleted, and only with --overwrite."""
     if resume and overwrite:
         raise UserError("--resume and --overwrite exclude each other")
     if resume:
-        if not is_run(path):
-            raise UserError(f"{path} is not a run folder (no {RUN_FILE}); nothing to resume")
+        if not (path / marker).is_file():
+            raise UserError(f"{path} is not a {kind} folder (no {marker}); nothing to resume")
         return
     if path.exists() and any(path.iterdir()):
         if not overwrite:
-            raise UserError(f"{path} already exists and is not empty; use --resume to continue it or --overwrite to replace it")
-        if not is_run(path):
-            raise UserError(f"{path} is not a run folder (no {RUN_FILE}); refusing to delete it, choose another --out")
+            hint = "use --resume to continue it or --overwrite to replace it" if kind == "run" else (
+                "use --overwrite to replace it or choose another --out")
+            raise UserError(f"{path} already exists and is not empty; {hint}")
+        if not (path / marker).is_file():
+            raise UserError(f"{path} is not a {kind} folder (no {marker}); refusing to delete it, choose another --out")
         shutil.rmtree(path)
     path.mkdir(parents=True, exist_ok=True)
 
 
 def write_run_info(path: Path, info: dict) -> None:
-    (path / RUN_FILE).write_text(json.dumps(info, indent=2, default=_jsonable))
+    write_json(path / RUN_FILE, info)
 
 
 def read_run_info(path: Path) -> dict:
@@ -66,14 +70,38 @@ def read_run_info(path: Path) -> dict:
     return json.loads((path / RUN_FILE).read_text())
 
 
-def _jsonable(x):
-    if dataclasses.is_dataclass(x):
-        return dataclasses.asdict(x)
-    if isinstance(x, (np.generic,)):
-        return x.item()
-    if isinstance(x, tuple):
-        return list(x)
+# ---------------------------------------------------------------------- JSON
+def jsonable(x):
+    """`x` as plain JSON values: dataclasses as dicts, tuples as lists, numpy scalars and
+    arrays as Python numbers and lists, paths as strings, and every NaN or infinity as None
+    (strict JSON has no NaN: an empty L>=5 bucket is written null)."""
+    if dataclasses.is_dataclass(x) and not isinstance(x, type):
+        x = dataclasses.asdict(x)
+    if isinstance(x, dict):
+        return {str(k): jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return jsonable(x.tolist())
+    if isinstance(x, np.generic):
+        x = x.item()
+    if isinstance(x, float):
+        return x if math.isfinite(x) else None
+    if isinstance(x, Path):
+        return str(x)
+    if x is None or isinstance(x, (str, int, bool)):
+        return x
     raise TypeError(f"not JSON serialisable: {type(x)}")
+
+
+def to_json(x, indent: int | None = None) -> str:
+    """Strict JSON text of `x` (see `jsonable`): NaN is written null, never NaN."""
+    return json.dumps(jsonable(x), indent=indent, allow_nan=False)
+
+
+def write_json(path: Path, x) -> None:
+    """`x` as strict, indented JSON (NaN as null)."""
+    Path(path).write_text(to_json(x, indent=2))
 
 
 # ---------------------------------------------------------------------- metrics files
@@ -99,16 +127,11 @@ def metric_rows(metrics: dict, first_update: int, previous: dict | None = None) 
 
 
 def append_rows(path: Path, rows: list[dict]) -> None:
+    """Append rows to `path`.jsonl (strict JSON, NaN as null) and `path`.csv."""
     with open(path.with_suffix(".jsonl"), "a") as f:
         for row in rows:
-            f.write(json.dumps(row) + "\n")
-    csv_path = path.with_suffix(".csv")
-    new = not csv_path.exists()
-    with open(csv_path, "a", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        if new:
-            writer.writeheader()
-        writer.writerows(rows)
+            f.write(to_json(row) + "\n")
+    write_csv(path.with_suffix(".csv"), rows, append=True)
 
 
 def read_rows(path: Path) -> list[dict]:
@@ -159,10 +182,8 @@ def restore(manager, step: int, like):
 # ---------------------------------------------------------------------- reports
 def results_markdown(results: dict, title: str, level: int = 1) -> str:
     cols = ("SPL", "SR", "SPL>=5", "SR>=5")
-    lines = ["#" * level + f" {title}", "", "| rooms | " + " | ".join(cols) + " | episodes |", "|---" * (len(cols) + 2) + "|"]
-    for room, m in results.items():
-        lines.append(f"| {room} | " + " | ".join(_fmt(m[c]) for c in cols) + f" | {m['episodes']} |")
-    return "\n".join(lines) + "\n"
+    rows = [[room, *(_fmt(m[c]) for c in cols), m["episodes"]] for room, m in results.items()]
+    return "#" * level + f" {title}\n\n" + markdown_table(rows, ["rooms", *cols, "episodes"]) + "\n"
 
 
 def _fmt(x: float) -> str:
@@ -170,13 +191,16 @@ def _fmt(x: float) -> str:
 
 
 def learning_curve_png(path: Path, curves: dict, ylabel: str = "training success rate", val_points=None) -> None:
-    """curves: {label: (x [n], y [n]) or (x [n], y [seeds, n])}; bands over seeds."""
-    import matplotlib
+    """curves: {label: (x [n], y [n]) or (x [n], y [seeds, n])}; bands over seeds.
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    Drawn with matplotlib's object API on an Agg canvas (as envs/render.py): matplotlib's
+    global backend and pyplot's state are left alone."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
-    fig, ax = plt.subplots(figsize=(7, 4))
+    fig = Figure(figsize=(7, 4))
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
     for label, (x, y) in curves.items():
         y = np.atleast_2d(np.asarray(y, float))
         mean, std = y.mean(0), y.std(0)
@@ -192,7 +216,6 @@ def learning_curve_png(path: Path, curves: dict, ylabel: str = "training success
     ax.legend()
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def smooth(y, window: int = 20):

@@ -8,9 +8,7 @@ learning-curve PNG of every method (mean and band over seeds).
 
 from __future__ import annotations
 
-import csv
 import dataclasses
-import json
 import sys
 import time
 from pathlib import Path
@@ -22,6 +20,8 @@ import tyro
 
 from experiments import runs
 from experiments.presets import preset
+from experiments.progress import progress_bar
+from experiments.tables import markdown_table, write_csv
 
 COLUMNS = ("SPL", "SR", "SPL>=5", "SR>=5")
 
@@ -56,10 +56,11 @@ def seed_keys(seed: int, seeds: int) -> jax.Array:
     return jax.vmap(lambda i: jax.random.fold_in(jax.random.PRNGKey(seed), i))(np.arange(seeds))
 
 
-def run_method(method: str, args: Args, bar) -> tuple[list[dict], np.ndarray, np.ndarray]:
+def run_method(method: str, args: Args, bar, evaluator) -> tuple[list[dict], np.ndarray, np.ndarray]:
     """Train `args.seeds` seeds of one method vmapped; returns (per-seed test results,
-    updates [n], training success rate [seeds, n])."""
-    from foresit_jax.evaluate import agent_params, evaluate
+    updates [n], training success rate [seeds, n]); `evaluator` (a foresit_jax Evaluator of
+    the sweep's setup) runs the test episodes."""
+    from foresit_jax.evaluate import agent_params
     from foresit_jax.train import make_trainer
 
     config, schedule = preset(args.preset, method, num_updates=args.num_updates, setup=args.setup)
@@ -84,7 +85,7 @@ def run_method(method: str, args: Args, bar) -> tuple[list[dict], np.ndarray, np
     for i in range(args.seeds):
         state_i = jax.tree.map(lambda x: x[i], states)
         key = jax.random.fold_in(jax.random.PRNGKey(args.seed + 10_000), i)
-        results.append(evaluate(agent_params(state_i, config.sigma2_max), config, "test", key, episodes))
+        results.append(evaluator.evaluate(agent_params(state_i, config.sigma2_max), config, "test", key, episodes))
     return results, np.arange(1, done + 1), np.concatenate(curves, axis=1)
 
 
@@ -102,15 +103,12 @@ def table(results_by_method: dict[str, list[dict]], room: str = "overall") -> li
 
 
 def table_markdown(rows: list[dict], title: str) -> str:
-    lines = [f"# {title}", "", "| Method | " + " | ".join(COLUMNS) + " |", "|---" * (len(COLUMNS) + 1) + "|"]
-    for row in rows:
-        cells = [f"{row[f'{c} mean']:.2f} ± {row[f'{c} std']:.2f}" for c in COLUMNS]
-        lines.append(f"| {row['method']} | " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+    cells = [[row["method"], *(f"{row[f'{c} mean']:.2f} ± {row[f'{c} std']:.2f}" for c in COLUMNS)] for row in rows]
+    return f"# {title}\n\n" + markdown_table(cells, ["Method", *COLUMNS]) + "\n"
 
 
 def main(args: Args) -> list[dict]:
-    from experiments.train import _progress
+    from foresit_jax.evaluate import Evaluator
 
     if args.seeds < 1:
         raise runs.UserError(f"--seeds must be >= 1, got {args.seeds}")
@@ -121,34 +119,24 @@ def main(args: Args) -> list[dict]:
     for method in args.methods:  # fail before any training
         preset(args.preset, method, num_updates=args.num_updates, setup=args.setup)
     out = args.out
-    if out.exists() and any(out.iterdir()):
-        if not args.overwrite:
-            raise runs.UserError(f"{out} already exists and is not empty; use --overwrite to replace it or choose another --out")
-        if not (out / "sweep.json").exists():
-            raise runs.UserError(f"{out} is not a sweep folder (no sweep.json); refusing to delete it")
-        import shutil
-
-        shutil.rmtree(out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "sweep.json").write_text(json.dumps(dataclasses.asdict(args), indent=2, default=str))
+    runs.prepare_run_dir(out, resume=False, overwrite=args.overwrite, marker="sweep.json", kind="sweep")
+    runs.write_json(out / "sweep.json", args)
 
     config, _ = preset(args.preset, args.methods[0], num_updates=args.num_updates, setup=args.setup)
-    bar = _progress(config.num_updates * len(args.methods), 0, args.progress)
+    evaluator = Evaluator(args.setup)  # one for the sweep: each method's evaluation compiles once
+    bar = progress_bar(config.num_updates * len(args.methods), 0, args.progress)
     t0 = time.time()
     results, curves = {}, {}
     for method in args.methods:
-        results[method], x, y = run_method(method, args, bar)
+        results[method], x, y = run_method(method, args, bar, evaluator)
         curves[method] = (x, runs.smooth(y))
     bar(0, None)
     rows = table(results)
     title = f"Table 1 layout: test split, preset {args.preset}, {args.seeds} seeds (mean ± std)"
     md = table_markdown(rows, title)
     (out / "table1.md").write_text(md)
-    with open(out / "table1.csv", "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
-    (out / "results_per_seed.json").write_text(json.dumps(results, indent=2))
+    write_csv(out / "table1.csv", rows)
+    runs.write_json(out / "results_per_seed.json", results)
     runs.learning_curve_png(out / "learning_curves.png", curves)
     print(md)
     print(f"wrote {out}/table1.md, table1.csv, results_per_seed.json, learning_curves.png ({time.time() - t0:.0f} s)")

@@ -13,7 +13,6 @@ without `--resume` or `--overwrite`.
 from __future__ import annotations
 
 import dataclasses
-import json
 import sys
 import time
 from pathlib import Path
@@ -24,7 +23,8 @@ import numpy as np
 import tyro
 
 from experiments import runs
-from experiments.presets import PRESETS, Schedule, preset
+from experiments.presets import Schedule, preset
+from experiments.progress import progress_bar
 
 
 @dataclasses.dataclass(frozen=True)
@@ -78,7 +78,7 @@ def build(args: Args):
 
 def main(args: Args) -> dict:
     from foresit_jax.config import Config
-    from foresit_jax.evaluate import agent_params, evaluate, evaluate_random_policy
+    from foresit_jax.evaluate import Evaluator, agent_params
     from foresit_jax.train import make_trainer
 
     out = args.out
@@ -100,6 +100,7 @@ def main(args: Args) -> dict:
 
     trainer = make_trainer(config)
     env_params = trainer.env_params
+    evaluator = Evaluator(config.setup)  # held for the run: validation compiles once
     state = trainer.init(jax.random.PRNGKey(seed))
     manager = runs.checkpoint_manager(out / "checkpoints", schedule.keep_checkpoints)
     best_manager = runs.checkpoint_manager(out / "best", 1)
@@ -117,7 +118,7 @@ def main(args: Args) -> dict:
     previous_rows = runs.read_rows(out / "metrics")
     last_row = previous_rows[-1] if previous_rows else None
     total = config.num_updates
-    bar = _progress(total, done, args.progress)
+    bar = progress_bar(total, done, args.progress)
     chunks_run = 0
     t_start = time.time()
     while done < total:
@@ -137,7 +138,7 @@ def main(args: Args) -> dict:
         runs.save(manager, done, state)
         # Model selection on the validation split.
         key = jax.random.fold_in(jax.random.PRNGKey(seed), done)
-        val = evaluate(agent_params(state, config.sigma2_max), config, "val", key, schedule.val_episodes_per_room)
+        val = evaluator.evaluate(agent_params(state, config.sigma2_max), config, "val", key, schedule.val_episodes_per_room)
         row = {"update": done, **val["overall"]}
         runs.append_rows(out / "validation", [row])
         if val["overall"]["SR"] > best_sr:
@@ -157,11 +158,9 @@ def main(args: Args) -> dict:
     # Final test evaluation of the model selected on validation.
     best_step = best_manager.latest_step()
     chosen = runs.restore(best_manager, best_step, agent_params(state, config.sigma2_max))
-    test = evaluate(chosen, config, "test", jax.random.PRNGKey(seed + 10_000), schedule.test_episodes_per_room)
-    random = evaluate_random_policy(config, "test", jax.random.PRNGKey(seed + 10_000), schedule.test_episodes_per_room)
-    (out / "results_test.json").write_text(
-        json.dumps({"selected_update": best_step, "results": test, "random_policy": random}, indent=2)
-    )
+    test = evaluator.evaluate(chosen, config, "test", jax.random.PRNGKey(seed + 10_000), schedule.test_episodes_per_room)
+    random = evaluator.evaluate_random_policy(config, "test", jax.random.PRNGKey(seed + 10_000), schedule.test_episodes_per_room)
+    runs.write_json(out / "results_test.json", {"selected_update": best_step, "results": test, "random_policy": random})
     title = f"{config.method}, preset {info['preset']}, seed {seed}: test split (model of update {best_step}, best validation SR)"
     report = runs.results_markdown(test, title) + "\n" + runs.results_markdown(random, "Uniformly random policy, same rooms", level=2)
     (out / "results_test.md").write_text(report)
@@ -174,23 +173,6 @@ def main(args: Args) -> dict:
     print(f"wrote {out}/results_test.md, results_test.json, learning_curve.png, metrics.csv "
           f"({time.time() - t_start:.0f} s)")  # fmt: skip
     return test
-
-
-def _progress(total: int, initial: int, enabled: bool):
-    """A tqdm bar advanced per chunk; call with (n, postfix) and (0, None) to close."""
-    from tqdm import tqdm
-
-    bar = tqdm(total=total, initial=initial, unit="upd", disable=not enabled, dynamic_ncols=True,
-               bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} updates [{elapsed}<{remaining}{postfix}]")  # fmt: skip
-
-    def advance(n, postfix):
-        if postfix is None:
-            bar.close()
-            return
-        bar.set_postfix(postfix, refresh=False)
-        bar.update(n)
-
-    return advance
 
 
 def cli(argv=None) -> None:

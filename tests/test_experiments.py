@@ -25,7 +25,7 @@ import tyro
 
 import train_helpers as H
 from experiments import evaluate as evaluate_cli
-from experiments import presets, runs, sweep
+from experiments import presets, progress, runs, sweep, tables
 from experiments import train as train_cli
 from foresit_jax.config import Config
 
@@ -179,6 +179,150 @@ def test_non_finite_loss_stops_training_naming_the_update_and_keeps_the_last_goo
     H.assert_tree_finite(state)
     assert [r["update"] for r in runs.read_rows(out / "metrics")] == [1, 2]
     assert not (out / "results_test.json").exists()
+
+
+def strict_json(text: str):
+    """json.loads that refuses NaN/Infinity (not JSON, though Python writes them by default)."""
+
+    def refuse(token):
+        raise ValueError(f"non-strict JSON token {token}")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_run_files_are_strict_json(finished_run):
+    for path in [finished_run / "run.json", *finished_run.glob("results_*.json")]:
+        strict_json(path.read_text())
+    for name in ("metrics.jsonl", "validation.jsonl"):
+        for line in (finished_run / name).read_text().splitlines():
+            strict_json(line)
+
+
+# ---------------------------------------------------------------------- shared pieces
+def test_json_writes_nan_as_null(tmp_path):
+    @dataclasses.dataclass(frozen=True)
+    class Where:
+        out: Path
+        sizes: tuple
+
+    results = {"overall": {"SR": 12.5, "SR>=5": float("nan"), "SPL>=5": np.float32("nan"), "episodes": np.int64(8)},
+               "bad": [float("inf"), -float("inf")], "args": Where(Path("runs/x"), (1, 2))}  # fmt: skip
+    runs.write_json(tmp_path / "r.json", results)
+    text = (tmp_path / "r.json").read_text()
+    assert "NaN" not in text and "Infinity" not in text
+    assert strict_json(text) == {"overall": {"SR": 12.5, "SR>=5": None, "SPL>=5": None, "episodes": 8},
+                                 "bad": [None, None], "args": {"out": "runs/x", "sizes": [1, 2]}}  # fmt: skip
+    # Rows: JSONL strict, CSV as before (nan), and a row read back (null -> None) is
+    # written to CSV the same way (a resume rewrites the CSV from the JSONL).
+    row = {"update": 1, "SR": 50.0, "SR>=5": float("nan")}
+    runs.append_rows(tmp_path / "validation", [row])
+    (back,) = runs.read_rows(tmp_path / "validation")
+    assert back == {"update": 1, "SR": 50.0, "SR>=5": None}
+    runs.append_rows(tmp_path / "again", [back])
+    assert (tmp_path / "again.csv").read_text() == (tmp_path / "validation.csv").read_text() == "update,SR,SR>=5\n1,50.0,nan\n"
+    with pytest.raises(TypeError, match="not JSON serialisable"):
+        runs.to_json({"x": object()})
+
+
+def test_markdown_table_of_a_hand_written_table():
+    rows = [["a3c", "12.50", 250], ["a3c+foresit", "n/a", 7]]
+    assert tables.markdown_table(rows, ["method", "SR", "episodes"]) == (
+        "| method | SR | episodes |\n"
+        "|---|---|---|\n"
+        "| a3c | 12.50 | 250 |\n"
+        "| a3c+foresit | n/a | 7 |"
+    )  # fmt: skip
+    assert tables.markdown_table(rows, ["method", "SR", "episodes"], align="<>>") == (
+        "| method      |    SR | episodes |\n"
+        "|-------------|-------|----------|\n"
+        "| a3c         | 12.50 |      250 |\n"
+        "| a3c+foresit |   n/a |        7 |"
+    )  # fmt: skip
+    assert tables.markdown_table([], ["x"]) == "| x |\n|---|"
+    with pytest.raises(ValueError, match="2 cells for 3 columns"):
+        tables.markdown_table([["a", "b"]], ["x", "y", "z"])
+    with pytest.raises(ValueError, match="align"):
+        tables.markdown_table(rows, ["method", "SR", "episodes"], align="<>")
+
+
+def test_reports_use_the_one_table_writer():
+    results = {"overall": {"SPL": 10.0, "SR": 20.0, "SPL>=5": float("nan"), "SR>=5": None, "episodes": 4}}
+    assert runs.results_markdown(results, "T", level=2) == (
+        "## T\n\n| rooms | SPL | SR | SPL>=5 | SR>=5 | episodes |\n|---|---|---|---|---|---|\n"
+        "| overall | 10.00 | 20.00 | n/a | n/a | 4 |\n"
+    )  # fmt: skip
+    rows = sweep.table({"a3c": [{"overall": {"SPL": 1.0, "SR": 2.0, "SPL>=5": 3.0, "SR>=5": 4.0}}] * 2})
+    assert sweep.table_markdown(rows, "T1") == (
+        "# T1\n\n| Method | SPL | SR | SPL>=5 | SR>=5 |\n|---|---|---|---|---|\n"
+        "| a3c | 1.00 ± 0.00 | 2.00 ± 0.00 | 3.00 ± 0.00 | 4.00 ± 0.00 |\n"
+    )  # fmt: skip
+
+
+def test_write_csv(tmp_path):
+    path = tmp_path / "t.csv"
+    tables.write_csv(path, [{"method": "a3c", "SR": 1.5}])
+    tables.write_csv(path, [{"method": "b", "SR": None}], append=True)
+    assert list(csv_rows(path)) == [{"method": "a3c", "SR": "1.5"}, {"method": "b", "SR": "nan"}]
+    tables.write_csv(path, [{"x": 1}])  # without append: replaced
+    assert path.read_text() == "x\n1\n"
+
+
+@pytest.mark.parametrize("marker, kind", [(runs.RUN_FILE, "run"), ("sweep.json", "sweep")])
+def test_prepare_run_dir_never_deletes_what_it_did_not_write(tmp_path, marker, kind):
+    out = tmp_path / "out"
+    runs.prepare_run_dir(out, resume=False, overwrite=False, marker=marker, kind=kind)
+    assert out.is_dir()
+    runs.prepare_run_dir(out, resume=False, overwrite=False, marker=marker, kind=kind)  # empty: fine
+    (out / "notes.txt").write_text("mine")
+    for overwrite, says in ((False, "already exists and is not empty"), (True, f"not a {kind} folder")):
+        with pytest.raises(runs.UserError, match=says) as e:
+            runs.prepare_run_dir(out, resume=False, overwrite=overwrite, marker=marker, kind=kind)
+        assert "\n" not in str(e.value)  # one line
+    with pytest.raises(runs.UserError, match=f"not a {kind} folder .*nothing to resume"):
+        runs.prepare_run_dir(out, resume=True, overwrite=False, marker=marker, kind=kind)
+    assert (out / "notes.txt").read_text() == "mine"
+    (out / marker).write_text("{}")
+    with pytest.raises(runs.UserError, match="--overwrite"):
+        runs.prepare_run_dir(out, resume=False, overwrite=False, marker=marker, kind=kind)
+    runs.prepare_run_dir(out, resume=False, overwrite=True, marker=marker, kind=kind)
+    assert out.is_dir() and not any(out.iterdir())
+
+
+def test_learning_curve_png_leaves_matplotlib_global_state_alone(tmp_path, monkeypatch):
+    import matplotlib
+
+    def no_global_backend(*args, **kwargs):
+        raise AssertionError("matplotlib.use called: the global backend must be left alone")
+
+    monkeypatch.setattr(matplotlib, "use", no_global_backend)
+    had_pyplot = "matplotlib.pyplot" in sys.modules
+    x = np.arange(1, 6)
+    runs.learning_curve_png(tmp_path / "c.png", {"a": (x, x / 10.0), "b": (x, np.stack([x, x + 1]) / 10.0)},
+                            val_points=[(2, 0.1), (4, 0.3)])  # fmt: skip
+    assert (tmp_path / "c.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert ("matplotlib.pyplot" in sys.modules) == had_pyplot
+
+
+def test_progress_bar_is_shared():
+    advance = progress.progress_bar(total=3, initial=1, enabled=False)
+    advance(2, {"SR": "0.1"})
+    advance(0, None)
+    assert not hasattr(train_cli, "_progress")
+    assert train_cli.progress_bar is sweep.progress_bar is progress.progress_bar
+
+
+def test_demo_oracle_plays_the_random_policys_episodes():
+    from experiments import demo
+    from foresit_jax.evaluate import random_policy_rollout
+
+    env, env_params = H.bathroom_env("test", training=False)
+    key = jax.random.PRNGKey(5)
+    random = random_policy_rollout(env, env_params, key, 6, 100)
+    _, _, oracle, _ = demo.oracle_rollout(env, 6, 100)(env_params, key)
+    np.testing.assert_array_equal(random.optimal_length, oracle.optimal_length)  # the same episodes
+    assert np.asarray(oracle.success).all() and (np.asarray(oracle.length) == np.asarray(oracle.optimal_length)).all()
+    m = demo.metrics(jax.tree.map(np.asarray, oracle))
+    assert m["SR"] == m["SPL"] == 100.0 and m["episodes"] == 6
 
 
 # ---------------------------------------------------------------------- one-line errors

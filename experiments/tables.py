@@ -1,0 +1,54 @@
+"""Tables written by the experiments: Markdown (reports, the paper's layout) and CSV.
+
+`markdown_table(rows, columns)` is the one Markdown table writer (run reports, sweep tables,
+the demo, the benchmarks); `write_csv(path, rows)` writes rows of dicts, appending when asked.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+from typing import Optional, Sequence
+
+
+def markdown_table(rows: Sequence[Sequence], columns: Sequence[str], align: Optional[str] = None) -> str:
+    """A Markdown table: the header `columns`, a rule, and one line per row of cells
+    (each cell written with `str`). No trailing newline.
+
+    `align`: None writes cells as they are (`| a | b |`); one character per column, '<'
+    (left) or '>' (right), pads every column to its widest cell, for a table that also reads
+    well as plain text (the benchmarks print it)."""
+    columns = [str(c) for c in columns]
+    rows = [[str(cell) for cell in row] for row in rows]
+    for row in rows:
+        if len(row) != len(columns):
+            raise ValueError(f"a row has {len(row)} cells for {len(columns)} columns: {row}")
+    if align is None:
+        lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+        return "\n".join(lines + ["| " + " | ".join(row) + " |" for row in rows])
+    if len(align) != len(columns) or set(align) - {"<", ">"}:
+        raise ValueError(f"align needs one '<' or '>' per column ({len(columns)}), got {align!r}")
+    widths = [max(len(cell) for cell in column) for column in zip(columns, *rows)]
+
+    def line(cells):
+        return "| " + " | ".join(f"{c:{a}{w}}" for c, a, w in zip(cells, align, widths)) + " |"
+
+    return "\n".join([line(columns), "|" + "|".join("-" * (w + 2) for w in widths) + "|"] + [line(r) for r in rows])
+
+
+def write_csv(path: Path, rows: Sequence[dict], append: bool = False) -> None:
+    """Rows of dicts as CSV, columns in the first row's key order; a header only when the
+    file is new. NaN and missing values (None, e.g. read back from strict JSON's null) are
+    written `nan`, as Python's csv writes a float NaN, so a row reads the same either way."""
+    path = Path(path)
+    new = not (append and path.exists())
+    with open(path, "a" if append else "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        if new:
+            writer.writeheader()
+        writer.writerows({k: _csv_cell(v) for k, v in row.items()} for row in rows)
+
+
+def _csv_cell(value):
+    return "nan" if value is None or (isinstance(value, float) and math.isnan(value)) else value
