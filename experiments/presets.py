@@ -6,12 +6,16 @@ network (measured: test SR ~50-60% after 3000 updates, about 7 minutes; the sett
 chosen by `experiments.search_learner`, see docs/learner.md).
 `paper` is the paper's sizes and schedule (512-unit LSTM, Adam 1e-4), for long runs on
 accelerators.  `tiny` is for tests and smoke runs (bathrooms only, tiny networks).
+A method's own requirements (`Method.required_config`: the maml base runs whole
+episodes, differentiated through the rollout) are applied over the preset's fields;
+fields given explicitly override both.
 """
 
 from __future__ import annotations
 
 import dataclasses
 
+from envs.gridnav import TRAIN_TIME_LIMIT
 from foresit_jax.config import Config
 from foresit_jax.methods import IMPLEMENTED_METHODS, parse_method
 
@@ -51,16 +55,11 @@ PRESETS: dict[str, tuple[dict, Schedule]] = {
 
 
 def check_method(method: str) -> None:
-    """A one-line error for a method name that does not parse or is not built yet."""
+    """A one-line error for a method name that does not parse."""
     try:
-        pieces = parse_method(method)
+        parse_method(method)
     except ValueError as e:
         raise ValueError(f"unknown method {method!r} ({e}); valid methods: {', '.join(IMPLEMENTED_METHODS)}") from None
-    if pieces.planned_pieces:
-        raise ValueError(
-            f"method {method!r} is planned, not implemented yet ({', '.join(pieces.planned_pieces)}); "
-            f"valid methods: {', '.join(IMPLEMENTED_METHODS)}"
-        )
 
 
 def preset(name: str, method: str, **overrides) -> tuple[Config, Schedule]:
@@ -74,5 +73,8 @@ def preset(name: str, method: str, **overrides) -> tuple[Config, Schedule]:
     unknown = set(given) - {f.name for f in dataclasses.fields(Config)}
     if unknown:
         raise ValueError(f"unknown config fields {sorted(unknown)}")
-    config = Config(method=method, **{**fields, **given})
+    required = parse_method(method).required_config
+    if required.get("rollout") == "episodes":  # whole training episodes per update
+        required = {**required, "num_steps": max(fields.get("num_steps", Config.num_steps), TRAIN_TIME_LIMIT)}
+    config = Config(method=method, **{**fields, **required, **given})
     return config, schedule

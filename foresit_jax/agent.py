@@ -29,7 +29,7 @@ import jax
 import jax.numpy as jnp
 
 import envs.metrics
-from foresit_jax import distributions, imagination
+from foresit_jax import distributions, imagination, maml
 from foresit_jax.config import Config
 from foresit_jax.lstm import (
     LSTMCarry,
@@ -125,8 +125,11 @@ class Agent:
         self.imagination = self.method.imagination
         # The object-relation graph (ORG) reads the `org` setup's detector features.
         object_graph = ObjectGraph() if self.method.encoder == "org" else None
+        # SAVN's learned interaction loss (the maml base), params at params["params"]["learned_loss"].
+        learned_loss = maml.LearnedLoss(segment=config.maml_segment) if self.method.base == "maml" else None
         self.model = ActorCritic(
             object_graph=object_graph,
+            learned_loss=learned_loss,
             num_actions=config.num_actions,
             hidden_size=config.hidden_size,
             use_imagination=self.imagination.uses_imagination,
@@ -147,6 +150,10 @@ class Agent:
         params = self.model.init(k_model, carry, obs, probs, imagined)
         w_params = self.imagination_net.init(k_imag, jnp.zeros((hidden,)), obs["target"])
         return params, w_params
+
+    def interaction_loss(self, params, inputs: chex.Array) -> chex.Array:
+        """The maml base's learned loss L_phi of one segment `[segment, H + A]` (scalar)."""
+        return self.model.apply(params, inputs, method=ActorCritic.interaction_loss)
 
     def imagine(self, w_params, s_0: chex.Array, goal: chex.Array) -> chex.Array:
         """f_w([s_0 : g_tau]) `[..., H]`."""
@@ -200,7 +207,32 @@ class Agent:
         step_keys: `[num_steps, 2]` the keys of the steps, instead of splitting `key`
           (so that two windows can replay exactly one longer window's steps).
         Returns (the actor state after the window, the window's Trajectory).
+
+        The `maml` base adapts each lane's parameters inside its episode
+        (`foresit_jax.maml.adaptive_act`): whole episodes only, in training and evaluation.
         """
+        if self.method.base == "maml":
+            if not whole_episodes or step_keys is not None:
+                raise ValueError("the maml base acts in whole episodes (rollout='episodes'), without step_keys")
+            actor, traj, _ = maml.adaptive_act(
+                self, params, w_params, env, env_params, actor, key, num_steps, greedy=greedy,
+                noise_variance=noise_variance, record_inputs=record_inputs,
+            )  # fmt: skip
+            return actor, traj
+        return self.act_window(
+            params, w_params, env, env_params, actor, key, num_steps, greedy=greedy, whole_episodes=whole_episodes,
+            noise_variance=noise_variance, record_inputs=record_inputs, step_keys=step_keys,
+        )  # fmt: skip
+
+    def act_window(
+        self, params, w_params, env, env_params, actor: ActorState, key: chex.PRNGKey, num_steps: int,
+        *, greedy: bool = False, whole_episodes: bool = False, noise_variance: Optional[chex.Array] = None,
+        record_inputs: bool = True, step_keys: Optional[chex.Array] = None, alive: Optional[chex.Array] = None,
+    ) -> tuple[ActorState, Trajectory]:  # fmt: skip
+        """`act` under one parameter set for the whole window (every base's step).
+        alive: `[B]` bool, with `whole_episodes`, which lanes' counted episode is still
+        running at the window's start (default: all; a window that continues an earlier
+        one of the same whole-episode rollout passes what that one left)."""
         cfg, imag = self.config, self.imagination
         num_lanes = actor.episode_step.shape[0]
         lanes = jnp.arange(num_lanes)
@@ -250,7 +282,9 @@ class Agent:
                 s_t, logits, action, reward, term, trunc, alive, info["success"] & alive, actor.episode_step,
                 s_0, info["optimal_length"], info["room_type"], seen,
             )  # fmt: skip
-            probs = jax.lax.stop_gradient(distributions.probs(logits))
+            probs = distributions.probs(logits)
+            if not self.method.action_probs_carry_gradient:
+                probs = jax.lax.stop_gradient(probs)
             next_actor = ActorState(
                 env_state=env_state,
                 obs=obs,
@@ -265,7 +299,8 @@ class Agent:
             return (next_actor, alive & ~done if whole_episodes else alive), out
 
         step_keys = jax.random.split(key, num_steps) if step_keys is None else step_keys
-        (actor, _), out = jax.lax.scan(step, (actor, jnp.ones((num_lanes,), bool)), step_keys)
+        alive = jnp.ones((num_lanes,), bool) if alive is None else alive
+        (actor, _), out = jax.lax.scan(step, (actor, alive), step_keys)
         states, logits, actions, rewards, term, trunc, valid, success, episode_step, s_0, opt, room, seen = out
         if whole_episodes:  # nothing is bootstrapped: every counted episode ended (or is cut by design)
             next_state = jnp.zeros_like(actor.s_0)

@@ -9,11 +9,10 @@ from __future__ import annotations
 
 import dataclasses
 
-from foresit_jax.methods import GRADIENTS, Method, parse_method
+from foresit_jax.methods import GRADIENTS, ROLLOUTS, Method, parse_method
 
 SETUPS: tuple[str, ...] = ("savn", "org")
 IMAGINATION_OPTIMIZERS: tuple[str, ...] = ("sgd", "adam")
-ROLLOUTS: tuple[str, ...] = ("packed", "episodes")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -92,6 +91,16 @@ class Config:
     int_interval: int = 10
     """K: the `int` ablation re-imagines from s_t every K steps."""
 
+    # The maml base (SAVN, `foresit_jax.maml`): SAVN's values.
+    maml_segment: int = 6
+    """Steps between inner updates, and the learned loss's segment length (SAVN's num_steps)."""
+    maml_inner_updates: int = 4
+    """Most inner updates per episode (SAVN's gradient_limit): after steps 6, 12, 18, 24."""
+    maml_inner_lr: float = 1e-4
+    """Inner SGD step size on the learned loss (SAVN's inner_lr)."""
+    maml_first_order: bool = False
+    """Stop the gradient through the inner gradient (first-order MAML); off: exact second order."""
+
     def __post_init__(self):
         # Keep the config hashable (usable as a jit static argument) if given a list.
         object.__setattr__(self, "imagination_layer_sizes", tuple(self.imagination_layer_sizes))
@@ -99,7 +108,7 @@ class Config:
         self.validate()
 
     def validate(self) -> None:
-        """Raise ValueError (NotImplementedError for planned methods) on bad values."""
+        """Raise ValueError on bad values."""
         pieces = parse_method(self.method)
         if self.setup not in SETUPS:
             raise ValueError(f"setup must be one of {SETUPS}, got {self.setup!r}.")
@@ -108,12 +117,13 @@ class Config:
                 f"method {self.method!r} needs setup {pieces.required_setup!r} (its {pieces.encoder!r} "
                 f"encoder reads the detector features), got setup {self.setup!r}."
             )
-        if pieces.planned_pieces:
-            raise NotImplementedError(
-                f"method {self.method!r}: {', '.join(pieces.planned_pieces)} is not implemented yet."
-            )
         if self.rollout not in ROLLOUTS:
             raise ValueError(f"rollout must be one of {ROLLOUTS}, got {self.rollout!r}.")
+        if self.rollout not in pieces.rollouts:
+            raise ValueError(
+                f"method {self.method!r} supports rollout {pieces.rollouts}, not {self.rollout!r} "
+                f"(set rollout='episodes', gradient='through_rollout' and num_steps >= the time limit)."
+            )
         if self.gradient not in GRADIENTS:
             raise ValueError(f"gradient must be one of {GRADIENTS}, got {self.gradient!r}.")
         if self.gradient not in pieces.gradients:
@@ -128,14 +138,16 @@ class Config:
         for name in (
             "num_lanes", "num_updates", "num_steps", "num_actions", "hidden_size",
             "attention_size", "value_hidden", "buffer_size", "imagination_epochs",
-            "success_window", "int_interval",
+            "success_window", "int_interval", "maml_segment",
         ):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int):
                 raise ValueError(f"{name} must be an int, got {value!r} ({type(value).__name__}).")
             if value < 1:
                 raise ValueError(f"{name} must be >= 1, got {value}.")
-        for name in ("learning_rate", "imagination_lr", "max_grad_norm", "rnd_variance"):
+        if isinstance(self.maml_inner_updates, bool) or not isinstance(self.maml_inner_updates, int) or self.maml_inner_updates < 0:
+            raise ValueError(f"maml_inner_updates must be an int >= 0, got {self.maml_inner_updates!r}.")
+        for name in ("learning_rate", "imagination_lr", "max_grad_norm", "rnd_variance", "maml_inner_lr"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}.")
         if not 0.0 < self.gamma <= 1.0:

@@ -2,7 +2,8 @@
 
 A method is a base learner x an encoder x an imagination variant:
 
-* base: `a3c` (SAVN's non-adaptive A3C) or `maml` (SAVN's self-adaptive learner; planned);
+* base: `a3c` (SAVN's non-adaptive A3C) or `maml` (SAVN's self-adaptive learner:
+  inner SGD on a learned interaction loss inside every episode, `foresit_jax.maml`);
 * encoder: `plain` (SAVN's observation encoder) or `org` (ORG's object-relation graph on
   the `org` setup's detector features, `foresit_jax.org`);
 * imagination: `none`, `foresit` (Sections 4.2-4.4), or a Table 3 ablation: `rnd`
@@ -32,10 +33,8 @@ BASES: tuple[str, ...] = ("a3c", "maml")
 ENCODERS: tuple[str, ...] = ("plain", "org")
 GRADIENTS: tuple[str, ...] = ("replay", "through_rollout")
 
-# Pieces that are designed but not built yet: parsing accepts them, Config refuses them.
-PLANNED: dict[str, str] = {
-    "maml": "SAVN's self-adaptive meta-learning (inner SGD on a learned interaction loss)",
-}
+ROLLOUTS: tuple[str, ...] = ("packed", "episodes")
+
 
 
 @dataclasses.dataclass(frozen=True)
@@ -123,8 +122,26 @@ class Method:
         return ("through_rollout",) if self.base == "maml" else GRADIENTS
 
     @property
-    def planned_pieces(self) -> tuple[str, ...]:
-        return tuple(p for p in (self.base, self.encoder) if p in PLANNED)
+    def action_probs_carry_gradient(self) -> bool:
+        """Whether the previous step's action probabilities, an input of the encoder, carry
+        gradient to the earlier steps. maml: yes, as in SAVN, whose episode is one graph
+        (the inner and the meta-gradient both flow through them). a3c: no, they are inputs
+        like the observation, which is what lets the replay re-run a window from its
+        recorded inputs (the differentiate-through-rollout reference matches it)."""
+        return self.base == "maml"
+
+    @property
+    def rollouts(self) -> tuple[str, ...]:
+        """Rollout layouts this method supports: maml's inner loop counts steps from each
+        episode's start and its meta-loss spans the whole episode, so it needs whole
+        episodes (SAVN's layout)."""
+        return ("episodes",) if self.base == "maml" else ROLLOUTS
+
+    @property
+    def required_config(self) -> dict:
+        """Config fields this method needs (a preset sets them for it): maml acts in
+        whole episodes, differentiated through the rollout."""
+        return {"rollout": "episodes", "gradient": "through_rollout"} if self.base == "maml" else {}
 
     @property
     def greedy_evaluation(self) -> bool:
@@ -143,9 +160,11 @@ PAPER_METHODS: tuple[str, ...] = (
     "a3c", "a3c+foresit", "a3c+maml", "a3c+maml+foresit", "a3c+org", "a3c+org+foresit",
     "a3c+org+rnd", "a3c+org+att", "a3c+org+int",
 )  # fmt: skip
-# Methods that run today (every combination of implemented pieces).
+# Methods that run today: the paper's rows and ablations (any other combination of the
+# pieces, e.g. 'a3c+maml+org' or 'a3c+maml+rnd', runs too).
 IMPLEMENTED_METHODS: tuple[str, ...] = (
     "a3c", "a3c+foresit", "a3c+rnd", "a3c+att", "a3c+int",
+    "a3c+maml", "a3c+maml+foresit",
     "a3c+org", "a3c+org+foresit", "a3c+org+rnd", "a3c+org+att", "a3c+org+int",
 )  # fmt: skip
 

@@ -259,6 +259,7 @@ class ActorCritic(nn.Module):
     attention_size: int = 512
     value_hidden: int = 256
     object_graph: Optional[nn.Module] = None
+    learned_loss: Optional[nn.Module] = None
 
     def setup(self):
         self.encoder = Encoder(hidden_size=self.hidden_size, object_graph=self.object_graph)
@@ -294,9 +295,19 @@ class ActorCritic(nn.Module):
     def critic(self, states: chex.Array, valid: chex.Array, keys=None, key_mask=None, positions=None) -> CriticOutput:
         return self.value_critic(states, valid, keys, key_mask, positions)
 
+    def interaction_loss(self, inputs: chex.Array) -> chex.Array:
+        """The maml base's learned loss L_phi over one segment of [s_t : pi_t] (see
+        `foresit_jax.maml.LearnedLoss`); only with `learned_loss` set."""
+        if self.learned_loss is None:
+            raise ValueError("ActorCritic.interaction_loss needs the maml base's learned_loss module")
+        return self.learned_loss(inputs)
+
     def __call__(self, carry, obs, prev_action_probs, imagined=None):
         carry, s_t, logits = self.step(carry, obs, prev_action_probs, imagined)
         out = self.critic(s_t[..., None, :], jnp.ones(s_t.shape[:-1] + (1,), bool))
+        if self.learned_loss is not None:  # create phi at init
+            segment = jnp.zeros((self.learned_loss.segment, s_t.shape[-1] + logits.shape[-1]), s_t.dtype)
+            self.interaction_loss(segment)
         return carry, s_t, logits, out.value
 
 

@@ -58,12 +58,13 @@ def test_replace_revalidates():
         dataclasses.replace(Config(), num_lanes=0)
 
 
-def test_unknown_and_planned_methods():
+def test_unknown_methods_and_impossible_combinations():
     with pytest.raises(ValueError, match="imagination \\['none', 'foresit'"):  # lists valid pieces
         Config(method="a3c+magic")
-    for name in ("a3c+maml", "a3c+maml+foresit"):
-        with pytest.raises(NotImplementedError, match="not implemented"):
+    for name in ("a3c+maml", "a3c+maml+foresit"):  # maml needs whole episodes, through the rollout
+        with pytest.raises(ValueError, match="supports rollout \\('episodes',\\)"):
             Config(method=name)
+        Config(method=name, rollout="episodes", gradient="through_rollout")
     for name in ("a3c+org", "a3c+org+foresit"):
         with pytest.raises(ValueError, match="needs setup 'org'"):
             Config(method=name, setup="savn")

@@ -20,6 +20,7 @@ import numpy as np
 
 import envs
 from foresit_jax.config import Config
+from foresit_jax.methods import parse_method
 from foresit_jax.train import Trainer
 
 FAST_COMPILE = {"xla_backend_optimization_level": 0}
@@ -37,7 +38,7 @@ ORG_METHODS = ("a3c+org", "a3c+org+foresit", "a3c+org+rnd", "a3c+org+att", "a3c+
 
 
 def tiny_config(method: str = "a3c+foresit", **overrides) -> Config:
-    return Config(method=method, **{**TINY, **overrides})
+    return Config(method=method, **{**TINY, **parse_method(method).required_config, **overrides})
 
 
 @functools.lru_cache(maxsize=None)

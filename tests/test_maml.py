@@ -1,0 +1,243 @@
+"""The maml base (SAVN): the learned loss against numpy, the inner step against a
+hand-written SGD step, when inner updates happen, that later steps really run under the
+adapted parameters (recomputed independently with flax's own modules), and the
+second-order meta-gradient against central finite differences in float64."""
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from flax import traverse_util
+
+import train_helpers as H
+from foresit_jax import maml
+from foresit_jax.agent import Agent
+from foresit_jax.networks import ActorCritic
+
+
+# ---------------------------------------------------------------------- the learned loss
+def _numpy_learned_loss(phi, inputs):
+    """SAVN's ll_tc by loops: steps are channels, causal dilated convs over features."""
+    x = np.asarray(inputs, np.float64).T  # [F, 6]
+    for level, name in enumerate(("conv0", "conv1")):
+        w = np.asarray(phi[name]["kernel"], np.float64)  # [k, in, out]
+        b = np.asarray(phi[name]["bias"], np.float64)
+        k, d = w.shape[0], 2**level
+        pad = np.concatenate([np.zeros(((k - 1) * d, x.shape[1])), x], axis=0)
+        y = np.zeros((x.shape[0], w.shape[2]))
+        for j in range(x.shape[0]):
+            for t in range(k):
+                y[j] += pad[j + t * d] @ w[t]
+        y += b
+        x = np.where(y > 0, y, 0.01 * y)
+    return np.sqrt(np.sum(x**2))
+
+
+def test_learned_loss_matches_numpy_and_is_causal_over_features():
+    module = maml.LearnedLoss(segment=6)
+    inputs = jax.random.normal(jax.random.PRNGKey(1), (6, 22))
+    phi = module.init(jax.random.PRNGKey(0), inputs)
+    assert phi["params"]["conv0"]["kernel"].shape == (2, 6, 10)  # 6 steps -> 10 channels, kernel 2
+    assert phi["params"]["conv1"]["kernel"].shape == (2, 10, 1)
+    got = float(module.apply(phi, inputs))
+    np.testing.assert_allclose(got, _numpy_learned_loss(phi["params"], inputs), rtol=1e-5)
+    with pytest.raises(ValueError, match="expects 6 steps"):
+        module.apply(phi, inputs[:5])
+
+
+def test_inner_step_is_sgd_on_everything_but_phi():
+    params = {"params": {"encoder": {"w": jnp.ones((2, 3))}, "actor": {"b": jnp.arange(3.0)},
+                         "learned_loss": {"conv0": {"kernel": jnp.ones((2, 6, 10))}}}}  # fmt: skip
+    grads = jax.tree.map(lambda x: jnp.full_like(x, 2.0), params)
+    new = maml.inner_step(params, grads, 0.1)
+    np.testing.assert_allclose(new["params"]["encoder"]["w"], np.ones((2, 3)) - 0.2)
+    np.testing.assert_allclose(new["params"]["actor"]["b"], np.arange(3.0) - 0.2)
+    H.assert_trees_bitwise_equal(new["params"]["learned_loss"], params["params"]["learned_loss"])
+    H.assert_trees_bitwise_equal(maml.inner_step(params, grads, 0.1, jnp.asarray(False)), params)
+
+
+def test_update_slots_are_savns():
+    assert maml.update_steps(30, 6, 4) == (6, 12, 18, 24)
+    assert maml.update_steps(200, 6, 4) == (6, 12, 18, 24)
+    assert maml.update_steps(14, 6, 4) == (6, 12)
+    assert maml.update_steps(30, 6, 0) == ()
+
+
+# ---------------------------------------------------------------------- the inner loop
+def _setup(lr=0.05, lanes=16, training=True, never_done=False, **overrides):
+    config = H.tiny_config("a3c+maml", num_lanes=lanes, maml_inner_lr=lr, **overrides)
+    env, env_params = H.bathroom_env("train", training)
+    agent = Agent(config)
+    obs, _ = env.reset(jax.random.PRNGKey(0), env_params)
+    params, w_params = agent.init(jax.random.PRNGKey(3), obs)
+    if never_done:  # the Done action never sampled: every episode runs to the time limit
+        params = jax.tree.map(lambda x: x, params)
+        params["params"]["policy"]["actor"]["bias"] = params["params"]["policy"]["actor"]["bias"].at[5].set(-30.0)
+    actor = agent.start(jax.random.PRNGKey(4), env, env_params, lanes)
+    return config, agent, env, env_params, params, w_params, actor
+
+
+@pytest.fixture(scope="module")
+def adapted_rollout():
+    config, agent, env, env_params, params, w_params, actor = _setup()
+    run = jax.jit(lambda p, a, k: maml.adaptive_act(agent, p, w_params, env, env_params, a, k, 30))
+    _, traj, thetas = run(params, actor, jax.random.PRNGKey(5))
+    return config, params, traj, thetas
+
+
+def test_inner_updates_only_after_steps_6_12_18_24_of_running_episodes(adapted_rollout):
+    config, params, traj, thetas = adapted_rollout
+    assert len(thetas) == 1 + 4  # theta_0, then one slot after each of steps 6, 12, 18, 24
+    running = np.asarray(traj.valid & ~(traj.terminated | traj.truncated))  # [T, B] episode goes on after step t
+    flat = [traverse_util.flatten_dict(jax.tree.map(np.asarray, t)) for t in thetas]
+    lanes = running.shape[1]
+    updated_any = np.zeros(lanes, bool)
+    for i in range(1, 5):
+        goes_on = running[6 * i - 1]  # alive after step 6 i
+        for b in range(lanes):
+            changed = any(
+                not np.array_equal(flat[i][p][b], flat[i - 1][p][b]) for p in flat[0] if maml.adapts(p)
+            )  # fmt: skip
+            assert changed == bool(goes_on[b]), (i, b)
+            updated_any[b] |= changed
+        for p in flat[0]:  # phi and the critic never change in an inner step
+            if not maml.adapts(p) or "value_critic" in p:
+                np.testing.assert_array_equal(flat[i][p], flat[0][p])
+    assert updated_any.any() and not updated_any.all(), "seed should mix short and long episodes"
+    # Steps are counted from the episode's start: every lane's counted episode starts at 0.
+    np.testing.assert_array_equal(np.asarray(traj.episode_step)[0], 0)
+
+
+def test_evaluation_step_13_runs_under_theta_2_recomputed_independently():
+    """An evaluation episode (time limit 100): recompute theta_1 = theta_0 - lr grad L_phi
+    (steps 0-5 under theta_0) and theta_2 (steps 6-11 under theta_1) with flax's own
+    modules over the recorded observations, then step 13's logits under
+    theta_2; they match the rollout's and differ from theta_0's."""
+    config, agent, env, env_params, params, w_params, actor = _setup(lr=5.0, lanes=4, training=False, never_done=True)
+    run = jax.jit(lambda p, a, k: maml.adaptive_act(agent, p, w_params, env, env_params, a, k, 40))
+    _, traj, thetas = run(params, actor, jax.random.PRNGKey(6))
+    assert bool(np.all(np.asarray(traj.valid)[:14]))  # every lane still in its episode at step 13
+    lane = 1
+    lane_inputs = jax.tree.map(lambda x: x[:, lane], traj.inputs)
+    carry0 = (jnp.zeros(config.hidden_size), jnp.zeros(config.hidden_size))
+
+    def run_steps(theta, carry, start, stop):
+        """Steps start..stop-1 under theta by flax's own step, each step's action
+        probabilities fed to the next (SAVN's graph); the first step's recorded ones
+        come from earlier parameters."""
+        probs, states, logits = lane_inputs.prev_action_probs[start], [], []
+        for t in range(start, stop):
+            obs = jax.tree.map(lambda x: x[t], lane_inputs.obs)
+            carry, s_t, logit = agent.model.apply(theta, carry, obs, probs, None, method=ActorCritic.step)
+            probs = jax.nn.softmax(logit)
+            states.append(s_t)
+            logits.append(logit)
+        return carry, jnp.stack(states), jnp.stack(logits)
+
+    def segment_loss(theta, carry, start):
+        _, states, logits = run_steps(theta, carry, start, start + 6)
+        return agent.model.apply(theta, maml.interaction_inputs(states, logits), method=ActorCritic.interaction_loss)
+
+    lr = config.maml_inner_lr
+    theta_1 = maml.inner_step(params, jax.grad(segment_loss)(params, carry0, 0), lr)
+    carry6, _, _ = run_steps(params, carry0, 0, 6)
+    theta_2 = maml.inner_step(theta_1, jax.grad(segment_loss)(theta_1, carry6, 6), lr)
+    carry12, _, _ = run_steps(theta_1, carry6, 6, 12)
+    _, states_2, logits_2 = run_steps(theta_2, carry12, 12, 14)
+    _, states_0, logits_0 = run_steps(params, carry0, 0, 14)
+    np.testing.assert_allclose(traj.states[13, lane], states_2[1], rtol=1e-4, atol=1e-5)
+    np.testing.assert_allclose(traj.logits[13, lane], logits_2[1], rtol=1e-4, atol=1e-6)
+    # Adaptation happened: theta_0 alone gives other values (100x the tolerance).
+    assert np.max(np.abs(np.asarray(states_2[1] - states_0[13]))) > 1e-3
+    assert np.max(np.abs(np.asarray(logits_2[1] - logits_0[13]))) > 1e-4
+    mine = jax.tree.map(lambda x: x[lane], thetas[2])
+    jax.tree.map(lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-4, atol=1e-6), mine, theta_2)
+
+
+def test_agent_rollout_adapts_through_the_same_code_path():
+    """Evaluation (`Agent.rollout`) runs adaptive_act: equal trajectories on one key."""
+    config, agent, env, env_params, params, w_params, actor = _setup(lanes=4, training=False)
+    key = jax.random.PRNGKey(7)
+    traj = jax.jit(lambda p: agent.rollout(p, w_params, env, env_params, key, 0.0, 20, num_lanes=4))(params)
+    k_start, k_act = jax.random.split(key)
+    start = agent.start(k_start, env, env_params, 4)
+    _, direct, _ = jax.jit(
+        lambda p: maml.adaptive_act(agent, p, w_params, env, env_params, start, k_act, 20,
+                                    noise_variance=jnp.zeros(4), record_inputs=False)  # fmt: skip
+    )(params)
+    H.assert_trees_bitwise_equal(traj.logits, direct.logits)
+    with pytest.raises(ValueError, match="whole episodes"):
+        agent.act(params, w_params, env, env_params, start, key, 5)  # packed windows: refused
+
+
+# ---------------------------------------------------------------------- the meta-gradient
+def _meta_objective(first_order: bool):
+    """A smooth function of a whole adapted episode, J(theta_0, phi) = sum of fixed random
+    weights times every valid step's logits and states. (The A3C loss itself holds
+    stop-gradients, the advantage's, so its gradient is not the derivative of its value;
+    the trainer differentiates it through the same adaptive rollout.)"""
+    config = H.tiny_config("a3c+maml", maml_inner_lr=0.5, maml_first_order=first_order, num_lanes=3)
+    env, env_params = H.bathroom_env()
+    agent = Agent(config)
+    obs, _ = env.reset(jax.random.PRNGKey(0), env_params)
+    params, w_params = agent.init(jax.random.PRNGKey(2), obs)
+    # Off the initial zero biases: a ReLU of exactly 0 (zero bias, zero input) has no
+    # derivative, and central differences would see half its slope.
+    rng = np.random.default_rng(1)
+    params = jax.tree.map(lambda x: x.astype(jnp.float64) + 0.05 * rng.standard_normal(x.shape), params)
+    actor = agent.start(jax.random.PRNGKey(3), env, env_params, config.num_lanes)
+    f64 = lambda x: x.astype(jnp.float64)  # noqa: E731  the agent's own carries, in float64
+    actor = actor._replace(lstm=jax.tree.map(f64, actor.lstm), prev_probs=f64(actor.prev_probs),
+                           imagined=f64(actor.imagined), s_0=f64(actor.s_0))  # fmt: skip
+    w_logits = jnp.asarray(rng.standard_normal((30, 3, 6)))
+    w_states = jnp.asarray(rng.standard_normal((30, 3, config.hidden_size)))
+
+    def objective(p):
+        _, traj, _ = maml.adaptive_act(agent, p, w_params, env, env_params, actor, jax.random.PRNGKey(11), 30,
+                                       record_inputs=False)  # fmt: skip
+        valid = traj.valid[..., None]
+        return jnp.sum(jnp.where(valid, traj.logits * w_logits, 0.0)) + jnp.sum(jnp.where(valid, traj.states * w_states, 0.0))
+
+    return jax.jit(objective), jax.jit(jax.value_and_grad(objective)), params
+
+
+def test_meta_gradient_matches_finite_differences_and_has_its_second_order_term():
+    with jax.experimental.enable_x64():
+        objective, value_and_grad, params = _meta_objective(first_order=False)
+        value, grads = value_and_grad(params)
+        assert grads["params"]["encoder"]["lstm"]["hi"]["kernel"].dtype == jnp.float64
+        rng = np.random.default_rng(0)
+        phi_only = lambda t: {"params": {k: (v if k == "learned_loss" else jax.tree.map(jnp.zeros_like, v))  # noqa: E731
+                                         for k, v in t["params"].items()}}  # fmt: skip
+        for trial in range(3):
+            direction = jax.tree.map(lambda x: jnp.asarray(rng.standard_normal(x.shape)), params)
+            if trial == 2:  # phi alone: it gets its gradient only through the inner updates
+                direction = phi_only(direction)
+            eps = 1e-7  # float64: truncation ~eps^2 (measured 1e-3 relative at 1e-6), rounding ~1e-16/eps
+            plus = objective(jax.tree.map(lambda p, d: p + eps * d, params, direction))
+            minus = objective(jax.tree.map(lambda p, d: p - eps * d, params, direction))
+            numeric = (float(plus) - float(minus)) / (2 * eps)
+            analytic = sum(float(jnp.vdot(g, d)) for g, d in zip(jax.tree.leaves(grads), jax.tree.leaves(direction)))
+            assert abs(numeric - analytic) <= 1e-4 * max(1.0, abs(numeric)), (trial, numeric, analytic)
+            assert abs(analytic) > 1e-6
+        # First-order MAML stops the inner gradient's gradient: phi gets none, and theta_0's
+        # gradient changes (the second-order term is really there).
+        _, first_value_and_grad, _ = _meta_objective(first_order=True)
+        first_value, first_grads = first_value_and_grad(params)
+        np.testing.assert_allclose(float(first_value), float(value), rtol=1e-12)
+        phi_norm = lambda g: float(sum(jnp.sum(x**2) for x in jax.tree.leaves(g["params"]["learned_loss"])))  # noqa: E731
+        assert phi_norm(grads) > 0 and phi_norm(first_grads) == 0.0
+        diff = max(float(jnp.max(jnp.abs(a - b))) for a, b in zip(jax.tree.leaves(grads), jax.tree.leaves(first_grads)))
+        assert diff > 1e-6
+
+
+def test_config_requires_whole_episodes_through_the_rollout():
+    with pytest.raises(ValueError, match="rollout"):
+        H.tiny_config("a3c+maml", rollout="packed")
+    with pytest.raises(ValueError, match="gradient"):
+        H.tiny_config("a3c+maml", gradient="replay")
+    config = H.tiny_config("a3c+maml+foresit")
+    assert (config.rollout, config.gradient) == ("episodes", "through_rollout")
+    assert dataclasses.replace(config, maml_first_order=True).maml_first_order
