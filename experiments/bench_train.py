@@ -3,6 +3,8 @@ the environment's share of the time, for methods and learner layouts side by sid
 
     python -m experiments.bench_train --preset quick --methods a3c a3c+foresit \
         --rollouts packed episodes --gradients replay through_rollout --lanes 32
+    python -m experiments.bench_train --methods a3c a3c+maml --rollouts episodes \
+        --gradients through_rollout --variants '{}' '{"maml_first_order": true}'
 
 For every combination, one jitted `Trainer.run` of `--updates` updates is compiled, run
 once, then timed `--repeats` times from the same state (so every repeat does the same
@@ -27,6 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import json
 import statistics
 import sys
 import time
@@ -36,7 +39,9 @@ import jax.numpy as jnp
 import numpy as np
 import tyro
 
+from envs.gridnav import TRAIN_TIME_LIMIT
 from experiments.presets import preset
+from foresit_jax.methods import parse_method
 from foresit_jax.train import Trainer
 
 
@@ -64,6 +69,9 @@ class BenchConfig:
     """timed calls per program (best and median are reported)"""
     seed: int = 0
     """PRNG seed"""
+    variants: tuple[str, ...] = ("{}",)
+    """Config overrides as JSON, one row each per combination, e.g. '{}' '{"maml_first_order": true}'
+    '{"maml_inner_updates": 0}' (where a maml update's time goes; maml_* fields apply to maml methods only)"""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -129,14 +137,29 @@ def temp_megabytes(compiled) -> float | None:
 
 
 def combinations(bench: BenchConfig):
-    for method, rollout, gradient, lanes in itertools.product(bench.methods, bench.rollouts, bench.gradients, bench.lanes):
+    """(label, Config) of every combination; a method that supports only some layouts or
+    gradient paths (maml: whole episodes through the rollout) runs with its own, once."""
+    seen = set()
+    for method, rollout, gradient, lanes, variant in itertools.product(
+        bench.methods, bench.rollouts, bench.gradients, bench.lanes, bench.variants
+    ):
+        pieces = parse_method(method)
+        rollout = rollout if rollout in pieces.rollouts else pieces.rollouts[0]
+        gradient = gradient if gradient in pieces.gradients else pieces.gradients[0]
+        extra = json.loads(variant)
+        if pieces.base != "maml":  # the maml_* fields change nothing elsewhere: one row
+            extra = {k: v for k, v in extra.items() if not k.startswith("maml_")}
+        label = f"{method} {rollout} {gradient}" + (f" {variant}" if extra else "")
+        if (label, lanes) in seen:
+            continue
+        seen.add((label, lanes))
         overrides = dict(num_lanes=lanes, num_updates=bench.updates, rollout=rollout, gradient=gradient, setup=bench.setup)
         if rollout == "episodes":
-            overrides["num_steps"] = 30  # the training time limit: one whole episode per lane
+            overrides["num_steps"] = TRAIN_TIME_LIMIT  # one whole episode per lane
         elif bench.num_steps:
             overrides["num_steps"] = bench.num_steps
-        config, _ = preset(bench.preset, method, **overrides)
-        yield f"{method} {rollout} {gradient}", config
+        config, _ = preset(bench.preset, method, **{**overrides, **extra})
+        yield label, config
 
 
 def main(bench: BenchConfig) -> list[Measurement]:

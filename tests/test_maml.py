@@ -15,6 +15,7 @@ import train_helpers as H
 from foresit_jax import maml
 from foresit_jax.agent import Agent
 from foresit_jax.networks import ActorCritic
+from foresit_jax.train import Trainer
 
 
 # ---------------------------------------------------------------------- the learned loss
@@ -82,7 +83,8 @@ def _setup(lr=0.05, lanes=16, training=True, never_done=False, **overrides):
 @pytest.fixture(scope="module")
 def adapted_rollout():
     config, agent, env, env_params, params, w_params, actor = _setup()
-    run = jax.jit(lambda p, a, k: maml.adaptive_act(agent, p, w_params, env, env_params, a, k, 30))
+    run = jax.jit(lambda p, a, k: maml.adaptive_act(agent, p, w_params, env, env_params, a, k, 30),
+                  compiler_options=H.FAST_COMPILE)  # fmt: skip
     _, traj, thetas = run(params, actor, jax.random.PRNGKey(5))
     return config, params, traj, thetas
 
@@ -111,12 +113,13 @@ def test_inner_updates_only_after_steps_6_12_18_24_of_running_episodes(adapted_r
 
 
 def test_evaluation_step_13_runs_under_theta_2_recomputed_independently():
-    """An evaluation episode (time limit 100): recompute theta_1 = theta_0 - lr grad L_phi
+    """An evaluation episode (time limit 100; its first 14 steps): recompute theta_1 = theta_0 - lr grad L_phi
     (steps 0-5 under theta_0) and theta_2 (steps 6-11 under theta_1) with flax's own
     modules over the recorded observations, then step 13's logits under
     theta_2; they match the rollout's and differ from theta_0's."""
     config, agent, env, env_params, params, w_params, actor = _setup(lr=5.0, lanes=4, training=False, never_done=True)
-    run = jax.jit(lambda p, a, k: maml.adaptive_act(agent, p, w_params, env, env_params, a, k, 40))
+    run = jax.jit(lambda p, a, k: maml.adaptive_act(agent, p, w_params, env, env_params, a, k, 14),
+                  compiler_options=H.FAST_COMPILE)  # fmt: skip
     _, traj, thetas = run(params, actor, jax.random.PRNGKey(6))
     assert bool(np.all(np.asarray(traj.valid)[:14]))  # every lane still in its episode at step 13
     lane = 1
@@ -156,26 +159,32 @@ def test_evaluation_step_13_runs_under_theta_2_recomputed_independently():
     jax.tree.map(lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-4, atol=1e-6), mine, theta_2)
 
 
-def test_agent_rollout_adapts_through_the_same_code_path():
-    """Evaluation (`Agent.rollout`) runs adaptive_act: equal trajectories on one key."""
+def test_agent_rollout_adapts_through_the_same_code_path(monkeypatch):
+    """Evaluation (`Agent.rollout`) and training (`Agent.act`) both run adaptive_act (traced
+    only: what is compiled is what is traced); packed windows are refused."""
     config, agent, env, env_params, params, w_params, actor = _setup(lanes=4, training=False)
+    calls = []
+    real = maml.adaptive_act
+
+    def spy(*args, **kwargs):
+        calls.append(args[7])  # num_steps
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(maml, "adaptive_act", spy)
     key = jax.random.PRNGKey(7)
-    traj = jax.jit(lambda p: agent.rollout(p, w_params, env, env_params, key, 0.0, 20, num_lanes=4))(params)
-    k_start, k_act = jax.random.split(key)
-    start = agent.start(k_start, env, env_params, 4)
-    _, direct, _ = jax.jit(
-        lambda p: maml.adaptive_act(agent, p, w_params, env, env_params, start, k_act, 20,
-                                    noise_variance=jnp.zeros(4), record_inputs=False)  # fmt: skip
-    )(params)
-    H.assert_trees_bitwise_equal(traj.logits, direct.logits)
+    traj = jax.eval_shape(lambda p: agent.rollout(p, w_params, env, env_params, key, 0.0, 20, num_lanes=4), params)
+    assert calls == [20] and traj.logits.shape == (20, 4, 6)
+    jax.eval_shape(lambda p: agent.act(p, w_params, env, env_params, actor, key, 30, whole_episodes=True), params)
+    assert calls == [20, 30]
     with pytest.raises(ValueError, match="whole episodes"):
-        agent.act(params, w_params, env, env_params, start, key, 5)  # packed windows: refused
+        agent.act(params, w_params, env, env_params, actor, key, 5)  # packed windows: refused
 
 
 # ---------------------------------------------------------------------- the meta-gradient
 def _meta_objective(first_order: bool):
-    """A smooth function of a whole adapted episode, J(theta_0, phi) = sum of fixed random
-    weights times every valid step's logits and states. (The A3C loss itself holds
+    """A smooth function of an adapted episode's first 13 steps (inner updates after steps
+    6 and 12), J(theta_0, phi) = sum of fixed random weights times every valid step's
+    logits and states. (The A3C loss itself holds
     stop-gradients, the advantage's, so its gradient is not the derivative of its value;
     the trainer differentiates it through the same adaptive rollout.)"""
     config = H.tiny_config("a3c+maml", maml_inner_lr=0.5, maml_first_order=first_order, num_lanes=3)
@@ -191,21 +200,23 @@ def _meta_objective(first_order: bool):
     f64 = lambda x: x.astype(jnp.float64)  # noqa: E731  the agent's own carries, in float64
     actor = actor._replace(lstm=jax.tree.map(f64, actor.lstm), prev_probs=f64(actor.prev_probs),
                            imagined=f64(actor.imagined), s_0=f64(actor.s_0))  # fmt: skip
-    w_logits = jnp.asarray(rng.standard_normal((30, 3, 6)))
-    w_states = jnp.asarray(rng.standard_normal((30, 3, config.hidden_size)))
+    steps = 13
+    w_logits = jnp.asarray(rng.standard_normal((steps, 3, 6)))
+    w_states = jnp.asarray(rng.standard_normal((steps, 3, config.hidden_size)))
 
     def objective(p):
-        _, traj, _ = maml.adaptive_act(agent, p, w_params, env, env_params, actor, jax.random.PRNGKey(11), 30,
+        _, traj, _ = maml.adaptive_act(agent, p, w_params, env, env_params, actor, jax.random.PRNGKey(11), steps,
                                        record_inputs=False)  # fmt: skip
         valid = traj.valid[..., None]
         return jnp.sum(jnp.where(valid, traj.logits * w_logits, 0.0)) + jnp.sum(jnp.where(valid, traj.states * w_states, 0.0))
 
-    return jax.jit(objective), jax.jit(jax.value_and_grad(objective)), params
+    return jax.jit(jax.value_and_grad(objective), compiler_options=H.FAST_COMPILE), params
 
 
 def test_meta_gradient_matches_finite_differences_and_has_its_second_order_term():
     with jax.experimental.enable_x64():
-        objective, value_and_grad, params = _meta_objective(first_order=False)
+        value_and_grad, params = _meta_objective(first_order=False)
+        objective = lambda p: value_and_grad(p)[0]  # noqa: E731  (one compiled program)
         value, grads = value_and_grad(params)
         assert grads["params"]["encoder"]["lstm"]["hi"]["kernel"].dtype == jnp.float64
         rng = np.random.default_rng(0)
@@ -224,7 +235,7 @@ def test_meta_gradient_matches_finite_differences_and_has_its_second_order_term(
             assert abs(analytic) > 1e-6
         # First-order MAML stops the inner gradient's gradient: phi gets none, and theta_0's
         # gradient changes (the second-order term is really there).
-        _, first_value_and_grad, _ = _meta_objective(first_order=True)
+        first_value_and_grad, _ = _meta_objective(first_order=True)
         first_value, first_grads = first_value_and_grad(params)
         np.testing.assert_allclose(float(first_value), float(value), rtol=1e-12)
         phi_norm = lambda g: float(sum(jnp.sum(x**2) for x in jax.tree.leaves(g["params"]["learned_loss"])))  # noqa: E731
@@ -241,3 +252,32 @@ def test_config_requires_whole_episodes_through_the_rollout():
     config = H.tiny_config("a3c+maml+foresit")
     assert (config.rollout, config.gradient) == ("episodes", "through_rollout")
     assert dataclasses.replace(config, maml_first_order=True).maml_first_order
+
+
+# ---------------------------------------------------------------------- training
+@pytest.mark.parametrize("method", ["a3c+maml", "a3c+maml+foresit"])
+def test_maml_methods_train_without_nan_and_phi_learns(method):
+    config = H.tiny_config(method)
+    state, metrics = H.init_and_run(config, 0, 2)
+    H.assert_tree_finite(state)
+    H.assert_tree_finite(metrics)
+    init = H.jitted_init(config)(jax.random.PRNGKey(0))
+    # The meta-gradient reaches phi (through the inner updates) and the optimiser moves it.
+    assert not H.trees_bitwise_equal(state.params["params"]["learned_loss"], init.params["params"]["learned_loss"])
+    assert float(np.min(metrics["charts/useful_fraction"])) < 1.0  # whole, padded episodes
+
+
+@pytest.mark.timeout(400)
+def test_maml_training_on_an_easy_setting_raises_the_success_rate():
+    """As the a3c easy-setting test (one bathroom, starts within 3 actions), with SAVN's
+    inner loop in every training episode."""
+    config = H.tiny_config("a3c+maml", num_lanes=8, hidden_size=64, attention_size=64, value_hidden=64,
+                           imagination_layer_sizes=(64, 32, 16, 32, 64, 64), learning_rate=5e-3)  # fmt: skip
+    env, env_params = H.bathroom_env()
+    trainer = Trainer(config, env, H.easy_env_params(env_params))
+    state = jax.jit(trainer.init)(jax.random.PRNGKey(0))
+    _, metrics = jax.jit(trainer.run, static_argnums=2)(state, trainer.env_params, 150)
+    success = np.asarray(metrics["charts/success_rate"])
+    first, last = success[:20].mean(), success[-20:].mean()
+    assert last > 0.5 and last > first + 0.25, (first, last)
+    assert float(np.max(metrics["losses/grad_norm"])) > 0
