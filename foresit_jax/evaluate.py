@@ -86,6 +86,18 @@ def random_policy_rollout(env, env_params, key: chex.PRNGKey, episodes: int, num
     return EpisodeOutcomes(success.any(0), acted.sum(0, dtype=jnp.int32), optimal[0], ~alive)
 
 
+# Episodes evaluated at once by methods that adapt a copy of the parameters per episode
+# (maml): at `quick` sizes a copy is ~1.6M floats, and the inner loop holds about three.
+MAX_ADAPTIVE_LANES = 50
+
+
+def lanes_per_group(episodes: int, max_lanes: int | None) -> int:
+    """The largest divisor of `episodes` that is at most `max_lanes` (all of them: None)."""
+    if max_lanes is None or episodes <= max_lanes:
+        return episodes
+    return max(d for d in range(1, max_lanes + 1) if episodes % d == 0)
+
+
 class Evaluator:
     """The environment, scene banks and compiled rollouts that evaluate agents of one setup.
 
@@ -113,15 +125,30 @@ class Evaluator:
         return self.params[(split, room)]
 
     def agent_rollout(self, config: Config, num_steps: int, greedy: bool):
-        """Jitted (params, w_params, env_params, key, sigma2 [N]) -> EpisodeOutcomes [N]."""
+        """Jitted (params, w_params, env_params, key, sigma2 [N]) -> EpisodeOutcomes [N].
+
+        The maml base keeps a copy of the parameters per episode (its inner loop adapts
+        each one): its episodes run in groups of at most `MAX_ADAPTIVE_LANES` (`lax.map`),
+        so that memory does not grow with the number of evaluation episodes."""
         key = ("agent", config, num_steps, greedy)
         if key not in self.compiled:
             agent, env = Agent(config), self.env
 
-            def run(params, w_params, env_params, key, sigma2):
+            def run_group(params, w_params, env_params, key, sigma2):
                 traj = agent.rollout(params, w_params, env, env_params, key, sigma2, num_steps, greedy)
                 stats = episode_stats(traj)
                 return EpisodeOutcomes(stats.success, stats.length, stats.optimal_length, stats.ended)
+
+            def run(params, w_params, env_params, key, sigma2):
+                episodes = sigma2.shape[0]
+                group = lanes_per_group(episodes, MAX_ADAPTIVE_LANES if config.pieces.base == "maml" else None)
+                if group == episodes:
+                    return run_group(params, w_params, env_params, key, sigma2)
+                keys = jax.random.split(key, episodes // group)
+                out = jax.lax.map(
+                    lambda xs: run_group(params, w_params, env_params, *xs), (keys, sigma2.reshape(-1, group))
+                )
+                return jax.tree.map(lambda x: x.reshape(episodes, *x.shape[2:]), out)
 
             self.compiled[key] = jax.jit(run)
         return self.compiled[key]

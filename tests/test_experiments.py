@@ -327,7 +327,7 @@ def test_demo_oracle_plays_the_random_policys_episodes():
 
 # ---------------------------------------------------------------------- one-line errors
 TRAIN_ERRORS = [
-    (["--method", "bogus"], ["unknown method 'bogus'", "a3c, a3c+foresit, a3c+rnd, a3c+att, a3c+int, a3c+org"]),
+    (["--method", "bogus"], ["unknown method 'bogus'", "a3c, a3c+foresit, a3c+rnd, a3c+att, a3c+int, a3c+maml"]),
     (["--method", "a3c+maml+org"], ["needs setup 'org'"]),
     (["--method", "a3c+org+foresit"], ["needs setup 'org'"]),
     (["--setup", "thor"], ["setup must be one of"]),
