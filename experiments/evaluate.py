@@ -30,9 +30,9 @@ class Args:
     """The model selected on validation (best) or the last checkpoint (last)."""
     episodes_per_room: Optional[int] = None
     """Episodes per room type (default: the run's test_episodes_per_room, 250 in the paper)."""
-    greedy: Optional[bool] = None
-    """Take the most likely action (--greedy) or sample (--no-greedy); default: the method's
-    own protocol (SAVN samples, ORG takes the argmax)."""
+    actions: Literal["method", "greedy", "sampled"] = "method"
+    """How actions are chosen: the method's own protocol (SAVN samples, ORG takes the
+    argmax), or greedy (argmax) or sampled for any method."""
     seed: int = 0
     """Evaluation seed."""
     overwrite: bool = False
@@ -53,8 +53,9 @@ def main(args: Args) -> dict:
     if episodes < 1:
         raise runs.UserError(f"--episodes-per-room must be >= 1, got {episodes}")
     # The method's own protocol (sampled; greedy for ORG) writes the plain file names.
-    mode = {None: "", True: "_greedy", False: "_sampled"}[args.greedy]
-    suffix = "" if (args.which, args.greedy) == ("best", None) else f"_{args.which}" + mode
+    greedy = {"method": None, "greedy": True, "sampled": False}[args.actions]
+    mode = "" if args.actions == "method" else f"_{args.actions}"
+    suffix = "" if (args.which, args.actions) == ("best", "method") else f"_{args.which}" + mode
     out_json = args.run / f"results_{args.split}{suffix}.json"
     if out_json.exists() and not args.overwrite:
         raise runs.UserError(f"{out_json} exists; pass --overwrite to replace it")
@@ -71,7 +72,7 @@ def main(args: Args) -> dict:
         chosen = runs.restore(manager, step, like)
     else:
         chosen = agent_params(runs.restore(manager, step, like_state), config.sigma2_max)
-    results = evaluate(chosen, config, args.split, jax.random.PRNGKey(args.seed), episodes, greedy=args.greedy)
+    results = evaluate(chosen, config, args.split, jax.random.PRNGKey(args.seed), episodes, greedy=greedy)
     runs.write_json(out_json, {"selected_update": step, "which": args.which, "results": results})
     results = runs.jsonable(results)  # as written: an empty L>=5 bucket is None (JSON null)
     title = f"{config.method}, seed {info['seed']}: {args.split} split ({args.which} model, update {step})"

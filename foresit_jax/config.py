@@ -117,19 +117,13 @@ class Config:
                 f"method {self.method!r} needs setup {pieces.required_setup!r} (its {pieces.encoder!r} "
                 f"encoder reads the detector features), got setup {self.setup!r}."
             )
-        if self.rollout not in ROLLOUTS:
-            raise ValueError(f"rollout must be one of {ROLLOUTS}, got {self.rollout!r}.")
-        if self.rollout not in pieces.rollouts:
-            raise ValueError(
-                f"method {self.method!r} supports rollout {pieces.rollouts}, not {self.rollout!r} "
-                f"(set rollout='episodes', gradient='through_rollout' and num_steps >= the time limit)."
-            )
-        if self.gradient not in GRADIENTS:
-            raise ValueError(f"gradient must be one of {GRADIENTS}, got {self.gradient!r}.")
-        if self.gradient not in pieces.gradients:
-            raise ValueError(
-                f"method {self.method!r} supports gradient {pieces.gradients}, not {self.gradient!r}."
-            )
+        for name, valid, supported in (("rollout", ROLLOUTS, pieces.rollouts), ("gradient", GRADIENTS, pieces.gradients)):
+            value = getattr(self, name)
+            if value not in valid:
+                raise ValueError(f"{name} must be one of {valid}, got {value!r}.")
+            if value not in supported:
+                needs = ", ".join(f"{k}={v!r}" for k, v in pieces.required_config.items())
+                raise ValueError(f"method {self.method!r} supports {name} {supported}, not {value!r} (it needs {needs}).")
         if self.imagination_optimizer not in IMAGINATION_OPTIMIZERS:
             raise ValueError(
                 f"imagination_optimizer must be one of {IMAGINATION_OPTIMIZERS}, "

@@ -415,6 +415,9 @@ def test_evaluate_cli_reproduces_the_test_results_of_training(finished_run, tmp_
     last = evaluate_cli.main(evaluate_cli.Args(run=out, which="last", split="val", episodes_per_room=2))
     assert set(last) == {"bathroom", "overall"} and last["overall"]["episodes"] == 2
     assert (out / "results_val_last.json").exists() and (out / "results_val_last.md").exists()
+    # Another protocol than the method's own, from the command line, to its own files.
+    evaluate_cli.cli(["--run", str(out), "--split", "val", "--episodes-per-room", "2", "--actions", "greedy"])
+    assert (out / "results_val_best_greedy.json").exists()
 
 
 # ---------------------------------------------------------------------- the README

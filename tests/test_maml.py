@@ -15,7 +15,6 @@ import train_helpers as H
 from foresit_jax import maml
 from foresit_jax.agent import Agent
 from foresit_jax.networks import ActorCritic
-from foresit_jax.train import Trainer
 
 
 # ---------------------------------------------------------------------- the learned loss
@@ -273,12 +272,7 @@ def test_maml_training_on_an_easy_setting_raises_the_success_rate():
     inner loop in every training episode."""
     config = H.tiny_config("a3c+maml", num_lanes=8, hidden_size=64, attention_size=64, value_hidden=64,
                            imagination_layer_sizes=(64, 32, 16, 32, 64, 64), learning_rate=5e-3)  # fmt: skip
-    env, env_params = H.bathroom_env()
-    trainer = Trainer(config, env, H.easy_env_params(env_params))
-    state = jax.jit(trainer.init)(jax.random.PRNGKey(0))
-    final, metrics = jax.jit(trainer.run, static_argnums=2)(state, trainer.env_params, 150)
-    success = np.asarray(metrics["charts/success_rate"])
-    first, last = success[:20].mean(), success[-20:].mean()
+    state, final, first, last = H.easy_setting_run(config, *H.bathroom_env())
     assert last > 0.5 and last > first + 0.25, (first, last)
     H.assert_tree_finite(final)
     assert not H.trees_bitwise_equal(final.params["params"]["learned_loss"], state.params["params"]["learned_loss"])

@@ -15,7 +15,6 @@ import pytest
 
 import train_helpers as H
 from foresit_jax import imagination
-from foresit_jax.train import Trainer
 
 FORESIT = H.tiny_config("a3c+foresit")
 
@@ -232,12 +231,7 @@ def test_object_graph_training_on_an_easy_org_setting_raises_the_success_rate():
         "a3c+org", setup="org", num_lanes=16, hidden_size=64, attention_size=64, value_hidden=64,
         imagination_layer_sizes=(64, 32, 16, 32, 64, 64), learning_rate=5e-3,
     )  # fmt: skip
-    env, env_params = H.org_bathroom_env()
-    trainer = Trainer(config, env, H.easy_env_params(env_params))
-    state = jax.jit(trainer.init)(jax.random.PRNGKey(0))
-    _, metrics = jax.jit(trainer.run, static_argnums=2)(state, trainer.env_params, 150)
-    success = np.asarray(metrics["charts/success_rate"])
-    first, last = success[:20].mean(), success[-20:].mean()
+    _, _, first, last = H.easy_setting_run(config, *H.org_bathroom_env())
     assert last > 0.5 and last > first + 0.25, (first, last)
 
 
@@ -277,11 +271,6 @@ def test_training_on_an_easy_setting_raises_the_success_rate():
         "a3c+foresit", num_lanes=16, hidden_size=64, attention_size=64, value_hidden=64,
         imagination_layer_sizes=(64, 32, 16, 32, 64, 64), buffer_size=4, imagination_epochs=5, learning_rate=5e-3,
     )  # fmt: skip
-    env, env_params = H.bathroom_env()
-    trainer = Trainer(config, env, H.easy_env_params(env_params))
-    state = jax.jit(trainer.init)(jax.random.PRNGKey(0))
-    _, metrics = jax.jit(trainer.run, static_argnums=2)(state, trainer.env_params, 150)
-    success = np.asarray(metrics["charts/success_rate"])
-    first, last = success[:20].mean(), success[-20:].mean()
+    _, _, first, last = H.easy_setting_run(config, *H.bathroom_env())
     assert first < 0.3, first
     assert last > 0.5 and last > first + 0.25, (first, last)

@@ -93,6 +93,17 @@ def init_and_run(config: Config, seed: int, num_updates: int):
     return run_updates(config, jitted_init(config)(jax.random.PRNGKey(seed)), num_updates)
 
 
+def easy_setting_run(config: Config, env, env_params, num_updates: int = 150):
+    """Train `config` from seed 0 on the easy version of `env_params` (`easy_env_params`):
+    (initial state, final state, mean training success of the first and of the last 20
+    updates)."""
+    trainer = Trainer(config, env, easy_env_params(env_params))
+    state = jax.jit(trainer.init)(jax.random.PRNGKey(0))
+    final, metrics = jax.jit(trainer.run, static_argnums=2)(state, trainer.env_params, num_updates)
+    success = np.asarray(metrics["charts/success_rate"])
+    return state, final, success[:20].mean(), success[-20:].mean()
+
+
 def easy_env_params(env_params, max_optimal_length: int = 3):
     """An easy setting: one bathroom, one target, starts within `max_optimal_length`
     actions of success (Done included)."""
