@@ -36,7 +36,6 @@ GRADIENTS: tuple[str, ...] = ("replay", "through_rollout")
 ROLLOUTS: tuple[str, ...] = ("packed", "episodes")
 
 
-
 @dataclasses.dataclass(frozen=True)
 class Imagination:
     """An imagination variant: where i_tau comes from, when it is renewed, what f_w learns.
