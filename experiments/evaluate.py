@@ -15,7 +15,7 @@ from typing import Literal, Optional
 import jax
 import tyro
 
-from experiments import runs
+from experiments import runs, selection
 
 
 @dataclasses.dataclass(frozen=True)
@@ -29,12 +29,14 @@ class Args:
     which: Literal["best", "last"] = "best"
     """The model selected on validation (best) or the last checkpoint (last)."""
     episodes_per_room: Optional[int] = None
-    """Episodes per room type (default: the run's test_episodes_per_room, 250 in the paper)."""
+    """Episodes per room type (default: the run's own count for the split: its
+    test_episodes_per_room, 250 in the paper, or its val_episodes_per_room)."""
     actions: Literal["method", "greedy", "sampled"] = "method"
     """How actions are chosen: the method's own protocol (SAVN samples, ORG takes the
     argmax), or greedy (argmax) or sampled for any method."""
-    seed: int = 0
-    """Evaluation seed."""
+    seed: Optional[int] = None
+    """Evaluation seed (default: the run's own keys, so the episodes are those train used:
+    its test episodes on test, the validation episodes of the model's update on val)."""
     overwrite: bool = False
     """Replace existing results files."""
 
@@ -49,7 +51,7 @@ def main(args: Args) -> dict:
         raise runs.UserError(f"--split must be val or test, got {args.split!r}")
     info = runs.read_run_info(args.run)
     config = Config(**info["config"])
-    episodes = info["schedule"]["test_episodes_per_room"] if args.episodes_per_room is None else args.episodes_per_room
+    episodes = info["schedule"][f"{args.split}_episodes_per_room"] if args.episodes_per_room is None else args.episodes_per_room
     if episodes < 1:
         raise runs.UserError(f"--episodes-per-room must be >= 1, got {episodes}")
     # The method's own protocol (sampled; greedy for ORG) writes the plain file names.
@@ -72,7 +74,13 @@ def main(args: Args) -> dict:
         chosen = runs.restore(manager, step, like)
     else:
         chosen = agent_params(runs.restore(manager, step, like_state), config.sigma2_max)
-    results = evaluate(chosen, config, args.split, jax.random.PRNGKey(args.seed), episodes, greedy=greedy)
+    if args.seed is not None:
+        key = jax.random.PRNGKey(args.seed)
+    elif args.split == "test":
+        key = selection.test_key(info["seed"])
+    else:
+        key = selection.validation_key(info["seed"], step)
+    results = evaluate(chosen, config, args.split, key, episodes, greedy=greedy)
     runs.write_json(out_json, {"selected_update": step, "which": args.which, "results": results})
     results = runs.jsonable(results)  # as written: an empty L>=5 bucket is None (JSON null)
     title = f"{config.method}, seed {info['seed']}: {args.split} split ({args.which} model, update {step})"

@@ -22,7 +22,7 @@ import jax
 import numpy as np
 import tyro
 
-from experiments import runs
+from experiments import runs, selection
 from experiments.presets import Schedule, preset
 from experiments.progress import progress_bar
 
@@ -101,7 +101,7 @@ def main(args: Args) -> dict:
     trainer = make_trainer(config)
     env_params = trainer.env_params
     evaluator = Evaluator(config.setup)  # held for the run: validation compiles once
-    state = trainer.init(jax.random.PRNGKey(seed))
+    state = trainer.init(selection.run_key(seed))
     manager = runs.checkpoint_manager(out / "checkpoints", schedule.keep_checkpoints)
     best_manager = runs.checkpoint_manager(out / "best", 1)
     done = 0
@@ -111,8 +111,9 @@ def main(args: Args) -> dict:
         print(f"resuming {out} from update {done}")
     runs.truncate_rows(out / "metrics", done)
     runs.truncate_rows(out / "validation", done)
-    val_history = runs.read_rows(out / "validation")
-    best_sr = max((r["SR"] for r in val_history), default=-1.0)
+    best = selection.Selection()
+    for r in runs.read_rows(out / "validation"):
+        best.offer(r["SR"], r["update"])
 
     run_chunk = jax.jit(trainer.run, static_argnums=2)
     previous_rows = runs.read_rows(out / "metrics")
@@ -137,13 +138,11 @@ def main(args: Args) -> dict:
         done += n
         runs.save(manager, done, state)
         # Model selection on the validation split.
-        key = jax.random.fold_in(jax.random.PRNGKey(seed), done)
-        val = evaluator.evaluate(agent_params(state, config.sigma2_max), config, "val", key, schedule.val_episodes_per_room)
-        row = {"update": done, **val["overall"]}
-        runs.append_rows(out / "validation", [row])
-        if val["overall"]["SR"] > best_sr:
-            best_sr = val["overall"]["SR"]
-            runs.save(best_manager, done, agent_params(state, config.sigma2_max))
+        params = agent_params(state, config.sigma2_max)
+        val = selection.validate(evaluator, params, config, seed, done, schedule.val_episodes_per_room)
+        runs.append_rows(out / "validation", [{"update": done, **val["overall"]}])
+        if best.offer(val["overall"]["SR"], done):
+            runs.save(best_manager, done, params)
         dt = time.time() - t0
         useful = float(np.sum(metrics["frames/useful"]))  # steps that entered the loss
         bar(n, {"useful fps": f"{useful / dt:,.0f}", "SR": f"{metrics['charts/success_rate'].mean():.3f}",
@@ -158,8 +157,8 @@ def main(args: Args) -> dict:
     # Final test evaluation of the model selected on validation.
     best_step = best_manager.latest_step()
     chosen = runs.restore(best_manager, best_step, agent_params(state, config.sigma2_max))
-    test = evaluator.evaluate(chosen, config, "test", jax.random.PRNGKey(seed + 10_000), schedule.test_episodes_per_room)
-    random = evaluator.evaluate_random_policy(config, "test", jax.random.PRNGKey(seed + 10_000), schedule.test_episodes_per_room)
+    test = evaluator.evaluate(chosen, config, "test", selection.test_key(seed), schedule.test_episodes_per_room)
+    random = evaluator.evaluate_random_policy(config, "test", selection.test_key(seed), schedule.test_episodes_per_room)
     runs.write_json(out / "results_test.json", {"selected_update": best_step, "results": test, "random_policy": random})
     title = f"{config.method}, preset {info['preset']}, seed {seed}: test split (model of update {best_step}, best validation SR)"
     report = runs.results_markdown(test, title) + "\n" + runs.results_markdown(random, "Uniformly random policy, same rooms", level=2)

@@ -370,6 +370,40 @@ def test_evaluate_rejects_bad_input_in_one_line(finished_run, tmp_path, capsys):
     assert "--overwrite" in cli_error(evaluate_cli.cli, ["--run", finished_run], capsys)
 
 
+def test_sweep_seed_i_is_the_run_train_makes_with_seed_i(tmp_path):
+    """The same protocol in both: seed i of a sweep starts from train --seed i's key,
+    validates on its episodes after each chunk, selects the same update and tests on the
+    same episodes (equal up to the vmapped program's float rounding, which does not flip
+    an outcome at this size); the last model is tested too.  (Enough episodes that other
+    keys give other numbers: with a test key or a training key off by one, this fails.)"""
+    out, episodes = tmp_path / "sweep", dict(val_episodes_per_room=12, test_episodes_per_room=24)
+    sweep.main(sweep.Args(methods=("a3c+foresit",), seeds=2, preset="tiny", seed=SEED, out=out, progress=False,
+                          **episodes))  # fmt: skip
+    per_seed = json.loads((out / "results_per_seed.json").read_text())["a3c+foresit"]
+    assert [r["seed"] for r in per_seed] == [SEED, SEED + 1]
+    trained = [tmp_path / f"train{i}" for i in range(2)]
+    for i, run in enumerate(trained):
+        train_cli.main(train_cli.Args(method="a3c+foresit", preset="tiny", seed=SEED + i, out=run, progress=False,
+                                      **episodes))  # fmt: skip
+    for r, run in zip(per_seed, trained):
+        mine = json.loads((run / "results_test.json").read_text())
+        assert r["selected_update"] == mine["selected_update"]
+        curve = [row["charts/success_rate"] for row in runs.read_rows(run / "metrics")]
+        np.testing.assert_allclose(r["training_success_rate"], curve, atol=1e-6)  # the same episodes were trained on
+        validation = runs.read_rows(run / "validation")
+        assert [v["update"] for v in r["validation"]] == [v["update"] for v in validation] == [2, 4]
+        np.testing.assert_allclose([v["SR"] for v in r["validation"]], [v["SR"] for v in validation])
+        for col in ("SR", "SPL", "episodes"):
+            assert r["selected"]["overall"][col] == pytest.approx(mine["results"]["overall"][col], abs=1e-3)
+        last = evaluate_cli.main(evaluate_cli.Args(run=run, which="last", overwrite=True))  # on train's test episodes
+        for col in ("SR", "SPL"):
+            assert r["last"]["overall"][col] == pytest.approx(last["overall"][col], abs=1e-3)
+    table = next(csv_rows(out / "table1.csv"))
+    assert float(table["SR mean"]) == pytest.approx(np.mean([r["selected"]["overall"]["SR"] for r in per_seed]))
+    md = (out / "table1.md").read_text()
+    assert "Model selection" in md and f"{SEED}: " in md and f"(update {per_seed[0]['selected_update']})" in md
+
+
 def test_sweep_rejects_bad_input_in_one_line(tmp_path, capsys):
     out = tmp_path / "sweep"
     base = ["--preset", "tiny", "--out", out]
@@ -404,13 +438,16 @@ def test_evaluate_cli_reproduces_the_test_results_of_training(finished_run, tmp_
     out = tmp_path / "run"
     shutil.copytree(finished_run, out)
     trained = json.loads((out / "results_test.json").read_text())
-    # The model selected on validation, loaded from best/, on the same episodes (train
-    # evaluates the test split with PRNGKey(seed + 10_000)).
-    results = evaluate_cli.main(evaluate_cli.Args(run=out, seed=SEED + 10_000, overwrite=True))
+    # The model selected on validation, loaded from best/, on the run's own test episodes.
+    results = evaluate_cli.main(evaluate_cli.Args(run=out, overwrite=True))
     np.testing.assert_equal(results, trained["results"])  # (NaN == NaN here)
     written = json.loads((out / "results_test.json").read_text())
     np.testing.assert_equal(written["results"], trained["results"])
     assert written["which"] == "best"
+    # On val, the validation episodes of the selected model's update: its row again.
+    val = evaluate_cli.main(evaluate_cli.Args(run=out, split="val"))
+    row = next(r for r in runs.read_rows(out / "validation") if r["update"] == trained["selected_update"])
+    assert val["overall"]["episodes"] == row["episodes"] and val["overall"]["SR"] == pytest.approx(row["SR"])
     # The last checkpoint goes to its own files and leaves the others alone.
     last = evaluate_cli.main(evaluate_cli.Args(run=out, which="last", split="val", episodes_per_room=2))
     assert set(last) == {"bathroom", "overall"} and last["overall"]["episodes"] == 2
