@@ -40,6 +40,7 @@ import numpy as np
 import tyro
 
 from envs.gridnav import TRAIN_TIME_LIMIT
+from experiments import runs
 from experiments.presets import preset
 from foresit_jax.methods import parse_method
 from foresit_jax.train import Trainer
@@ -136,6 +137,17 @@ def temp_megabytes(compiled) -> float | None:
         return None
 
 
+def parse_variant(variant: str) -> dict:
+    """One --variants entry: a JSON object of Config fields."""
+    try:
+        extra = json.loads(variant)
+    except json.JSONDecodeError as e:
+        raise ValueError(f"--variants entries must be JSON objects of Config fields, got {variant!r} ({e})") from None
+    if not isinstance(extra, dict):
+        raise ValueError(f"--variants entries must be JSON objects of Config fields, e.g. '{{}}', got {variant!r}")
+    return extra
+
+
 def combinations(bench: BenchConfig):
     """(label, Config) of every combination; a method that supports only some layouts or
     gradient paths (maml: whole episodes through the rollout) runs with its own, once."""
@@ -146,7 +158,7 @@ def combinations(bench: BenchConfig):
         pieces = parse_method(method)
         rollout = rollout if rollout in pieces.rollouts else pieces.rollouts[0]
         gradient = gradient if gradient in pieces.gradients else pieces.gradients[0]
-        extra = json.loads(variant)
+        extra = parse_variant(variant)
         if pieces.base != "maml":  # the maml_* fields change nothing elsewhere: one row
             extra = {k: v for k, v in extra.items() if not k.startswith("maml_")}
         label = f"{method} {rollout} {gradient}" + (f" {variant}" if extra else "")
@@ -169,7 +181,7 @@ def main(bench: BenchConfig) -> list[Measurement]:
         flush=True,
     )
     programs = []
-    for label, config in combinations(bench):
+    for label, config in list(combinations(bench)):  # every config checked before any compile
         trainer = Trainer(config)
         state = jax.block_until_ready(jax.jit(trainer.init)(jax.random.key(bench.seed)))
         start = time.perf_counter()
@@ -220,5 +232,8 @@ def print_table(results: list[Measurement]) -> None:
 
 
 if __name__ == "__main__":
-    main(tyro.cli(BenchConfig))
+    try:
+        main(tyro.cli(BenchConfig))
+    except ValueError as e:
+        runs.fail(str(e))
     sys.exit(0)

@@ -178,7 +178,7 @@ def cli(argv=None) -> None:
     args = tyro.cli(Args, args=argv)
     try:
         main(args)
-    except (runs.UserError, ValueError, NotImplementedError) as e:
+    except (runs.UserError, ValueError) as e:
         runs.fail(str(e))
 
 

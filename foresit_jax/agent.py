@@ -159,15 +159,19 @@ class Agent:
         """f_w([s_0 : g_tau]) `[..., H]`."""
         return self.imagination_net.apply(w_params, s_0, goal)
 
-    def start(self, key, env, env_params, num_lanes: int, memory_size: int = 0, tracker=None) -> ActorState:
+    def start(
+        self, key, env, env_params, num_lanes: int, memory_size: int = 0, tracker=None, reset_keys=None
+    ) -> ActorState:
         """Every lane at the start of a fresh episode. memory_size: states of an episode
         the attention critic can remember across windows (the training time limit; 0 when
         nothing is carried across windows: `memory` is then None). tracker: per-lane success trackers to keep
-        (fresh ones by default)."""
+        (fresh ones by default). reset_keys: `[num_lanes, ...]` the lanes' reset keys
+        (default: `split(key, num_lanes)`)."""
         if isinstance(num_lanes, bool) or not isinstance(num_lanes, int) or num_lanes < 1:
             raise ValueError(f"num_lanes must be a positive int, got {num_lanes!r}")
         cfg = self.config
-        obs, env_state = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(key, num_lanes), env_params)
+        reset_keys = jax.random.split(key, num_lanes) if reset_keys is None else reset_keys
+        obs, env_state = jax.vmap(env.reset, in_axes=(0, None))(reset_keys, env_params)
         hidden = cfg.hidden_size
         zeros = jnp.zeros((num_lanes, hidden), jnp.float32)
         if tracker is None:
@@ -314,10 +318,11 @@ class Agent:
 
     def rollout(
         self, params, w_params, env, env_params, key, noise_variance, num_steps: int, greedy: bool = False,
-        record_inputs: bool = False, num_lanes: Optional[int] = None,
+        record_inputs: bool = False, num_lanes: Optional[int] = None, reset_keys: Optional[chex.Array] = None,
     ) -> Trajectory:  # fmt: skip
         """One whole episode per lane from a fresh start, padded to `num_steps`
-        (evaluation). noise_variance `[B]` (or a scalar with `num_lanes`)."""
+        (evaluation). noise_variance `[B]` (or a scalar with `num_lanes`). The lanes reset
+        with `split(split(key)[0], B)` unless `reset_keys` `[B, ...]` are given."""
         noise_variance = jnp.asarray(noise_variance, jnp.float32)
         if num_lanes is None:
             if noise_variance.ndim != 1:
@@ -325,7 +330,7 @@ class Agent:
             num_lanes = noise_variance.shape[0]
         noise_variance = jnp.broadcast_to(noise_variance, (num_lanes,))
         k_start, k_act = jax.random.split(key)
-        actor = self.start(k_start, env, env_params, num_lanes)
+        actor = self.start(k_start, env, env_params, num_lanes, reset_keys=reset_keys)
         _, traj = self.act(
             params, w_params, env, env_params, actor, k_act, num_steps, greedy=greedy, whole_episodes=True,
             noise_variance=noise_variance, record_inputs=record_inputs,

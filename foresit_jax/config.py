@@ -99,7 +99,9 @@ class Config:
     maml_inner_lr: float = 1e-4
     """Inner SGD step size on the learned loss (SAVN's inner_lr)."""
     maml_first_order: bool = False
-    """Stop the gradient through the inner gradient (first-order MAML); off: exact second order."""
+    """Stop the gradient through the inner gradient (first-order MAML); off: exact second order.
+    First order leaves the learned loss's parameters at their initial values: they get
+    their gradient only through the inner gradient."""
 
     def __post_init__(self):
         # Keep the config hashable (usable as a jit static argument) if given a list.

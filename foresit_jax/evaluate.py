@@ -91,11 +91,13 @@ def random_policy_rollout(env, env_params, key: chex.PRNGKey, episodes: int, num
 MAX_ADAPTIVE_LANES = 50
 
 
-def lanes_per_group(episodes: int, max_lanes: int | None) -> int:
-    """The largest divisor of `episodes` that is at most `max_lanes` (all of them: None)."""
+def group_layout(episodes: int, max_lanes: int | None) -> tuple[int, int]:
+    """(groups, lanes per group): the fewest groups of at most `max_lanes` lanes (no limit:
+    None), as even as can be; groups x lanes may exceed `episodes` by less than a group."""
     if max_lanes is None or episodes <= max_lanes:
-        return episodes
-    return max(d for d in range(1, max_lanes + 1) if episodes % d == 0)
+        return 1, episodes
+    groups = -(-episodes // max_lanes)
+    return groups, -(-episodes // groups)
 
 
 class Evaluator:
@@ -129,26 +131,34 @@ class Evaluator:
 
         The maml base keeps a copy of the parameters per episode (its inner loop adapts
         each one): its episodes run in groups of at most `MAX_ADAPTIVE_LANES` (`lax.map`),
-        so that memory does not grow with the number of evaluation episodes."""
+        so that memory does not grow with the number of evaluation episodes; they are the
+        episodes one rollout of all lanes would play (the same reset keys)."""
         key = ("agent", config, num_steps, greedy)
         if key not in self.compiled:
             agent, env = Agent(config), self.env
 
-            def run_group(params, w_params, env_params, key, sigma2):
-                traj = agent.rollout(params, w_params, env, env_params, key, sigma2, num_steps, greedy)
+            def run_group(params, w_params, env_params, key, sigma2, reset_keys=None):
+                traj = agent.rollout(params, w_params, env, env_params, key, sigma2, num_steps, greedy,
+                                     reset_keys=reset_keys)  # fmt: skip
                 stats = episode_stats(traj)
                 return EpisodeOutcomes(stats.success, stats.length, stats.optimal_length, stats.ended)
 
             def run(params, w_params, env_params, key, sigma2):
                 episodes = sigma2.shape[0]
-                group = lanes_per_group(episodes, MAX_ADAPTIVE_LANES if config.pieces.base == "maml" else None)
-                if group == episodes:
+                groups, group = group_layout(episodes, MAX_ADAPTIVE_LANES if config.pieces.base == "maml" else None)
+                if groups == 1:
                     return run_group(params, w_params, env_params, key, sigma2)
-                keys = jax.random.split(key, episodes // group)
-                out = jax.lax.map(
-                    lambda xs: run_group(params, w_params, env_params, *xs), (keys, sigma2.reshape(-1, group))
-                )
-                return jax.tree.map(lambda x: x.reshape(episodes, *x.shape[2:]), out)
+                # The episodes are those of one rollout of all lanes (its reset keys), so
+                # every method and the random policy play the same ones; the groups pad
+                # with repeats of the first episodes, dropped afterwards.
+                k_start, k_act = jax.random.split(key)
+                pad = groups * group - episodes
+                reset = jax.random.split(k_start, episodes)
+                reset = jnp.concatenate([reset, reset[:pad]]).reshape(groups, group, *reset.shape[1:])
+                sigma2 = jnp.concatenate([sigma2, sigma2[:pad]]).reshape(groups, group)
+                out = jax.lax.map(lambda xs: run_group(params, w_params, env_params, *xs),
+                                  (jax.random.split(k_act, groups), sigma2, reset))  # fmt: skip
+                return jax.tree.map(lambda x: x.reshape(groups * group, *x.shape[2:])[:episodes], out)
 
             self.compiled[key] = jax.jit(run)
         return self.compiled[key]

@@ -45,8 +45,9 @@ Choices where SAVN's code leaves one open or where ours differs, each with its r
   clipping), shared with every other method so that comparisons differ in the method
   only; SAVN's SharedAdam (AMSGrad, eps 1e-3, no clipping) is not reproduced.
 * Lanes are SAVN's workers: each lane adapts its own copy of the parameters (they are
-  vmapped over lanes), and one meta-update averages the lanes' episode losses (the
-  synchronous stand-in for SAVN's asynchronous one-episode gradients).
+  vmapped over lanes), and one meta-update takes the A3C loss's mean over all lanes'
+  valid steps (the synchronous stand-in for SAVN's asynchronous one-episode gradients;
+  a longer episode weighs more, as in the other methods' whole-episode updates).
 """
 
 from __future__ import annotations
@@ -124,8 +125,9 @@ def inner_step(params, grads, lr: float, apply: chex.Array = True):
 
 def update_steps(num_steps: int, segment: int, max_updates: int) -> tuple[int, ...]:
     """The episode steps after which an inner update may happen within `num_steps` steps:
-    (6, 12, 18, 24) for SAVN's segment 6 and 4 updates."""
-    return tuple(segment * (i + 1) for i in range(max_updates) if segment * (i + 1) <= num_steps)
+    (6, 12, 18, 24) for SAVN's segment 6 and 4 updates; none after the last step (its
+    parameters would act no more)."""
+    return tuple(segment * (i + 1) for i in range(max_updates) if segment * (i + 1) < num_steps)
 
 
 def _per_lane(tree):

@@ -3,6 +3,7 @@ and the table reports the useful share the run's own metrics give (no timed asse
 timings belong to the benchmark itself)."""
 
 import numpy as np
+import pytest
 
 import train_helpers as H
 from experiments import bench_train as B
@@ -23,3 +24,9 @@ def test_bench_train_runs_every_combination_and_counts_useful_frames(monkeypatch
     assert 0 < episodes.useful_frames < episodes.stepped_frames == 2 * 30 * 2  # padding is stepped, not useful
     assert all(np.isfinite([m.best_s, m.compile_s, m.env_s]).all() for m in results)
     assert "| a3c packed replay | 2 | 8 |" in out and "100%" in out
+
+
+@pytest.mark.parametrize("variant", ["{maml_first_order: true}", "[1]", "3"])
+def test_a_variant_that_is_not_a_json_object_is_refused_before_any_compile(variant):
+    with pytest.raises(ValueError, match="--variants entries must be JSON objects"):
+        B.main(B.BenchConfig(preset="tiny", methods=("a3c",), variants=("{}", variant)))

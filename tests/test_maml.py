@@ -63,6 +63,7 @@ def test_update_slots_are_savns():
     assert maml.update_steps(200, 6, 4) == (6, 12, 18, 24)
     assert maml.update_steps(14, 6, 4) == (6, 12)
     assert maml.update_steps(30, 6, 0) == ()
+    assert maml.update_steps(24, 6, 4) == (6, 12, 18)  # none after the last step: nothing would act under it
 
 
 # ---------------------------------------------------------------------- the inner loop
@@ -279,22 +280,37 @@ def test_maml_training_on_an_easy_setting_raises_the_success_rate():
 
 
 def test_maml_evaluation_runs_its_episodes_in_groups(monkeypatch):
+    """Groups of at most MAX_ADAPTIVE_LANES episodes (the last padded), playing the
+    episodes one rollout of all lanes plays: those of every other method and of the
+    random policy with the same key."""
     import importlib
 
     ev = importlib.import_module("foresit_jax.evaluate")  # the module (the package exports the function)
 
-    assert ev.lanes_per_group(250, 50) == 50 and ev.lanes_per_group(25, 50) == 25
-    assert ev.lanes_per_group(7, 5) == 1 and ev.lanes_per_group(12, None) == 12
+    assert ev.group_layout(250, 50) == (5, 50) and ev.group_layout(25, 50) == (1, 25)
+    assert ev.group_layout(7, 5) == (2, 4) and ev.group_layout(53, 50) == (2, 27) and ev.group_layout(12, None) == (1, 12)
     monkeypatch.setattr(ev, "MAX_ADAPTIVE_LANES", 2)
-    config, agent, env, env_params, params, w_params, actor = _setup(lanes=4, training=False)
+    config, agent, env, env_params, params, w_params, actor = _setup(lanes=5, training=False)
     evaluator = ev.Evaluator(config.setup)
     run = evaluator.agent_rollout(config, 8, False)
     room = evaluator.room_params("val", "bathroom")
-    outcomes = run(params, w_params, room, jax.random.PRNGKey(0), jnp.zeros(4))
-    # Two groups of two episodes, group g from the g-th split of the key.
-    group = jax.jit(lambda k: ev.episode_stats(agent.rollout(params, w_params, evaluator.env, room, k, 0.0, 8, num_lanes=2)),
+    key = jax.random.PRNGKey(0)
+    outcomes = run(params, w_params, room, key, jnp.zeros(5))  # 3 groups of 2, one lane of padding
+    assert outcomes.length.shape == (5,)
+    # The same episodes as the random policy's (and any one-group rollout's) with this key:
+    # the same starts, so the same optimal lengths.
+    random = ev.random_policy_rollout(evaluator.env, room, key, 5, 8)
+    np.testing.assert_array_equal(outcomes.optimal_length, random.optimal_length)
+    assert len(set(np.asarray(random.optimal_length).tolist())) > 1  # (distinct episodes: the check can fail)
+    # Group g: one rollout of its lanes' reset keys, acting with the g-th split of the key.
+    k_start, k_act = jax.random.split(key)
+    reset = jax.random.split(k_start, 5)
+    group = jax.jit(lambda k, r: ev.episode_stats(agent.rollout(params, w_params, evaluator.env, room, k, 0.0, 8,
+                                                                num_lanes=r.shape[0], reset_keys=r)),
                     compiler_options=H.FAST_COMPILE)  # fmt: skip
-    for g, k in enumerate(jax.random.split(jax.random.PRNGKey(0), 2)):
-        stats = group(k)
-        np.testing.assert_array_equal(outcomes.length[2 * g : 2 * g + 2], stats.length)
-        np.testing.assert_array_equal(outcomes.optimal_length[2 * g : 2 * g + 2], stats.optimal_length)
+    for g, k in enumerate(jax.random.split(k_act, 3)):
+        lanes = slice(2 * g, min(2 * g + 2, 5))
+        stats = group(k, jnp.concatenate([reset, reset[:1]])[2 * g : 2 * g + 2])
+        n = lanes.stop - lanes.start
+        np.testing.assert_array_equal(outcomes.length[lanes], stats.length[:n])
+        np.testing.assert_array_equal(outcomes.success[lanes], stats.success[:n])
