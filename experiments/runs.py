@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
 import shutil
 import sys
 from pathlib import Path
@@ -100,8 +101,12 @@ def to_json(x, indent: int | None = None) -> str:
 
 
 def write_json(path: Path, x) -> None:
-    """`x` as strict, indented JSON (NaN as null)."""
-    Path(path).write_text(to_json(x, indent=2))
+    """`x` as strict, indented JSON (NaN as null), written atomically (a killed program
+    leaves the old file or the new one, never half of one)."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(to_json(x, indent=2))
+    os.replace(tmp, path)
 
 
 # ---------------------------------------------------------------------- metrics files

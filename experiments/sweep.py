@@ -1,6 +1,7 @@
 """Seed sweep: `python -m experiments.sweep --methods a3c a3c+foresit --seeds 5 --preset quick`.
 
-Each method's seeds run vmapped inside one jitted program (in chunks, for progress).  The
+Each method's seeds run vmapped inside one jitted program (in chunks, for progress), spread
+over the local devices along the seed axis (experiments.devices).  The
 protocol is `train`'s (experiments.selection): seed i of the sweep is seed `--seed + i`,
 initialised from the key `train --seed <seed + i>` uses; after each chunk each seed is
 validated on the episodes that run would validate on, and the model with the best
@@ -8,8 +9,9 @@ validation SR is the one tested, on that run's test episodes.  So a seed's numbe
 those of its `train` run, up to the float rounding of a vmapped program (the batched
 matmuls differ in the last bits).  The last model is tested too, for comparison.
 
-Written: the paper's Table 1 layout (SPL, SR, SPL>=5, SR>=5, mean +- std over seeds) of the
-selected models as Markdown and CSV, the selected and last models' SR per seed, every
+Written: the paper's Table 1 layout (SPL, SR, SPL>=5, SR>=5: mean, sample std and 95%
+confidence interval over seeds) of the selected models as Markdown and CSV, every method
+against the first one paired seed by seed (difference, interval, p), the selected and last models' SR per seed, every
 seed's results, validation history and training curve (JSON), and one learning-curve PNG of every method
 (mean and band over seeds).
 """
@@ -17,6 +19,7 @@ seed's results, validation history and training curve (JSON), and one learning-c
 from __future__ import annotations
 
 import dataclasses
+import json
 import sys
 import time
 from pathlib import Path
@@ -27,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 import tyro
 
-from experiments import runs, selection
+from experiments import devices, runs, selection, stats
 from experiments.presets import preset
 from experiments.progress import progress_bar
 from experiments.tables import markdown_table, write_csv
@@ -51,6 +54,9 @@ class Args:
     """Base seed: seed i of a method is the run `train --seed <seed + i>` would make."""
     out: Path = Path("runs/sweep")
     """Output folder."""
+    resume: bool = False
+    """Continue the sweep in --out where it stopped, with the arguments it was started
+    with (finished methods are kept, a started one continues from its last checkpoint)."""
     overwrite: bool = False
     """Replace an existing sweep in --out."""
     num_updates: Optional[int] = None
@@ -59,6 +65,8 @@ class Args:
     """Override the preset's test episodes per room type."""
     val_episodes_per_room: Optional[int] = None
     """Override the preset's validation episodes per room type."""
+    stop_after_chunks: Optional[int] = None
+    """Stop (as if killed) after this many chunks of this invocation; for testing --resume."""
     progress: bool = True
     """Show the progress bar."""
 
@@ -75,70 +83,128 @@ def method_schedule(method: str, args: Args):
     return config, dataclasses.replace(schedule, **{k: v for k, v in sched.items() if v is not None})
 
 
-def run_method(method: str, args: Args, bar, evaluator) -> tuple[list[dict], np.ndarray, np.ndarray]:
+def run_method(method: str, args: Args, bar, evaluator, folder: Path, budget: list) -> tuple | None:
     """Train `args.seeds` seeds of one method vmapped, selecting each seed's model on
     validation after each chunk; returns (per seed: seed, selected update, test results of
-    the selected and of the last model, validation history; updates [n]; training success
-    rate [seeds, n]).  `evaluator` (a foresit_jax Evaluator of the sweep's setup) runs the
-    validation and test episodes.  Each seed's training success rate per update is in
-    its results too."""
+    the selected and of the last model, validation history, training success rate per
+    update; updates [n]; training success rate [seeds, n]), or None when `budget` (chunks
+    this invocation may still run, a one-item list, or [None]) ran out first.
+
+    `folder` keeps the method's progress: after each chunk an orbax checkpoint of the
+    seeds' training states and selected models, then `progress.json` (updates done,
+    validation history, curves); at the end `results.json`.  A finished method is read
+    back; a started one continues from its last checkpoint, bit for bit."""
     from foresit_jax.evaluate import agent_params
     from foresit_jax.train import make_trainer
 
+    if (folder / "results.json").exists():
+        done = json.loads((folder / "results.json").read_text())
+        bar(done["updates"], {"method": method})
+        return done["results"], np.arange(1, done["updates"] + 1), np.array(done["curves"], float)
     config, schedule = method_schedule(method, args)
     seeds = seeds_of(args)
     trainer = make_trainer(config)
     env_params = trainer.env_params
+    mesh = devices.seed_mesh(len(seeds))
     states = jax.vmap(trainer.init)(jnp.stack([selection.run_key(s) for s in seeds]))
-    run = jax.jit(jax.vmap(trainer.run, in_axes=(0, None, None)), static_argnums=2)
-    best = [selection.Selection() for _ in seeds]
-    history: list[list[dict]] = [[] for _ in seeds]
-    curves, done = [], 0
+    seed_params_of = jax.vmap(lambda s: agent_params(s, config.sigma2_max))
+    best_params = seed_params_of(states)  # the selected models, stacked over seeds
+    manager = runs.checkpoint_manager(folder / "checkpoints", 2)
+    progress = {"done": 0, "best_sr": [-1.0] * len(seeds), "best_update": [None] * len(seeds),
+                "history": [[] for _ in seeds], "curves": []}  # fmt: skip
+    if (folder / "progress.json").exists():
+        progress = json.loads((folder / "progress.json").read_text())
+        restored = runs.restore(manager, progress["done"], {"states": states, "best": best_params})
+        states, best_params = restored["states"], restored["best"]
+        bar(progress["done"], {"method": method})
+    states = devices.shard_seeds(states, mesh)
+    best = [selection.Selection(sr, update, devices.seed_slice(best_params, i))
+            for i, (sr, update) in enumerate(zip(progress["best_sr"], progress["best_update"]))]  # fmt: skip
+    run = trainer.run_seeds
+    done, history = progress["done"], progress["history"]
     while done < config.num_updates:
+        if budget[0] is not None and budget[0] <= 0:
+            return None
         n = min(schedule.chunk_updates, config.num_updates - done)
         states, metrics = run(states, env_params, n)
         metrics = jax.tree.map(np.asarray, metrics)  # [seeds, n]
         loss = metrics["losses/total_loss"]
         if not np.isfinite(loss).all():
             seed, update = np.argwhere(~np.isfinite(loss))[0]
-            runs.fail(f"{method}: non-finite loss at update {done + update + 1} of seed {seed}; sweep stopped", 1)
-        curves.append(metrics["charts/success_rate"])
+            runs.fail(f"{method}: non-finite loss at update {done + update + 1} of seed {seeds[seed]}; sweep stopped "
+                      f"(its last good checkpoint, update {done}, is kept in {folder})", 1)  # fmt: skip
+        progress["curves"].append(metrics["charts/success_rate"].tolist())
         done += n
+        seed_params = seed_params_of(states)
         for i, seed in enumerate(seeds):  # model selection, as train does
-            params = jax.device_get(agent_params(jax.tree.map(lambda x: x[i], states), config.sigma2_max))
+            params = devices.seed_slice(seed_params, i)
             val = selection.validate(evaluator, params, config, seed, done, schedule.val_episodes_per_room)
             history[i].append({"update": done, **val["overall"]})
             best[i].offer(val["overall"]["SR"], done, params)
+        best_params = jax.tree.map(lambda *x: np.stack(x), *[b.params for b in best])
+        runs.save(manager, done, {"states": states, "best": best_params})
+        progress.update(done=done, best_sr=[b.sr for b in best], best_update=[b.update for b in best])
+        runs.write_json(folder / "progress.json", progress)
+        if budget[0] is not None:
+            budget[0] -= 1
         val_sr = np.mean([h[-1]["SR"] for h in history])
         bar(n, {"method": method, "SR": f"{metrics['charts/success_rate'].mean():.3f}", "val SR": f"{val_sr:.1f}%"})
-    curves = np.concatenate(curves, axis=1)
+    curves = np.concatenate([np.array(c, float) for c in progress["curves"]], axis=1)
+    last_params = seed_params_of(states)
     results = []
     for i, seed in enumerate(seeds):
-        last = agent_params(jax.tree.map(lambda x: x[i], states), config.sigma2_max)
+        last = devices.seed_slice(last_params, i)
         test = [evaluator.evaluate(p, config, "test", selection.test_key(seed), schedule.test_episodes_per_room)
                 for p in (best[i].params, last)]  # fmt: skip
         results.append({"seed": seed, "selected_update": best[i].update, "selected": test[0], "last": test[1],
                         "validation": history[i], "training_success_rate": curves[i].tolist()})  # fmt: skip
+    runs.write_json(folder / "results.json", {"updates": done, "results": results, "curves": curves.tolist()})
     return results, np.arange(1, done + 1), curves
 
 
 def table(results_by_method: dict[str, list[dict]], room: str = "overall") -> list[dict]:
-    """Rows of Table 1: per method, mean and std over seeds of each column
-    (`results_by_method`: per method, one test result per seed)."""
+    """Rows of Table 1: per method, each column's mean, sample std and 95% confidence
+    interval over seeds (`experiments.stats.summary`; `results_by_method`: per method, one
+    test result per seed)."""
     rows = []
     for method, per_seed in results_by_method.items():
         row = {"method": method, "seeds": len(per_seed)}
         for col in COLUMNS:
-            values = np.array([r[room][col] for r in per_seed], float)
-            row[f"{col} mean"] = float(np.nanmean(values))
-            row[f"{col} std"] = float(np.nanstd(values))
+            s = stats.summary([np.nan if r[room][col] is None else r[room][col] for r in per_seed])
+            row.update({f"{col} {k}": s[k] for k in ("mean", "std", "ci_low", "ci_high")})
         rows.append(row)
     return rows
 
 
+def _mean_std_ci(row: dict, col: str) -> str:
+    if not np.isfinite(row[f"{col} mean"]):
+        return "n/a"
+    if not np.isfinite(row[f"{col} std"]):
+        return f"{row[f'{col} mean']:.2f}"
+    return f"{row[f'{col} mean']:.2f} ± {row[f'{col} std']:.2f} [{row[f'{col} ci_low']:.1f}, {row[f'{col} ci_high']:.1f}]"
+
+
 def table_markdown(rows: list[dict], title: str) -> str:
-    cells = [[row["method"], *(f"{row[f'{c} mean']:.2f} ± {row[f'{c} std']:.2f}" for c in COLUMNS)] for row in rows]
-    return f"# {title}\n\n" + markdown_table(cells, ["Method", *COLUMNS]) + "\n"
+    cells = [[row["method"], *(_mean_std_ci(row, c) for c in COLUMNS)] for row in rows]
+    note = "mean ± sample std [95% confidence interval, Student t] over seeds"
+    return f"# {title}\n\n" + markdown_table(cells, ["Method", *COLUMNS]) + f"\n({note})\n"
+
+
+def paired_markdown(results_by_method: dict[str, list[dict]], room: str = "overall") -> str:
+    """Each method against the first, seed by seed (the same seeds and test episodes):
+    the mean difference of SR and SPL, its 95% interval and the paired t-test's p."""
+    methods = list(results_by_method)
+    cells = []
+    for method in methods[1:]:
+        cell = [f"{method} - {methods[0]}"]
+        for col in ("SR", "SPL"):
+            base, other = ([r[room][col] for r in results_by_method[m]] for m in (methods[0], method))
+            p = stats.paired(base, other)
+            p_value = f"{p['p']:.3f}" if np.isfinite(p["p"]) else "n/a"
+            cell += [f"{p['diff']:+.2f} [{p['ci_low']:+.1f}, {p['ci_high']:+.1f}]", p_value]
+        cells.append(cell)
+    header = ["Methods", "SR difference [95% CI]", "p (SR)", "SPL difference [95% CI]", "p (SPL)"]
+    return "## Paired over seeds (same seeds, same test episodes)\n\n" + markdown_table(cells, header) + "\n"
 
 
 def selection_markdown(results: dict[str, list[dict]]) -> str:
@@ -146,18 +212,32 @@ def selection_markdown(results: dict[str, list[dict]]) -> str:
     (mean ± std over seeds) and per seed."""
     cells = []
     for method, per_seed in results.items():
-        sr = {k: np.array([r[k]["overall"]["SR"] for r in per_seed], float) for k in ("selected", "last")}
+        sr = [stats.summary([r[k]["overall"]["SR"] for r in per_seed]) for k in ("selected", "last")]
         seeds = ", ".join(f"{r['seed']}: {r['selected']['overall']['SR']:.1f} / {r['last']['overall']['SR']:.1f}"
                           f" (update {r['selected_update']})" for r in per_seed)  # fmt: skip
-        cells.append([method, *(f"{v.mean():.2f} ± {v.std():.2f}" for v in sr.values()), seeds])
+        cells.append([method, *(f"{s['mean']:.2f} ± {s['std']:.2f}" for s in sr), seeds])
     header = ["Method", "SR, selected", "SR, last", "per seed: selected / last (selected update)"]
     return "## Model selection: the model of the best validation SR against the last one, test split\n\n" + (
         markdown_table(cells, header) + "\n")
 
 
-def main(args: Args) -> list[dict]:
+def main(args: Args) -> list[dict] | None:
+    """Run (or, with --resume, continue) the sweep; returns Table 1's rows (None when
+    stopped by --stop-after-chunks)."""
     from foresit_jax.evaluate import Evaluator
 
+    if args.resume:
+        runs.prepare_run_dir(args.out, resume=True, overwrite=args.overwrite, marker="sweep.json", kind="sweep")
+        saved = json.loads((args.out / "sweep.json").read_text())
+        saved = {k: tuple(v) if isinstance(v, list) else v for k, v in saved.items() if k != "out"}
+        defaults = Args()
+        clash = [f"--{k.replace('_', '-')} {getattr(args, k)} (started with {v})" for k, v in saved.items()
+                 if getattr(args, k) not in (getattr(defaults, k), v)]  # fmt: skip
+        if clash:
+            raise runs.UserError(f"--resume continues {args.out} with the arguments it was started with; "
+                                 f"drop {', '.join(clash)}")  # fmt: skip
+        keep = {k: getattr(args, k) for k in ("stop_after_chunks", "progress")}
+        args = dataclasses.replace(Args(**{**saved, "out": args.out}), resume=True, **keep)
     if args.seeds < 1:
         raise runs.UserError(f"--seeds must be >= 1, got {args.seeds}")
     if not args.methods:
@@ -168,22 +248,32 @@ def main(args: Args) -> list[dict]:
     for method in args.methods:  # fail before any training
         method_schedule(method, args)
     out = args.out
-    runs.prepare_run_dir(out, resume=False, overwrite=args.overwrite, marker="sweep.json", kind="sweep")
-    runs.write_json(out / "sweep.json", args)
+    if not args.resume:
+        runs.prepare_run_dir(out, resume=False, overwrite=args.overwrite, marker="sweep.json", kind="sweep")
+        runs.write_json(out / "sweep.json", {k: v for k, v in dataclasses.asdict(args).items()
+                                             if k not in ("resume", "overwrite", "stop_after_chunks", "progress")})  # fmt: skip
 
     config, _ = preset(args.preset, args.methods[0], num_updates=args.num_updates, setup=args.setup)
     evaluator = Evaluator(args.setup)  # one for the sweep: each method's evaluation compiles once
     bar = progress_bar(config.num_updates * len(args.methods), 0, args.progress)
     t0 = time.time()
-    results, curves = {}, {}
+    results, curves, budget = {}, {}, [args.stop_after_chunks]
     for method in args.methods:
-        results[method], x, y = run_method(method, args, bar, evaluator)
+        ran = run_method(method, args, bar, evaluator, out / "methods" / method, budget)
+        if ran is None:
+            bar(0, None)
+            print(f"stopped after {args.stop_after_chunks} chunks, in {method} (continue with --resume)")
+            return None
+        results[method], x, y = ran
         curves[method] = (x, runs.smooth(y))
     bar(0, None)
-    rows = table({method: [r["selected"] for r in per_seed] for method, per_seed in results.items()})
+    selected = {method: [r["selected"] for r in per_seed] for method, per_seed in results.items()}
+    rows = table(selected)
     title = (f"Table 1 layout: test split, preset {args.preset}, seeds {args.seed}-{args.seed + args.seeds - 1} "
-             "(mean ± std; each seed's model selected on validation)")  # fmt: skip
+             "(each seed's model selected on validation)")  # fmt: skip
     md = table_markdown(rows, title) + "\n" + selection_markdown(results)
+    if len(selected) > 1 and args.seeds > 1:
+        md += "\n" + paired_markdown(selected)
     (out / "table1.md").write_text(md)
     write_csv(out / "table1.csv", rows)
     runs.write_json(out / "results_per_seed.json", results)

@@ -24,6 +24,7 @@ updates, whose padding is stepped and masked away).
 
 from __future__ import annotations
 
+import functools
 from typing import Any, Callable, NamedTuple
 
 import chex
@@ -228,6 +229,14 @@ class Trainer:
     def run(self, state: RunnerState, env_params, num_updates: int) -> tuple[RunnerState, dict]:
         """`num_updates` updates in a `lax.scan`; metrics stacked `[num_updates]`."""
         return jax.lax.scan(lambda s, _: self.update(s, env_params), state, None, length=num_updates)
+
+    @functools.cached_property
+    def run_seeds(self):
+        """`run` of several seeds at once, jitted: (states with a leading seed axis,
+        env_params, num_updates (static)) -> (states, metrics `[seeds, num_updates]`).
+        Built once per Trainer, so that every chunk (and every sweep of this Trainer)
+        reuses its compiled programs; the seed axis may be sharded over devices."""
+        return jax.jit(jax.vmap(self.run, in_axes=(0, None, None)), static_argnums=2)
 
     def train(self, key: chex.PRNGKey) -> tuple[RunnerState, dict]:
         """The whole run in one jittable function: init, then `config.num_updates` updates."""

@@ -11,6 +11,7 @@ import dataclasses
 import importlib
 import importlib.util
 import json
+import os
 import re
 import shlex
 import shutil
@@ -251,11 +252,23 @@ def test_reports_use_the_one_table_writer():
         "## T\n\n| rooms | SPL | SR | SPL>=5 | SR>=5 | episodes |\n|---|---|---|---|---|---|\n"
         "| overall | 10.00 | 20.00 | n/a | n/a | 4 |\n"
     )  # fmt: skip
-    rows = sweep.table({"a3c": [{"overall": {"SPL": 1.0, "SR": 2.0, "SPL>=5": 3.0, "SR>=5": 4.0}}] * 2})
+    rows = sweep.table({"a3c": [{"overall": {"SPL": 1.0, "SR": 2.0, "SPL>=5": 3.0, "SR>=5": 4.0}}] * 2,
+                        "b": [{"overall": {"SPL": 1.0, "SR": 10.0, "SPL>=5": None, "SR>=5": 4.0}}]})  # fmt: skip
     assert sweep.table_markdown(rows, "T1") == (
         "# T1\n\n| Method | SPL | SR | SPL>=5 | SR>=5 |\n|---|---|---|---|---|\n"
-        "| a3c | 1.00 ± 0.00 | 2.00 ± 0.00 | 3.00 ± 0.00 | 4.00 ± 0.00 |\n"
+        "| a3c | 1.00 ± 0.00 [1.0, 1.0] | 2.00 ± 0.00 [2.0, 2.0] | 3.00 ± 0.00 [3.0, 3.0] | 4.00 ± 0.00 [4.0, 4.0] |\n"
+        "| b | 1.00 | 10.00 | n/a | 4.00 |\n"
+        "(mean ± sample std [95% confidence interval, Student t] over seeds)\n"
     )  # fmt: skip
+
+
+def test_sweep_pairs_every_method_with_the_first_seed_by_seed():
+    result = lambda sr, spl: {"overall": {"SR": sr, "SPL": spl}}  # noqa: E731
+    md = sweep.paired_markdown({"a3c": [result(1.0, 0.0), result(2.0, 0.0), result(3.0, 0.0)],
+                                "b": [result(2.0, 1.0), result(4.0, 1.0), result(5.0, 1.0)]})  # fmt: skip
+    # SR differences 1, 2, 2: mean 5/3, t = 5 with 2 dof, p = 1 - 5 / sqrt(27) = 0.038,
+    # interval 5/3 -+ 4.303 / 3; SPL differences all 1: no spread, no p.
+    assert "| b - a3c | +1.67 [+0.2, +3.1] | 0.038 | +1.00 [+1.0, +1.0] | n/a |" in md
 
 
 def test_write_csv(tmp_path):
@@ -370,15 +383,29 @@ def test_evaluate_rejects_bad_input_in_one_line(finished_run, tmp_path, capsys):
     assert "--overwrite" in cli_error(evaluate_cli.cli, ["--run", finished_run], capsys)
 
 
-def test_sweep_seed_i_is_the_run_train_makes_with_seed_i(tmp_path):
+SWEEP_EPISODES = dict(val_episodes_per_room=12, test_episodes_per_room=24)  # enough that other keys give other numbers
+
+
+def sweep_args(out: Path) -> sweep.Args:
+    return sweep.Args(methods=("a3c", "a3c+foresit"), seeds=2, preset="tiny", seed=SEED, out=out, progress=False,
+                      **SWEEP_EPISODES)  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def tiny_sweep(tmp_path_factory, cheap_experiments):
+    """Two methods, two seeds of a tiny sweep on this process's devices (one CPU device)."""
+    out = tmp_path_factory.mktemp("sweeps") / "one_device"
+    sweep.main(sweep_args(out))
+    return out
+
+
+def test_sweep_seed_i_is_the_run_train_makes_with_seed_i(tiny_sweep, tmp_path):
     """The same protocol in both: seed i of a sweep starts from train --seed i's key,
     validates on its episodes after each chunk, selects the same update and tests on the
     same episodes (equal up to the vmapped program's float rounding, which does not flip
     an outcome at this size); the last model is tested too.  (Enough episodes that other
     keys give other numbers: with a test key or a training key off by one, this fails.)"""
-    out, episodes = tmp_path / "sweep", dict(val_episodes_per_room=12, test_episodes_per_room=24)
-    sweep.main(sweep.Args(methods=("a3c+foresit",), seeds=2, preset="tiny", seed=SEED, out=out, progress=False,
-                          **episodes))  # fmt: skip
+    out, episodes = tiny_sweep, SWEEP_EPISODES
     per_seed = json.loads((out / "results_per_seed.json").read_text())["a3c+foresit"]
     assert [r["seed"] for r in per_seed] == [SEED, SEED + 1]
     trained = [tmp_path / f"train{i}" for i in range(2)]
@@ -431,6 +458,57 @@ def test_bad_method_from_the_shell_is_one_line_without_traceback(tmp_path):
     assert lines == [lines[0]] and lines[0].startswith("error: unknown method 'bogus'"), proc.stderr
     assert "valid methods: a3c, a3c+foresit" in lines[0]
     assert not out.exists()
+
+
+def test_a_sweep_spread_over_two_host_devices_equals_the_one_device_sweep(tiny_sweep, tmp_path):
+    """The seed axis sharded over 2 forced host devices (a fresh interpreter: the flag
+    must precede jax's start): the same selections, validation and test results, and
+    training curves equal to float rounding."""
+    out = tmp_path / "two_devices"
+    code = (
+        "import sys, pytest, jax; sys.path.insert(0, 'tests'); import train_helpers as H\n"
+        "assert jax.device_count() == 2, jax.devices()\n"
+        "H.patch_for_experiments(pytest.MonkeyPatch())\n"
+        "import dataclasses; from pathlib import Path; from experiments import sweep; import test_experiments as T\n"
+        f"sweep.main(dataclasses.replace(T.sweep_args(Path({str(out)!r})), methods=('a3c',)))\n"
+    )  # one method of the two: its numbers do not depend on the others
+    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
+    proc = subprocess.run([sys.executable, "-c", code], cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    one, two = (json.loads((d / "results_per_seed.json").read_text()) for d in (tiny_sweep, out))
+    assert list(two) == ["a3c"]
+    for a, b in zip(one["a3c"], two["a3c"], strict=True):
+        assert (a["seed"], a["selected_update"]) == (b["seed"], b["selected_update"])
+        np.testing.assert_allclose(a["training_success_rate"], b["training_success_rate"], atol=1e-6)
+        for key in ("selected", "last"):
+            for col in ("SR", "SPL", "episodes"):
+                assert a[key]["overall"][col] == pytest.approx(b[key]["overall"][col], abs=1e-3)
+        assert [v["SR"] for v in a["validation"]] == pytest.approx([v["SR"] for v in b["validation"]])
+
+
+def test_a_killed_sweep_resumes_where_it_stopped_and_ends_with_the_same_numbers(tiny_sweep, tmp_path, capsys):
+    out = tmp_path / "killed"
+    # 2 chunks per method: a3c finishes, a3c+foresit stops after its first chunk.
+    assert sweep.main(dataclasses.replace(sweep_args(out), stop_after_chunks=3)) is None
+    assert "continue with --resume" in capsys.readouterr().out
+    finished, started = out / "methods" / "a3c", out / "methods" / "a3c+foresit"
+    assert (finished / "results.json").exists() and not (started / "results.json").exists()
+    assert json.loads((started / "progress.json").read_text())["done"] == 2
+    kept = (finished / "results.json").stat().st_mtime_ns
+    # --resume takes the arguments the sweep was started with, and refuses others.
+    assert "drop --seeds 9 (started with 2)" in cli_error(sweep.cli, ["--out", out, "--resume", "--seeds", "9"], capsys)
+    sweep.cli(["--out", str(out), "--resume", "--no-progress"])
+    assert (finished / "results.json").stat().st_mtime_ns == kept  # a finished method is not run again
+    for name in ("results_per_seed.json", "table1.csv", "table1.md"):
+        assert (out / name).read_text() == (tiny_sweep / name).read_text(), name
+
+
+def test_seeds_go_to_the_most_devices_that_divide_them():
+    from experiments import devices
+
+    fake = ["d0", "d1", "d2", "d3"]
+    assert [devices.seed_mesh(n, fake).devices.tolist() for n in (5, 6, 8, 3)] == [
+        ["d0"], ["d0", "d1", "d2"], ["d0", "d1", "d2", "d3"], ["d0", "d1", "d2"]]  # fmt: skip
 
 
 # ---------------------------------------------------------------------- evaluate CLI

@@ -12,6 +12,7 @@ compiled with the same options.
 from __future__ import annotations
 
 import functools
+import importlib
 
 import chex
 import jax
@@ -164,6 +165,14 @@ def _make_trainer_cached(config, env=None, env_params=None, **kwargs):
     return cached_trainer(config, **kwargs)
 
 
+_REAL_EVALUATOR = importlib.import_module("foresit_jax.evaluate").Evaluator  # before any patching
+
+
+@functools.lru_cache(maxsize=None)
+def _cached_evaluator(setup: str = "savn"):
+    return _REAL_EVALUATOR(setup)
+
+
 def _fast_jit(real_jit):
     def jit(fun=None, /, **kwargs):
         kwargs.setdefault("compiler_options", FAST_COMPILE)
@@ -178,12 +187,16 @@ def patch_for_experiments(mp) -> None:
     """Make in-process calls of the experiments CLIs cheap, without changing what they do:
     the `tiny` preset trains on bathrooms only (one scene bank, 2 evaluation programs
     instead of 8), `make_trainer` returns one Trainer per config (so every `main()` call
-    reuses the same jitted chunk instead of recompiling it: a Trainer is pure), and jit
-    compiles with FAST_COMPILE."""
+    reuses the same jitted chunk instead of recompiling it: a Trainer is pure), one Evaluator
+    per setup (its compiled evaluation rollouts are shared the same way), and jit compiles
+    with FAST_COMPILE."""
     import experiments.presets as presets
     import foresit_jax.train as train
+
+    evaluate = importlib.import_module("foresit_jax.evaluate")  # the module (the package exports a function)
 
     fields, schedule = presets.PRESETS["tiny"]
     mp.setitem(presets.PRESETS, "tiny", ({**fields, "room_types": ("bathroom",)}, schedule))
     mp.setattr(train, "make_trainer", _make_trainer_cached)
+    mp.setattr(evaluate, "Evaluator", _cached_evaluator)
     mp.setattr(jax, "jit", _fast_jit(jax.jit))

@@ -1,0 +1,35 @@
+"""Seeds spread over the local devices: a one-axis `Mesh` ("seed") and a `NamedSharding`
+of the seed axis, so that one jitted, vmapped program runs each device's seeds on that
+device (XLA partitions the program along the seed axis; nothing else changes).
+
+A single device runs the same program. The number of devices used is the largest that
+divides the number of seeds (5 seeds on 2 devices: 1 device), so that every device holds
+as many seeds. On a CPU, `XLA_FLAGS=--xla_force_host_platform_device_count=N` (set
+before jax is imported) makes N host devices; on a cluster, call
+`jax.distributed.initialize()` in each process first: `jax.devices()` then lists every
+host's devices and the same code spreads the seeds over all of them (each process must
+then read its results from its own addressable shards).
+"""
+
+from __future__ import annotations
+
+import jax
+import numpy as np
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+
+def seed_mesh(num_seeds: int, devices=None) -> Mesh:
+    """A mesh over the most local devices that divide `num_seeds` evenly."""
+    devices = list(jax.devices() if devices is None else devices)
+    used = max(n for n in range(1, len(devices) + 1) if num_seeds % n == 0)
+    return Mesh(np.array(devices[:used]), ("seed",))
+
+
+def shard_seeds(tree, mesh: Mesh):
+    """Place every leaf's leading (seed) axis across the mesh."""
+    return jax.device_put(tree, NamedSharding(mesh, PartitionSpec("seed")))
+
+
+def seed_slice(tree, i: int):
+    """Seed i of a sharded tree, on the host (numpy): ready for single-device code."""
+    return jax.device_get(jax.tree.map(lambda x: x[i], tree))
