@@ -13,9 +13,27 @@ then read its results from its own addressable shards).
 
 from __future__ import annotations
 
+import os
+
 import jax
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+
+# Measured with experiments.bench_devices on the 2-core CPU (a3c+foresit, quick, 4 seeds):
+# 2 host devices ran the sweep's chunk 1.19x faster than 1 (6.94 vs 8.23 s per 20 updates).
+DEFAULT_HOST_DEVICES = 2
+
+
+def split_host_into_devices(count: int = DEFAULT_HOST_DEVICES) -> None:
+    """Ask XLA for `count` host (CPU) devices (at most one per core), unless XLA_FLAGS
+    already sets a count. Call it before jax's backends start (the sweep's command line
+    does, first thing): afterwards it changes nothing. Accelerators are unaffected (their
+    devices are jax's default ones); the host devices only matter where the CPU computes."""
+    flags = os.environ.get("XLA_FLAGS", "")
+    if "xla_force_host_platform_device_count" not in flags:
+        count = max(1, min(count, os.cpu_count() or 1))
+        os.environ["XLA_FLAGS"] = f"{flags} --xla_force_host_platform_device_count={count}".strip()
 
 
 def seed_mesh(num_seeds: int, devices=None) -> Mesh:

@@ -253,6 +253,9 @@ def main(args: Args) -> list[dict] | None:
         runs.write_json(out / "sweep.json", {k: v for k, v in dataclasses.asdict(args).items()
                                              if k not in ("resume", "overwrite", "stop_after_chunks", "progress")})  # fmt: skip
 
+    used = devices.seed_mesh(args.seeds).devices.size
+    print(f"{len(args.methods)} method(s) x {args.seeds} seed(s), the seeds spread over {used} of the "
+          f"{jax.device_count()} local device(s)", flush=True)  # fmt: skip
     config, _ = preset(args.preset, args.methods[0], num_updates=args.num_updates, setup=args.setup)
     evaluator = Evaluator(args.setup)  # one for the sweep: each method's evaluation compiles once
     bar = progress_bar(config.num_updates * len(args.methods), 0, args.progress)
@@ -292,4 +295,5 @@ def cli(argv=None) -> None:
 
 
 if __name__ == "__main__":
+    devices.split_host_into_devices()  # before jax starts: faster on a CPU (see experiments.devices)
     cli(sys.argv[1:])

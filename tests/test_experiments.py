@@ -503,6 +503,19 @@ def test_a_killed_sweep_resumes_where_it_stopped_and_ends_with_the_same_numbers(
         assert (out / name).read_text() == (tiny_sweep / name).read_text(), name
 
 
+def test_the_sweep_command_asks_for_two_host_devices_unless_the_user_chose(monkeypatch):
+    from experiments import devices
+
+    monkeypatch.setenv("XLA_FLAGS", "--xla_cpu_use_thunk_runtime=true")
+    devices.split_host_into_devices()
+    expected = min(2, os.cpu_count() or 1)
+    assert os.environ["XLA_FLAGS"] == f"--xla_cpu_use_thunk_runtime=true --xla_force_host_platform_device_count={expected}"
+    monkeypatch.setenv("XLA_FLAGS", "--xla_force_host_platform_device_count=1")
+    devices.split_host_into_devices()
+    assert os.environ["XLA_FLAGS"] == "--xla_force_host_platform_device_count=1"
+    assert "devices.split_host_into_devices()" in (REPO / "experiments" / "sweep.py").read_text().split("__main__")[-1]
+
+
 def test_seeds_go_to_the_most_devices_that_divide_them():
     from experiments import devices
 
