@@ -9,7 +9,8 @@ The entry points (what the README uses):
 The modules hold the pieces: `config` (Config), `methods` (base x encoder x imagination),
 `networks` (flax modules), `lstm` (the encoder LSTM's split form), `agent` (acting),
 `replay` (the replay gradient), `losses`, `imagination` (buffers, f_w training, noise),
-`train` (the trainer), `evaluate` (SR/SPL on held-out scenes).
+`train` (the trainer), `evaluate` (SR/SPL on held-out scenes), `maml` (SAVN's inner loop),
+`org` (ORG's object graph), `cvae` (the paper's C-VAE comparison).
 """
 
 from foresit_jax.agent import Agent

@@ -147,12 +147,16 @@ class Trainer:
         return jax.value_and_grad(loss_fn, has_aux=True)(params)
 
     # ------------------------------------------------------------------ one update
+    def begin_window(self, actor: ActorState, key, env_params) -> tuple[ActorState, chex.PRNGKey, chex.PRNGKey]:
+        """(the lanes at the window's start, the next key, the window's acting key)."""
+        key, k_act, k_start = jax.random.split(key, 3)
+        if not self.packed:  # SAVN's layout: every lane starts a fresh episode
+            actor = self.agent.start(k_start, self.env, env_params, self.config.num_lanes, 0, tracker=actor.tracker)
+        return actor, key, k_act
+
     def update(self, state: RunnerState, env_params) -> tuple[RunnerState, dict]:
         cfg, imag = self.config, self.agent.imagination
-        key, k_act, k_start = jax.random.split(state.key, 3)
-        actor = state.actor
-        if not self.packed:  # SAVN's layout: every lane starts a fresh episode
-            actor = self.agent.start(k_start, self.env, env_params, cfg.num_lanes, 0, tracker=actor.tracker)
+        actor, key, k_act = self.begin_window(state.actor, state.key, env_params)
         rho = jax.vmap(imagination.success_rate)(actor.tracker)  # [B] at the window's start
         (loss, (next_actor, traj, alpha, keys, metrics)), grads = self.loss_and_grad(
             state.params, state.imagination_params, env_params, actor, k_act
@@ -164,8 +168,7 @@ class Trainer:
         metrics = dict(metrics)
         ended, stats = ended_episodes(traj)
         if imag.trains_imagination:
-            subgoals = jnp.swapaxes(subgoals_of_rows(keys, alpha[:, :-1], imag.subgoal_mode), 0, 1)  # [T, B, H]
-            items = (traj.s_0, traj.inputs.obs["target"], subgoals, stats.success)
+            items = self.subgoal_items(traj, alpha, keys, stats.success)
             w_params, buffers, imag_metrics = self.store_and_train(w_params, buffers, items)
             metrics.update(imag_metrics)
         num_ended = jnp.sum(ended.astype(jnp.float32))
@@ -193,6 +196,28 @@ class Trainer:
         )
         new_state = RunnerState(params, opt_state, w_params, buffers, next_actor, key, state.update + 1)
         return new_state, metrics
+
+    def subgoal_items(self, traj: Trajectory, alpha, keys, success):
+        """What each step offers the buffers: (s_0 `[T, B, H]`, g_tau `[T, B, D]`, the
+        critic-selected sub-goal ŝ_tau `[T, B, H]`, add `[T, B]`: an episode ended there
+        successfully)."""
+        subgoals = jnp.swapaxes(subgoals_of_rows(keys, alpha[:, :-1], self.agent.imagination.subgoal_mode), 0, 1)
+        return traj.s_0, traj.inputs.obs["target"], subgoals, success
+
+    def collect_subgoal_items(self, state: RunnerState, env_params, num_windows: int):
+        """The (s_0, g_tau, ŝ_tau, add) items of `num_windows` windows played by the
+        agent of `state`, which is not updated (the data of the paper's C-VAE comparison);
+        each `[num_windows, T, B, ...]`."""
+
+        def window(carry, _):
+            actor, key, k_act = self.begin_window(*carry, env_params)
+            next_actor, traj = self.act(state.params, state.imagination_params, env_params, actor, k_act)
+            _, (alpha, keys, _) = self.window_loss(state.params, traj, actor.memory)  # the critic's alpha
+            _, stats = ended_episodes(traj)
+            return (next_actor, key), self.subgoal_items(traj, alpha, keys, stats.success)
+
+        _, items = jax.lax.scan(window, (state.actor, state.key), None, length=num_windows)
+        return items
 
     def store_and_train(self, w_params, buffers, items):
         """Algorithm 1 for each step of the window in time order: lanes whose episode
