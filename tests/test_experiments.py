@@ -570,9 +570,10 @@ BLOCKS = re.findall(r"```(\w+)\n(.*?)```", README, flags=re.S)
 CLI_MODULES = {"experiments.train": train_cli, "experiments.evaluate": evaluate_cli, "experiments.sweep": sweep}
 # Benchmarks the README documents: their flags must parse (they run in their own tests or
 # take minutes by design).
-BENCH_ARGS = {
+BENCH_ARGS = {  # commands whose flags are parsed here and which run in their own tests
     "experiments.bench_train": lambda: importlib.import_module("experiments.bench_train").BenchConfig,
     "experiments.bench_learning": lambda: importlib.import_module("experiments.bench_learning").BenchLearning,
+    "experiments.cvae_compare": lambda: importlib.import_module("experiments.cvae_compare").Args,
 }
 
 
