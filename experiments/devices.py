@@ -5,10 +5,12 @@ device (XLA partitions the program along the seed axis; nothing else changes).
 A single device runs the same program. The number of devices used is the largest that
 divides the number of seeds (5 seeds on 2 devices: 1 device), so that every device holds
 as many seeds. On a CPU, `XLA_FLAGS=--xla_force_host_platform_device_count=N` (set
-before jax is imported) makes N host devices; on a cluster, call
-`jax.distributed.initialize()` in each process first: `jax.devices()` then lists every
-host's devices and the same code spreads the seeds over all of them (each process must
-then read its results from its own addressable shards).
+before jax starts) makes N host devices.
+
+The mesh holds this process's devices (`jax.local_devices()`): on a cluster, run one sweep
+per host, each with its own seeds (`--seed`). A mesh over every host's devices (after
+`jax.distributed.initialize()`) would need each process to read back only the shards it
+can address; that is not done here.
 """
 
 from __future__ import annotations
@@ -38,7 +40,7 @@ def split_host_into_devices(count: int = DEFAULT_HOST_DEVICES) -> None:
 
 def seed_mesh(num_seeds: int, devices=None) -> Mesh:
     """A mesh over the most local devices that divide `num_seeds` evenly."""
-    devices = list(jax.devices() if devices is None else devices)
+    devices = list(jax.local_devices() if devices is None else devices)
     used = max(n for n in range(1, len(devices) + 1) if num_seeds % n == 0)
     return Mesh(np.array(devices[:used]), ("seed",))
 

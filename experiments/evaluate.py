@@ -13,7 +13,6 @@ from pathlib import Path
 from typing import Literal, Optional
 
 import jax
-import tyro
 
 from experiments import runs, selection
 
@@ -92,11 +91,7 @@ def main(args: Args) -> dict:
 
 
 def cli(argv=None) -> None:
-    args = tyro.cli(Args, args=argv)
-    try:
-        main(args)
-    except (runs.UserError, ValueError) as e:
-        runs.fail(str(e))
+    runs.run_cli(Args, main, argv)
 
 
 if __name__ == "__main__":

@@ -36,6 +36,18 @@ def fail(message: str, status: int = 2) -> None:
     raise SystemExit(status)
 
 
+def run_cli(args_class, main, argv=None):
+    """A CLI's body: parse `argv` into `args_class` with tyro and run `main`; what the user
+    asked wrongly (UserError, ValueError) is one line on stderr and exit status 2."""
+    import tyro
+
+    args = tyro.cli(args_class, args=argv)
+    try:
+        return main(args)
+    except (UserError, ValueError) as e:
+        fail(str(e))
+
+
 def is_run(path: Path) -> bool:
     return (path / RUN_FILE).is_file()
 
@@ -175,6 +187,13 @@ def save(manager, step: int, tree) -> None:
 
     manager.save(step, args=ocp.args.StandardSave(tree), force=True)
     manager.wait_until_finished()
+
+
+def drop_steps_after(manager, step: int) -> None:
+    """Delete the checkpoints of steps after `step` (written after what a resume starts from)."""
+    for s in manager.all_steps():
+        if s > step:
+            manager.delete(s)
 
 
 def restore(manager, step: int, like):

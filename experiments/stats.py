@@ -48,9 +48,10 @@ def paired(a, b, level: float = LEVEL) -> dict[str, float]:
 
 def verdict(pair: dict[str, float], claim_positive: bool = True) -> str:
     """'holds' when the interval of b - a lies above 0 (below, for a negative claim),
-    'does not hold' when it lies on the other side, 'cannot tell at this budget' else."""
+    'does not hold' when it lies on the other side, 'cannot tell at this budget' else
+    (also when the differences have no spread, so that there is no interval)."""
     low, high = pair["ci_low"], pair["ci_high"]
-    if not (math.isfinite(low) and math.isfinite(high)):
+    if not (math.isfinite(low) and math.isfinite(high)) or low == high:  # no spread: no interval
         return "cannot tell at this budget"
     if not claim_positive:
         low, high = -high, -low

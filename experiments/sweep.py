@@ -1,19 +1,23 @@
 """Seed sweep: `python -m experiments.sweep --methods a3c a3c+foresit --seeds 5 --preset quick`.
 
-Each method's seeds run vmapped inside one jitted program (in chunks, for progress), spread
-over the local devices along the seed axis (experiments.devices).  The
-protocol is `train`'s (experiments.selection): seed i of the sweep is seed `--seed + i`,
-initialised from the key `train --seed <seed + i>` uses; after each chunk each seed is
-validated on the episodes that run would validate on, and the model with the best
-validation SR is the one tested, on that run's test episodes.  So a seed's numbers are
-those of its `train` run, up to the float rounding of a vmapped program (the batched
-matmuls differ in the last bits).  The last model is tested too, for comparison.
+Each method's seeds run vmapped inside one jitted program (in chunks, for progress),
+spread over the local devices along the seed axis (experiments.devices).  The protocol is
+`train`'s (experiments.selection): seed i of the sweep is seed `--seed + i`, initialised
+from the key `train --seed <seed + i>` uses; after each chunk each seed is validated on
+the episodes that run would validate on, and the model with the best validation SR is the
+one tested, on that run's test episodes.  So a seed's numbers are those of its `train` run
+with the same preset and schedule, up to the float rounding of a vmapped program (the
+batched matmuls differ in the last bits); over many updates that rounding grows into
+another trajectory (at quick: the same training curve for the first ~100 updates, then
+apart), so long runs agree in distribution, not in value.  The last model is tested too,
+for comparison.
 
 Written: the paper's Table 1 layout (SPL, SR, SPL>=5, SR>=5: mean, sample std and 95%
-confidence interval over seeds) of the selected models as Markdown and CSV, every method
-against the first one paired seed by seed (difference, interval, p), the selected and last models' SR per seed, every
-seed's results, validation history and training curve (JSON), and one learning-curve PNG of every method
-(mean and band over seeds).
+confidence interval over seeds) of the selected models as Markdown and CSV; every method
+against the first one, paired seed by seed (difference, interval, p, verdict); the
+selected and last models' SR per seed; every seed's results, validation history and
+training curve (JSON); one learning-curve PNG of every method (mean and band over seeds).
+`--resume` continues a killed sweep (see `run_method`).
 """
 
 from __future__ import annotations
@@ -28,7 +32,6 @@ from typing import Optional
 import jax
 import jax.numpy as jnp
 import numpy as np
-import tyro
 
 from experiments import devices, runs, selection, stats
 from experiments.presets import preset
@@ -56,7 +59,9 @@ class Args:
     """Output folder."""
     resume: bool = False
     """Continue the sweep in --out where it stopped, with the arguments it was started
-    with (finished methods are kept, a started one continues from its last checkpoint)."""
+    with (finished methods are kept, a started one continues from its last checkpoint;
+    other values are refused, except a flag given at its default, which cannot be told
+    from one not given and is ignored)."""
     overwrite: bool = False
     """Replace an existing sweep in --out."""
     num_updates: Optional[int] = None
@@ -114,6 +119,10 @@ def run_method(method: str, args: Args, bar, evaluator, folder: Path, budget: li
                 "history": [[] for _ in seeds], "curves": []}  # fmt: skip
     if (folder / "progress.json").exists():
         progress = json.loads((folder / "progress.json").read_text())
+    # A kill between a chunk's checkpoint and its progress.json leaves a newer checkpoint
+    # that nothing else records: drop it, that chunk runs again (to the same result).
+    runs.drop_steps_after(manager, progress["done"])
+    if progress["done"]:
         restored = runs.restore(manager, progress["done"], {"states": states, "best": best_params})
         states, best_params = restored["states"], restored["best"]
         bar(progress["done"], {"method": method})
@@ -201,9 +210,10 @@ def paired_markdown(results_by_method: dict[str, list[dict]], room: str = "overa
             base, other = ([r[room][col] for r in results_by_method[m]] for m in (methods[0], method))
             p = stats.paired(base, other)
             p_value = f"{p['p']:.3f}" if np.isfinite(p["p"]) else "n/a"
-            cell += [f"{p['diff']:+.2f} [{p['ci_low']:+.1f}, {p['ci_high']:+.1f}]", p_value]
+            cell += [f"{p['diff']:+.2f} [{p['ci_low']:+.1f}, {p['ci_high']:+.1f}]", p_value, stats.verdict(p)]
         cells.append(cell)
-    header = ["Methods", "SR difference [95% CI]", "p (SR)", "SPL difference [95% CI]", "p (SPL)"]
+    header = ["Methods", "SR difference [95% CI]", "p (SR)", "higher SR", "SPL difference [95% CI]", "p (SPL)",
+              "higher SPL"]  # fmt: skip
     return "## Paired over seeds (same seeds, same test episodes)\n\n" + markdown_table(cells, header) + "\n"
 
 
@@ -215,7 +225,8 @@ def selection_markdown(results: dict[str, list[dict]]) -> str:
         sr = [stats.summary([r[k]["overall"]["SR"] for r in per_seed]) for k in ("selected", "last")]
         seeds = ", ".join(f"{r['seed']}: {r['selected']['overall']['SR']:.1f} / {r['last']['overall']['SR']:.1f}"
                           f" (update {r['selected_update']})" for r in per_seed)  # fmt: skip
-        cells.append([method, *(f"{s['mean']:.2f} ± {s['std']:.2f}" for s in sr), seeds])
+        cells.append([method, *(f"{s['mean']:.2f}" + (f" ± {s['std']:.2f}" if np.isfinite(s["std"]) else "")
+                                for s in sr), seeds])  # fmt: skip
     header = ["Method", "SR, selected", "SR, last", "per seed: selected / last (selected update)"]
     return "## Model selection: the model of the best validation SR against the last one, test split\n\n" + (
         markdown_table(cells, header) + "\n")
@@ -287,11 +298,7 @@ def main(args: Args) -> list[dict] | None:
 
 
 def cli(argv=None) -> None:
-    args = tyro.cli(Args, args=argv)
-    try:
-        main(args)
-    except (runs.UserError, ValueError) as e:
-        runs.fail(str(e))
+    runs.run_cli(Args, main, argv)
 
 
 if __name__ == "__main__":

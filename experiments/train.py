@@ -20,7 +20,6 @@ from typing import Optional
 
 import jax
 import numpy as np
-import tyro
 
 from experiments import runs, selection
 from experiments.presets import Schedule, preset
@@ -115,6 +114,23 @@ def main(args: Args) -> dict:
     for r in runs.read_rows(out / "validation"):
         best.offer(r["SR"], r["update"])
 
+    def validate_and_select(state, done: int) -> dict:
+        """Validate after `done` updates; keep the model if it is the best so far."""
+        params = agent_params(state, config.sigma2_max)
+        val = selection.validate(evaluator, params, config, seed, done, schedule.val_episodes_per_room)
+        runs.append_rows(out / "validation", [{"update": done, **val["overall"]}])
+        if best.offer(val["overall"]["SR"], done):
+            runs.save(best_manager, done, params)
+        return val
+
+    # A run killed between a chunk's checkpoint and its validation, or between the
+    # validation and saving the best model, is completed here (the keys depend only on
+    # the seed and the update: the same numbers as uninterrupted).
+    if done and not any(r["update"] == done for r in runs.read_rows(out / "validation")):
+        validate_and_select(state, done)
+    elif done and best.update == done and best_manager.latest_step() != done:
+        runs.save(best_manager, done, agent_params(state, config.sigma2_max))
+
     run_chunk = jax.jit(trainer.run, static_argnums=2)
     previous_rows = runs.read_rows(out / "metrics")
     last_row = previous_rows[-1] if previous_rows else None
@@ -137,12 +153,7 @@ def main(args: Args) -> dict:
         runs.append_rows(out / "metrics", rows)
         done += n
         runs.save(manager, done, state)
-        # Model selection on the validation split.
-        params = agent_params(state, config.sigma2_max)
-        val = selection.validate(evaluator, params, config, seed, done, schedule.val_episodes_per_room)
-        runs.append_rows(out / "validation", [{"update": done, **val["overall"]}])
-        if best.offer(val["overall"]["SR"], done):
-            runs.save(best_manager, done, params)
+        val = validate_and_select(state, done)  # model selection on the validation split
         dt = time.time() - t0
         useful = float(np.sum(metrics["frames/useful"]))  # steps that entered the loss
         bar(n, {"useful fps": f"{useful / dt:,.0f}", "SR": f"{metrics['charts/success_rate'].mean():.3f}",
@@ -175,11 +186,7 @@ def main(args: Args) -> dict:
 
 
 def cli(argv=None) -> None:
-    args = tyro.cli(Args, args=argv)
-    try:
-        main(args)
-    except (runs.UserError, ValueError) as e:
-        runs.fail(str(e))
+    runs.run_cli(Args, main, argv)
 
 
 if __name__ == "__main__":

@@ -142,13 +142,13 @@ def compare_imagination_targets(key, train_items, test_items, layer_sizes: Seque
     """The paper's comparison on (s_0, g, ŝ) items `[N, ...]` (a train and a held-out set):
     f_w trained on ŝ directly vs on the C-VAE's latent mean of ŝ; each one's average
     smooth-L1 loss on the held-out items, with the variance of what it predicts."""
-    k_cvae, k_direct, k_latent = jax.random.split(key, 3)
+    k_cvae, k_direct, k_latent, k_held_out = jax.random.split(key, 4)
     train_items, test_items = (tuple(jnp.asarray(x, jnp.float32) for x in items) for items in (train_items, test_items))
     s_0, goal, subgoal = train_items
     model = CVAE(state_size=subgoal.shape[-1], latent_size=latent_size)
     cvae_params, cvae_losses = fit_cvae(model, k_cvae, subgoal, s_0, goal, epochs, batch_size, learning_rate)
     latent = lambda items: model.apply(cvae_params, items[2], items[0], items[1], method=CVAE.encode)[0]  # noqa: E731
-    _, (reconstruction, kl) = cvae_loss(model, cvae_params, test_items[2], test_items[0], test_items[1], k_cvae)
+    _, (reconstruction, kl) = cvae_loss(model, cvae_params, test_items[2], test_items[0], test_items[1], k_held_out)
     # A KL near 0 means the latent carries little of ŝ (posterior collapse: the condition
     # alone explains it), and the latent target is then nearly constant.
     out = {"cvae_final_loss": float(cvae_losses[-1]), "cvae_reconstruction": float(reconstruction),

@@ -108,14 +108,22 @@ def test_finished_run_folder(finished_run):
     H.assert_tree_finite(state)
 
 
-def test_resume_after_a_kill_ends_bit_identical_to_an_uninterrupted_run(finished_run, tmp_path):
+@pytest.mark.parametrize("killed", ["before_a_checkpoint", "before_its_validation", "before_the_best_was_saved"])
+def test_resume_after_a_kill_ends_bit_identical_to_an_uninterrupted_run(finished_run, tmp_path, killed):
     out = tmp_path / "interrupted"
     assert train_cli.main(tiny_args(out, stop_after_chunks=1)) == {"stopped_at": 2}
     assert not (out / "results_test.json").exists()
-    # A kill after the metrics of update 3 were written but before its checkpoint: the
-    # resumed run must drop that row and redo update 3.
-    stale = dict(runs.read_rows(out / "metrics")[-1], update=3)
-    runs.append_rows(out / "metrics", [stale])
+    if killed == "before_a_checkpoint":
+        # After the metrics of update 3 were written but before its checkpoint: the
+        # resumed run must drop that row and redo update 3.
+        stale = dict(runs.read_rows(out / "metrics")[-1], update=3)
+        runs.append_rows(out / "metrics", [stale])
+    else:
+        # After update 2's checkpoint, before its validation row (and so before its best
+        # model), or after the row but before the best model was saved.
+        if killed == "before_its_validation":
+            runs.truncate_rows(out / "validation", 0)
+        shutil.rmtree(out / "best")
     # The run folder alone says what to resume (method, preset and seed are not repeated).
     train_cli.main(train_cli.Args(out=out, resume=True, progress=False))
 
@@ -268,7 +276,8 @@ def test_sweep_pairs_every_method_with_the_first_seed_by_seed():
                                 "b": [result(2.0, 1.0), result(4.0, 1.0), result(5.0, 1.0)]})  # fmt: skip
     # SR differences 1, 2, 2: mean 5/3, t = 5 with 2 dof, p = 1 - 5 / sqrt(27) = 0.038,
     # interval 5/3 -+ 4.303 / 3; SPL differences all 1: no spread, no p.
-    assert "| b - a3c | +1.67 [+0.2, +3.1] | 0.038 | +1.00 [+1.0, +1.0] | n/a |" in md
+    assert ("| b - a3c | +1.67 [+0.2, +3.1] | 0.038 | holds | +1.00 [+1.0, +1.0] | n/a | cannot tell at this budget |"
+            in md)  # fmt: skip
 
 
 def test_write_csv(tmp_path):
@@ -495,6 +504,9 @@ def test_a_killed_sweep_resumes_where_it_stopped_and_ends_with_the_same_numbers(
     assert (finished / "results.json").exists() and not (started / "results.json").exists()
     assert json.loads((started / "progress.json").read_text())["done"] == 2
     kept = (finished / "results.json").stat().st_mtime_ns
+    # As if killed after the next chunk's checkpoint but before its progress.json: a newer
+    # checkpoint that nothing records (dropped on resume, the chunk runs again).
+    shutil.copytree(started / "checkpoints" / "2", started / "checkpoints" / "4")
     # --resume takes the arguments the sweep was started with, and refuses others.
     assert "drop --seeds 9 (started with 2)" in cli_error(sweep.cli, ["--out", out, "--resume", "--seeds", "9"], capsys)
     sweep.cli(["--out", str(out), "--resume", "--no-progress"])

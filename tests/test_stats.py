@@ -47,6 +47,7 @@ def test_verdicts():
     assert stats.verdict({"ci_low": -1.0, "ci_high": 2.0}) == "cannot tell at this budget"
     assert stats.verdict({"ci_low": float("nan"), "ci_high": float("nan")}) == "cannot tell at this budget"
     assert stats.verdict({"ci_low": -2.0, "ci_high": -0.5}, claim_positive=False) == "holds"
+    assert stats.verdict(stats.paired([1.0, 2.0, 3.0], [2.0, 3.0, 4.0])) == "cannot tell at this budget"  # no spread
 
 
 finite = st.floats(-100, 100, allow_nan=False)
