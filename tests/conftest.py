@@ -49,3 +49,15 @@ def org_kit(org_test):
     from env_helpers import Kit
 
     return Kit(*org_test)
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _free_compiled_programs():
+    """Drop every jit cache after each test module. One process compiles hundreds of XLA
+    programs; with all of them kept alive for the whole session (cached Trainers and
+    Evaluators), the suite segfaulted inside XLA's compiler near its end, twice at the same
+    test, which passes alone."""
+    yield
+    import jax
+
+    jax.clear_caches()

@@ -168,9 +168,6 @@ def _make_trainer_cached(config, env=None, env_params=None, **kwargs):
 _REAL_EVALUATOR = importlib.import_module("foresit_jax.evaluate").Evaluator  # before any patching
 
 
-@functools.lru_cache(maxsize=None)
-def _cached_evaluator(setup: str = "savn"):
-    return _REAL_EVALUATOR(setup)
 
 
 def _fast_jit(real_jit):
@@ -198,5 +195,12 @@ def patch_for_experiments(mp) -> None:
     fields, schedule = presets.PRESETS["tiny"]
     mp.setitem(presets.PRESETS, "tiny", ({**fields, "room_types": ("bathroom",)}, schedule))
     mp.setattr(train, "make_trainer", _make_trainer_cached)
-    mp.setattr(evaluate, "Evaluator", _cached_evaluator)
+    evaluators = {}  # dropped with the patch (and its compiled rollouts with it)
+
+    def cached_evaluator(setup: str = "savn"):
+        if setup not in evaluators:
+            evaluators[setup] = _REAL_EVALUATOR(setup)
+        return evaluators[setup]
+
+    mp.setattr(evaluate, "Evaluator", cached_evaluator)
     mp.setattr(jax, "jit", _fast_jit(jax.jit))
