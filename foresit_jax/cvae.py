@@ -91,26 +91,33 @@ def _minibatches(key, n: int, batch_size: int, epochs: int) -> chex.Array:
     return perms.reshape(epochs * steps, batch_size)
 
 
+def _fit_adam(loss_fn, params, key, n: int, batch_size: int, epochs: int, learning_rate: float):
+    """Adam on `loss_fn(params, item indices, key)` over shuffled minibatches of the `n`
+    items, `epochs` times; (params, per-step losses `[steps]`)."""
+    k_batches, k_steps = jax.random.split(key)
+    batches = _minibatches(k_batches, n, min(batch_size, n), epochs)
+    optimizer = optax.adam(learning_rate)
+    grad_fn = jax.value_and_grad(loss_fn)
+
+    def step(carry, xs):
+        params, opt_state = carry
+        loss, grads = grad_fn(params, *xs)
+        updates, opt_state = optimizer.update(grads, opt_state, params)
+        return (optax.apply_updates(params, updates), opt_state), loss
+
+    keys = jax.random.split(k_steps, batches.shape[0])
+    (params, _), step_losses = jax.lax.scan(step, (params, optimizer.init(params)), (batches, keys))
+    return params, step_losses
+
+
 def fit_cvae(model: CVAE, key, state, s_0, goal, epochs: int = 50, batch_size: int = 64, learning_rate: float = 1e-3,
              beta: float = 1.0):  # fmt: skip
     """Train the C-VAE on items `[N, ...]` with Adam; (params, per-step losses `[steps]`)."""
     state, s_0, goal = (jnp.asarray(x) for x in (state, s_0, goal))
-    k_init, k_batches, k_noise = jax.random.split(key, 3)
-    params = model.init(k_init, state[:1], s_0[:1], goal[:1], k_noise)
-    optimizer = optax.adam(learning_rate)
-    grad_fn = jax.value_and_grad(lambda p, idx, k: cvae_loss(model, p, state[idx], s_0[idx], goal[idx], k, beta)[0])
-    batches = _minibatches(k_batches, state.shape[0], min(batch_size, state.shape[0]), epochs)
-
-    def step(carry, xs):
-        params, opt_state = carry
-        idx, k = xs
-        loss, grads = grad_fn(params, idx, k)
-        updates, opt_state = optimizer.update(grads, opt_state, params)
-        return (optax.apply_updates(params, updates), opt_state), loss
-
-    keys = jax.random.split(k_noise, batches.shape[0])
-    (params, _), step_losses = jax.lax.scan(step, (params, optimizer.init(params)), (batches, keys))
-    return params, step_losses
+    k_init, k_fit = jax.random.split(key)
+    params = model.init(k_init, state[:1], s_0[:1], goal[:1], k_init)
+    loss = lambda p, idx, k: cvae_loss(model, p, state[idx], s_0[idx], goal[idx], k, beta)[0]  # noqa: E731
+    return _fit_adam(loss, params, k_fit, state.shape[0], batch_size, epochs, learning_rate)
 
 
 def fit_imagination(key, s_0, goal, target, layer_sizes: Sequence[int], epochs: int = 50, batch_size: int = 64,
@@ -119,21 +126,10 @@ def fit_imagination(key, s_0, goal, target, layer_sizes: Sequence[int], epochs: 
     Eq. 5's smooth-L1 and Adam; (apply function, params, per-step losses `[steps]`)."""
     s_0, goal, target = (jnp.asarray(x) for x in (s_0, goal, target))
     net = ImaginationNet(tuple(layer_sizes))
-    k_init, k_batches = jax.random.split(key)
+    k_init, k_fit = jax.random.split(key)
     params = net.init(k_init, s_0[:1], goal[:1])
-    optimizer = optax.adam(learning_rate)
-    grad_fn = jax.value_and_grad(
-        lambda p, idx: imagination.imagination_loss(net.apply, p, s_0[idx], goal[idx], target[idx])
-    )
-    batches = _minibatches(k_batches, s_0.shape[0], min(batch_size, s_0.shape[0]), epochs)
-
-    def step(carry, idx):
-        params, opt_state = carry
-        loss, grads = grad_fn(params, idx)
-        updates, opt_state = optimizer.update(grads, opt_state, params)
-        return (optax.apply_updates(params, updates), opt_state), loss
-
-    (params, _), step_losses = jax.lax.scan(step, (params, optimizer.init(params)), batches)
+    loss = lambda p, idx, _: imagination.imagination_loss(net.apply, p, s_0[idx], goal[idx], target[idx])  # noqa: E731
+    params, step_losses = _fit_adam(loss, params, k_fit, s_0.shape[0], batch_size, epochs, learning_rate)
     return net.apply, params, step_losses
 
 
