@@ -52,7 +52,7 @@ Choices where SAVN's code leaves one open or where ours differs, each with its r
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable
 
 import chex
 import flax.linen as nn
@@ -70,6 +70,30 @@ def _torch_default_init(fan_in: int):
     ll_* layers keep it (its own init runs before they are created)."""
     bound = 1.0 / jnp.sqrt(fan_in)
     return lambda key, shape, dtype=jnp.float32: jax.random.uniform(key, shape, dtype, -bound, bound)
+
+
+class CausalConv1d(nn.Module):
+    """`nn.Conv(features, (kernel_size,), kernel_dilation=dilation, padding=causal)` on
+    `[length, in]`, with the same parameters (kernel `[K, in, out]`, bias, created in the
+    same order, so the same init), written as K shifted matmuls: `lax.conv` has no
+    batching rule for the transposed convolutions of a second-order gradient whose kernel
+    is batched twice (per seed of a sweep and per lane of the inner loop), and these
+    convolutions are tiny."""
+
+    features: int
+    kernel_size: int
+    dilation: int
+    param_init: Callable
+
+    @nn.compact
+    def __call__(self, x: chex.Array) -> chex.Array:
+        length, in_features = x.shape
+        kernel = self.param("kernel", self.param_init, (self.kernel_size, in_features, self.features))
+        bias = self.param("bias", self.param_init, (self.features,))
+        pad = (self.kernel_size - 1) * self.dilation
+        x = jnp.pad(x, ((pad, 0), (0, 0)))
+        taps = [x[k * self.dilation : k * self.dilation + length] @ kernel[k] for k in range(self.kernel_size)]
+        return sum(taps) + bias
 
 
 class LearnedLoss(nn.Module):
@@ -92,11 +116,7 @@ class LearnedLoss(nn.Module):
         for level, out_channels in enumerate(self.channels):
             dilation = 2**level
             init = _torch_default_init(in_channels * self.kernel_size)
-            x = nn.Conv(
-                out_channels, (self.kernel_size,), kernel_dilation=(dilation,),
-                padding=(((self.kernel_size - 1) * dilation, 0),), kernel_init=init, bias_init=init,
-                name=f"conv{level}",
-            )(x)  # fmt: skip
+            x = CausalConv1d(out_channels, self.kernel_size, dilation, init, name=f"conv{level}")(x)
             x = nn.leaky_relu(x, 0.01)
             in_channels = out_channels
         return jnp.sqrt(jnp.sum(jnp.square(x)) + 1e-12)
