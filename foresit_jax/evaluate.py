@@ -171,8 +171,9 @@ class Evaluator:
             self.compiled[key] = jax.jit(lambda env_params, k: random_policy_rollout(env, env_params, k, episodes, num_steps))
         return self.compiled[key]
 
-    def _per_room(self, rooms, split, key, run_room) -> dict[str, dict[str, float]]:
-        """{room: metrics, ..., "overall": metrics over the pooled episodes}; `run_room`
+    def _per_room(self, rooms, split, key, run_room, by_length: bool = False) -> dict[str, dict[str, float]]:
+        """{room: metrics, ..., "overall": metrics over the pooled episodes, and with
+        `by_length` "by_length": `envs.metrics.by_length` of the pooled episodes}; `run_room`
         (env_params, num_steps, key) -> EpisodeOutcomes; rooms get keys split from `key`."""
         results, pooled = {}, []
         for room, k in zip(rooms, jax.random.split(key, len(rooms))):
@@ -181,7 +182,11 @@ class Evaluator:
             outcomes = jax.tree.map(np.asarray, run_room(env_params, num_steps, k))
             results[room] = outcome_metrics(outcomes)
             pooled.append(outcomes)
-        results["overall"] = outcome_metrics(EpisodeOutcomes(*(np.concatenate(parts) for parts in zip(*pooled))))
+        pooled = EpisodeOutcomes(*(np.concatenate(parts) for parts in zip(*pooled)))
+        results["overall"] = outcome_metrics(pooled)
+        if by_length:
+            spl = np.asarray(envs.metrics.spl(pooled.success, pooled.length, pooled.optimal_length))
+            results["by_length"] = envs.metrics.by_length(pooled.success, spl, pooled.optimal_length)
         return results
 
     def _check(self, config: Config, split: str, episodes_per_room: int) -> None:
@@ -195,10 +200,12 @@ class Evaluator:
     def evaluate(
         self, agent_params: AgentParams, config: Config, split: str = "test", key: chex.PRNGKey | None = None,
         episodes_per_room: int = 250, greedy: bool | None = None, room_types: tuple[str, ...] | None = None,
+        by_length: bool = False,
     ) -> dict[str, dict[str, float]]:  # fmt: skip
         """Run `episodes_per_room` episodes in each room type of `split` ("val" or "test").
 
-        Returns {"overall": metrics, "kitchen": metrics, ...} with metrics from `summarize`.
+        Returns {"overall": metrics, "kitchen": metrics, ...} with metrics from `summarize`,
+        and with `by_length` also "by_length": SR/SPL by bucket of L^g (`envs.metrics.by_length`).
         """
         self._check(config, split, episodes_per_room)
         key = jax.random.PRNGKey(0) if key is None else key
@@ -210,7 +217,7 @@ class Evaluator:
             run = self.agent_rollout(config, num_steps, greedy)
             return run(agent_params.params, agent_params.imagination_params, env_params, k, sigma2)
 
-        return self._per_room(rooms, split, key, run_room)
+        return self._per_room(rooms, split, key, run_room, by_length)
 
     def evaluate_random_policy(
         self, config: Config, split: str = "test", key: chex.PRNGKey | None = None, episodes_per_room: int = 250
