@@ -42,7 +42,6 @@ class Args:
 
 
 def main(args: Args) -> dict:
-    from foresit_jax import cvae
     from foresit_jax.config import Config
     from foresit_jax.train import make_trainer
 
@@ -62,39 +61,58 @@ def main(args: Args) -> dict:
     step = manager.latest_step()
     if step is None:
         raise runs.UserError(f"{args.run / 'checkpoints'} holds no checkpoint; was the run interrupted before its first chunk?")
-    state = runs.restore(manager, step, like)
-    state = state._replace(key=jax.random.fold_in(state.key, args.seed))
-    collect = jax.jit(trainer.collect_subgoal_items, static_argnums=2)
-    s_0, goal, subgoal, add = (np.asarray(x) for x in collect(state, trainer.env_params, args.windows))
-    add = add.astype(bool)
-    items = (s_0[add], goal[add], subgoal[add])
-    n = len(items[0])
-    if n < MIN_ITEMS:
-        raise runs.UserError(f"only {n} successful episodes in {args.windows} windows (at least {MIN_ITEMS} needed); "
-                             "raise --windows")  # fmt: skip
-    order = np.random.default_rng(args.seed).permutation(n)
-    cut = int(0.8 * n)
-    train = tuple(x[order[:cut]] for x in items)
-    test = tuple(x[order[cut:]] for x in items)
-    sizes = config.imagination_layer_sizes
-    result = cvae.compare_imagination_targets(jax.random.PRNGKey(args.seed), train, test, layer_sizes=sizes,
-                                              latent_size=min(sizes), epochs=args.epochs)  # fmt: skip
-    result.update(items=n, train_items=cut, test_items=n - cut, update=step, latent_size=min(sizes))
+    result = compare(config, trainer, runs.restore(manager, step, like), args.windows, args.epochs, args.seed)
+    if "direct" not in result:
+        raise runs.UserError(f"only {result['items']} successful episodes in {args.windows} windows (at least {MIN_ITEMS} "
+                             "needed); raise --windows")  # fmt: skip
+    result["update"] = step
     runs.write_json(out, result)
-    rows = [[label, f"{r['loss']:.4f}", f"{r['target_variance']:.4f}", f"{r['loss_over_variance']:.3f}", width]
-            for label, r, width in (("f_w on the agent's states (ForeSIT)", result["direct"], sizes[-1]),
-                                    ("f_w on the C-VAE's latent mean", result["cvae_latent"], min(sizes)))]  # fmt: skip
-    header = ["f_w target", "held-out smooth-L1 loss", "target variance", "loss / variance", "width"]
-    md = (f"# Imagination loss: the agent's states vs a C-VAE's latent ({config.method}, update {step})\n\n"
-          + markdown_table(rows, header)
-          + f"\n{n} items from successful episodes in {args.windows} windows ({cut} to fit, {n - cut} held out, "
-          "split at random: the held-out items come from the same training scenes and targets); "
-          f"the C-VAE's held-out reconstruction {result['cvae_reconstruction']:.4f}, KL {result['cvae_kl']:.4f} "
-          "(near 0: the latent carries little of the state). Paper: 0.012 vs 0.018.\n")  # fmt: skip
+    md = markdown(result, config, args.windows)
     out.with_suffix(".md").write_text(md)
     print(md)
     print(f"wrote {out} and {out.with_suffix('.md')}")
     return result
+
+
+def compare(config, trainer, state, windows: int, epochs: int, seed: int) -> dict:
+    """The comparison on the agent of training state `state` (not updated): its items from
+    `windows` windows, 80% to fit and 20% held out (`foresit_jax.cvae.compare_imagination_targets`);
+    with fewer than MIN_ITEMS items, only {"items": n}."""
+    from foresit_jax import cvae
+
+    state = state._replace(key=jax.random.fold_in(state.key, seed))
+    collect = jax.jit(trainer.collect_subgoal_items, static_argnums=2)
+    s_0, goal, subgoal, add = (np.asarray(x) for x in collect(state, trainer.env_params, windows))
+    add = add.astype(bool)
+    items = (s_0[add], goal[add], subgoal[add])
+    n = len(items[0])
+    if n < MIN_ITEMS:
+        return {"items": n}
+    order = np.random.default_rng(seed).permutation(n)
+    cut = int(0.8 * n)
+    train = tuple(x[order[:cut]] for x in items)
+    test = tuple(x[order[cut:]] for x in items)
+    sizes = config.imagination_layer_sizes
+    result = cvae.compare_imagination_targets(jax.random.PRNGKey(seed), train, test, layer_sizes=sizes,
+                                              latent_size=min(sizes), epochs=epochs)  # fmt: skip
+    result.update(items=n, train_items=cut, test_items=n - cut, latent_size=min(sizes))
+    return result
+
+
+def markdown(result: dict, config, windows: int, level: int = 1) -> str:
+    """The comparison's table and notes (the result of `compare`)."""
+    sizes, n, cut = config.imagination_layer_sizes, result["items"], result["train_items"]
+    rows = [[label, f"{r['loss']:.4f}", f"{r['target_variance']:.4f}", f"{r['loss_over_variance']:.3f}", width]
+            for label, r, width in (("f_w on the agent's states (ForeSIT)", result["direct"], sizes[-1]),
+                                    ("f_w on the C-VAE's latent mean", result["cvae_latent"], min(sizes)))]  # fmt: skip
+    header = ["f_w target", "held-out smooth-L1 loss", "target variance", "loss / variance", "width"]
+    at = f", update {result['update']}" if "update" in result else ""
+    return ("#" * level + f" Imagination loss: the agent's states vs a C-VAE's latent ({config.method}{at})\n\n"
+            + markdown_table(rows, header)
+            + f"\n{n} items from successful episodes in {windows} windows ({cut} to fit, {n - cut} held out, "
+            "split at random: the held-out items come from the same training scenes and targets); "
+            f"the C-VAE's held-out reconstruction {result['cvae_reconstruction']:.4f}, KL {result['cvae_kl']:.4f} "
+            "(a KL near 0 means the latent carries little of the state). Paper: 0.012 vs 0.018.\n")  # fmt: skip
 
 
 def cli(argv=None) -> None:

@@ -73,6 +73,30 @@ def prepare_run_dir(path: Path, resume: bool, overwrite: bool, marker: str = RUN
     path.mkdir(parents=True, exist_ok=True)
 
 
+def write_started_args(path: Path, args, keep: tuple[str, ...]) -> None:
+    """Save a CLI's arguments (a dataclass) for `resumed_args`; the fields in `keep` and
+    resume/overwrite are this invocation's own and are not saved."""
+    skip = ("resume", "overwrite", *keep)
+    write_json(path, {k: v for k, v in dataclasses.asdict(args).items() if k not in skip})
+
+
+def resumed_args(args, marker: str, kind: str, keep: tuple[str, ...]):
+    """The arguments a run folder `args.out` was started with (`write_started_args` wrote
+    them to `marker`), for --resume: a value given now that differs from them is refused
+    in one line (a flag at its default cannot be told from one not given and is ignored);
+    the fields in `keep` are taken from `args`."""
+    prepare_run_dir(args.out, resume=True, overwrite=args.overwrite, marker=marker, kind=kind)
+    saved = json.loads((args.out / marker).read_text())
+    saved = {k: tuple(v) if isinstance(v, list) else v for k, v in saved.items() if k != "out"}
+    defaults = type(args)()
+    clash = [f"--{k.replace('_', '-')} {getattr(args, k)} (started with {v})" for k, v in saved.items()
+             if getattr(args, k) not in (getattr(defaults, k), v)]  # fmt: skip
+    if clash:
+        raise UserError(f"--resume continues {args.out} with the arguments it was started with; drop {', '.join(clash)}")
+    return dataclasses.replace(type(args)(**{**saved, "out": args.out}), resume=True,
+                               **{k: getattr(args, k) for k in keep})  # fmt: skip
+
+
 def write_run_info(path: Path, info: dict) -> None:
     write_json(path / RUN_FILE, info)
 

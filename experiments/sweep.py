@@ -88,6 +88,28 @@ def method_schedule(method: str, args: Args):
     return config, dataclasses.replace(schedule, **{k: v for k, v in sched.items() if v is not None})
 
 
+def initial_states(trainer, seeds: list[int]):
+    """(the seeds' training states, stacked; the selected models (`AgentParams`), stacked:
+    at first the initial ones): what a sweep's checkpoints hold, as `runs.restore` needs it."""
+    from foresit_jax.evaluate import agent_params
+
+    states = jax.vmap(trainer.init)(jnp.stack([selection.run_key(s) for s in seeds]))
+    return states, jax.vmap(lambda s: agent_params(s, trainer.config.sigma2_max))(states)
+
+
+def load_method(method: str, args: Args, folder: Path):
+    """A finished method of a sweep read back: (Config, trainer, the seeds' last training
+    states, their selected models), stacked over `seeds_of(args)` (numpy leaves)."""
+    from foresit_jax.train import make_trainer
+
+    config, _ = method_schedule(method, args)
+    trainer = make_trainer(config)
+    done = json.loads((folder / "results.json").read_text())["updates"]
+    states, best = initial_states(trainer, seeds_of(args))
+    restored = runs.restore(runs.checkpoint_manager(folder / "checkpoints", 2), done, {"states": states, "best": best})
+    return config, trainer, restored["states"], restored["best"]
+
+
 def run_method(method: str, args: Args, bar, evaluator, folder: Path, budget: list) -> tuple | None:
     """Train `args.seeds` seeds of one method vmapped, selecting each seed's model on
     validation after each chunk; returns (per seed: seed, selected update, test results of
@@ -111,9 +133,8 @@ def run_method(method: str, args: Args, bar, evaluator, folder: Path, budget: li
     trainer = make_trainer(config)
     env_params = trainer.env_params
     mesh = devices.seed_mesh(len(seeds))
-    states = jax.vmap(trainer.init)(jnp.stack([selection.run_key(s) for s in seeds]))
+    states, best_params = initial_states(trainer, seeds)
     seed_params_of = jax.vmap(lambda s: agent_params(s, config.sigma2_max))
-    best_params = seed_params_of(states)  # the selected models, stacked over seeds
     manager = runs.checkpoint_manager(folder / "checkpoints", 2)
     progress = {"done": 0, "best_sr": [-1.0] * len(seeds), "best_update": [None] * len(seeds),
                 "history": [[] for _ in seeds], "curves": []}  # fmt: skip
@@ -163,8 +184,8 @@ def run_method(method: str, args: Args, bar, evaluator, folder: Path, budget: li
     results = []
     for i, seed in enumerate(seeds):
         last = devices.seed_slice(last_params, i)
-        test = [evaluator.evaluate(p, config, "test", selection.test_key(seed), schedule.test_episodes_per_room)
-                for p in (best[i].params, last)]  # fmt: skip
+        test = [evaluator.evaluate(p, config, "test", selection.test_key(seed), schedule.test_episodes_per_room,
+                                   by_length=True) for p in (best[i].params, last)]  # fmt: skip
         results.append({"seed": seed, "selected_update": best[i].update, "selected": test[0], "last": test[1],
                         "validation": history[i], "training_success_rate": curves[i].tolist()})  # fmt: skip
     runs.write_json(folder / "results.json", {"updates": done, "results": results, "curves": curves.tolist()})
@@ -185,7 +206,7 @@ def table(results_by_method: dict[str, list[dict]], room: str = "overall") -> li
     return rows
 
 
-def _mean_std_ci(row: dict, col: str) -> str:
+def mean_std_ci(row: dict, col: str) -> str:
     if not np.isfinite(row[f"{col} mean"]):
         return "n/a"
     if not np.isfinite(row[f"{col} std"]):
@@ -194,7 +215,7 @@ def _mean_std_ci(row: dict, col: str) -> str:
 
 
 def table_markdown(rows: list[dict], title: str) -> str:
-    cells = [[row["method"], *(_mean_std_ci(row, c) for c in COLUMNS)] for row in rows]
+    cells = [[row["method"], *(mean_std_ci(row, c) for c in COLUMNS)] for row in rows]
     note = "mean ± sample std [95% confidence interval, Student t] over seeds"
     return f"# {title}\n\n" + markdown_table(cells, ["Method", *COLUMNS]) + f"\n({note})\n"
 
@@ -238,17 +259,7 @@ def main(args: Args) -> list[dict] | None:
     from foresit_jax.evaluate import Evaluator
 
     if args.resume:
-        runs.prepare_run_dir(args.out, resume=True, overwrite=args.overwrite, marker="sweep.json", kind="sweep")
-        saved = json.loads((args.out / "sweep.json").read_text())
-        saved = {k: tuple(v) if isinstance(v, list) else v for k, v in saved.items() if k != "out"}
-        defaults = Args()
-        clash = [f"--{k.replace('_', '-')} {getattr(args, k)} (started with {v})" for k, v in saved.items()
-                 if getattr(args, k) not in (getattr(defaults, k), v)]  # fmt: skip
-        if clash:
-            raise runs.UserError(f"--resume continues {args.out} with the arguments it was started with; "
-                                 f"drop {', '.join(clash)}")  # fmt: skip
-        keep = {k: getattr(args, k) for k in ("stop_after_chunks", "progress")}
-        args = dataclasses.replace(Args(**{**saved, "out": args.out}), resume=True, **keep)
+        args = runs.resumed_args(args, "sweep.json", "sweep", keep=("stop_after_chunks", "progress"))
     if args.seeds < 1:
         raise runs.UserError(f"--seeds must be >= 1, got {args.seeds}")
     if not args.methods:
@@ -261,8 +272,7 @@ def main(args: Args) -> list[dict] | None:
     out = args.out
     if not args.resume:
         runs.prepare_run_dir(out, resume=False, overwrite=args.overwrite, marker="sweep.json", kind="sweep")
-        runs.write_json(out / "sweep.json", {k: v for k, v in dataclasses.asdict(args).items()
-                                             if k not in ("resume", "overwrite", "stop_after_chunks", "progress")})  # fmt: skip
+        runs.write_started_args(out / "sweep.json", args, ("stop_after_chunks", "progress"))
 
     used = devices.seed_mesh(args.seeds).devices.size
     print(f"{len(args.methods)} method(s) x {args.seeds} seed(s), the seeds spread over {used} of the "

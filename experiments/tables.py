@@ -40,8 +40,13 @@ def markdown_table(rows: Sequence[Sequence], columns: Sequence[str], align: Opti
 def write_csv(path: Path, rows: Sequence[dict], append: bool = False) -> None:
     """Rows of dicts as CSV, columns in the first row's key order; a header only when the
     file is new. NaN and missing values (None, e.g. read back from strict JSON's null) are
-    written `nan`, as Python's csv writes a float NaN, so a row reads the same either way."""
+    written `nan`, as Python's csv writes a float NaN, so a row reads the same either way.
+    No rows: an empty file (a table of nothing that ran), or nothing appended."""
     path = Path(path)
+    if not rows:
+        if not append:
+            path.write_text("")
+        return
     new = not (append and path.exists())
     with open(path, "a" if append else "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=list(rows[0]))
