@@ -1,0 +1,509 @@
+"""The paper's evaluation from one command:
+`python -m experiments.paper --preset quick --seeds 5 --out runs/paper`.
+
+It runs one seed sweep per setup (`experiments.sweep`, the protocol of `train`: each
+seed's model selected on validation) over the methods of the paper's tables, then writes
+`report.md` with a CSV beside each table and a PNG beside each figure:
+
+- Table 1: both setups (savn: A3C, A3C+MAML, A3C+ForeSIT, A3C+MAML+ForeSIT; org: A3C+ORG,
+  A3C+ORG+ForeSIT), SPL, SR, SPL>=5, SR>=5 over seeds, beside the paper's numbers;
+- Table 2: SPL/SR per room type of the +ForeSIT pairs;
+- Table 3: the ablations RND, INT, ATT and ForeSIT on the ORG base;
+- the model selected on validation against the last one;
+- SR and SPL by optimal path length (buckets of L^g) with 95% bands over seeds, and the
+  paired difference per bucket, for each +ForeSIT pair;
+- the paper's claims, each with a verdict ("holds", "does not hold", "cannot tell at this
+  budget": a paired t interval over seeds, `experiments.stats`) and its numbers;
+- the C-VAE comparison (`experiments.cvae_compare`) on the first seed of a ForeSIT method;
+- Figure 3: trajectories of the baseline and of ForeSIT on the same test episodes;
+- Figure 4: t-SNE of imagined states f_w([s_0 : g_tau]) and of the selected sub-goals;
+- learning curves of every method with bands over seeds (one PNG per setup).
+
+`--exclude` leaves methods out (the report says which, and the claims that need them read
+"not run"); on a CPU the MAML rows take hours (see the README). A killed run resumes with
+`--resume`: finished sweeps and methods are kept, a started one continues from its last
+checkpoint (`experiments.sweep`), and the report is written again from the results.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Optional
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from envs.catalog import ROOM_TYPES
+from envs.metrics import LENGTH_BUCKETS, bucket_label
+from experiments import cvae_compare, devices, runs, selection, stats, sweep
+from experiments.tables import markdown_table, write_csv
+
+# The methods of each setup's sweep: Table 1's rows, then Table 3's ablations.
+GROUPS = {
+    "savn": ("a3c", "a3c+maml", "a3c+foresit", "a3c+maml+foresit"),
+    "org": ("a3c+org", "a3c+org+foresit", "a3c+org+rnd", "a3c+org+int", "a3c+org+att"),
+}
+SETUP_OF = {m: setup for setup, methods in GROUPS.items() for m in methods}
+PAIRS = (("a3c", "a3c+foresit"), ("a3c+maml", "a3c+maml+foresit"), ("a3c+org", "a3c+org+foresit"))
+TABLE3 = ("a3c+org", "a3c+org+rnd", "a3c+org+int", "a3c+org+att", "a3c+org+foresit")
+# The paper's numbers (Tables 1-3), printed beside ours for orientation only: AI2-THOR is
+# not GridNav, so the levels differ; the claims compare methods within this environment.
+PAPER_TABLE1 = {
+    "a3c": (14.68, 33.04, 11.69, 21.44), "a3c+maml": (16.15, 40.86, 13.91, 28.70),
+    "a3c+foresit": (15.23, 36.80, 13.14, 27.55), "a3c+maml+foresit": (16.75, 45.5, 15.8, 34.7),
+    "a3c+org": (37.5, 65.3, 36.1, 54.8), "a3c+org+foresit": (39.41, 68.0, 36.85, 56.11),
+}  # fmt: skip
+PAPER_TABLE3 = {"a3c+org": (37.5, 65.3), "a3c+org+rnd": (37.57, 64.8), "a3c+org+int": (37.78, 63.8),
+                "a3c+org+att": (37.76, 65.4), "a3c+org+foresit": (38.66, 67.6)}  # fmt: skip
+NOT_RUN = "not run"
+
+
+@dataclasses.dataclass(frozen=True)
+class Args:
+    """Train the paper's methods over seeds and write its tables, figures and verdicts."""
+
+    preset: str = "quick"
+    """Preset: tiny, quick or paper."""
+    seeds: int = 5
+    """Seeds per method."""
+    seed: int = 0
+    """Base seed: seed i is the run `train --seed <seed + i>` would make."""
+    out: Path = Path("runs/paper")
+    """Output folder (report.md, one sweep folder per setup)."""
+    exclude: tuple[str, ...] = ()
+    """Methods to leave out (e.g. a3c+maml a3c+maml+foresit on a CPU)."""
+    resume: bool = False
+    """Continue a killed run in --out with the arguments it was started with."""
+    overwrite: bool = False
+    """Replace an existing run in --out."""
+    num_updates: Optional[int] = None
+    """Override the preset's number of updates."""
+    test_episodes_per_room: Optional[int] = None
+    """Override the preset's test episodes per room type."""
+    val_episodes_per_room: Optional[int] = None
+    """Override the preset's validation episodes per room type."""
+    cvae_windows: int = 100
+    """Windows the C-VAE comparison collects its sub-goals from."""
+    cvae_epochs: int = 50
+    """Epochs of the C-VAE comparison's fits."""
+    trajectory_candidates: int = 32
+    """Figure 3: test episodes per room type among which the first with L^g >= 5 is drawn."""
+    tsne_points: int = 400
+    """Figure 4: most sub-goal items embedded (each gives an imagined and a selected state)."""
+    stop_after_chunks: Optional[int] = None
+    """Stop (as if killed) after this many chunks of a setup's sweep; for testing --resume."""
+    progress: bool = True
+    """Show the progress bar."""
+
+
+def sweep_args(args: Args, setup: str, methods: tuple[str, ...]) -> sweep.Args:
+    fields = ("seeds", "preset", "seed", "num_updates", "test_episodes_per_room", "val_episodes_per_room",
+              "stop_after_chunks", "progress")  # fmt: skip
+    folder = args.out / setup
+    return sweep.Args(methods=methods, setup=setup, out=folder, resume=(folder / "sweep.json").exists(),
+                      **{k: getattr(args, k) for k in fields})  # fmt: skip
+
+
+def check(args: Args) -> None:
+    unknown = [m for m in args.exclude if m not in SETUP_OF]
+    if unknown:
+        raise runs.UserError(f"--exclude {' '.join(unknown)}: not a method of the paper's tables; "
+                             f"they are {', '.join(SETUP_OF)}")  # fmt: skip
+    if not any(m not in args.exclude for m in SETUP_OF):
+        raise runs.UserError("--exclude leaves no method to run")
+    if args.seeds < 1:
+        raise runs.UserError(f"--seeds must be >= 1, got {args.seeds}")
+    for name in ("cvae_windows", "cvae_epochs", "trajectory_candidates", "tsne_points"):
+        if getattr(args, name) < 1:
+            raise runs.UserError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
+
+
+def main(args: Args) -> dict | None:
+    """Run (or continue) every sweep, then write the report; returns the claims
+    ({claim: verdict line}), or None when stopped by --stop-after-chunks."""
+    keep = ("stop_after_chunks", "progress")
+    if args.resume:
+        args = runs.resumed_args(args, "paper.json", "paper run", keep=keep)
+    check(args)
+    for method in SETUP_OF:  # fail before any training
+        sweep.method_schedule(method, dataclasses.replace(sweep.Args(), preset=args.preset, setup=SETUP_OF[method]))
+    if not args.resume:
+        runs.prepare_run_dir(args.out, resume=False, overwrite=args.overwrite, marker="paper.json", kind="paper run")
+        runs.write_started_args(args.out / "paper.json", args, keep)
+    t0 = time.time()
+    results = {}
+    for setup, group in GROUPS.items():
+        methods = tuple(m for m in group if m not in args.exclude)
+        if not methods:
+            continue
+        print(f"== {setup} setup: {', '.join(methods)}", flush=True)
+        if sweep.main(sweep_args(args, setup, methods)) is None:
+            print("stopped (continue with --resume)")
+            return None
+        per_seed = json.loads((args.out / setup / "results_per_seed.json").read_text())
+        results.update(per_seed)
+    print(f"sweeps done ({time.time() - t0:.0f} s); writing the report", flush=True)
+    return write_report(args, results)
+
+
+# ---------------------------------------------------------------------- the report
+def _selected(results: dict, methods) -> dict[str, list[dict]]:
+    return {m: [r["selected"] for r in results[m]] for m in methods if m in results}
+
+
+def _cell(values) -> str:
+    s = stats.summary(values)
+    if not np.isfinite(s["mean"]):
+        return "n/a"
+    return f"{s['mean']:.1f}" + (f" ± {s['std']:.1f}" if np.isfinite(s["std"]) else "")
+
+
+def table1(args: Args, results: dict) -> tuple[str, list[dict]]:
+    md, rows = "", []
+    for setup, group in GROUPS.items():
+        methods = [m for m in group if m in PAPER_TABLE1]
+        selected = _selected(results, methods)
+        cells = []
+        for method in methods:
+            if method not in selected:
+                cells.append([method, *[NOT_RUN] * 4, " / ".join(map(str, PAPER_TABLE1[method]))])
+                continue
+            row = sweep.table({method: selected[method]})[0]
+            rows.append({"setup": setup, **row})
+            cells.append([method, *(sweep.mean_std_ci(row, c) for c in sweep.COLUMNS),
+                          " / ".join(map(str, PAPER_TABLE1[method]))])  # fmt: skip
+        md += (f"### {setup} setup\n\n" + markdown_table(cells, ["Method", *sweep.COLUMNS, "paper (SPL / SR / SPL>5 / SR>5)"])
+               + "\n")  # fmt: skip
+    return md, rows
+
+
+def table2(results: dict) -> tuple[str, list[dict]]:
+    cells, rows = [], []
+    first = next(iter(results.values()))[0]["selected"]
+    rooms = [room for room in ROOM_TYPES if room in first]  # the preset's room types
+    for pair in PAIRS:
+        for method in pair:
+            if method not in results:
+                continue
+            per_seed = [r["selected"] for r in results[method]]
+            cell = [method]
+            for room in rooms:
+                spl, sr = ([r[room][c] for r in per_seed] for c in ("SPL", "SR"))
+                cell.append(f"{_cell(spl)} / {_cell(sr)}")
+                rows.append({"method": method, "room": room, "SPL mean": float(np.mean(spl)), "SR mean": float(np.mean(sr)),
+                             "SPL std": stats.summary(spl)["std"], "SR std": stats.summary(sr)["std"]})  # fmt: skip
+            cells.append(cell)
+    header = ["Method", *(f"{room.replace('_', ' ')} SPL / SR" for room in rooms)]
+    return markdown_table(cells, header) + "\n(mean ± sample std over seeds)\n", rows
+
+
+def table3(results: dict) -> tuple[str, list[dict]]:
+    methods = [m for m in TABLE3 if m in results]
+    selected = _selected(results, methods)
+    rows = sweep.table(selected)
+    cells = [[r["method"], sweep.mean_std_ci(r, "SPL"), sweep.mean_std_ci(r, "SR"),
+              " / ".join(map(str, PAPER_TABLE3[r["method"]]))] for r in rows]  # fmt: skip
+    cells += [[m, NOT_RUN, NOT_RUN, " / ".join(map(str, PAPER_TABLE3[m]))] for m in TABLE3 if m not in results]
+    md = markdown_table(cells, ["Method", "SPL", "SR", "paper (SPL / SR)"]) + "\n"
+    if "a3c+org" in selected and len(selected) > 1 and len(next(iter(selected.values()))) > 1:
+        md += "\n" + sweep.paired_markdown(selected)
+    return md, rows
+
+
+# ---------------------------------------------------------------------- L^g buckets
+def by_length_rows(results: dict) -> list[dict]:
+    """Per method present and bucket of L^g: SR and SPL over seeds (mean, 95% interval),
+    the test episodes in the bucket (summed over seeds)."""
+    rows = []
+    for method, per_seed in results.items():
+        for bucket in map(bucket_label, LENGTH_BUCKETS):
+            cells = [r["selected"]["by_length"][bucket] for r in per_seed]
+            row = {"method": method, "bucket": bucket, "episodes": sum(c["episodes"] for c in cells)}
+            for col in ("SR", "SPL"):
+                s = stats.summary([_num(c[col]) for c in cells])
+                row.update({f"{col} mean": s["mean"], f"{col} ci_low": s["ci_low"], f"{col} ci_high": s["ci_high"]})
+            rows.append(row)
+    return rows
+
+
+def _num(x) -> float:
+    """A rate read back from JSON: None (an empty bucket, written as null) is NaN."""
+    return np.nan if x is None else float(x)
+
+
+def _paired_col(results: dict, base: str, other: str, get) -> dict:
+    """`stats.paired` of `get(selected test result)` of two methods over their seeds."""
+    a, b = ([get(r["selected"]) for r in results[m]] for m in (base, other))
+    return stats.paired(a, b)
+
+
+def _fmt_pair(p: dict) -> str:
+    if not np.isfinite(p["diff"]):
+        return "n/a"
+    if not np.isfinite(p["ci_low"]) or p["ci_low"] == p["ci_high"]:
+        return f"{p['diff']:+.1f} (no spread over seeds)"
+    return f"{p['diff']:+.1f} [{p['ci_low']:+.1f}, {p['ci_high']:+.1f}], p {p['p']:.3f}"
+
+
+def by_length_section(args: Args, results: dict) -> str:
+    """For each +ForeSIT pair: a PNG of SR and SPL by L^g bucket with 95% bands over seeds,
+    and the paired difference per bucket."""
+    rows = by_length_rows(results)
+    write_csv(args.out / "by_length.csv", rows)
+    md = ""
+    for base, other in PAIRS:
+        if base not in results or other not in results:
+            continue
+        name = f"by_length_{base}_vs_{other}.png".replace("+", "_")
+        _by_length_png(args.out / name, [r for r in rows if r["method"] in (base, other)])
+        cells = []
+        for bucket in map(bucket_label, LENGTH_BUCKETS):
+            episodes = next(r["episodes"] for r in rows if r["method"] == base and r["bucket"] == bucket)
+            pairs = [_paired_col(results, base, other, lambda r, c=c: _num(r["by_length"][bucket][c])) for c in ("SR", "SPL")]
+            cells.append([bucket, episodes, *(f"{_fmt_pair(p)} ({stats.verdict(p)})" for p in pairs)])
+        md += (f"### {other} against {base}\n\n![SR and SPL by L^g]({name})\n\n"
+               + markdown_table(cells, ["L^g", "episodes (all seeds)", "SR difference [95% CI], p", "SPL difference"])
+               + "\n\n")  # fmt: skip
+    return md or f"(no +ForeSIT pair was run)\n"
+
+
+def _by_length_png(path: Path, rows: list[dict]) -> None:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(9, 3.6))
+    FigureCanvasAgg(fig)
+    buckets = [bucket_label(b) for b in LENGTH_BUCKETS]
+    x = np.arange(len(buckets))
+    for i, col in enumerate(("SR", "SPL")):
+        ax = fig.add_subplot(1, 2, i + 1)
+        for method in dict.fromkeys(r["method"] for r in rows):
+            by = {r["bucket"]: r for r in rows if r["method"] == method}
+            y, lo, hi = (np.array([by[b][f"{col} {k}"] for b in buckets], float) for k in ("mean", "ci_low", "ci_high"))
+            ax.plot(x, y, "o-", label=method)
+            ax.fill_between(x, lo, hi, alpha=0.2)
+        ax.set_xticks(x, buckets)
+        ax.set_xlabel("optimal path length L^g (actions)")
+        ax.set_ylabel(f"test {col} (%)")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+# ---------------------------------------------------------------------- claims
+def claims(results: dict) -> list[tuple[str, str, str]]:
+    """(claim, verdict, numbers) of each claim of the paper the run can test: a paired
+    interval over seeds of the difference it states (holds when the interval lies on the
+    claimed side of 0)."""
+    out = []
+
+    def claim(text: str, base: str, other: str, get, label: str):
+        if base not in results or other not in results:
+            out.append((text, NOT_RUN, f"needs {base} and {other}"))
+            return
+        p = _paired_col(results, base, other, get)
+        out.append((text, stats.verdict(p), f"{label} {_fmt_pair(p)} over {p['n']} seeds"))
+
+    for base, other in PAIRS:
+        for col in ("SR", "SPL"):
+            claim(f"Table 1: {other} has a higher {col} than {base}", base, other,
+                  lambda r, c=col: r["overall"][c], f"{col} difference")  # fmt: skip
+        # The paper's Section 5: ForeSIT's gain is larger on long paths (L^g >= 5).
+        claim(f"{other}'s SR gain over {base} is larger on L^g>=5 than overall", base, other,
+              lambda r: _num(r["overall"]["SR>=5"]) - r["overall"]["SR"], "(SR>=5 - SR) difference")  # fmt: skip
+    claim("Table 1: a3c+maml has a higher SR than a3c", "a3c", "a3c+maml", lambda r: r["overall"]["SR"], "SR difference")
+    for ablation in ("a3c+org+rnd", "a3c+org+int", "a3c+org+att"):
+        claim(f"Table 3: a3c+org+foresit has a higher SR than {ablation}", ablation, "a3c+org+foresit",
+              lambda r: r["overall"]["SR"], "SR difference")  # fmt: skip
+    return out
+
+
+def claims_markdown(lines) -> str:
+    return markdown_table([[c, v, n] for c, v, n in lines], ["Claim of the paper", "Verdict", "Numbers"]) + "\n"
+
+
+# ---------------------------------------------------------------------- figures 3 and 4
+def _first_seed(args: Args, method: str):
+    """(config, trainer, last training state, selected AgentParams) of the first seed."""
+    config, trainer, states, best = sweep.load_method(method, _method_args(args, method), args.out / SETUP_OF[method] / "methods" / method)
+    return config, trainer, devices.seed_slice(states, 0), devices.seed_slice(best, 0)
+
+
+def _method_args(args: Args, method: str) -> sweep.Args:
+    setup = SETUP_OF[method]
+    return sweep_args(args, setup, tuple(m for m in GROUPS[setup] if m not in args.exclude))
+
+
+def trajectories_figure(args: Args, base: str, other: str, path: Path) -> str:
+    """Figure 3: both methods' first seeds (selected models) play the same test episodes,
+    one per room type: the first of `trajectory_candidates` whose L^g >= 5 (a fixed rule,
+    not a choice of good-looking ones); each method acts by its own evaluation protocol."""
+    from envs.render import render_topdown
+    from foresit_jax.agent import Agent
+    from foresit_jax.evaluate import Evaluator
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    loaded = {m: _first_seed(args, m)[::3] for m in (base, other)}  # (config, selected params)
+    evaluator = Evaluator(SETUP_OF[base])
+    env, n = evaluator.env, args.trajectory_candidates
+    key = selection.test_key(args.seed)
+    rooms = next(iter(loaded.values()))[0].room_types or ROOM_TYPES
+    rollouts = {m: jax.jit(functools.partial(Agent(config).rollout, env=env, greedy=config.pieces.greedy_evaluation),
+                           static_argnames="num_steps") for m, (config, _) in loaded.items()}  # fmt: skip
+    replay = jax.jit(functools.partial(_replay_positions, env))
+    panels, lines = [], []
+    for room, k in zip(rooms, jax.random.split(key, len(rooms))):
+        env_params = evaluator.room_params("test", room)
+        num_steps = int(jnp.max(env_params.max_steps))
+        reset_keys = jax.random.split(jax.random.fold_in(k, 0), n)
+        _, start = jax.vmap(env.reset, in_axes=(0, None))(reset_keys, env_params)
+        long = np.flatnonzero(np.asarray(start.optimal_length) >= 5)
+        if not len(long):
+            continue
+        i = int(long[0])
+        row = []
+        for method, (config, params) in loaded.items():
+            traj = rollouts[method](params.params, params.imagination_params, env_params=env_params, key=k,
+                                    noise_variance=jnp.full((n,), params.noise_variance), num_steps=num_steps,
+                                    reset_keys=reset_keys)  # fmt: skip
+            actions, valid, success = (np.asarray(x)[:, i] for x in (traj.actions, traj.valid, traj.success))
+            steps = int(valid.sum())
+            poses = np.asarray(replay(env_params, reset_keys[i], actions))[: steps + 1]
+            ok = bool((success & valid).any())
+            state = jax.tree.map(lambda x: x[i], start)
+            title = f"{method}: {'success' if ok else 'failure'}, {steps} actions (L^g {int(state.optimal_length)})"
+            row.append(render_topdown(env_params, int(state.scene), state=state, trajectory=poses, title=title))
+            lines.append(f"{room} {method}: {'success' if ok else 'failure'} in {steps} actions, L^g {int(state.optimal_length)}")
+        panels.append(row)
+    fig = Figure(figsize=(10, 4.2 * len(panels)))
+    FigureCanvasAgg(fig)
+    for r, row in enumerate(panels):
+        for c, image in enumerate(row):
+            ax = fig.add_subplot(len(panels), 2, 2 * r + c + 1)
+            ax.imshow(image)
+            ax.axis("off")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    return "; ".join(lines)
+
+
+def _replay_positions(env, env_params, reset_key, actions):
+    """[T + 1, 2] the cells the agent stood on, the start included, for actions `[T]` (the
+    dynamics are deterministic: the episode replayed from its reset key and actions; the
+    rows after the episode's last action are the caller's to drop)."""
+    _, state = env.reset(reset_key, env_params)
+
+    def step(state, action):
+        _, state, *_ = env.step_env(reset_key, state, action, env_params)
+        return state, state.agent_pos
+
+    _, cells = jax.lax.scan(step, state, actions)
+    return jnp.concatenate([state.agent_pos[None], cells])
+
+
+def tsne_figure(args: Args, method: str, path: Path) -> int:
+    """Figure 4: t-SNE of f_w([s_0 : g_tau]) and of the critic-selected sub-goals ŝ_tau of
+    successful training episodes of the first seed's last agent (the items f_w learns
+    from), coloured by target category; returns the number of items."""
+    from envs.catalog import categories
+    from foresit_jax.agent import Agent
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from sklearn.manifold import TSNE
+
+    config, trainer, state, _ = _first_seed(args, method)
+    collect = jax.jit(trainer.collect_subgoal_items, static_argnums=2)
+    s_0, goal, subgoal, add = (np.asarray(x) for x in collect(state, trainer.env_params, args.cvae_windows))
+    add = add.astype(bool)
+    s_0, goal, subgoal = s_0[add][: args.tsne_points], goal[add][: args.tsne_points], subgoal[add][: args.tsne_points]
+    n = len(s_0)
+    if n < 5:
+        return n
+    imagined = np.asarray(Agent(config).imagine(state.imagination_params, s_0, goal))
+    vectors = np.asarray(trainer.env_params.bank.target_vectors)
+    category = np.argmin(((goal[:, None, :] - vectors[None]) ** 2).sum(-1), axis=1)
+    names = categories(config.setup)
+    points = TSNE(perplexity=min(30.0, (2 * n - 1) / 3), init="pca", random_state=args.seed).fit_transform(
+        np.concatenate([imagined, subgoal]))  # fmt: skip
+    fig = Figure(figsize=(7, 6))
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    cmap = __import__("matplotlib").colormaps["tab20"]
+    for j, c in enumerate(np.unique(category)):
+        m = category == c
+        ax.scatter(*points[:n][m].T, marker="o", s=14, color=cmap(j % 20), label=names[c])
+        ax.scatter(*points[n:][m].T, marker="x", s=14, color=cmap(j % 20))
+    ax.set_title(f"{method}: imagined f_w (o) and selected sub-goals (x), {n} items")
+    ax.legend(fontsize=6, ncol=2, markerscale=0.8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    return n
+
+
+# ---------------------------------------------------------------------- report.md
+def write_report(args: Args, results: dict) -> dict:
+    out = args.out
+    seeds = f"{args.seed}-{args.seed + args.seeds - 1}" if args.seeds > 1 else str(args.seed)
+    excluded = [m for m in SETUP_OF if m not in results]
+    md = [f"# ForeSIT on GridNav: the paper's evaluation (preset {args.preset}, seeds {seeds})\n",
+          f"Test split, each seed's model selected on validation (`experiments.selection`); mean ± sample std "
+          f"[95% Student-t interval] over {args.seeds} seed(s). Not run: {', '.join(excluded) or 'none'}.\n"]  # fmt: skip
+
+    t1, rows1 = table1(args, results)
+    write_csv(out / "table1.csv", rows1)
+    md.append("## Table 1\n\n" + t1)
+    t2, rows2 = table2(results)
+    write_csv(out / "table2.csv", rows2)
+    md.append("## Table 2: SPL / SR per room type\n\n" + t2)
+    t3, rows3 = table3(results)
+    write_csv(out / "table3.csv", rows3)
+    md.append("## Table 3: what to imagine (ablations on the ORG base)\n\n" + t3)
+    md.append(sweep.selection_markdown(results))
+    md.append("## SR and SPL by optimal path length\n\n" + by_length_section(args, results))
+    lines = claims(results)
+    write_csv(out / "claims.csv", [{"claim": c, "verdict": v, "numbers": n} for c, v, n in lines])
+    md.append("## The paper's claims\n\n" + claims_markdown(lines))
+
+    foresit = next((m for m in ("a3c+foresit", "a3c+org+foresit", "a3c+maml+foresit") if m in results), None)
+    if foresit is None:
+        md.append("## C-VAE comparison, Figures 3 and 4\n\nNot run: no ForeSIT method was trained.\n")
+    else:
+        config, trainer, state, _ = _first_seed(args, foresit)
+        result = cvae_compare.compare(config, trainer, state, args.cvae_windows, args.cvae_epochs, args.seed)
+        runs.write_json(out / "cvae_comparison.json", result)
+        md.append(f"## The C-VAE comparison ({foresit}, seed {args.seed})\n\n"
+                  + (cvae_compare.markdown(result, config, args.cvae_windows, level=3) if "direct" in result
+                     else f"Not run: {result['items']} successful episodes in {args.cvae_windows} windows.\n"))  # fmt: skip
+        n = tsne_figure(args, foresit, out / "fig4_tsne.png")
+        md.append(f"## Figure 4: t-SNE of imagined states and selected sub-goals ({foresit}, seed {args.seed})\n\n"
+                  + (f"![t-SNE](fig4_tsne.png)\n\n{n} items.\n" if n >= 5 else f"Not drawn: {n} items.\n"))  # fmt: skip
+    md.append("## Figure 3: trajectories on the same test episodes\n\n")
+    for base, other in PAIRS:
+        if base in results and other in results:
+            name = f"fig3_{base}_vs_{other}.png".replace("+", "_")
+            summary = trajectories_figure(args, base, other, out / name)
+            md.append(f"![{base} and {other}]({name})\n\n{base} left, {other} right (seed {args.seed}). {summary}.\n\n")
+    md.append("## Learning curves (mean and band of one std over seeds)\n\n"
+              + "".join(f"![{setup}]({setup}/learning_curves.png)\n\n" for setup in GROUPS if (out / setup / "learning_curves.png").exists()))  # fmt: skip
+    text = "\n".join(md)
+    (out / "report.md").write_text(text)
+    print(text)
+    print(f"wrote {out / 'report.md'}")
+    return {c: f"{v}: {n}" for c, v, n in lines}
+
+
+def cli(argv=None) -> dict | None:
+    return runs.run_cli(Args, main, argv)
+
+
+if __name__ == "__main__":
+    devices.split_host_into_devices()  # before jax starts (see experiments.devices)
+    cli(sys.argv[1:])

@@ -1,0 +1,128 @@
+"""experiments.paper: the report at the tiny preset (every section, table, figure and claim
+line, a kill and --resume on the way), the claims' verdicts on hand-made results, SR/SPL
+by L^g against a brute-force count, the trajectory replay against stepping the env, and
+one-line errors."""
+
+import json
+import math
+
+import jax
+import numpy as np
+import pytest
+
+import envs
+import train_helpers as H
+from envs.metrics import LENGTH_BUCKETS, bucket_label, by_length
+from experiments import paper
+from test_experiments import cli_error
+
+# The tiny report trains two methods (compile time dominates): the other rows read "not run".
+RUN = ("a3c", "a3c+foresit")
+EXCLUDE = tuple(m for m in paper.SETUP_OF if m not in RUN)
+SECTIONS = ("## Table 1", "### savn setup", "### org setup", "## Table 2", "## Table 3", "## Model selection",
+            "## SR and SPL by optimal path length", "## The paper's claims", "## The C-VAE comparison",
+            "## Figure 4", "## Figure 3", "## Learning curves")  # fmt: skip
+
+
+@pytest.fixture(scope="module", autouse=True)
+def cheap_experiments():
+    with pytest.MonkeyPatch.context() as mp:
+        H.patch_for_experiments(mp)
+        yield
+
+
+def test_tiny_report_has_every_table_figure_and_claim_after_a_kill_and_resume(tmp_path):
+    out = tmp_path / "paper"
+    argv = ["--preset", "tiny", "--seeds", "2", "--out", str(out), "--no-progress", "--exclude", *EXCLUDE,
+            "--cvae-windows", "20", "--cvae-epochs", "2", "--trajectory-candidates", "8"]  # fmt: skip
+    assert paper.cli([*argv, "--stop-after-chunks", "1"]) is None  # killed inside a3c's first seeds
+    assert not (out / "report.md").exists()
+    claims = paper.cli(["--resume", "--out", str(out), "--no-progress"])
+    report = (out / "report.md").read_text()
+    for section in SECTIONS:
+        assert section in report, section
+    assert (out / "table3.csv").read_text() == ""  # none of Table 3's methods ran
+    for name in ("table1.csv", "table2.csv", "by_length.csv", "claims.csv", "cvae_comparison.json",
+                 "fig4_tsne.png", "fig3_a3c_vs_a3c_foresit.png", "by_length_a3c_vs_a3c_foresit.png",
+                 "savn/learning_curves.png"):  # fmt: skip
+        assert (out / name).stat().st_size > 0, name
+    assert not (out / "org").exists()  # every org method excluded: no sweep
+    # One line per claim; those with a method left out read "not run".
+    assert len(claims) == len(paper.claims({})) == 13
+    verdicts = {c: v.split(":")[0] for c, v in claims.items()}
+    assert set(verdicts.values()) <= {"holds", "does not hold", "cannot tell at this budget", paper.NOT_RUN}
+    assert verdicts["Table 1: a3c+foresit has a higher SR than a3c"] != paper.NOT_RUN
+    assert verdicts["Table 3: a3c+org+foresit has a higher SR than a3c+org+att"] == paper.NOT_RUN
+    for claim in claims:
+        assert claim in report
+    for method in ("a3c+maml", "a3c+org+rnd"):
+        assert any(method in line and paper.NOT_RUN in line for line in report.splitlines()), method
+    # Strict JSON (an empty L^g bucket is null, never NaN) with SR/SPL by L^g per seed.
+    text = (out / "savn" / "results_per_seed.json").read_text()
+    assert "NaN" not in text
+    per_seed = json.loads(text)
+    assert [r["seed"] for r in per_seed["a3c"]] == [0, 1]
+    assert set(per_seed["a3c"][0]["selected"]["by_length"]) == {bucket_label(b) for b in LENGTH_BUCKETS}
+
+
+def result(sr: float, sr5: float) -> dict:
+    buckets = {bucket_label(b): {"SR": sr, "SPL": sr / 2, "episodes": 4} for b in LENGTH_BUCKETS}
+    return {"selected": {"overall": {"SR": sr, "SPL": sr / 2, "SR>=5": sr5, "SPL>=5": sr5 / 2}, "by_length": buckets}}
+
+
+def test_claims_hold_fail_or_cannot_tell_by_the_paired_interval():
+    base = [result(50.0 + d, 40.0 + d) for d in (0.0, 3.0, -2.0, 1.0)]
+    better = [result(60.0 + d, 58.0 + 2 * d) for d in (0.5, 2.0, -1.0, 1.5)]  # ~+10 SR, ~+18 on L>=5, small spread
+    worse = [result(40.0 + d, 30.0 + d) for d in (1.0, 2.0, -2.5, 1.0)]
+    noisy = [result(50.0 + d, 40.0 + d) for d in (20.0, -20.0, 15.0, -10.0)]
+    verdicts = {c: v for c, v, _ in paper.claims({"a3c": base, "a3c+foresit": better, "a3c+org": base,
+                                                  "a3c+org+foresit": worse, "a3c+org+att": noisy})}  # fmt: skip
+    assert verdicts["Table 1: a3c+foresit has a higher SR than a3c"] == "holds"
+    assert verdicts["Table 1: a3c+foresit has a higher SPL than a3c"] == "holds"
+    assert verdicts["a3c+foresit's SR gain over a3c is larger on L^g>=5 than overall"] == "holds"
+    assert verdicts["Table 1: a3c+org+foresit has a higher SR than a3c+org"] == "does not hold"
+    assert verdicts["Table 3: a3c+org+foresit has a higher SR than a3c+org+att"] == "cannot tell at this budget"
+    assert verdicts["Table 1: a3c+maml has a higher SR than a3c"] == paper.NOT_RUN
+    numbers = {c: n for c, _, n in paper.claims({"a3c": base, "a3c+foresit": better})}
+    diff = np.mean([b["selected"]["overall"]["SR"] - a["selected"]["overall"]["SR"] for a, b in zip(base, better)])
+    assert numbers["Table 1: a3c+foresit has a higher SR than a3c"].startswith(f"SR difference {diff:+.1f} [")
+
+
+def test_by_length_against_a_brute_force_count():
+    rng = np.random.default_rng(0)
+    optimal = rng.integers(1, 30, size=300)
+    success = rng.random(300) < 0.4
+    spl = np.where(success, rng.random(300), 0.0)
+    got = by_length(success, spl, optimal)
+    for (first, last), label in zip(LENGTH_BUCKETS, got):
+        last = 10**9 if last is None else last
+        idx = [i for i in range(300) if first <= optimal[i] <= last]
+        assert got[label]["episodes"] == len(idx)
+        assert got[label]["SR"] == pytest.approx(100 * sum(success[i] for i in idx) / len(idx))
+        assert got[label]["SPL"] == pytest.approx(100 * sum(spl[i] for i in idx) / len(idx))
+    assert sum(b["episodes"] for b in got.values()) == 300  # the buckets cover every length once
+    empty = by_length([True], [1.0], [3])
+    assert empty["3-4"]["SR"] == 100.0 and math.isnan(empty["15+"]["SR"]) and empty["15+"]["episodes"] == 0
+
+
+def test_trajectory_replay_follows_the_environment_step_by_step():
+    env, params = envs.make("GridNav-v0", setup="savn", split="test", room_types=("bathroom",), training=False)
+    key = jax.random.PRNGKey(4)
+    actions = jax.numpy.array([0, 0, 0, 2, 2] * 6)  # MoveAhead and turns, no Done: the episode runs on
+    got = np.asarray(paper._replay_positions(env, params, key, actions))
+    _, state = env.reset(key, params)
+    want = [np.asarray(state.agent_pos)]
+    for a in np.asarray(actions):
+        _, state, *_ = env.step(key, state, int(a), params)
+        want.append(np.asarray(state.agent_pos))
+    np.testing.assert_array_equal(got, np.stack(want))
+    assert len({tuple(p) for p in want}) > 1  # the agent moved
+
+
+def test_paper_rejects_bad_input_in_one_line(tmp_path, capsys):
+    base = ["--preset", "tiny", "--out", tmp_path / "p"]
+    assert "not a method of the paper's tables" in cli_error(paper.cli, [*base, "--exclude", "bogus"], capsys)
+    assert "leaves no method" in cli_error(paper.cli, [*base, "--exclude", *paper.SETUP_OF], capsys)
+    assert "--seeds must be >= 1" in cli_error(paper.cli, [*base, "--seeds", "0"], capsys)
+    assert "--tsne-points must be >= 1" in cli_error(paper.cli, [*base, "--tsne-points", "0"], capsys)
+    assert not (tmp_path / "p").exists()
