@@ -61,7 +61,8 @@ def main(args: Args) -> dict:
     step = manager.latest_step()
     if step is None:
         raise runs.UserError(f"{args.run / 'checkpoints'} holds no checkpoint; was the run interrupted before its first chunk?")
-    result = compare(config, trainer, runs.restore(manager, step, like), args.windows, args.epochs, args.seed)
+    items = collect_items(trainer, runs.restore(manager, step, like), args.windows, args.seed)
+    result = compare(config, items, args.epochs, args.seed)
     if "direct" not in result:
         raise runs.UserError(f"only {result['items']} successful episodes in {args.windows} windows (at least {MIN_ITEMS} "
                              "needed); raise --windows")  # fmt: skip
@@ -74,17 +75,22 @@ def main(args: Args) -> dict:
     return result
 
 
-def compare(config, trainer, state, windows: int, epochs: int, seed: int) -> dict:
-    """The comparison on the agent of training state `state` (not updated): its items from
-    `windows` windows, 80% to fit and 20% held out (`foresit_jax.cvae.compare_imagination_targets`);
-    with fewer than MIN_ITEMS items, only {"items": n}."""
-    from foresit_jax import cvae
-
+def collect_items(trainer, state, windows: int, seed: int) -> tuple[np.ndarray, ...]:
+    """(s_0, g_tau, ŝ_tau) `[n, ...]` of the successful episodes the agent of training
+    state `state` (not updated) ends in `windows` windows (`Trainer.collect_subgoal_items`)."""
     state = state._replace(key=jax.random.fold_in(state.key, seed))
     collect = jax.jit(trainer.collect_subgoal_items, static_argnums=2)
     s_0, goal, subgoal, add = (np.asarray(x) for x in collect(state, trainer.env_params, windows))
     add = add.astype(bool)
-    items = (s_0[add], goal[add], subgoal[add])
+    return s_0[add], goal[add], subgoal[add]
+
+
+def compare(config, items: tuple[np.ndarray, ...], epochs: int, seed: int) -> dict:
+    """The comparison on `collect_items`'s items: 80% to fit and 20% held out
+    (`foresit_jax.cvae.compare_imagination_targets`); with fewer than MIN_ITEMS items,
+    only {"items": n}."""
+    from foresit_jax import cvae
+
     n = len(items[0])
     if n < MIN_ITEMS:
         return {"items": n}
@@ -109,7 +115,7 @@ def markdown(result: dict, config, windows: int, level: int = 1) -> str:
     at = f", update {result['update']}" if "update" in result else ""
     return ("#" * level + f" Imagination loss: the agent's states vs a C-VAE's latent ({config.method}{at})\n\n"
             + markdown_table(rows, header)
-            + f"\n{n} items from successful episodes in {windows} windows ({cut} to fit, {n - cut} held out, "
+            + f"\n\n{n} items from successful episodes in {windows} windows ({cut} to fit, {n - cut} held out, "
             "split at random: the held-out items come from the same training scenes and targets); "
             f"the C-VAE's held-out reconstruction {result['cvae_reconstruction']:.4f}, KL {result['cvae_kl']:.4f} "
             "(a KL near 0 means the latent carries little of the state). Paper: 0.012 vs 0.018.\n")  # fmt: skip

@@ -164,7 +164,7 @@ def _cell(values) -> str:
     return f"{s['mean']:.1f}" + (f" ± {s['std']:.1f}" if np.isfinite(s["std"]) else "")
 
 
-def table1(args: Args, results: dict) -> tuple[str, list[dict]]:
+def table1(results: dict) -> tuple[str, list[dict]]:
     md, rows = "", []
     for setup, group in GROUPS.items():
         methods = [m for m in group if m in PAPER_TABLE1]
@@ -179,7 +179,7 @@ def table1(args: Args, results: dict) -> tuple[str, list[dict]]:
             cells.append([method, *(sweep.mean_std_ci(row, c) for c in sweep.COLUMNS),
                           " / ".join(map(str, PAPER_TABLE1[method]))])  # fmt: skip
         md += (f"### {setup} setup\n\n" + markdown_table(cells, ["Method", *sweep.COLUMNS, "paper (SPL / SR / SPL>5 / SR>5)"])
-               + "\n")  # fmt: skip
+               + "\n\n")  # fmt: skip
     return md, rows
 
 
@@ -322,6 +322,15 @@ def claims(results: dict) -> list[tuple[str, str, str]]:
     for ablation in ("a3c+org+rnd", "a3c+org+int", "a3c+org+att"):
         claim(f"Table 3: a3c+org+foresit has a higher SR than {ablation}", ablation, "a3c+org+foresit",
               lambda r: r["overall"]["SR"], "SR difference")  # fmt: skip
+    # The protocol (#10): selecting on validation should not lose to taking the last model;
+    # every method's seeds pooled (the same test episodes for both models of a seed).
+    pooled = [r for per_seed in results.values() for r in per_seed]
+    if pooled:
+        p = stats.paired(*([r[k]["overall"]["SR"] for r in pooled] for k in ("last", "selected")))
+        out.append(("Protocol: the model selected on validation has a higher test SR than the last one",
+                    stats.verdict(p), f"SR difference {_fmt_pair(p)} over {p['n']} runs (methods x seeds)"))  # fmt: skip
+    else:
+        out.append(("Protocol: the model selected on validation has a higher test SR than the last one", NOT_RUN, ""))
     return out
 
 
@@ -409,21 +418,19 @@ def _replay_positions(env, env_params, reset_key, actions):
     return jnp.concatenate([state.agent_pos[None], cells])
 
 
-def tsne_figure(args: Args, method: str, path: Path) -> int:
+def tsne_figure(args: Args, config, trainer, state, items, path: Path) -> int:
     """Figure 4: t-SNE of f_w([s_0 : g_tau]) and of the critic-selected sub-goals ŝ_tau of
-    successful training episodes of the first seed's last agent (the items f_w learns
-    from), coloured by target category; returns the number of items."""
+    `items` (`cvae_compare.collect_items`: successful training episodes of the first
+    seed's last agent, what f_w learns from), coloured by target category; returns the
+    number of items drawn."""
     from envs.catalog import categories
     from foresit_jax.agent import Agent
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     from sklearn.manifold import TSNE
 
-    config, trainer, state, _ = _first_seed(args, method)
-    collect = jax.jit(trainer.collect_subgoal_items, static_argnums=2)
-    s_0, goal, subgoal, add = (np.asarray(x) for x in collect(state, trainer.env_params, args.cvae_windows))
-    add = add.astype(bool)
-    s_0, goal, subgoal = s_0[add][: args.tsne_points], goal[add][: args.tsne_points], subgoal[add][: args.tsne_points]
+    method = config.method
+    s_0, goal, subgoal = (x[: args.tsne_points] for x in items)
     n = len(s_0)
     if n < 5:
         return n
@@ -457,7 +464,7 @@ def write_report(args: Args, results: dict) -> dict:
           f"Test split, each seed's model selected on validation (`experiments.selection`); mean ± sample std "
           f"[95% Student-t interval] over {args.seeds} seed(s). Not run: {', '.join(excluded) or 'none'}.\n"]  # fmt: skip
 
-    t1, rows1 = table1(args, results)
+    t1, rows1 = table1(results)
     write_csv(out / "table1.csv", rows1)
     md.append("## Table 1\n\n" + t1)
     t2, rows2 = table2(results)
@@ -476,21 +483,26 @@ def write_report(args: Args, results: dict) -> dict:
     if foresit is None:
         md.append("## C-VAE comparison, Figures 3 and 4\n\nNot run: no ForeSIT method was trained.\n")
     else:
+        print(f"the C-VAE comparison on {foresit}", flush=True)
         config, trainer, state, _ = _first_seed(args, foresit)
-        result = cvae_compare.compare(config, trainer, state, args.cvae_windows, args.cvae_epochs, args.seed)
+        items = cvae_compare.collect_items(trainer, state, args.cvae_windows, args.seed)
+        result = cvae_compare.compare(config, items, args.cvae_epochs, args.seed)
         runs.write_json(out / "cvae_comparison.json", result)
         md.append(f"## The C-VAE comparison ({foresit}, seed {args.seed})\n\n"
                   + (cvae_compare.markdown(result, config, args.cvae_windows, level=3) if "direct" in result
                      else f"Not run: {result['items']} successful episodes in {args.cvae_windows} windows.\n"))  # fmt: skip
-        n = tsne_figure(args, foresit, out / "fig4_tsne.png")
+        print("Figure 4: t-SNE", flush=True)
+        n = tsne_figure(args, config, trainer, state, items, out / "fig4_tsne.png")
         md.append(f"## Figure 4: t-SNE of imagined states and selected sub-goals ({foresit}, seed {args.seed})\n\n"
                   + (f"![t-SNE](fig4_tsne.png)\n\n{n} items.\n" if n >= 5 else f"Not drawn: {n} items.\n"))  # fmt: skip
     md.append("## Figure 3: trajectories on the same test episodes\n\n")
     for base, other in PAIRS:
         if base in results and other in results:
             name = f"fig3_{base}_vs_{other}.png".replace("+", "_")
+            print(f"Figure 3: {base} and {other}", flush=True)
             summary = trajectories_figure(args, base, other, out / name)
-            md.append(f"![{base} and {other}]({name})\n\n{base} left, {other} right (seed {args.seed}). {summary}.\n\n")
+            md.append(f"![{base} and {other}]({name})\n\n{base} left, {other} right (seed {args.seed}; the arrow is the "
+                      f"start pose, the target framed in red). {summary}.\n\n")  # fmt: skip
     md.append("## Learning curves (mean and band of one std over seeds)\n\n"
               + "".join(f"![{setup}]({setup}/learning_curves.png)\n\n" for setup in GROUPS if (out / setup / "learning_curves.png").exists()))  # fmt: skip
     text = "\n".join(md)

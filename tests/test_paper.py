@@ -48,7 +48,7 @@ def test_tiny_report_has_every_table_figure_and_claim_after_a_kill_and_resume(tm
         assert (out / name).stat().st_size > 0, name
     assert not (out / "org").exists()  # every org method excluded: no sweep
     # One line per claim; those with a method left out read "not run".
-    assert len(claims) == len(paper.claims({})) == 13
+    assert len(claims) == len(paper.claims({})) == 14
     verdicts = {c: v.split(":")[0] for c, v in claims.items()}
     assert set(verdicts.values()) <= {"holds", "does not hold", "cannot tell at this budget", paper.NOT_RUN}
     assert verdicts["Table 1: a3c+foresit has a higher SR than a3c"] != paper.NOT_RUN
@@ -67,7 +67,8 @@ def test_tiny_report_has_every_table_figure_and_claim_after_a_kill_and_resume(tm
 
 def result(sr: float, sr5: float) -> dict:
     buckets = {bucket_label(b): {"SR": sr, "SPL": sr / 2, "episodes": 4} for b in LENGTH_BUCKETS}
-    return {"selected": {"overall": {"SR": sr, "SPL": sr / 2, "SR>=5": sr5, "SPL>=5": sr5 / 2}, "by_length": buckets}}
+    test = {"overall": {"SR": sr, "SPL": sr / 2, "SR>=5": sr5, "SPL>=5": sr5 / 2}, "by_length": buckets}
+    return {"selected": test, "last": {**test, "overall": {**test["overall"], "SR": sr - 1.0}}}
 
 
 def test_claims_hold_fail_or_cannot_tell_by_the_paired_interval():
@@ -83,6 +84,9 @@ def test_claims_hold_fail_or_cannot_tell_by_the_paired_interval():
     assert verdicts["Table 1: a3c+org+foresit has a higher SR than a3c+org"] == "does not hold"
     assert verdicts["Table 3: a3c+org+foresit has a higher SR than a3c+org+att"] == "cannot tell at this budget"
     assert verdicts["Table 1: a3c+maml has a higher SR than a3c"] == paper.NOT_RUN
+    # selected - last is +1 SR in every run: no spread, so no interval
+    assert verdicts["Protocol: the model selected on validation has a higher test SR than the last one"] == (
+        "cannot tell at this budget")
     numbers = {c: n for c, _, n in paper.claims({"a3c": base, "a3c+foresit": better})}
     diff = np.mean([b["selected"]["overall"]["SR"] - a["selected"]["overall"]["SR"] for a, b in zip(base, better)])
     assert numbers["Table 1: a3c+foresit has a higher SR than a3c"].startswith(f"SR difference {diff:+.1f} [")
