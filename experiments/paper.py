@@ -200,7 +200,7 @@ def table2(results: dict) -> tuple[str, list[dict]]:
                              "SPL std": stats.summary(spl)["std"], "SR std": stats.summary(sr)["std"]})  # fmt: skip
             cells.append(cell)
     header = ["Method", *(f"{room.replace('_', ' ')} SPL / SR" for room in rooms)]
-    return markdown_table(cells, header) + "\n(mean ± sample std over seeds)\n", rows
+    return markdown_table(cells, header) + "\n\n(mean ± sample std over seeds)\n", rows
 
 
 def table3(results: dict) -> tuple[str, list[dict]]:
@@ -495,7 +495,7 @@ def write_report(args: Args, results: dict) -> dict:
         n = tsne_figure(args, config, trainer, state, items, out / "fig4_tsne.png")
         md.append(f"## Figure 4: t-SNE of imagined states and selected sub-goals ({foresit}, seed {args.seed})\n\n"
                   + (f"![t-SNE](fig4_tsne.png)\n\n{n} items.\n" if n >= 5 else f"Not drawn: {n} items.\n"))  # fmt: skip
-    md.append("## Figure 3: trajectories on the same test episodes\n\n")
+    md.append("## Figure 3: trajectories on the same test episodes\n")
     for base, other in PAIRS:
         if base in results and other in results:
             name = f"fig3_{base}_vs_{other}.png".replace("+", "_")
