@@ -324,14 +324,12 @@ def claims(results: dict) -> list[tuple[str, str, str]]:
               lambda r: r["overall"]["SR"], "SR difference")  # fmt: skip
     # The protocol (#10): selecting on validation should not lose to taking the last model;
     # every method's seeds pooled (the same test episodes for both models of a seed).
+    text = "Protocol: the model selected on validation has a higher test SR than the last one"
     pooled = [r for per_seed in results.values() for r in per_seed]
-    if pooled:
-        p = stats.paired(*([r[k]["overall"]["SR"] for r in pooled] for k in ("last", "selected")))
-        out.append(("Protocol: the model selected on validation has a higher test SR than the last one",
-                    stats.verdict(p), f"SR difference {_fmt_pair(p)} over {p['n']} runs (methods x seeds)"))  # fmt: skip
-    else:
-        out.append(("Protocol: the model selected on validation has a higher test SR than the last one", NOT_RUN, ""))
-    return out
+    if not pooled:
+        return out + [(text, NOT_RUN, "")]
+    p = stats.paired(*([r[k]["overall"]["SR"] for r in pooled] for k in ("last", "selected")))
+    return out + [(text, stats.verdict(p), f"SR difference {_fmt_pair(p)} over {p['n']} runs (methods x seeds)")]
 
 
 def claims_markdown(lines) -> str:
