@@ -25,6 +25,7 @@ import jax
 import jax.numpy as jnp
 
 from foresit_jax import distributions
+from foresit_jax.layers import Dense, GridDense
 from foresit_jax.lstm import LSTMCarry, initial_carry, reset_carry  # noqa: F401 (re-exported)
 
 # f_w layer widths: 6 tanh layers, bottleneck 64, output = LSTM size (512).
@@ -53,10 +54,10 @@ class Encoder(nn.Module):
     object_graph: Optional[nn.Module] = None
 
     def setup(self):
-        self.view_conv = nn.Dense(self.conv_features)
-        self.target_embed = nn.Dense(self.target_features)
-        self.action_embed = nn.Dense(self.action_features)
-        self.pointwise_conv = nn.Dense(self.conv_features)
+        self.view_conv = Dense(self.conv_features)
+        self.target_embed = Dense(self.target_features)
+        self.action_embed = Dense(self.action_features)
+        self.pointwise_conv = GridDense(self.conv_features)
         self.lstm = nn.OptimizedLSTMCell(self.hidden_size)
 
     def features(self, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array) -> chex.Array:
@@ -69,17 +70,13 @@ class Encoder(nn.Module):
         batch_shape = target.shape[:-1]
         chex.assert_rank(view, len(batch_shape) + 3)
         chex.assert_equal_shape_prefix([view, target, prev_action_probs], len(batch_shape))
-        grid_shape = view.shape[-3:-1]  # (3, W)
 
         image = nn.relu(self.view_conv(view))  # [..., 3, W, 64]
         goal = nn.relu(self.target_embed(target))  # [..., 64]
         action = nn.relu(self.action_embed(prev_action_probs))  # [..., 10]
-
-        def tile(x):  # [..., F] -> [..., 3, W, F]
-            return jnp.broadcast_to(x[..., None, None, :], (*batch_shape, *grid_shape, x.shape[-1]))
-
-        x = jnp.concatenate([image, tile(goal), tile(action)], axis=-1)  # [..., 3, W, 138]
-        x = nn.relu(self.pointwise_conv(x))  # [..., 3, W, 64]
+        # The 1x1 conv of [image : tile(goal) : tile(action)] ([..., 3, W, 138]), without
+        # building the tiled input (layers.GridDense: the same function, faster).
+        x = nn.relu(self.pointwise_conv(image, goal, action))  # [..., 3, W, 64]
         x = x.reshape(*batch_shape, -1)  # [..., 3 * W * 64]
 
         if self.object_graph is not None:
@@ -115,7 +112,7 @@ class PolicyHead(nn.Module):
             x = jnp.concatenate([s_t, imagined], axis=-1)  # [..., 2H]
         else:
             x = s_t  # [..., H]
-        return nn.Dense(
+        return Dense(
             self.num_actions, kernel_init=nn.initializers.orthogonal(0.01), name="actor"
         )(x)  # [..., A]
 
@@ -127,8 +124,8 @@ class ValueHead(nn.Module):
 
     @nn.compact
     def __call__(self, x: chex.Array) -> chex.Array:
-        x = nn.relu(nn.Dense(self.hidden, name="hidden")(x))
-        return nn.Dense(1, name="out")(x)[..., 0]
+        x = nn.relu(Dense(self.hidden, name="hidden")(x))
+        return Dense(1, name="out")(x)[..., 0]
 
 
 def causal_episode_mask(valid: chex.Array) -> chex.Array:
@@ -212,9 +209,9 @@ class Critic(nn.Module):
             keys, key_mask = states, causal_episode_mask(valid)
         if positions is None:
             positions = jnp.arange(num_steps)
-        query = nn.Dense(self.attention_size, name="query")(states)  # [..., T, Q]
-        key = nn.Dense(self.attention_size, name="key")(keys)  # [..., K, Q]
-        value = nn.Dense(state_size, name="value")(keys)  # [..., K, H]
+        query = Dense(self.attention_size, name="query")(states)  # [..., T, Q]
+        key = Dense(self.attention_size, name="key")(keys)  # [..., K, Q]
+        value = Dense(state_size, name="value")(keys)  # [..., K, H]
         scale = jnp.sqrt(positions.astype(states.dtype) + 1.0)  # [..., T] sqrt(t+1)
         scores = jnp.einsum("...tq,...jq->...tj", query, key) / scale[..., None]  # [..., T, K]
         alpha = masked_softmax(scores, key_mask)  # [..., T, K]
@@ -236,7 +233,7 @@ class ImaginationNet(nn.Module):
     def __call__(self, s_0: chex.Array, goal: chex.Array) -> chex.Array:
         x = jnp.concatenate([s_0, goal], axis=-1)  # [..., H + D]
         for i, size in enumerate(self.layer_sizes):
-            x = jnp.tanh(nn.Dense(size, name=f"layer_{i}")(x))
+            x = jnp.tanh(Dense(size, name=f"layer_{i}")(x))
         return x  # [..., layer_sizes[-1]]
 
 

@@ -87,6 +87,8 @@ import chex
 import flax.linen as nn
 import jax.numpy as jnp
 
+from foresit_jax.layers import Dense
+
 NUM_DETECTION_FEATURES = 7  # visible, col min/max, row min/max, confidence, is target
 VISIBLE, CONFIDENCE = 0, 5  # columns of a detection row
 INFO = slice(1, 7)  # [box (4) : confidence : is_target], ORG's [info : indicator]
@@ -117,13 +119,13 @@ class ObjectGraph(nn.Module):
             raise ValueError(f"adjacency_layers must be >= 1, got {self.adjacency_layers}")
         n = self.num_categories
         self.adjacency_dense = [
-            nn.Dense(n, kernel_init=_glorot, name=f"adjacency_{i}") for i in range(self.adjacency_layers)
+            Dense(n, kernel_init=_glorot, name=f"adjacency_{i}") for i in range(self.adjacency_layers)
         ]
         self.appearance_embedding = self.param(
             "appearance_embedding", nn.initializers.normal(1.0), (n, self.embed_size)
         )  # [N, E]
-        self.map_hidden_dense = nn.Dense(self.map_hidden, kernel_init=_glorot, name="map_hidden")
-        self.map_out_dense = nn.Dense(self.view_rows * self.view_cols, kernel_init=_glorot, name="map_out")
+        self.map_hidden_dense = Dense(self.map_hidden, kernel_init=_glorot, name="map_hidden")
+        self.map_out_dense = Dense(self.view_rows * self.view_cols, kernel_init=_glorot, name="map_out")
 
     @property
     def output_size(self) -> int:
