@@ -22,7 +22,6 @@ from __future__ import annotations
 import chex
 import flax.linen as nn
 import jax.numpy as jnp
-import numpy as np
 
 
 class Dense(nn.Dense):
@@ -50,12 +49,10 @@ class GridDense(nn.Module):
         sizes = [grid.shape[-1]] + [v.shape[-1] for v in vectors]
         kernel = self.param("kernel", nn.initializers.lecun_normal(), (sum(sizes), self.features))
         bias = self.param("bias", nn.initializers.zeros_init(), (self.features,))
-        starts = np.cumsum([0] + sizes)
-        rows = [kernel[start:stop] for start, stop in zip(starts[:-1], starts[1:])]  # the kernel's rows by input
-        flat_grid = jnp.reshape(grid, (-1, sizes[0]))
-        cells = jnp.reshape(jnp.dot(flat_grid, rows[0]), grid.shape[:-1] + (self.features,))
-        per_sample = bias
-        for vector, kernel_rows in zip(vectors, rows[1:]):
-            flat = jnp.reshape(vector, (-1, vector.shape[-1]))
-            per_sample = per_sample + jnp.reshape(jnp.dot(flat, kernel_rows), (*batch_shape, self.features))
+        cells = jnp.dot(jnp.reshape(grid, (-1, sizes[0])), kernel[: sizes[0]])  # [cells, F]
+        cells = jnp.reshape(cells, grid.shape[:-1] + (self.features,))
+        if not vectors:
+            return cells + bias
+        per_sample = jnp.concatenate([jnp.reshape(v, (-1, v.shape[-1])) for v in vectors], axis=-1)
+        per_sample = jnp.reshape(jnp.dot(per_sample, kernel[sizes[0] :]) + bias, (*batch_shape, self.features))
         return cells + per_sample[..., None, None, :]
