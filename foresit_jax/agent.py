@@ -32,6 +32,7 @@ import envs.metrics
 from foresit_jax import distributions, imagination, maml
 from foresit_jax.config import Config
 from foresit_jax.lstm import (
+    LowRankUpdate,
     LSTMCarry,
     encoder_lstm_params,
     initial_carry,
@@ -190,12 +191,15 @@ class Agent:
         )
 
     # ------------------------------------------------------------------ acting
+    def lstm_inputs(self, params, obs, prev_action_probs):
+        """The encoder's output, the LSTM's input x_t `[..., F]`."""
+        return self.model.apply(params, obs, prev_action_probs, method=ActorCritic.encoder_features)
+
     def input_gates(self, params, obs, prev_action_probs, kernels=None):
         """The encoder up to the LSTM's input gates `[..., 4H]`: everything of a step
         that does not depend on the LSTM carry."""
         kernels = lstm_kernels(encoder_lstm_params(params)) if kernels is None else kernels
-        features = self.model.apply(params, obs, prev_action_probs, method=ActorCritic.encoder_features)
-        return lstm_input_gates(kernels, features)
+        return lstm_input_gates(kernels, self.lstm_inputs(params, obs, prev_action_probs))
 
     def act(
         self, params, w_params, env, env_params, actor: ActorState, key: chex.PRNGKey, num_steps: int,
@@ -232,22 +236,29 @@ class Agent:
         self, params, w_params, env, env_params, actor: ActorState, key: chex.PRNGKey, num_steps: int,
         *, greedy: bool = False, whole_episodes: bool = False, noise_variance: Optional[chex.Array] = None,
         record_inputs: bool = True, step_keys: Optional[chex.Array] = None, alive: Optional[chex.Array] = None,
+        lstm_update: Optional[LowRankUpdate] = None, gate_offsets: Optional[chex.Array] = None,
     ) -> tuple[ActorState, Trajectory]:  # fmt: skip
         """`act` under one parameter set for the whole window (every base's step).
         alive: `[B]` bool, with `whole_episodes`, which lanes' counted episode is still
         running at the window's start (default: all; a window that continues an earlier
-        one of the same whole-episode rollout passes what that one left)."""
+        one of the same whole-episode rollout passes what that one left).
+        lstm_update: a low-rank change of the LSTM's kernels (the maml base's adapted
+          kernels, `foresit_jax.maml`); gate_offsets: `[num_steps, B, 4H]` added to each
+          step's gate pre-activations (zeros whose gradient is the pre-activations')."""
         cfg, imag = self.config, self.imagination
         num_lanes = actor.episode_step.shape[0]
         lanes = jnp.arange(num_lanes)
         memory_size = 0 if actor.memory is None else actor.memory.shape[1]
-        kernels = lstm_kernels(encoder_lstm_params(params))  # concatenated once, outside the loop
+        kernels = lstm_kernels(encoder_lstm_params(params))._replace(update=lstm_update)  # once, outside the loop
 
-        def step(carry, key):
+        def step(carry, xs):
             actor, alive = carry
+            key, gate_offset = xs
             k_imag, k_act, k_env = jax.random.split(key, 3)
             first = actor.episode_step == 0  # [B]
             input_gates = self.input_gates(params, actor.obs, actor.prev_probs, kernels)  # [B, 4H]
+            if gate_offset is not None:
+                input_gates = input_gates + gate_offset
             lstm, s_t = lstm_step(kernels, actor.lstm, input_gates)
             s_0 = jnp.where(first[:, None], s_t, actor.s_0)
             imagined = actor.imagined
@@ -304,7 +315,7 @@ class Agent:
 
         step_keys = jax.random.split(key, num_steps) if step_keys is None else step_keys
         alive = jnp.ones((num_lanes,), bool) if alive is None else alive
-        (actor, _), out = jax.lax.scan(step, (actor, alive), step_keys)
+        (actor, _), out = jax.lax.scan(step, (actor, alive), (step_keys, gate_offsets))
         states, logits, actions, rewards, term, trunc, valid, success, episode_step, s_0, opt, room, seen = out
         if whole_episodes:  # nothing is bootstrapped: every counted episode ended (or is cut by design)
             next_state = jnp.zeros_like(actor.s_0)

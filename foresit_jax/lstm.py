@@ -29,9 +29,39 @@ LSTMCarry = tuple[chex.Array, chex.Array]  # (c, h), each [..., hidden_size]
 LSTM_GATES: tuple[str, ...] = ("i", "f", "g", "o")
 
 
+ENCODER_LSTM_PATH: tuple[str, ...] = ("params", "encoder", "lstm")
+
+
 def encoder_lstm_params(params: Mapping[str, Any]) -> Mapping[str, Any]:
     """The encoder LSTM's subtree of an `ActorCritic` parameter tree."""
-    return params["params"]["encoder"]["lstm"]
+    for name in ENCODER_LSTM_PATH:
+        params = params[name]
+    return params
+
+
+def is_encoder_lstm_kernel(path: tuple[str, ...]) -> bool:
+    """Whether a flattened parameter path names one of the encoder LSTM's eight kernels."""
+    return path[: len(ENCODER_LSTM_PATH)] == ENCODER_LSTM_PATH and path[-1] == "kernel"
+
+
+class LowRankUpdate(NamedTuple):
+    """A change of rank R of both kernels with one shared right factor: the input kernel
+    plus `inputs^T deltas`, the recurrent kernel plus `hiddens^T deltas`.
+
+    An SGD step on the kernels over a few steps is one: their gradients are
+    `sum_t x_t^T delta_t` and `sum_t h_{t-1}^T delta_t`, with delta_t the gradient of step
+    t's gate pre-activations (`foresit_jax.maml`'s inner loop keeps its adapted kernels
+    so, never as dense copies). A product with the changed kernel is the kernel's product
+    plus a rank-R correction, `x K + (x inputs^T) deltas`: the big kernel stays shared
+    (unbatched) when every lane has its own update."""
+
+    inputs: chex.Array  # [R, F]
+    hiddens: chex.Array  # [R, H]
+    deltas: chex.Array  # [R, 4H]
+
+    def concat(self, other: "LowRankUpdate") -> "LowRankUpdate":
+        """The sum of two updates (their rows stacked)."""
+        return LowRankUpdate(*(jnp.concatenate([a, b], axis=-2) for a, b in zip(self, other)))
 
 
 class LSTMKernels(NamedTuple):
@@ -39,6 +69,19 @@ class LSTMKernels(NamedTuple):
     recurrent_kernel: chex.Array  # [H, 4H] (hi, hf, hg, ho)
     bias: chex.Array  # [4H]
     recurrent_kernel_t: Optional[chex.Array] = None  # [4H, H]: see `with_transposed_recurrent_kernel`
+    update: Optional[LowRankUpdate] = None  # added to both kernels (see LowRankUpdate); None: none
+
+    def dense(self) -> "LSTMKernels":
+        """The same kernels with the update added into them (`update` None)."""
+        if self.update is None:
+            return self
+        u = self.update
+        return self._replace(
+            input_kernel=self.input_kernel + jnp.swapaxes(u.inputs, -1, -2) @ u.deltas,
+            recurrent_kernel=self.recurrent_kernel + jnp.swapaxes(u.hiddens, -1, -2) @ u.deltas,
+            recurrent_kernel_t=None,
+            update=None,
+        )
 
 
 def lstm_kernels(lstm_params: Mapping[str, Any]) -> LSTMKernels:
@@ -49,6 +92,19 @@ def lstm_kernels(lstm_params: Mapping[str, Any]) -> LSTMKernels:
         jnp.concatenate([lstm_params["h" + g]["kernel"] for g in LSTM_GATES], axis=-1),
         jnp.concatenate([lstm_params["h" + g]["bias"] for g in LSTM_GATES], axis=-1),
     )
+
+
+def lstm_params(kernels: LSTMKernels) -> dict[str, Any]:
+    """The inverse of `lstm_kernels`: the cell's parameter subtree (flax's names) of
+    concatenated kernels (`update` added in, see `LSTMKernels.dense`)."""
+    kernels = kernels.dense()
+    hidden = kernels.recurrent_kernel.shape[-2]
+    split = lambda x: jnp.split(x, [hidden, 2 * hidden, 3 * hidden], axis=-1)  # noqa: E731
+    out = {}
+    for g, ik, hk, b in zip(LSTM_GATES, split(kernels.input_kernel), split(kernels.recurrent_kernel), split(kernels.bias)):
+        out["i" + g] = {"kernel": ik}
+        out["h" + g] = {"kernel": hk, "bias": b}
+    return out
 
 
 def materialized_transpose(kernel: chex.Array) -> chex.Array:
@@ -87,9 +143,17 @@ def with_transposed_recurrent_kernel(kernels: LSTMKernels) -> LSTMKernels:
     return kernels._replace(recurrent_kernel_t=materialized_transpose(kernels.recurrent_kernel))
 
 
+def _low_rank_correction(x: chex.Array, rows: chex.Array, deltas: chex.Array) -> chex.Array:
+    """`x (rows^T deltas)` as `(x rows^T) deltas`: `[..., D] -> [..., 4H]`."""
+    return jnp.dot(jnp.dot(x, jnp.swapaxes(rows, -1, -2)), deltas)
+
+
 def lstm_input_gates(kernels: LSTMKernels, x: chex.Array) -> chex.Array:
     """The input's contribution to the four gates, `[..., F] -> [..., 4H]`."""
-    return jnp.dot(x, kernels.input_kernel)
+    gates = jnp.dot(x, kernels.input_kernel)
+    if kernels.update is not None:
+        gates += _low_rank_correction(x, kernels.update.inputs, kernels.update.deltas)
+    return gates
 
 
 def lstm_step(kernels: LSTMKernels, carry: LSTMCarry, input_gates: chex.Array) -> tuple[LSTMCarry, chex.Array]:
@@ -99,6 +163,8 @@ def lstm_step(kernels: LSTMKernels, carry: LSTMCarry, input_gates: chex.Array) -
         recurrent = jnp.dot(h, kernels.recurrent_kernel)
     else:
         recurrent = dot_with_transposed_kernel(h, kernels.recurrent_kernel, kernels.recurrent_kernel_t)
+    if kernels.update is not None:
+        recurrent += _low_rank_correction(h, kernels.update.hiddens, kernels.update.deltas)
     recurrent += jnp.reshape(kernels.bias, (1,) * (recurrent.ndim - 1) + (-1,))
     split = np.cumsum([h.shape[-1]] * 3)
     i, f, g, o = (r + x for r, x in zip(jnp.split(recurrent, split, axis=-1), jnp.split(input_gates, split, axis=-1)))

@@ -29,6 +29,19 @@ runners/train_util.py, runners/savn_val.py, agents/agent.py) and kept as it is t
 * Test time runs the same inner loop (`Agent.rollout` calls the same `adaptive_act`), with
   no meta-step; actions are sampled (SAVN's validation samples too).
 
+Adapted kernels. Each lane adapts its own theta_i, but the encoder LSTM's two kernels (the
+input kernel alone is `[F, 4H]`, 25 MB at the paper's sizes) are never copied per lane:
+their inner gradient over a segment is sum_t x_t^T delta_t (input kernel) and
+sum_t h_{t-1}^T delta_t (recurrent kernel), with x_t the LSTM's input, h_{t-1} its carry
+and delta_t the gradient of L_phi with respect to step t's gate pre-activations (taken as
+the gradient of a zero offset added to them). So after i updates a lane's kernels are
+theta_0's plus an update of rank <= 6 i (`lstm.LowRankUpdate`: the recorded x_t and
+h_{t-1}, and -lr delta_t), and a step's gates are x W_0 + (x X^T) D: one matmul with the
+shared W_0 for all lanes plus a small per-lane correction. This is the same function, not an
+approximation (second order included: the factors are differentiable functions of theta_0
+and phi); it only changes how theta_i is stored (`AdaptedParams`; `dense()` builds the
+lanes' whole trees). The other parameters (a few hundred thousand) are per-lane copies.
+
 Choices where SAVN's code leaves one open or where ours differs, each with its reason:
 
 * Values (the critic) are computed under theta_0's critic parameters. This is exact, not
@@ -52,7 +65,7 @@ Choices where SAVN's code leaves one open or where ours differs, each with its r
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from typing import Any, Callable, NamedTuple, Optional
 
 import chex
 import flax.linen as nn
@@ -61,6 +74,14 @@ import jax.numpy as jnp
 from flax import traverse_util
 
 from foresit_jax import distributions, imagination
+from foresit_jax.lstm import (
+    ENCODER_LSTM_PATH,
+    LowRankUpdate,
+    encoder_lstm_params,
+    is_encoder_lstm_kernel,
+    lstm_kernels,
+    lstm_params,
+)
 
 LEARNED_LOSS_SCOPE = "learned_loss"  # params["params"]["learned_loss"]: phi
 
@@ -150,6 +171,43 @@ def update_steps(num_steps: int, segment: int, max_updates: int) -> tuple[int, .
     return tuple(segment * (i + 1) for i in range(max_updates) if segment * (i + 1) < num_steps)
 
 
+class AdaptedParams(NamedTuple):
+    """Every lane's parameters after an inner-update slot (theta_i of each lane), kept
+    without per-lane copies of the encoder LSTM's kernels (see "Adapted kernels" in the
+    module docstring). `dense()` builds the lanes' whole trees."""
+
+    shared: Any  # theta_0's LSTM kernels: the partial tree of `_split`, unbatched
+    lanes: Any  # every other parameter, leaves [B, ...] (phi included, never adapted)
+    lstm_update: Optional[LowRankUpdate]  # [B, R, ...] each lane's change of those kernels; None: none yet
+
+    def dense(self):
+        """Every lane's whole parameter tree, leaves `[B, ...]` (B copies of the kernels:
+        for tests and inspection, not for acting)."""
+
+        def one(lanes, update):
+            params = _join(self.shared, lanes)
+            kernels = lstm_kernels(encoder_lstm_params(params))._replace(update=update)
+            flat = traverse_util.flatten_dict(params)
+            lstm = traverse_util.flatten_dict(lstm_params(kernels))
+            flat.update({ENCODER_LSTM_PATH + path: x for path, x in lstm.items()})
+            return traverse_util.unflatten_dict(flat)
+
+        return jax.vmap(one, in_axes=(0, 0))(self.lanes, self.lstm_update)
+
+
+def _split(params) -> tuple[Any, Any]:
+    """(the encoder LSTM's kernels, every other parameter), two partial trees."""
+    flat = traverse_util.flatten_dict(params)
+    shared = {path: x for path, x in flat.items() if is_encoder_lstm_kernel(path)}
+    rest = {path: x for path, x in flat.items() if not is_encoder_lstm_kernel(path)}
+    return traverse_util.unflatten_dict(shared), traverse_util.unflatten_dict(rest)
+
+
+def _join(shared, rest):
+    """The inverse of `_split`."""
+    return traverse_util.unflatten_dict({**traverse_util.flatten_dict(shared), **traverse_util.flatten_dict(rest)})
+
+
 def _per_lane(tree):
     return jax.tree.map(lambda x: x[:, None], tree)  # [B, ...] -> [B, 1, ...]
 
@@ -161,50 +219,69 @@ def _unlane(tree):
 def adaptive_act(
     agent, params, w_params, env, env_params, actor, key: chex.PRNGKey, num_steps: int, *,
     greedy: bool = False, noise_variance: chex.Array | None = None, record_inputs: bool = True,
-) -> tuple[Any, Any, Any]:  # fmt: skip
+) -> tuple[Any, Any, list[AdaptedParams]]:  # fmt: skip
     """One whole episode per lane (from `actor`, every lane at an episode start) with
     SAVN's inner loop. Returns (actor after the window, Trajectory `[num_steps, B]`,
-    the parameters each lane used: a list of per-lane trees `[B, ...]`, theta_0 first,
-    then theta_i after each update slot (unchanged in lanes whose episode had ended))."""
+    the parameters each lane used: `AdaptedParams`, theta_0 first, then theta_i after
+    each update slot (unchanged in lanes whose episode had ended))."""
     cfg = agent.config
     num_lanes = actor.episode_step.shape[0]
     if noise_variance is None:  # Eq. 7 from each lane's tracker (it changes only when the episode ends)
         rho = jax.vmap(imagination.success_rate)(actor.tracker)
         noise_variance = imagination.noise_variance(rho, cfg.sigma2_max)
     variance = jnp.broadcast_to(jnp.asarray(noise_variance, jnp.float32), (num_lanes,))[:, None]  # [B, 1]
-    theta = jax.tree.map(lambda x: jnp.broadcast_to(x, (num_lanes,) + x.shape), params)
+    shared, lanes = _split(params)
+    lanes = jax.tree.map(lambda x: jnp.broadcast_to(x, (num_lanes,) + x.shape), lanes)
+    kernel_dtype = jax.tree.leaves(shared)[0].dtype
     lane_actor = _per_lane(actor)
     alive = jnp.ones((num_lanes, 1), bool)
 
-    def window(theta, lane_actor, key, variance, alive, steps):  # one lane, its own parameters
+    def window(lanes, update, lane_actor, key, variance, alive, steps, record, gate_offsets=None):  # one lane
         return agent.act_window(
-            theta, w_params, env, env_params, lane_actor, key, steps, greedy=greedy, whole_episodes=True,
-            noise_variance=variance, record_inputs=record_inputs, alive=alive,
+            _join(shared, lanes), w_params, env, env_params, lane_actor, key, steps, greedy=greedy,
+            whole_episodes=True, noise_variance=variance, record_inputs=record, alive=alive,
+            lstm_update=update, gate_offsets=gate_offsets,
         )  # fmt: skip
 
-    def segment(theta, lane_actor, key, variance, alive):
-        def loss(th):
-            next_actor, traj = window(th, lane_actor, key, variance, alive, cfg.maml_segment)
+    def segment(lanes, update, lane_actor, key, variance, alive):  # one lane
+        def loss(lanes, gate_offsets):
+            next_actor, traj = window(lanes, update, lane_actor, key, variance, alive, cfg.maml_segment, True, gate_offsets)
             inputs = interaction_inputs(traj.states[:, 0], traj.logits[:, 0])  # [segment, H + A]
-            return agent.interaction_loss(th, inputs), (next_actor, traj)
+            return agent.interaction_loss(_join(shared, lanes), inputs), (next_actor, traj)
 
-        (_, (next_actor, traj)), grads = jax.value_and_grad(loss, has_aux=True)(theta)
+        zeros = jnp.zeros((cfg.maml_segment, 1, 4 * cfg.hidden_size), kernel_dtype)
+        (_, (next_actor, traj)), (grads, gate_grads) = jax.value_and_grad(loss, (0, 1), has_aux=True)(lanes, zeros)
+        # The kernels' gradients, sum_t x_t^T delta_t and sum_t h_{t-1}^T delta_t, kept as their factors.
+        seen = traj.inputs
+        rows = LowRankUpdate(
+            inputs=agent.lstm_inputs(_join(shared, lanes), seen.obs, seen.prev_action_probs)[:, 0],  # [segment, F]
+            hiddens=jnp.concatenate([lane_actor.lstm[1], traj.states[:-1, 0]]),  # [segment, H] h_{t-1}
+            deltas=-cfg.maml_inner_lr * gate_grads[:, 0],  # [segment, 4H]
+        )
         if cfg.maml_first_order:
-            grads = jax.lax.stop_gradient(grads)
+            grads, rows = jax.lax.stop_gradient((grads, rows))
         going = traj.valid[-1] & ~(traj.terminated[-1] | traj.truncated[-1])  # [1] the episode runs on
-        return inner_step(theta, grads, cfg.maml_inner_lr, going[0]), next_actor, traj, going
+        rows = rows._replace(deltas=jnp.where(going[0], rows.deltas, 0.0))
+        update = rows if update is None else update.concat(rows)
+        if not record_inputs:
+            traj = traj._replace(inputs=None)
+        return inner_step(lanes, grads, cfg.maml_inner_lr, going[0]), update, next_actor, traj, going
 
-    thetas, trajs, done_steps = [theta], [], 0
+    update = None
+    thetas, trajs, done_steps = [AdaptedParams(shared, lanes, update)], [], 0
     slots = update_steps(num_steps, cfg.maml_segment, cfg.maml_inner_updates)
     keys = jax.random.split(key, len(slots) + 1)
     for k in keys[:-1]:
-        theta, lane_actor, traj, alive = jax.vmap(segment)(theta, lane_actor, jax.random.split(k, num_lanes), variance, alive)
-        thetas.append(theta)
+        lanes, update, lane_actor, traj, alive = jax.vmap(segment)(
+            lanes, update, lane_actor, jax.random.split(k, num_lanes), variance, alive
+        )
+        thetas.append(AdaptedParams(shared, lanes, update))
         trajs.append(traj)
         done_steps += cfg.maml_segment
     if num_steps > done_steps:
-        rest = lambda *a: window(*a, num_steps - done_steps)  # noqa: E731
-        lane_actor, traj = jax.vmap(rest)(theta, lane_actor, jax.random.split(keys[-1], num_lanes), variance, alive)
+        steps = num_steps - done_steps
+        rest = lambda *a: window(*a, steps, record_inputs)  # noqa: E731
+        lane_actor, traj = jax.vmap(rest)(lanes, update, lane_actor, jax.random.split(keys[-1], num_lanes), variance, alive)
         trajs.append(traj)
     last = trajs[-1]
     per_step = [t._replace(next_state=None, next_episode_step=None) for t in trajs]

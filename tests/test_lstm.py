@@ -1,6 +1,7 @@
 """foresit_jax.lstm: the split LSTM cell against flax's own `nn.OptimizedLSTMCell` on the
-same parameters (a flax upgrade that renames or reorders its gates fails here), and the
-transposed-kernel product's gradient against plain autodiff."""
+same parameters (a flax upgrade that renames or reorders its gates fails here), the
+transposed-kernel product's gradient against plain autodiff, and the low-rank kernel
+update against dense kernels."""
 
 import chex
 import flax.linen as nn
@@ -85,3 +86,62 @@ def test_reset_carry_zeroes_only_done_lanes():
     c, h = lstm.reset_carry(jnp.array([True, False, True]), carry)
     np.testing.assert_array_equal(c[:, 0], [0, 1, 0])
     np.testing.assert_array_equal(h[:, 0], [0, 2, 0])
+
+
+def test_lstm_params_inverts_lstm_kernels():
+    _, params = flax_cell_params(jax.random.PRNGKey(5))
+    params = jax.tree.map(lambda x: x + jax.random.normal(jax.random.PRNGKey(6), x.shape), params)
+    back = lstm.lstm_params(lstm.lstm_kernels(params))
+    assert jax.tree.structure(back) == jax.tree.structure(params)
+    jax.tree.map(np.testing.assert_array_equal, back, params)
+
+
+def test_low_rank_update_equals_the_dense_kernels_in_numpy():
+    """`dense()` adds a rank-R update into the kernels as numpy float64 does (W + rows^T
+    deltas); a cell with the update acts as flax's cell with those kernels, over several
+    steps; and the kernels' gradient over a few steps is the update whose deltas are the
+    gradients of the pre-activations (the identity the maml inner loop rests on)."""
+    cell, params = flax_cell_params(jax.random.PRNGKey(7))
+    params = jax.tree.map(lambda x: x + 0.3 * jax.random.normal(jax.random.PRNGKey(8), x.shape), params)
+    kernels = lstm.lstm_kernels(params)
+    rank = 3
+    ks = jax.random.split(jax.random.PRNGKey(9), 4)
+    update = lstm.LowRankUpdate(
+        jax.random.normal(ks[0], (rank, F)), jax.random.normal(ks[1], (rank, H)), 0.2 * jax.random.normal(ks[2], (rank, 4 * H))
+    )
+    updated = kernels._replace(update=update)
+    dense = updated.dense()
+    u = jax.tree.map(lambda x: np.asarray(x, np.float64), update)
+    w_in = np.asarray(kernels.input_kernel, np.float64) + u.inputs.T @ u.deltas
+    w_h = np.asarray(kernels.recurrent_kernel, np.float64) + u.hiddens.T @ u.deltas
+    np.testing.assert_allclose(dense.input_kernel, w_in, rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(dense.recurrent_kernel, w_h, rtol=1e-5, atol=1e-5)
+    assert dense.update is None
+    # Stacking two updates adds them.
+    both = update.concat(update)
+    twice = kernels._replace(update=both).dense()
+    np.testing.assert_allclose(twice.input_kernel, w_in + u.inputs.T @ u.deltas, rtol=1e-5, atol=1e-5)
+
+    xs = jax.random.normal(ks[3], (T, B, F))
+    ours = theirs = lstm.initial_carry((B,), H)
+    for t in range(T):
+        ours, h_ours = lstm.lstm_step(updated, ours, lstm.lstm_input_gates(updated, xs[t]))
+        theirs, h_theirs = cell.apply({"params": lstm.lstm_params(dense)}, theirs, xs[t])
+        np.testing.assert_allclose(h_ours, h_theirs, rtol=1e-5, atol=1e-5)
+
+    # The gradient of a loss over a few steps with respect to both kernels is
+    # sum_t x_t^T delta_t and sum_t h_{t-1}^T delta_t, delta_t the gradient with respect to
+    # a zero offset added to step t's pre-activations.
+    def unroll(k, offsets):
+        carry, hs, prevs = lstm.initial_carry((B,), H), [], []
+        for t in range(T):
+            prevs.append(carry[1])
+            carry, h = lstm.lstm_step(k, carry, lstm.lstm_input_gates(k, xs[t]) + offsets[t])
+            hs.append(h)
+        return jnp.sum(jnp.stack(hs) ** 3), jnp.stack(prevs)
+
+    offsets = jnp.zeros((T, B, 4 * H))
+    grads, deltas = jax.grad(lambda k, o: unroll(k, o)[0], argnums=(0, 1))(kernels, offsets)
+    prevs = unroll(kernels, offsets)[1]  # h_{t-1} [T, B, H]
+    np.testing.assert_allclose(grads.input_kernel, jnp.einsum("tbf,tbg->fg", xs, deltas), rtol=1e-4, atol=1e-5)
+    np.testing.assert_allclose(grads.recurrent_kernel, jnp.einsum("tbh,tbg->hg", prevs, deltas), rtol=1e-4, atol=1e-5)

@@ -109,7 +109,7 @@ def test_inner_updates_only_after_steps_6_12_18_24_of_running_episodes(adapted_r
     config, params, traj, thetas = adapted_rollout
     assert len(thetas) == 1 + 4  # theta_0, then one slot after each of steps 6, 12, 18, 24
     running = np.asarray(traj.valid & ~(traj.terminated | traj.truncated))  # [T, B] episode goes on after step t
-    flat = [traverse_util.flatten_dict(jax.tree.map(np.asarray, t)) for t in thetas]
+    flat = [traverse_util.flatten_dict(jax.tree.map(np.asarray, t.dense())) for t in thetas]
     lanes = running.shape[1]
     updated_any = np.zeros(lanes, bool)
     for i in range(1, 5):
@@ -171,7 +171,7 @@ def test_evaluation_step_13_runs_under_theta_2_recomputed_independently():
     # Adaptation happened: theta_0 alone gives other values (100x the tolerance).
     assert np.max(np.abs(np.asarray(states_2[1] - states_0[13]))) > 1e-3
     assert np.max(np.abs(np.asarray(logits_2[1] - logits_0[13]))) > 1e-4
-    mine = jax.tree.map(lambda x: x[lane], thetas[2])
+    mine = jax.tree.map(lambda x: x[lane], thetas[2].dense())
     jax.tree.map(lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-4, atol=1e-6), mine, theta_2)
 
 
