@@ -40,7 +40,8 @@ h_{t-1}, and -lr delta_t), and a step's gates are x W_0 + (x X^T) D: one matmul 
 shared W_0 for all lanes plus a small per-lane correction. This is the same function, not an
 approximation (second order included: the factors are differentiable functions of theta_0
 and phi); it only changes how theta_i is stored (`AdaptedParams`; `dense()` builds the
-lanes' whole trees). The other parameters (a few hundred thousand) are per-lane copies.
+lanes' whole trees). The other parameters (about 170 thousand at the paper's sizes) are
+per-lane copies.
 
 Choices where SAVN's code leaves one open or where ours differs, each with its reason:
 
@@ -57,8 +58,8 @@ Choices where SAVN's code leaves one open or where ours differs, each with its r
 * The optimiser is the trainer's (Adam with the config's learning rate and global-norm
   clipping), shared with every other method so that comparisons differ in the method
   only; SAVN's SharedAdam (AMSGrad, eps 1e-3, no clipping) is not reproduced.
-* Lanes are SAVN's workers: each lane adapts its own copy of the parameters (they are
-  vmapped over lanes), and one meta-update takes the A3C loss's mean over all lanes'
+* Lanes are SAVN's workers: each lane adapts its own parameters (vmapped over lanes; the
+  LSTM's kernels as low-rank updates, see "Adapted kernels"), and one meta-update takes the A3C loss's mean over all lanes'
   valid steps (the synchronous stand-in for SAVN's asynchronous one-episode gradients;
   a longer episode weighs more, as in the other methods' whole-episode updates).
 """
