@@ -59,9 +59,10 @@ Choices where SAVN's code leaves one open or where ours differs, each with its r
   clipping), shared with every other method so that comparisons differ in the method
   only; SAVN's SharedAdam (AMSGrad, eps 1e-3, no clipping) is not reproduced.
 * Lanes are SAVN's workers: each lane adapts its own parameters (vmapped over lanes; the
-  LSTM's kernels as low-rank updates, see "Adapted kernels"), and one meta-update takes the A3C loss's mean over all lanes'
-  valid steps (the synchronous stand-in for SAVN's asynchronous one-episode gradients;
-  a longer episode weighs more, as in the other methods' whole-episode updates).
+  LSTM's kernels as low-rank updates, see "Adapted kernels"), and one meta-update takes
+  the A3C loss's mean over all lanes' valid steps (the synchronous stand-in for SAVN's
+  asynchronous one-episode gradients; a longer episode weighs more, as in the other
+  methods' whole-episode updates).
 """
 
 from __future__ import annotations
