@@ -23,6 +23,9 @@ seed's model selected on validation) over the methods of the paper's tables, the
 "not run"); on a CPU the MAML rows take hours (see the README). A killed run resumes with
 `--resume`: finished sweeps and methods are kept, a started one continues from its last
 checkpoint (`experiments.sweep`), and the report is written again from the results.
+`--reuse RUN ...` combines runs: the methods RUN has finished (a paper run of the same
+preset, seeds and overrides, e.g. the MAML rows run on another machine with `--exclude`)
+are copied into --out instead of trained, and the report covers them all.
 """
 
 from __future__ import annotations
@@ -82,6 +85,9 @@ class Args:
     """Continue a killed run in --out with the arguments it was started with."""
     overwrite: bool = False
     """Replace an existing run in --out."""
+    reuse: tuple[Path, ...] = ()
+    """Paper runs whose finished methods are copied instead of trained (same preset, seeds and
+    overrides): e.g. the MAML rows run elsewhere with --exclude, combined into one report."""
     num_updates: Optional[int] = None
     """Override the preset's number of updates."""
     test_episodes_per_room: Optional[int] = None
@@ -102,12 +108,17 @@ class Args:
     """Show the progress bar."""
 
 
+# The arguments that fix a method's results (those of sweep.PROTOCOL a paper run sets).
+PROTOCOL = tuple(k for k in sweep.PROTOCOL if k != "setup")
+
+
 def sweep_args(args: Args, setup: str, methods: tuple[str, ...]) -> sweep.Args:
     fields = ("seeds", "preset", "seed", "num_updates", "test_episodes_per_room", "val_episodes_per_room",
               "stop_after_chunks", "progress")  # fmt: skip
     folder = args.out / setup
+    reuse = tuple(Path(run) / setup for run in args.reuse if (Path(run) / setup / "sweep.json").is_file())
     return sweep.Args(methods=methods, setup=setup, out=folder, resume=(folder / "sweep.json").exists(),
-                      **{k: getattr(args, k) for k in fields})  # fmt: skip
+                      reuse=reuse, **{k: getattr(args, k) for k in fields})  # fmt: skip
 
 
 def check(args: Args) -> None:
@@ -119,6 +130,15 @@ def check(args: Args) -> None:
         raise runs.UserError("--exclude leaves no method to run")
     if args.seeds < 1:
         raise runs.UserError(f"--seeds must be >= 1, got {args.seeds}")
+    for run in map(Path, args.reuse):
+        if not (run / "paper.json").is_file():
+            raise runs.UserError(f"--reuse {run}: not a paper run folder (no paper.json)")
+        if run.resolve() == Path(args.out).resolve():
+            raise runs.UserError(f"--reuse {run}: the run being written (--out); to continue it use --resume")
+        clash = sweep.protocol_clash(args, json.loads((run / "paper.json").read_text()), PROTOCOL)
+        if clash:
+            raise runs.UserError(f"--reuse {run}: run with another protocol ({clash}); only paper runs of the "
+                                 "same protocol can be combined")  # fmt: skip
     for name in ("cvae_windows", "cvae_epochs", "trajectory_candidates", "tsne_points"):
         if getattr(args, name) < 1:
             raise runs.UserError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")

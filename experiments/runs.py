@@ -90,7 +90,7 @@ def resumed_args(args, marker: str, kind: str, keep: tuple[str, ...]):
     saved = {k: tuple(v) if isinstance(v, list) else v for k, v in saved.items() if k != "out"}
     defaults = type(args)()
     clash = [f"--{k.replace('_', '-')} {getattr(args, k)} (started with {v})" for k, v in saved.items()
-             if getattr(args, k) not in (getattr(defaults, k), v)]  # fmt: skip
+             if jsonable(getattr(args, k)) not in (jsonable(getattr(defaults, k)), jsonable(v))]  # fmt: skip
     if clash:
         raise UserError(f"--resume continues {args.out} with the arguments it was started with; drop {', '.join(clash)}")
     return dataclasses.replace(type(args)(**{**saved, "out": args.out}), resume=True,

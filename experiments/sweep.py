@@ -17,13 +17,15 @@ confidence interval over seeds) of the selected models as Markdown and CSV; ever
 against the first one, paired seed by seed (difference, interval, p, verdict); the
 selected and last models' SR per seed; every seed's results, validation history and
 training curve (JSON); one learning-curve PNG of every method (mean and band over seeds).
-`--resume` continues a killed sweep (see `run_method`).
+`--resume` continues a killed sweep (see `run_method`); `--reuse` copies the methods other
+sweeps of the same protocol have finished instead of training them (`copy_finished`).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -64,6 +66,10 @@ class Args:
     from one not given and is ignored)."""
     overwrite: bool = False
     """Replace an existing sweep in --out."""
+    reuse: tuple[Path, ...] = ()
+    """Sweep folders whose finished methods are copied into --out instead of trained (same
+    setup, seeds, preset and overrides; the first folder that has a method wins): e.g. the
+    rows run on another machine, combined into one table."""
     num_updates: Optional[int] = None
     """Override the preset's number of updates."""
     test_episodes_per_room: Optional[int] = None
@@ -86,6 +92,50 @@ def method_schedule(method: str, args: Args):
     config, schedule = preset(args.preset, method, num_updates=args.num_updates, setup=args.setup)
     sched = {k: getattr(args, k) for k in ("test_episodes_per_room", "val_episodes_per_room")}
     return config, dataclasses.replace(schedule, **{k: v for k, v in sched.items() if v is not None})
+
+
+# A sweep's arguments that fix what a finished method's results are: a method is reused
+# from another sweep only when they agree.
+PROTOCOL = ("setup", "seeds", "preset", "seed", "num_updates", "test_episodes_per_room", "val_episodes_per_room")
+
+
+def protocol_clash(args, started: dict, fields: tuple[str, ...]) -> str | None:
+    """Where the run that wrote `started` (its saved arguments) and `args` differ in
+    `fields`, as one line; None if they agree."""
+    clash = [f"--{k.replace('_', '-')} {started.get(k)} there, {getattr(args, k)} here" for k in fields
+             if started.get(k) != getattr(args, k)]  # fmt: skip
+    return "; ".join(clash) or None
+
+
+def reuse_sources(args: Args) -> list[Path]:
+    """The folders of --reuse, checked: a folder that is not a sweep, or one run with
+    another protocol, is refused in one line."""
+    sources = []
+    for folder in map(Path, args.reuse):  # str when read back from sweep.json by --resume
+        if not (folder / "sweep.json").is_file():
+            raise runs.UserError(f"--reuse {folder}: not a sweep folder (no sweep.json)")
+        if folder.resolve() == Path(args.out).resolve():
+            raise runs.UserError(f"--reuse {folder}: the sweep being written (--out); to continue it use --resume")
+        clash = protocol_clash(args, json.loads((folder / "sweep.json").read_text()), PROTOCOL)
+        if clash:
+            raise runs.UserError(f"--reuse {folder}: run with another protocol ({clash}); "
+                                 "only sweeps of the same protocol can be combined")  # fmt: skip
+        sources.append(folder)
+    return sources
+
+
+def copy_finished(args: Args, sources: list[Path]) -> None:
+    """Copy each method of `args.methods` that --out lacks and a sweep of `sources` has
+    finished (its folder, checkpoints included) into --out; the sources are only read."""
+    for method in args.methods:
+        target = args.out / "methods" / method
+        found = [f / "methods" / method for f in sources if (f / "methods" / method / "results.json").is_file()]
+        if found and not target.exists():
+            partial = target.with_name(f".{method}.copying")  # a kill mid-copy leaves no half a method
+            shutil.rmtree(partial, ignore_errors=True)
+            shutil.copytree(found[0], partial)
+            partial.rename(target)
+            print(f"{method}: finished in {found[0].parent.parent}, copied", flush=True)
 
 
 def initial_states(trainer, seeds: list[int]):
@@ -269,10 +319,12 @@ def main(args: Args) -> list[dict] | None:
             raise runs.UserError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
     for method in args.methods:  # fail before any training
         method_schedule(method, args)
+    sources = reuse_sources(args)
     out = args.out
     if not args.resume:
         runs.prepare_run_dir(out, resume=False, overwrite=args.overwrite, marker="sweep.json", kind="sweep")
         runs.write_started_args(out / "sweep.json", args, ("stop_after_chunks", "progress"))
+    copy_finished(args, sources)
 
     used = devices.seed_mesh(args.seeds).devices.size
     print(f"{len(args.methods)} method(s) x {args.seeds} seed(s), the seeds spread over {used} of the "

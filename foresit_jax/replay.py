@@ -26,7 +26,6 @@ from foresit_jax.agent import Agent, Trajectory
 from foresit_jax.lstm import (
     LSTMCarry,
     encoder_lstm_params,
-    lstm_input_gates,
     lstm_kernels,
     lstm_step,
     reset_carry,
@@ -53,11 +52,8 @@ def replay(agent: Agent, params, traj: Trajectory, initial_carry: LSTMCarry):
         return x.reshape((size,) + x.shape[2:])
 
     kernels = lstm_kernels(encoder_lstm_params(params))
-    features = agent.model.apply(
-        params, jax.tree.map(flat, inputs.obs), flat(inputs.prev_action_probs),
-        method=ActorCritic.encoder_features,
-    )  # fmt: skip  # [T * B, F]
-    gates = lstm_input_gates(kernels, features).reshape(num_steps, num_lanes, -1)  # [T, B, 4H]
+    gates = agent.input_gates(params, jax.tree.map(flat, inputs.obs), flat(inputs.prev_action_probs), kernels)
+    gates = gates.reshape(num_steps, num_lanes, -1)  # [T, B, 4H]: one matmul over the whole segment
     kernels = with_transposed_recurrent_kernel(kernels)
     first = traj.episode_step == 0  # [T, B]
 

@@ -521,6 +521,23 @@ def test_a_killed_sweep_resumes_where_it_stopped_and_ends_with_the_same_numbers(
         assert (out / name).read_text() == (tiny_sweep / name).read_text(), name
 
 
+def test_a_sweep_copies_the_methods_another_sweep_finished_instead_of_training_them(tiny_sweep, tmp_path, capsys):
+    out = tmp_path / "combined"
+    # A budget of 0 chunks: nothing may train, both methods must come from tiny_sweep.
+    assert sweep.main(dataclasses.replace(sweep_args(out), reuse=(tiny_sweep,), stop_after_chunks=0)) is not None
+    assert "a3c+foresit: finished in" in capsys.readouterr().out
+    for name in ("results_per_seed.json", "table1.csv", "table1.md"):
+        assert (out / name).read_text() == (tiny_sweep / name).read_text(), name
+    assert not list((out / "methods").glob(".*"))  # no partial copy left behind
+    # Refused in one line: the sweep itself, a folder that is no sweep, another protocol.
+    line = cli_error(sweep.cli, ["--out", out, "--overwrite", "--reuse", out], capsys)
+    assert "the sweep being written" in line and (out / "table1.md").exists()
+    assert "not a sweep folder" in cli_error(sweep.cli, ["--out", tmp_path / "x", "--reuse", tmp_path], capsys)
+    line = cli_error(sweep.cli, ["--preset", "tiny", "--seeds", "3", "--out", tmp_path / "x", "--reuse", tiny_sweep], capsys)
+    assert "another protocol" in line and "--seeds 2 there, 3 here" in line
+    assert not (tmp_path / "x").exists()
+
+
 def test_the_sweep_command_asks_for_two_host_devices_unless_the_user_chose(monkeypatch):
     from experiments import devices
 

@@ -31,13 +31,25 @@ def cheap_experiments():
         yield
 
 
-def test_tiny_report_has_every_table_figure_and_claim_after_a_kill_and_resume(tmp_path):
-    out = tmp_path / "paper"
-    argv = ["--preset", "tiny", "--seeds", "2", "--out", str(out), "--no-progress", "--exclude", *EXCLUDE,
-            "--cvae-windows", "20", "--cvae-epochs", "2", "--trajectory-candidates", "8"]  # fmt: skip
-    assert paper.cli([*argv, "--stop-after-chunks", "1"]) is None  # killed inside a3c's first seeds
-    assert not (out / "report.md").exists()
-    claims = paper.cli(["--resume", "--out", str(out), "--no-progress"])
+def test_tiny_report_has_every_table_figure_and_claim_after_a_kill_resume_and_reuse(tmp_path, capsys):
+    # a3c alone first, killed and resumed; then the report run trains a3c+foresit and
+    # copies a3c from the first run (--reuse), as MAML rows run elsewhere would be combined.
+    part, out = tmp_path / "a3c_only", tmp_path / "paper"
+    extra = ["--cvae-windows", "20", "--cvae-epochs", "2", "--trajectory-candidates", "8", "--no-progress"]
+    only_a3c = ["--exclude", *EXCLUDE, "a3c+foresit"]
+    argv = ["--preset", "tiny", "--seeds", "2", *extra]
+    assert paper.cli([*argv, "--out", str(part), *only_a3c, "--stop-after-chunks", "1"]) is None  # killed in a3c
+    assert not (part / "report.md").exists()
+    paper.cli(["--resume", "--out", str(part), "--no-progress"])
+    assert "a3c+foresit" in (part / "report.md").read_text().split("Not run:")[1].splitlines()[0]
+    reused = (part / "savn" / "methods" / "a3c" / "results.json").read_text()
+    capsys.readouterr()
+    claims = paper.cli([*argv, "--out", str(out), "--exclude", *EXCLUDE, "--reuse", str(part)])
+    assert "a3c: finished in" in capsys.readouterr().out  # copied, not trained again
+    assert (out / "savn" / "methods" / "a3c" / "results.json").read_text() == reused
+    per_seed = json.loads((out / "savn" / "results_per_seed.json").read_text())
+    assert per_seed["a3c"] == json.loads(reused)["results"]
+    assert (part / "savn" / "methods" / "a3c" / "results.json").read_text() == reused  # the source untouched
     report = (out / "report.md").read_text()
     for section in SECTIONS:
         assert section in report, section
@@ -129,4 +141,14 @@ def test_paper_rejects_bad_input_in_one_line(tmp_path, capsys):
     assert "leaves no method" in cli_error(paper.cli, [*base, "--exclude", *paper.SETUP_OF], capsys)
     assert "--seeds must be >= 1" in cli_error(paper.cli, [*base, "--seeds", "0"], capsys)
     assert "--tsne-points must be >= 1" in cli_error(paper.cli, [*base, "--tsne-points", "0"], capsys)
+    # --reuse: a folder that is no paper run, the run itself, a run of another protocol.
+    assert "not a paper run folder" in cli_error(paper.cli, [*base, "--reuse", tmp_path], capsys)
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "paper.json").write_text(json.dumps({"preset": "tiny", "seeds": 3, "seed": 0}))
+    line = cli_error(paper.cli, [*base, "--seeds", "2", "--reuse", other], capsys)
+    assert "another protocol" in line and "--seeds 3 there, 2 here" in line
     assert not (tmp_path / "p").exists()
+    (tmp_path / "p").mkdir()
+    (tmp_path / "p" / "paper.json").write_text("{}")
+    assert "the run being written" in cli_error(paper.cli, [*base, "--overwrite", "--reuse", tmp_path / "p"], capsys)
