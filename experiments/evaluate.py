@@ -35,7 +35,7 @@ class Args:
     argmax), or greedy (argmax) or sampled for any method."""
     seed: Optional[int] = None
     """Evaluation seed (default: the run's own keys, so the episodes are those train used:
-    its test episodes on test, the validation episodes of the model's update on val)."""
+    its test episodes on test, its validation episodes on val)."""
     overwrite: bool = False
     """Replace existing results files."""
 
@@ -78,7 +78,7 @@ def main(args: Args) -> dict:
     elif args.split == "test":
         key = selection.test_key(info["seed"])
     else:
-        key = selection.validation_key(info["seed"], step)
+        key = selection.validation_key(info["seed"])
     results = evaluate(chosen, config, args.split, key, episodes, greedy=greedy)
     runs.write_json(out_json, {"selected_update": step, "which": args.which, "results": results})
     results = runs.jsonable(results)  # as written: an empty L>=5 bucket is None (JSON null)

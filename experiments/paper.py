@@ -139,6 +139,8 @@ def check(args: Args) -> None:
         if clash:
             raise runs.UserError(f"--reuse {run}: run with another protocol ({clash}); only paper runs of the "
                                  "same protocol can be combined")  # fmt: skip
+    for setup, group in GROUPS.items():  # each setup's sweep checks its sources the same way
+        sweep.reuse_sources(sweep_args(args, setup, tuple(m for m in group if m not in args.exclude)))
     for name in ("cvae_windows", "cvae_epochs", "trajectory_candidates", "tsne_points"):
         if getattr(args, name) < 1:
             raise runs.UserError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")

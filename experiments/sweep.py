@@ -108,8 +108,9 @@ def protocol_clash(args, started: dict, fields: tuple[str, ...]) -> str | None:
 
 
 def reuse_sources(args: Args) -> list[Path]:
-    """The folders of --reuse, checked: a folder that is not a sweep, or one run with
-    another protocol, is refused in one line."""
+    """The folders of --reuse, checked: a folder that is not a sweep, one run with another
+    protocol, or a finished method selected by another version of `experiments.selection`,
+    is refused in one line."""
     sources = []
     for folder in map(Path, args.reuse):  # str when read back from sweep.json by --resume
         if not (folder / "sweep.json").is_file():
@@ -120,6 +121,12 @@ def reuse_sources(args: Args) -> list[Path]:
         if clash:
             raise runs.UserError(f"--reuse {folder}: run with another protocol ({clash}); "
                                  "only sweeps of the same protocol can be combined")  # fmt: skip
+        for method in args.methods:
+            done = folder / "methods" / method / "results.json"
+            made = json.loads(done.read_text()).get("selection_protocol") if done.is_file() else None
+            if done.is_file() and made != selection.PROTOCOL_VERSION:
+                raise runs.UserError(f"--reuse {folder}: its {method} was selected by another protocol (version "
+                                     f"{made or 1}; this code's is {selection.PROTOCOL_VERSION}, experiments/selection.py)")  # fmt: skip
         sources.append(folder)
     return sources
 
@@ -218,7 +225,7 @@ def run_method(method: str, args: Args, bar, evaluator, folder: Path, budget: li
         seed_params = seed_params_of(states)
         for i, seed in enumerate(seeds):  # model selection, as train does
             params = devices.seed_slice(seed_params, i)
-            val = selection.validate(evaluator, params, config, seed, done, schedule.val_episodes_per_room)
+            val = selection.validate(evaluator, params, config, seed, schedule.val_episodes_per_room)
             history[i].append({"update": done, **val["overall"]})
             best[i].offer(val["overall"]["SR"], done, params)
         best_params = jax.tree.map(lambda *x: np.stack(x), *[b.params for b in best])
@@ -238,7 +245,8 @@ def run_method(method: str, args: Args, bar, evaluator, folder: Path, budget: li
                                    by_length=True) for p in (best[i].params, last)]  # fmt: skip
         results.append({"seed": seed, "selected_update": best[i].update, "selected": test[0], "last": test[1],
                         "validation": history[i], "training_success_rate": curves[i].tolist()})  # fmt: skip
-    runs.write_json(folder / "results.json", {"updates": done, "results": results, "curves": curves.tolist()})
+    runs.write_json(folder / "results.json", {"updates": done, "results": results, "curves": curves.tolist(),
+                                              "selection_protocol": selection.PROTOCOL_VERSION})  # fmt: skip
     return results, np.arange(1, done + 1), curves
 
 

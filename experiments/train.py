@@ -117,7 +117,7 @@ def main(args: Args) -> dict:
     def validate_and_select(state, done: int) -> dict:
         """Validate after `done` updates; keep the model if it is the best so far."""
         params = agent_params(state, config.sigma2_max)
-        val = selection.validate(evaluator, params, config, seed, done, schedule.val_episodes_per_room)
+        val = selection.validate(evaluator, params, config, seed, schedule.val_episodes_per_room)
         runs.append_rows(out / "validation", [{"update": done, **val["overall"]}])
         if best.offer(val["overall"]["SR"], done):
             runs.save(best_manager, done, params)
@@ -125,7 +125,7 @@ def main(args: Args) -> dict:
 
     # A run killed between a chunk's checkpoint and its validation, or between the
     # validation and saving the best model, is completed here (the keys depend only on
-    # the seed and the update: the same numbers as uninterrupted).
+    # the seed: the same numbers as uninterrupted).
     if done and not any(r["update"] == done for r in runs.read_rows(out / "validation")):
         validate_and_select(state, done)
     elif done and best.update == done and best_manager.latest_step() != done:

@@ -535,6 +535,13 @@ def test_a_sweep_copies_the_methods_another_sweep_finished_instead_of_training_t
     assert "not a sweep folder" in cli_error(sweep.cli, ["--out", tmp_path / "x", "--reuse", tmp_path], capsys)
     line = cli_error(sweep.cli, ["--preset", "tiny", "--seeds", "3", "--out", tmp_path / "x", "--reuse", tiny_sweep], capsys)
     assert "another protocol" in line and "--seeds 2 there, 3 here" in line
+    # A method selected by an earlier version of experiments.selection (no version recorded).
+    old = tmp_path / "old"
+    shutil.copytree(tiny_sweep, old)
+    done = old / "methods" / "a3c" / "results.json"
+    done.write_text(json.dumps({k: v for k, v in json.loads(done.read_text()).items() if k != "selection_protocol"}))
+    with pytest.raises(runs.UserError, match=r"its a3c was selected by another protocol \(version 1"):
+        sweep.main(dataclasses.replace(sweep_args(tmp_path / "x"), reuse=(old,)))
     assert not (tmp_path / "x").exists()
 
 
