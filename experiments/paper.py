@@ -108,10 +108,6 @@ class Args:
     """Show the progress bar."""
 
 
-# The arguments that fix a method's results (those of sweep.PROTOCOL a paper run sets).
-PROTOCOL = tuple(k for k in sweep.PROTOCOL if k != "setup")
-
-
 def sweep_args(args: Args, setup: str, methods: tuple[str, ...]) -> sweep.Args:
     fields = ("seeds", "preset", "seed", "num_updates", "test_episodes_per_room", "val_episodes_per_room",
               "stop_after_chunks", "progress")  # fmt: skip
@@ -135,11 +131,7 @@ def check(args: Args) -> None:
             raise runs.UserError(f"--reuse {run}: not a paper run folder (no paper.json)")
         if run.resolve() == Path(args.out).resolve():
             raise runs.UserError(f"--reuse {run}: the run being written (--out); to continue it use --resume")
-        clash = sweep.protocol_clash(args, json.loads((run / "paper.json").read_text()), PROTOCOL)
-        if clash:
-            raise runs.UserError(f"--reuse {run}: run with another protocol ({clash}); only paper runs of the "
-                                 "same protocol can be combined")  # fmt: skip
-    for setup, group in GROUPS.items():  # each setup's sweep checks its sources the same way
+    for setup, group in GROUPS.items():  # each setup's sweep checks its sources' protocol
         sweep.reuse_sources(sweep_args(args, setup, tuple(m for m in group if m not in args.exclude)))
     for name in ("cvae_windows", "cvae_epochs", "trajectory_candidates", "tsne_points"):
         if getattr(args, name) < 1:

@@ -99,14 +99,6 @@ def method_schedule(method: str, args: Args):
 PROTOCOL = ("setup", "seeds", "preset", "seed", "num_updates", "test_episodes_per_room", "val_episodes_per_room")
 
 
-def protocol_clash(args, started: dict, fields: tuple[str, ...]) -> str | None:
-    """Where the run that wrote `started` (its saved arguments) and `args` differ in
-    `fields`, as one line; None if they agree."""
-    clash = [f"--{k.replace('_', '-')} {started.get(k)} there, {getattr(args, k)} here" for k in fields
-             if started.get(k) != getattr(args, k)]  # fmt: skip
-    return "; ".join(clash) or None
-
-
 def reuse_sources(args: Args) -> list[Path]:
     """The folders of --reuse, checked: a folder that is not a sweep, one run with another
     protocol, or a finished method selected by another version of `experiments.selection`,
@@ -117,9 +109,11 @@ def reuse_sources(args: Args) -> list[Path]:
             raise runs.UserError(f"--reuse {folder}: not a sweep folder (no sweep.json)")
         if folder.resolve() == Path(args.out).resolve():
             raise runs.UserError(f"--reuse {folder}: the sweep being written (--out); to continue it use --resume")
-        clash = protocol_clash(args, json.loads((folder / "sweep.json").read_text()), PROTOCOL)
+        started = json.loads((folder / "sweep.json").read_text())
+        clash = [f"--{k.replace('_', '-')} {started.get(k)} there, {getattr(args, k)} here" for k in PROTOCOL
+                 if started.get(k) != getattr(args, k)]  # fmt: skip
         if clash:
-            raise runs.UserError(f"--reuse {folder}: run with another protocol ({clash}); "
+            raise runs.UserError(f"--reuse {folder}: run with another protocol ({'; '.join(clash)}); "
                                  "only sweeps of the same protocol can be combined")  # fmt: skip
         for method in args.methods:
             done = folder / "methods" / method / "results.json"

@@ -144,8 +144,9 @@ def test_paper_rejects_bad_input_in_one_line(tmp_path, capsys):
     # --reuse: a folder that is no paper run, the run itself, a run of another protocol.
     assert "not a paper run folder" in cli_error(paper.cli, [*base, "--reuse", tmp_path], capsys)
     other = tmp_path / "other"
-    other.mkdir()
-    (other / "paper.json").write_text(json.dumps({"preset": "tiny", "seeds": 3, "seed": 0}))
+    (other / "savn").mkdir(parents=True)
+    (other / "paper.json").write_text("{}")
+    (other / "savn" / "sweep.json").write_text(json.dumps({"setup": "savn", "preset": "tiny", "seeds": 3, "seed": 0}))
     line = cli_error(paper.cli, [*base, "--seeds", "2", "--reuse", other], capsys)
     assert "another protocol" in line and "--seeds 3 there, 2 here" in line
     assert not (tmp_path / "p").exists()
