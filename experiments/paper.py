@@ -131,8 +131,11 @@ def check(args: Args) -> None:
             raise runs.UserError(f"--reuse {run}: not a paper run folder (no paper.json)")
         if run.resolve() == Path(args.out).resolve():
             raise runs.UserError(f"--reuse {run}: the run being written (--out); to continue it use --resume")
-    for setup, group in GROUPS.items():  # each setup's sweep checks its sources' protocol
-        sweep.reuse_sources(sweep_args(args, setup, tuple(m for m in group if m not in args.exclude)))
+    for setup, group in GROUPS.items():  # each setup's sweep checks its sources' protocol (and its own)
+        setup_args = sweep_args(args, setup, tuple(m for m in group if m not in args.exclude))
+        sweep.reuse_sources(setup_args)
+        if args.resume and setup_args.resume:
+            sweep.check_started(setup_args)
     for name in ("cvae_windows", "cvae_epochs", "trajectory_candidates", "tsne_points"):
         if getattr(args, name) < 1:
             raise runs.UserError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")

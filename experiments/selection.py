@@ -19,13 +19,25 @@ from typing import Any
 
 import jax
 
+from experiments.runs import UserError
+
 # Bumped whenever what selects a run's model changes (the keys, the tie rule, the presets'
 # validation episodes): results of another version are not combined with this one's
-# (`sweep --reuse`). 1 (unrecorded): new validation episodes after every chunk, the first
+# (`sweep --reuse`), nor continued by it (`--resume`: `check_resumable`). 1 (unrecorded): new validation episodes after every chunk, the first
 # model on ties, 25 episodes per room type at quick.
 PROTOCOL_VERSION = 2
 TEST_SEED_OFFSET = 10_000
 VALIDATION_SEED_OFFSET = 20_000
+
+
+def check_resumable(recorded: int | None, what: str) -> None:
+    """Refuse (one line) to continue a run whose validations so far were made under another
+    protocol: its checkpoints would be compared on other episodes (and by another tie rule)
+    than the rest. `recorded` None: the run predates the record (made before protocol 2 was
+    written into run.json and progress.json; it cannot be told apart and is let through)."""
+    if recorded is not None and recorded != PROTOCOL_VERSION:
+        raise UserError(f"{what} was validated under selection protocol {recorded}, this code's is {PROTOCOL_VERSION} "
+                        "(experiments/selection.py): finish it with the code that started it, or start it again")  # fmt: skip
 
 
 def run_key(seed: int) -> jax.Array:

@@ -116,13 +116,31 @@ def reuse_sources(args: Args) -> list[Path]:
             raise runs.UserError(f"--reuse {folder}: run with another protocol ({'; '.join(clash)}); "
                                  "only sweeps of the same protocol can be combined")  # fmt: skip
         for method in args.methods:
-            done = folder / "methods" / method / "results.json"
-            made = json.loads(done.read_text()).get("selection_protocol") if done.is_file() else None
-            if done.is_file() and made != selection.PROTOCOL_VERSION:
+            made = method_protocol(folder / "methods" / method)
+            if (folder / "methods" / method / "results.json").is_file() and made != selection.PROTOCOL_VERSION:
                 raise runs.UserError(f"--reuse {folder}: its {method} was selected by another protocol (version "
-                                     f"{made or 1}; this code's is {selection.PROTOCOL_VERSION}, experiments/selection.py)")  # fmt: skip
+                                     f"{made}; this code's is {selection.PROTOCOL_VERSION}, experiments/selection.py)")  # fmt: skip
         sources.append(folder)
     return sources
+
+
+def method_protocol(folder: Path) -> int | None:
+    """The version of `experiments.selection` a method folder of a sweep was validated
+    under: its results.json's (1 where it records none: finished before versions were
+    recorded), else its progress.json's (None where it records none: started before they
+    were recorded there, and so not known), else None (not started)."""
+    for name, unrecorded in (("results.json", 1), ("progress.json", None)):
+        if (folder / name).is_file():
+            return json.loads((folder / name).read_text()).get("selection_protocol", unrecorded)
+    return None
+
+
+def check_started(args: Args) -> None:
+    """For --resume, before anything runs: refuse (one line) to continue a sweep whose
+    methods so far were validated under another selection protocol."""
+    for method in args.methods:
+        folder = args.out / "methods" / method
+        selection.check_resumable(method_protocol(folder), f"{method} in {folder}")
 
 
 def copy_finished(args: Args, sources: list[Path]) -> None:
@@ -188,9 +206,9 @@ def run_method(method: str, args: Args, bar, evaluator, folder: Path, budget: li
     seed_params_of = jax.vmap(lambda s: agent_params(s, config.sigma2_max))
     manager = runs.checkpoint_manager(folder / "checkpoints", 2)
     progress = {"done": 0, "best_sr": [-1.0] * len(seeds), "best_update": [None] * len(seeds),
-                "history": [[] for _ in seeds], "curves": []}  # fmt: skip
+                "history": [[] for _ in seeds], "curves": [], "selection_protocol": selection.PROTOCOL_VERSION}  # fmt: skip
     if (folder / "progress.json").exists():
-        progress = json.loads((folder / "progress.json").read_text())
+        progress = json.loads((folder / "progress.json").read_text())  # its protocol: see check_started
     # A kill between a chunk's checkpoint and its progress.json leaves a newer checkpoint
     # that nothing else records: drop it, that chunk runs again (to the same result).
     runs.drop_steps_after(manager, progress["done"])
@@ -322,6 +340,8 @@ def main(args: Args) -> list[dict] | None:
     for method in args.methods:  # fail before any training
         method_schedule(method, args)
     sources = reuse_sources(args)
+    if args.resume:
+        check_started(args)
     out = args.out
     if not args.resume:
         runs.prepare_run_dir(out, resume=False, overwrite=args.overwrite, marker="sweep.json", kind="sweep")

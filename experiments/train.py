@@ -88,13 +88,15 @@ def main(args: Args) -> dict:
     runs.prepare_run_dir(out, args.resume, args.overwrite)
     if args.resume:
         info = runs.read_run_info(out)
+        selection.check_resumable(info.get("selection_protocol"), str(out))
         config = Config(**info["config"])
         schedule = Schedule(**info["schedule"])
         seed = info["seed"]
     else:
         seed = args.seed
         info = {"method": config.method, "preset": args.preset, "seed": seed,
-                "config": dataclasses.asdict(config), "schedule": dataclasses.asdict(schedule)}  # fmt: skip
+                "config": dataclasses.asdict(config), "schedule": dataclasses.asdict(schedule),
+                "selection_protocol": selection.PROTOCOL_VERSION}  # fmt: skip
         runs.write_run_info(out, info)
 
     trainer = make_trainer(config)

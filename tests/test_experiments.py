@@ -26,7 +26,7 @@ import tyro
 
 import train_helpers as H
 from experiments import evaluate as evaluate_cli
-from experiments import presets, progress, runs, sweep, tables
+from experiments import presets, progress, runs, selection, sweep, tables
 from experiments import train as train_cli
 from foresit_jax.config import Config
 
@@ -164,6 +164,18 @@ def test_existing_folders_are_never_overwritten_without_a_flag(finished_run, tmp
     line = cli_error(train_cli.cli, ["--out", notes, "--resume"], capsys)
     assert "not a run folder" in line
     assert snapshot(notes) == {"thesis.tex": b"months of work"}
+
+
+def test_a_run_validated_under_another_selection_protocol_is_not_resumed(finished_run, tmp_path, capsys):
+    assert runs.read_run_info(finished_run)["selection_protocol"] == selection.PROTOCOL_VERSION
+    out = tmp_path / "older"
+    shutil.copytree(finished_run, out)
+    info = runs.read_run_info(out)
+    runs.write_run_info(out, {**info, "selection_protocol": selection.PROTOCOL_VERSION - 1})
+    before = snapshot(out)
+    line = cli_error(train_cli.cli, ["--out", out, "--resume"], capsys)
+    assert f"validated under selection protocol {selection.PROTOCOL_VERSION - 1}" in line and "start it again" in line
+    assert snapshot(out) == before
 
 
 def test_non_finite_loss_stops_training_naming_the_update_and_keeps_the_last_good_checkpoint(tmp_path, capsys):
@@ -513,6 +525,13 @@ def test_a_killed_sweep_resumes_where_it_stopped_and_ends_with_the_same_numbers(
     # As if killed after the next chunk's checkpoint but before its progress.json: a newer
     # checkpoint that nothing records (dropped on resume, the chunk runs again).
     shutil.copytree(started / "checkpoints" / "2", started / "checkpoints" / "4")
+    # A method validated under another selection protocol is not continued under this one.
+    progress = json.loads((started / "progress.json").read_text())
+    assert progress["selection_protocol"] == selection.PROTOCOL_VERSION
+    (started / "progress.json").write_text(json.dumps({**progress, "selection_protocol": 1}))
+    line = cli_error(sweep.cli, ["--out", out, "--resume"], capsys)
+    assert "a3c+foresit in" in line and "validated under selection protocol 1" in line
+    (started / "progress.json").write_text(json.dumps(progress))
     # --resume takes the arguments the sweep was started with, and refuses others.
     assert "drop --seeds 9 (started with 2)" in cli_error(sweep.cli, ["--out", out, "--resume", "--seeds", "9"], capsys)
     sweep.cli(["--out", str(out), "--resume", "--no-progress"])

@@ -40,6 +40,12 @@ def test_tiny_report_has_every_table_figure_and_claim_after_a_kill_resume_and_re
     argv = ["--preset", "tiny", "--seeds", "2", *extra]
     assert paper.cli([*argv, "--out", str(part), *only_a3c, "--stop-after-chunks", "1"]) is None  # killed in a3c
     assert not (part / "report.md").exists()
+    # Not continued under another selection protocol than the one it was validated under.
+    progress_file = part / "savn" / "methods" / "a3c" / "progress.json"
+    progress = progress_file.read_text()
+    progress_file.write_text(json.dumps({**json.loads(progress), "selection_protocol": 1}))
+    assert "validated under selection protocol 1" in cli_error(paper.cli, ["--resume", "--out", part], capsys)
+    progress_file.write_text(progress)
     paper.cli(["--resume", "--out", str(part), "--no-progress"])
     assert "a3c+foresit" in (part / "report.md").read_text().split("Not run:")[1].splitlines()[0]
     reused = (part / "savn" / "methods" / "a3c" / "results.json").read_text()
