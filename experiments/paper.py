@@ -44,7 +44,7 @@ import numpy as np
 
 from envs.catalog import ROOM_TYPES
 from envs.metrics import LENGTH_BUCKETS, bucket_label
-from experiments import cvae_compare, devices, runs, selection, stats, sweep
+from experiments import cvae_compare, devices, numerics, runs, selection, stats, sweep
 from experiments.tables import markdown_table, write_csv
 
 # The methods of each setup's sweep: Table 1's rows, then Table 3's ablations.
@@ -479,6 +479,8 @@ def write_report(args: Args, results: dict) -> dict:
           f"Test split, each seed's model selected on validation (`experiments.selection`); mean ± sample std "
           f"[95% Student-t interval] over {args.seeds} seed(s). Not run: {', '.join(excluded) or 'none'}.\n"]  # fmt: skip
 
+    compared = [*PAIRS, *(("a3c+org+foresit", m) for m in TABLE3[1:-1])]  # the claims' pairs
+    md.append(numerics.markdown(results, compared))
     t1, rows1 = table1(results)
     write_csv(out / "table1.csv", rows1)
     md.append("## Table 1\n\n" + t1)

@@ -35,7 +35,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from experiments import devices, runs, selection, stats
+from experiments import devices, numerics, runs, selection, stats
 from experiments.presets import preset
 from experiments.progress import progress_bar
 from experiments.tables import markdown_table, write_csv
@@ -189,7 +189,8 @@ def run_method(method: str, args: Args, bar, evaluator, folder: Path, budget: li
     `folder` keeps the method's progress: after each chunk an orbax checkpoint of the
     seeds' training states and selected models, then `progress.json` (updates done,
     validation history, curves); at the end `results.json`.  A finished method is read
-    back; a started one continues from its last checkpoint, bit for bit."""
+    back; a started one continues from its last checkpoint, bit for bit on the same platform
+    (progress.json records the platform of each stretch, `experiments.numerics`)."""
     from foresit_jax.evaluate import agent_params
     from foresit_jax.train import make_trainer
 
@@ -209,6 +210,10 @@ def run_method(method: str, args: Args, bar, evaluator, folder: Path, budget: li
                 "history": [[] for _ in seeds], "curves": [], "selection_protocol": selection.PROTOCOL_VERSION}  # fmt: skip
     if (folder / "progress.json").exists():
         progress = json.loads((folder / "progress.json").read_text())  # its protocol: see check_started
+    # The platform of the updates still to come (experiments.numerics).
+    progress["numerics"], warning = numerics.extend(progress.get("numerics"), progress["done"])
+    if warning:
+        print(f"warning: {method}: {warning}", file=sys.stderr, flush=True)
     # A kill between a chunk's checkpoint and its progress.json leaves a newer checkpoint
     # that nothing else records: drop it, that chunk runs again (to the same result).
     runs.drop_steps_after(manager, progress["done"])
@@ -256,7 +261,8 @@ def run_method(method: str, args: Args, bar, evaluator, folder: Path, budget: li
         test = [evaluator.evaluate(p, config, "test", selection.test_key(seed), schedule.test_episodes_per_room,
                                    by_length=True) for p in (best[i].params, last)]  # fmt: skip
         results.append({"seed": seed, "selected_update": best[i].update, "selected": test[0], "last": test[1],
-                        "validation": history[i], "training_success_rate": curves[i].tolist()})  # fmt: skip
+                        "validation": history[i], "training_success_rate": curves[i].tolist(),
+                        "numerics": progress["numerics"]})  # fmt: skip
     runs.write_json(folder / "results.json", {"updates": done, "results": results, "curves": curves.tolist(),
                                               "selection_protocol": selection.PROTOCOL_VERSION})  # fmt: skip
     return results, np.arange(1, done + 1), curves
@@ -372,6 +378,7 @@ def main(args: Args) -> list[dict] | None:
     md = table_markdown(rows, title) + "\n" + selection_markdown(results)
     if len(selected) > 1 and args.seeds > 1:
         md += "\n" + paired_markdown(selected)
+    md += "\n" + numerics.markdown(results, [(args.methods[0], m) for m in args.methods[1:]])
     (out / "table1.md").write_text(md)
     write_csv(out / "table1.csv", rows)
     runs.write_json(out / "results_per_seed.json", results)

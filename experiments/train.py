@@ -6,7 +6,8 @@ chunk (the best model by validation SR is kept: model selection), and at the end
 evaluation of the selected model (JSON and Markdown) and a learning-curve PNG.
 
 `--resume` continues an interrupted run from its last checkpoint and ends bit-identical to
-an uninterrupted run with the same seed.  An existing run folder is never overwritten
+an uninterrupted run with the same seed on the same platform (run.json records the platform
+of each stretch of updates, and a resume on another one warns: `experiments.numerics`).  An existing run folder is never overwritten
 without `--resume` or `--overwrite`.
 """
 
@@ -21,7 +22,7 @@ from typing import Optional
 import jax
 import numpy as np
 
-from experiments import runs, selection
+from experiments import numerics, runs, selection
 from experiments.presets import Schedule, preset
 from experiments.progress import progress_bar
 
@@ -96,7 +97,7 @@ def main(args: Args) -> dict:
         seed = args.seed
         info = {"method": config.method, "preset": args.preset, "seed": seed,
                 "config": dataclasses.asdict(config), "schedule": dataclasses.asdict(schedule),
-                "selection_protocol": selection.PROTOCOL_VERSION}  # fmt: skip
+                "selection_protocol": selection.PROTOCOL_VERSION, "numerics": numerics.extend(None, 0)[0]}  # fmt: skip
         runs.write_run_info(out, info)
 
     trainer = make_trainer(config)
@@ -110,6 +111,12 @@ def main(args: Args) -> dict:
         done = int(manager.latest_step())
         state = runs.restore(manager, done, state)
         print(f"resuming {out} from update {done}")
+    if args.resume:  # the platform of the updates still to come (experiments.numerics)
+        history, warning = numerics.extend(info.get("numerics"), done)
+        if history != info.get("numerics"):
+            runs.write_run_info(out, {**info, "numerics": history})
+        if warning:
+            print(f"warning: {warning}", file=sys.stderr, flush=True)
     runs.truncate_rows(out / "metrics", done)
     runs.truncate_rows(out / "validation", done)
     best = selection.Selection()

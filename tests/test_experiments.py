@@ -26,7 +26,7 @@ import tyro
 
 import train_helpers as H
 from experiments import evaluate as evaluate_cli
-from experiments import presets, progress, runs, selection, sweep, tables
+from experiments import numerics, presets, progress, runs, selection, sweep, tables
 from experiments import train as train_cli
 from foresit_jax.config import Config
 
@@ -89,6 +89,7 @@ def cli_error(cli, argv, capsys) -> str:
 def test_finished_run_folder(finished_run):
     info = runs.read_run_info(finished_run)
     assert (info["method"], info["preset"], info["seed"]) == ("a3c+foresit", "tiny", SEED)
+    assert info["numerics"] == [{"from_update": 0, "platform": numerics.fingerprint()}]
     rows = runs.read_rows(finished_run / "metrics")
     assert [r["update"] for r in rows] == [1, 2, 3, 4]
     assert all(np.isfinite(r["losses/total_loss"]) for r in rows)
@@ -134,6 +135,22 @@ def test_resume_after_a_kill_ends_bit_identical_to_an_uninterrupted_run(finished
         ref_step, ref_steps, reference = restore_latest(finished_run, folder)
         assert (step, steps) == (ref_step, ref_steps)
         H.assert_trees_bitwise_equal(resumed, reference)
+
+
+def test_a_run_resumed_on_another_platform_says_so_and_records_where_each_stretch_ran(finished_run, tmp_path, capsys):
+    out = tmp_path / "moved"
+    train_cli.main(tiny_args(out, stop_after_chunks=1))
+    info = runs.read_run_info(out)
+    elsewhere = {**numerics.fingerprint(), "jaxlib": "0.0.1"}  # as if started on another machine
+    runs.write_run_info(out, {**info, "numerics": [{"from_update": 0, "platform": elsewhere}]})
+    capsys.readouterr()
+    train_cli.main(train_cli.Args(out=out, resume=True, progress=False))
+    err = capsys.readouterr().err
+    assert "warning: continuing on another platform than updates 0-2 were trained on" in err
+    assert runs.read_run_info(out)["numerics"] == [{"from_update": 0, "platform": elsewhere},
+                                                   {"from_update": 2, "platform": numerics.fingerprint()}]  # fmt: skip
+    # (Here it is this machine all along: the numbers are still the uninterrupted run's.)
+    assert (out / "results_test.json").read_text() == (finished_run / "results_test.json").read_text()
 
 
 def test_overwrite_replaces_a_run_and_same_seed_gives_the_same_run(finished_run, tmp_path):
@@ -562,6 +579,21 @@ def test_a_sweep_copies_the_methods_another_sweep_finished_instead_of_training_t
     with pytest.raises(runs.UserError, match=r"its a3c was selected by another protocol \(version 1"):
         sweep.main(dataclasses.replace(sweep_args(tmp_path / "x"), reuse=(old,)))
     assert not (tmp_path / "x").exists()
+    # A method trained on another platform is combined, and the table says which pair mixes platforms.
+    moved = tmp_path / "moved"
+    shutil.copytree(tiny_sweep, moved)
+    done = moved / "methods" / "a3c+foresit" / "results.json"
+    finished = json.loads(done.read_text())
+    elsewhere = [{"from_update": 0, "platform": {**numerics.fingerprint(), "jax": "0.0.1"}}]
+    for r in finished["results"]:
+        assert r["numerics"] == [{"from_update": 0, "platform": numerics.fingerprint()}]
+        r["numerics"] = elsewhere
+    done.write_text(json.dumps(finished))
+    sweep.main(dataclasses.replace(sweep_args(tmp_path / "mixed"), reuse=(moved,), stop_after_chunks=0))
+    md = (tmp_path / "mixed" / "table1.md").read_text()
+    assert f"- {numerics.describe(elsewhere[0]['platform'])}: a3c+foresit\n" in md
+    assert "different platforms (or a run on several): a3c and a3c+foresit." in md
+    assert f"Every method was trained on {numerics.describe(numerics.fingerprint())}." in (tiny_sweep / "table1.md").read_text()
 
 
 def test_the_sweep_command_asks_for_two_host_devices_unless_the_user_chose(monkeypatch):

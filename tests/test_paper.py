@@ -19,7 +19,7 @@ from test_experiments import cli_error
 # The tiny report trains two methods (compile time dominates): the other rows read "not run".
 RUN = ("a3c", "a3c+foresit")
 EXCLUDE = tuple(m for m in paper.SETUP_OF if m not in RUN)
-SECTIONS = ("## Table 1", "### savn setup", "### org setup", "## Table 2", "## Table 3", "## Model selection",
+SECTIONS = ("## Platforms", "## Table 1", "### savn setup", "### org setup", "## Table 2", "## Table 3", "## Model selection",
             "## SR and SPL by optimal path length", "## The paper's claims", "## The C-VAE comparison",
             "## Figure 4", "## Figure 3", "## Learning curves")  # fmt: skip
 
@@ -59,6 +59,7 @@ def test_tiny_report_has_every_table_figure_and_claim_after_a_kill_resume_and_re
     report = (out / "report.md").read_text()
     for section in SECTIONS:
         assert section in report, section
+    assert "Every method was trained on cpu (" in report  # a3c copied from a run on this machine
     assert (out / "table3.csv").read_text() == ""  # none of Table 3's methods ran
     for name in ("table1.csv", "table2.csv", "by_length.csv", "claims.csv", "cvae_comparison.json",
                  "fig4_tsne.png", "fig3_a3c_vs_a3c_foresit.png", "by_length_a3c_vs_a3c_foresit.png",
