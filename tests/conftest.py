@@ -7,9 +7,54 @@ split use ``view_width=2`` (the view width only sets the number of rays; the dyn
 time limits and oracle are the same), which keeps them cheap.
 """
 
+import os
+import shutil
+import tempfile
+
+import jax
 import pytest
 
 import envs
+
+_CACHE = "JAX_COMPILATION_CACHE_DIR"
+
+
+def pytest_configure(config):
+    """One persistent XLA compilation cache for the whole test session, shared by the
+    xdist workers (which inherit this environment variable from the controller) and the
+    subprocesses the tests start.  The same program is compiled many times in a session:
+    `jax.clear_caches()` after every module (below) drops compiled programs that later
+    modules compile again, and workers compile what the other worker did; each is
+    compiled once here, then loaded.  A fresh, empty folder per session (deleted at its
+    end): nothing is reused from an earlier run, so the suite still compiles what it tests.
+    A user's own `JAX_COMPILATION_CACHE_DIR` is left as it is."""
+    if not hasattr(config, "workerinput") and _CACHE not in os.environ:
+        os.environ[_CACHE] = config._foresit_xla_cache = tempfile.mkdtemp(prefix="foresit-xla-cache-")
+    # jax is imported already (it read its environment then): tell it directly.
+    jax.config.update("jax_compilation_cache_dir", os.environ.get(_CACHE))
+
+
+# Module-scoped fixtures that train (tens of seconds each): the tests that use one are
+# sent to one xdist worker together (`--dist loadgroup` in pyproject.toml), so it is built
+# once, not once on each worker.
+SHARED_TRAINING_FIXTURES = ("finished_run", "tiny_sweep")
+
+
+# tryfirst: xdist's worker reads the marks in its own pytest_collection_modifyitems, which
+# would otherwise run before this one and see none.
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        for name in SHARED_TRAINING_FIXTURES:
+            if name in getattr(item, "fixturenames", ()):
+                item.add_marker(pytest.mark.xdist_group(name))
+
+
+def pytest_unconfigure(config):
+    folder = getattr(config, "_foresit_xla_cache", None)
+    if folder is not None:
+        shutil.rmtree(folder, ignore_errors=True)
+        del os.environ[_CACHE]
 
 
 @pytest.fixture(scope="session")
