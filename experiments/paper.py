@@ -24,8 +24,11 @@ seed's model selected on validation) over the methods of the paper's tables, the
 `--resume`: finished sweeps and methods are kept, a started one continues from its last
 checkpoint (`experiments.sweep`), and the report is written again from the results.
 `--reuse RUN ...` combines runs: the methods RUN has finished (a paper run of the same
-preset, seeds and overrides, e.g. the MAML rows run on another machine with `--exclude`)
-are copied into --out instead of trained, and the report covers them all.
+preset and overrides, e.g. the MAML rows run on another machine with `--exclude`) are
+copied into --out instead of trained, and the report covers them all. They combine seed by
+seed (`experiments.sweep.copy_finished`): `--seeds 5 --reuse A B` with seeds 0-1 in A and
+2-4 (`--seed 2 --seeds 3`) in B trains nothing, so a 5-seed report can be made in blocks of
+seeds, on several machines or one after another.
 """
 
 from __future__ import annotations
@@ -86,8 +89,9 @@ class Args:
     overwrite: bool = False
     """Replace an existing run in --out."""
     reuse: tuple[Path, ...] = ()
-    """Paper runs whose finished methods are copied instead of trained (same preset, seeds and
-    overrides): e.g. the MAML rows run elsewhere with --exclude, combined into one report."""
+    """Paper runs whose finished methods are taken instead of trained (same preset and
+    overrides), seed by seed: e.g. the MAML rows run elsewhere with --exclude, or seeds 2-4
+    (--seed 2 --seeds 3) added to a run of seeds 0-1, combined into one report."""
     num_updates: Optional[int] = None
     """Override the preset's number of updates."""
     test_episodes_per_room: Optional[int] = None
@@ -480,7 +484,8 @@ def write_report(args: Args, results: dict) -> dict:
           f"[95% Student-t interval] over {args.seeds} seed(s). Not run: {', '.join(excluded) or 'none'}.\n"]  # fmt: skip
 
     compared = [*PAIRS, *(("a3c+org+foresit", m) for m in TABLE3[1:-1])]  # the claims' pairs
-    md.append(numerics.markdown(results, compared))
+    md.append(numerics.markdown(results, compared)
+              + sweep.assembled_markdown({m: out / SETUP_OF[m] / "methods" / m for m in results}))  # fmt: skip
     t1, rows1 = table1(results)
     write_csv(out / "table1.csv", rows1)
     md.append("## Table 1\n\n" + t1)

@@ -17,8 +17,10 @@ confidence interval over seeds) of the selected models as Markdown and CSV; ever
 against the first one, paired seed by seed (difference, interval, p, verdict); the
 selected and last models' SR per seed; every seed's results, validation history and
 training curve (JSON); one learning-curve PNG of every method (mean and band over seeds).
-`--resume` continues a killed sweep (see `run_method`); `--reuse` copies the methods other
-sweeps of the same protocol have finished instead of training them (`copy_finished`).
+`--resume` continues a killed sweep (see `run_method`); `--reuse` takes the methods other
+sweeps of the same protocol have finished instead of training them, seed by seed: a method
+whose every seed they finished between them (e.g. seeds 0-1 in one sweep and 2-4, `--seed 2
+--seeds 3`, in another) is assembled from them (`copy_finished`).
 """
 
 from __future__ import annotations
@@ -67,9 +69,11 @@ class Args:
     overwrite: bool = False
     """Replace an existing sweep in --out."""
     reuse: tuple[Path, ...] = ()
-    """Sweep folders whose finished methods are copied into --out instead of trained (same
-    setup, seeds, preset and overrides; the first folder that has a method wins): e.g. the
-    rows run on another machine, combined into one table."""
+    """Sweep folders whose finished methods are taken into --out instead of trained (same
+    setup, preset and overrides), seed by seed: a method whose every seed of this sweep
+    they finished between them is copied or assembled (each seed from the first folder that
+    has it), e.g. rows run on another machine, or seeds 2-4 (--seed 2 --seeds 3) added to
+    a sweep of seeds 0-1; a method they finish only some seeds of is trained here."""
     num_updates: Optional[int] = None
     """Override the preset's number of updates."""
     test_episodes_per_room: Optional[int] = None
@@ -95,8 +99,11 @@ def method_schedule(method: str, args: Args):
 
 
 # A sweep's arguments that fix what a finished method's results are: a method is reused
-# from another sweep only when they agree.
-PROTOCOL = ("setup", "seeds", "preset", "seed", "num_updates", "test_episodes_per_room", "val_episodes_per_room")
+# from another sweep only when they agree.  The seeds are not among them: seed s of any
+# sweep is the run `train --seed s` makes (the same key, validation and test episodes),
+# whichever seeds were vmapped beside it (up to the float rounding of the vmapped program,
+# see the module docstring), so seeds of several sweeps combine into one.
+PROTOCOL = ("setup", "preset", "num_updates", "test_episodes_per_room", "val_episodes_per_room")
 
 
 def reuse_sources(args: Args) -> list[Path]:
@@ -143,18 +150,94 @@ def check_started(args: Args) -> None:
         selection.check_resumable(method_protocol(folder), f"{method} in {folder}")
 
 
+def finished_seeds(folder: Path) -> list[int]:
+    """The seeds a sweep's method folder has finished (none when it has not finished)."""
+    if not (folder / "results.json").is_file():
+        return []
+    return [r["seed"] for r in json.loads((folder / "results.json").read_text())["results"]]
+
+
+def _seed_ranges(seeds) -> str:
+    """'0-1, 4' for [0, 1, 4]."""
+    seeds, out = sorted(seeds), []
+    for s in seeds:
+        if out and s == out[-1][1] + 1:
+            out[-1][1] = s
+        else:
+            out.append([s, s])
+    return ", ".join(str(a) if a == b else f"{a}-{b}" for a, b in out)
+
+
 def copy_finished(args: Args, sources: list[Path]) -> None:
-    """Copy each method of `args.methods` that --out lacks and a sweep of `sources` has
-    finished (its folder, checkpoints included) into --out; the sources are only read."""
+    """Give --out each method of `args.methods` that it lacks and whose every seed the
+    sweeps of `sources` have finished between them: its folder copied whole (checkpoints
+    included) from the first source that has exactly these seeds, else assembled seed by
+    seed, each from the first source that has it (`assemble`). A method some of whose
+    seeds no source has is left to train (all its seeds), and said so. The sources are
+    only read; a kill mid-copy leaves no half a method."""
+    wanted = seeds_of(args)
     for method in args.methods:
         target = args.out / "methods" / method
-        found = [f / "methods" / method for f in sources if (f / "methods" / method / "results.json").is_file()]
-        if found and not target.exists():
-            partial = target.with_name(f".{method}.copying")  # a kill mid-copy leaves no half a method
-            shutil.rmtree(partial, ignore_errors=True)
-            shutil.copytree(found[0], partial)
-            partial.rename(target)
-            print(f"{method}: finished in {found[0].parent.parent}, copied", flush=True)
+        folders = [f / "methods" / method for f in sources]
+        have = {folder: finished_seeds(folder) for folder in folders}
+        if target.exists() or not any(have.values()):
+            continue
+        partial = target.with_name(f".{method}.copying")
+        shutil.rmtree(partial, ignore_errors=True)
+        whole = [folder for folder in folders if have[folder] == wanted]
+        where = {}  # seed -> the first folder that finished it
+        for folder in folders:
+            for seed in have[folder]:
+                where.setdefault(seed, folder)
+        missing = [s for s in wanted if s not in where]
+        if whole:
+            shutil.copytree(whole[0], partial)
+            print(f"{method}: finished in {whole[0].parent.parent}, copied", flush=True)
+        elif not missing:
+            parts = {s: where[s] for s in wanted}
+            assemble(method, args, parts, partial)
+            taken = "; ".join(f"seeds {_seed_ranges([s for s in wanted if parts[s] == f])} from {f.parent.parent}"
+                              for f in dict.fromkeys(parts.values()))  # fmt: skip
+            print(f"{method}: assembled ({taken})", flush=True)
+        else:
+            found = [s for s in wanted if s in where]
+            if found:
+                print(f"{method}: seeds {_seed_ranges(found)} are finished in --reuse, but not seeds "
+                      f"{_seed_ranges(missing)}, so all {len(wanted)} seeds train here (to reuse them, run the "
+                      "missing seeds with --seed/--seeds and add that run to --reuse)", flush=True)  # fmt: skip
+            continue
+        partial.rename(target)
+
+
+def assemble(method: str, args: Args, parts: dict[int, Path], target: Path) -> None:
+    """A finished method folder of `args`'s seeds in `target` (results.json and a
+    checkpoint of the seeds' last training states and selected models, stacked in seed
+    order), seed s taken from the finished method folder `parts[s]` of another sweep.
+    Its results.json records where each seed came from ("assembled_from")."""
+    seeds = seeds_of(args)
+    loaded = {}
+    for folder in dict.fromkeys(parts.values()):
+        done = json.loads((folder / "results.json").read_text())
+        *_, states, best = load_method(method, args, folder)
+        loaded[folder] = (done, [r["seed"] for r in done["results"]], states, best)
+    updates = {done["updates"] for done, *_ in loaded.values()}
+    protocols = {done.get("selection_protocol") for done, *_ in loaded.values()}
+    if len(updates) != 1 or len(protocols) != 1:  # reuse_sources checks both; this guards a hand-edited folder
+        raise runs.UserError(f"--reuse: {method}'s seeds were trained for {sorted(updates)} updates under selection "
+                             f"protocol(s) {sorted(protocols, key=str)}; they cannot be combined")  # fmt: skip
+    rows = []  # per seed: (result, curve, states, best)
+    for seed in seeds:
+        done, order, states, best = loaded[parts[seed]]
+        i = order.index(seed)
+        rows.append((done["results"][i], done["curves"][i], *jax.tree.map(lambda x: x[i], (states, best))))
+    results, curves, states, best = zip(*rows)
+    stack = lambda trees: jax.tree.map(lambda *x: np.stack(x), *trees)  # noqa: E731
+    (done,) = updates
+    target.mkdir(parents=True)
+    runs.save(runs.checkpoint_manager(target / "checkpoints", 2), done, {"states": stack(states), "best": stack(best)})
+    runs.write_json(target / "results.json", {"updates": done, "results": list(results), "curves": list(curves),
+                                              "selection_protocol": protocols.pop(),
+                                              "assembled_from": {str(s): str(parts[s]) for s in seeds}})  # fmt: skip
 
 
 def initial_states(trainer, seeds: list[int]):
@@ -166,15 +249,34 @@ def initial_states(trainer, seeds: list[int]):
     return states, jax.vmap(lambda s: agent_params(s, trainer.config.sigma2_max))(states)
 
 
+def assembled_markdown(folders: dict[str, Path]) -> str:
+    """For a report's "Platforms" section: a line per method (of `folders`: method -> its
+    folder in a sweep) whose seeds were assembled from several sweeps (`assemble`), naming
+    the folder each seed came from; '' when none was."""
+    lines = []
+    for method, folder in folders.items():
+        done = json.loads((folder / "results.json").read_text()) if (folder / "results.json").is_file() else {}
+        where = {}  # source folder -> its seeds
+        for seed, source in done.get("assembled_from", {}).items():
+            where.setdefault(source, []).append(int(seed))
+        if where:
+            lines.append(f"- {method}: " + "; ".join(f"seeds {_seed_ranges(s)} from {f}" for f, s in where.items()))
+    if not lines:
+        return ""
+    return ("\nSeeds trained in separate sweeps and combined (`--reuse`; seed s is the run `train --seed s` makes "
+            "in any of them):\n\n" + "\n".join(lines) + "\n")  # fmt: skip
+
+
 def load_method(method: str, args: Args, folder: Path):
     """A finished method of a sweep read back: (Config, trainer, the seeds' last training
-    states, their selected models), stacked over `seeds_of(args)` (numpy leaves)."""
+    states, their selected models), stacked over the seeds it finished (`finished_seeds`,
+    in its results' order; numpy leaves). `args` gives the protocol, not the seeds."""
     from foresit_jax.train import make_trainer
 
     config, _ = method_schedule(method, args)
     trainer = make_trainer(config)
     done = json.loads((folder / "results.json").read_text())["updates"]
-    states, best = initial_states(trainer, seeds_of(args))
+    states, best = initial_states(trainer, finished_seeds(folder))
     restored = runs.restore(runs.checkpoint_manager(folder / "checkpoints", 2), done, {"states": states, "best": best})
     return config, trainer, restored["states"], restored["best"]
 
@@ -379,6 +481,7 @@ def main(args: Args) -> list[dict] | None:
     if len(selected) > 1 and args.seeds > 1:
         md += "\n" + paired_markdown(selected)
     md += "\n" + numerics.markdown(results, [(args.methods[0], m) for m in args.methods[1:]])
+    md += assembled_markdown({method: out / "methods" / method for method in args.methods})
     (out / "table1.md").write_text(md)
     write_csv(out / "table1.csv", rows)
     runs.write_json(out / "results_per_seed.json", results)

@@ -569,8 +569,9 @@ def test_a_sweep_copies_the_methods_another_sweep_finished_instead_of_training_t
     line = cli_error(sweep.cli, ["--out", out, "--overwrite", "--reuse", out], capsys)
     assert "the sweep being written" in line and (out / "table1.md").exists()
     assert "not a sweep folder" in cli_error(sweep.cli, ["--out", tmp_path / "x", "--reuse", tmp_path], capsys)
-    line = cli_error(sweep.cli, ["--preset", "tiny", "--seeds", "3", "--out", tmp_path / "x", "--reuse", tiny_sweep], capsys)
-    assert "another protocol" in line and "--seeds 2 there, 3 here" in line
+    argv = ["--preset", "tiny", "--val-episodes-per-room", "5", "--out", tmp_path / "x", "--reuse", tiny_sweep]
+    line = cli_error(sweep.cli, argv, capsys)
+    assert "another protocol" in line and "--val-episodes-per-room 12 there, 5 here" in line
     # A method selected by an earlier version of experiments.selection (no version recorded).
     old = tmp_path / "old"
     shutil.copytree(tiny_sweep, old)
@@ -594,6 +595,53 @@ def test_a_sweep_copies_the_methods_another_sweep_finished_instead_of_training_t
     assert f"- {numerics.describe(elsewhere[0]['platform'])}: a3c+foresit\n" in md
     assert "different platforms (or a run on several): a3c and a3c+foresit." in md
     assert f"Every method was trained on {numerics.describe(numerics.fingerprint())}." in (tiny_sweep / "table1.md").read_text()
+
+
+def test_a_sweep_assembles_a_method_from_the_seeds_other_sweeps_finished(tiny_sweep, tmp_path, capsys):
+    """Seeds S and S+1 of tiny_sweep and seed S+2 of a one-seed sweep (`--seed S+2
+    --seeds 1`) make a three-seed sweep with nothing trained: each seed's results are its
+    source's, and the assembled checkpoint holds each seed's own states and selected model
+    (what the paper's figures load); a seed no source has makes every seed train."""
+    extra = tmp_path / "third"
+    sweep.main(dataclasses.replace(sweep_args(extra), methods=("a3c",), seed=SEED + 2, seeds=1))
+    capsys.readouterr()
+    three = dataclasses.replace(sweep_args(tmp_path / "three"), methods=("a3c",), seeds=3, reuse=(tiny_sweep, extra))
+    assert sweep.main(dataclasses.replace(three, stop_after_chunks=0)) is not None  # a budget of 0: nothing trains
+    assert f"a3c: assembled (seeds {SEED}-{SEED + 1} from {tiny_sweep}; seeds {SEED + 2} from {extra})" in (
+        capsys.readouterr().out
+    )
+    per_seed = json.loads((three.out / "results_per_seed.json").read_text())["a3c"]
+    sources = [json.loads((d / "results_per_seed.json").read_text())["a3c"] for d in (tiny_sweep, extra)]
+    assert per_seed == sources[0] + sources[1]
+    done = json.loads((three.out / "methods" / "a3c" / "results.json").read_text())
+    assert done["curves"] == [r["training_success_rate"] for r in per_seed]
+    assert done["assembled_from"] == {str(SEED): str(tiny_sweep / "methods" / "a3c"),
+                                      str(SEED + 1): str(tiny_sweep / "methods" / "a3c"),
+                                      str(SEED + 2): str(extra / "methods" / "a3c")}  # fmt: skip
+    md = (three.out / "table1.md").read_text()
+    assert (f"- a3c: seeds {SEED}-{SEED + 1} from {tiny_sweep / 'methods' / 'a3c'}; "
+            f"seeds {SEED + 2} from {extra / 'methods' / 'a3c'}\n") in md  # fmt: skip
+    assert "combined" not in (tiny_sweep / "table1.md").read_text()
+    table = next(csv_rows(three.out / "table1.csv"))
+    assert table["seeds"] == "3"
+    assert float(table["SR mean"]) == pytest.approx(np.mean([r["selected"]["overall"]["SR"] for r in per_seed]))
+    loaded = [sweep.load_method("a3c", three, d / "methods" / "a3c")[2:] for d in (three.out, tiny_sweep, extra)]
+    assert jax.tree.structure(loaded[0]) == jax.tree.structure(loaded[1])
+    for got, first, second in zip(*(jax.tree.leaves(x) for x in loaded), strict=True):
+        np.testing.assert_array_equal(got, np.concatenate([first, second]))
+    # A subset of a source's seeds: seed S+1 alone is taken from tiny_sweep (not copied whole).
+    one = dataclasses.replace(sweep_args(tmp_path / "one"), methods=("a3c",), seed=SEED + 1, seeds=1,
+                              reuse=(tiny_sweep,), stop_after_chunks=0)  # fmt: skip
+    assert sweep.main(one) is not None
+    assert json.loads((one.out / "results_per_seed.json").read_text())["a3c"] == sources[0][1:]
+    # Seed S+3 is in no source: all four seeds would train (a budget of 0 stops it), and it says why.
+    four = dataclasses.replace(three, out=tmp_path / "four", seeds=4, stop_after_chunks=0)
+    assert sweep.main(four) is None
+    out = capsys.readouterr().out
+    assert f"a3c: seeds {SEED}-{SEED + 2} are finished in --reuse, but not seeds {SEED + 3}, so all 4 seeds" in out
+    assert not (four.out / "methods" / "a3c" / "results.json").exists()
+    for d, before in zip((tiny_sweep, extra), sources):  # the sources are only read
+        assert json.loads((d / "results_per_seed.json").read_text())["a3c"] == before
 
 
 def test_the_sweep_command_asks_for_two_host_devices_unless_the_user_chose(monkeypatch):

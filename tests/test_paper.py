@@ -153,9 +153,9 @@ def test_paper_rejects_bad_input_in_one_line(tmp_path, capsys):
     other = tmp_path / "other"
     (other / "savn").mkdir(parents=True)
     (other / "paper.json").write_text("{}")
-    (other / "savn" / "sweep.json").write_text(json.dumps({"setup": "savn", "preset": "tiny", "seeds": 3, "seed": 0}))
+    (other / "savn" / "sweep.json").write_text(json.dumps({"setup": "savn", "preset": "quick", "seeds": 3, "seed": 0}))
     line = cli_error(paper.cli, [*base, "--seeds", "2", "--reuse", other], capsys)
-    assert "another protocol" in line and "--seeds 3 there, 2 here" in line
+    assert "another protocol" in line and "--preset quick there, tiny here" in line
     assert not (tmp_path / "p").exists()
     (tmp_path / "p").mkdir()
     (tmp_path / "p" / "paper.json").write_text("{}")
