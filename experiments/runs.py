@@ -221,9 +221,17 @@ def drop_steps_after(manager, step: int) -> None:
 
 
 def restore(manager, step: int, like):
+    """The checkpoint of `step`, shaped as `like` and placed where `like`'s arrays are
+    (numpy leaves: on the first local device), not where the saving process had them:
+    without a sharding orbax restores the saved one, so a sweep's checkpoint of seeds
+    spread over 2 devices came back spread over them in any reader, which then ran
+    cross-device collectives it never asked for (and on the CPU these could time out:
+    "Termination timeout for all reduce") and failed in a process with 1 device."""
     import orbax.checkpoint as ocp
 
-    abstract = jax.tree.map(lambda x: jax.ShapeDtypeStruct(np.shape(x), x.dtype), like)
+    first = jax.sharding.SingleDeviceSharding(jax.local_devices()[0])
+    abstract = jax.tree.map(lambda x: jax.ShapeDtypeStruct(np.shape(x), x.dtype, sharding=getattr(x, "sharding", first)),
+                            like)  # fmt: skip
     return manager.restore(step, args=ocp.args.StandardRestore(abstract))
 
 

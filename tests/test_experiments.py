@@ -503,14 +503,19 @@ def test_a_sweep_spread_over_two_host_devices_equals_the_one_device_sweep(tiny_s
     must precede jax's start): the same selections, validation and test results, and
     training curves equal to float rounding.  In the same interpreter, a3c+maml's sharded
     sweep program lowers (with nn.Conv in L_phi, partitioning its second-order
-    convolutions raised NotImplementedError)."""
+    convolutions raised NotImplementedError).  Its checkpoint, saved from the 2 devices, is
+    read back onto one device, there and in this process (before, it came back spread over
+    both there, and failed with orbax's "Topology mismatch" in a 1-device process)."""
     out = tmp_path / "two_devices"
+    on_one_device = "assert {d for x in jax.tree.leaves(read[2:]) for d in x.sharding.device_set} == {jax.local_devices()[0]}"
     code = (
         "import sys, pytest, jax; sys.path.insert(0, 'tests'); import train_helpers as H\n"
         "assert jax.device_count() == 2, jax.devices()\n"
         "H.patch_for_experiments(pytest.MonkeyPatch())\n"
         "import dataclasses; from pathlib import Path; from experiments import sweep; import test_experiments as T\n"
         f"sweep.main(dataclasses.replace(T.sweep_args(Path({str(out)!r})), methods=('a3c',)))\n"
+        f"read = sweep.load_method('a3c', T.sweep_args(Path({str(out)!r})), Path({str(out / 'methods' / 'a3c')!r}))\n"
+        f"{on_one_device}\n"
         "from experiments import devices; from experiments.presets import preset; from foresit_jax.train import make_trainer\n"
         "trainer = make_trainer(preset('tiny', 'a3c+maml')[0])\n"
         "states = jax.vmap(trainer.init)(jax.random.split(jax.random.PRNGKey(0), 2))\n"
@@ -519,6 +524,8 @@ def test_a_sweep_spread_over_two_host_devices_equals_the_one_device_sweep(tiny_s
     env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
     proc = subprocess.run([sys.executable, "-c", code], cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-3000:]
+    read = sweep.load_method("a3c", sweep_args(out), out / "methods" / "a3c")
+    assert {d for x in jax.tree.leaves(read[2:]) for d in x.sharding.device_set} == {jax.local_devices()[0]}
     one, two = (json.loads((d / "results_per_seed.json").read_text()) for d in (tiny_sweep, out))
     assert list(two) == ["a3c"]
     for a, b in zip(one["a3c"], two["a3c"], strict=True):
