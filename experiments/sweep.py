@@ -270,7 +270,8 @@ def assembled_markdown(folders: dict[str, Path]) -> str:
 def load_method(method: str, args: Args, folder: Path):
     """A finished method of a sweep read back: (Config, trainer, the seeds' last training
     states, their selected models), stacked over the seeds it finished (`finished_seeds`,
-    in its results' order; numpy leaves). `args` gives the protocol, not the seeds."""
+    in its results' order) on the first local device (`runs.restore`). `args` gives the
+    protocol, not the seeds."""
     from foresit_jax.train import make_trainer
 
     config, _ = method_schedule(method, args)
