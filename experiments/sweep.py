@@ -219,7 +219,7 @@ def assemble(method: str, args: Args, parts: dict[int, Path], target: Path) -> N
     for folder in dict.fromkeys(parts.values()):
         done = json.loads((folder / "results.json").read_text())
         *_, states, best = load_method(method, args, folder)
-        loaded[folder] = (done, [r["seed"] for r in done["results"]], states, best)
+        loaded[folder] = (done, finished_seeds(folder), states, best)
     updates = {done["updates"] for done, *_ in loaded.values()}
     protocols = {done.get("selection_protocol") for done, *_ in loaded.values()}
     if len(updates) != 1 or len(protocols) != 1:  # reuse_sources checks both; this guards a hand-edited folder
@@ -232,10 +232,10 @@ def assemble(method: str, args: Args, parts: dict[int, Path], target: Path) -> N
         rows.append((done["results"][i], done["curves"][i], *jax.tree.map(lambda x: x[i], (states, best))))
     results, curves, states, best = zip(*rows)
     stack = lambda trees: jax.tree.map(lambda *x: np.stack(x), *trees)  # noqa: E731
-    (done,) = updates
+    (step,) = updates
     target.mkdir(parents=True)
-    runs.save(runs.checkpoint_manager(target / "checkpoints", 2), done, {"states": stack(states), "best": stack(best)})
-    runs.write_json(target / "results.json", {"updates": done, "results": list(results), "curves": list(curves),
+    runs.save(runs.checkpoint_manager(target / "checkpoints", 2), step, {"states": stack(states), "best": stack(best)})
+    runs.write_json(target / "results.json", {"updates": step, "results": list(results), "curves": list(curves),
                                               "selection_protocol": protocols.pop(),
                                               "assembled_from": {str(s): str(parts[s]) for s in seeds}})  # fmt: skip
 
