@@ -63,7 +63,7 @@ def main(args: Args) -> dict:
 
     trainer = make_trainer(config)
     like_state = trainer.init(jax.random.PRNGKey(0))
-    like = agent_params(like_state, config.sigma2_max)
+    like = agent_params(like_state, config.sigma2_max, config.evaluation_noise)
     folder = args.run / ("best" if args.which == "best" else "checkpoints")
     manager = runs.checkpoint_manager(folder, 100)
     step = manager.latest_step()
@@ -72,7 +72,7 @@ def main(args: Args) -> dict:
     if args.which == "best":
         chosen = runs.restore(manager, step, like)
     else:
-        chosen = agent_params(runs.restore(manager, step, like_state), config.sigma2_max)
+        chosen = agent_params(runs.restore(manager, step, like_state), config.sigma2_max, config.evaluation_noise)
     if args.seed is not None:
         key = jax.random.PRNGKey(args.seed)
     elif args.split == "test":

@@ -65,13 +65,51 @@ def check_method(method: str) -> None:
         raise ValueError(f"unknown method {method!r} ({e}); valid methods: {', '.join(IMPLEMENTED_METHODS)}") from None
 
 
+def split_arm(arm: str) -> tuple[str, dict]:
+    """An arm of a comparison: a method with Config fields of its own, written
+    `METHOD[field=value,...]`, e.g. `a3c+foresit[imagination_input=encoder]` or
+    `a3c[learning_rate=3e-4,imagination_input=mlp]` -> (method, {field: value}); a plain
+    method name gives no fields. Values are read as the field's type (str, int, float,
+    bool: true/false); a one-line ValueError names what is wrong."""
+    arm = arm.strip()
+    if not arm.endswith("]") or "[" not in arm:
+        if "[" in arm or "]" in arm:
+            raise ValueError(f"arm {arm!r}: write fields as METHOD[field=value,...]")
+        return arm, {}
+    method, _, body = arm[:-1].partition("[")
+    defaults = {f.name: f.default for f in dataclasses.fields(Config)}
+    fields = {}
+    for item in filter(None, (x.strip() for x in body.split(","))):
+        field, eq, text = (x.strip() for x in item.partition("="))
+        if not eq or not text:
+            raise ValueError(f"arm {arm!r}: {item!r} is not field=value")
+        if field not in defaults or field in ("method", "setup"):
+            raise ValueError(f"arm {arm!r}: {field!r} is not a Config field an arm can set")
+        kind = type(defaults[field])
+        try:
+            if kind is bool:
+                if text.lower() not in ("true", "false"):
+                    raise ValueError
+                value = text.lower() == "true"
+            elif kind in (int, float, str):
+                value = kind(text)
+            else:
+                raise ValueError
+        except ValueError:
+            raise ValueError(f"arm {arm!r}: {field}={text!r} is not a {kind.__name__}") from None
+        fields[field] = value
+    return method.strip(), fields
+
+
 def preset(name: str, method: str, **overrides) -> tuple[Config, Schedule]:
-    """The Config and Schedule of a preset for a method, with field overrides
-    (None values are ignored)."""
+    """The Config and Schedule of a preset for a method (or an arm, `split_arm`: its
+    fields override the preset's), with field overrides (None values are ignored)."""
     if name not in PRESETS:
         raise ValueError(f"unknown preset {name!r}; valid presets: {', '.join(PRESETS)}")
+    method, arm_fields = split_arm(method)
     check_method(method)
     fields, schedule = PRESETS[name]
+    fields = {**fields, **arm_fields}
     given = {k: v for k, v in overrides.items() if v is not None}
     unknown = set(given) - {f.name for f in dataclasses.fields(Config)}
     if unknown:

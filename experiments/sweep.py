@@ -86,6 +86,13 @@ class Args:
     """Show the progress bar."""
 
 
+# Training diagnostics kept per seed and chunk (the chunk's mean), in results.json: what
+# the value baseline explains, how spread the advantages are, the gradient's size, the
+# policy's entropy (why a critic helps or costs, docs/mechanism.md).
+DIAGNOSTICS = ("losses/value_loss", "losses/explained_variance", "losses/advantage_std", "losses/grad_norm",
+               "losses/entropy", "charts/noise_variance", "imagination/loss")  # fmt: skip
+
+
 def seeds_of(args: Args) -> list[int]:
     """The seeds of the sweep: those of `train --seed` for each of its runs."""
     return [args.seed + i for i in range(args.seeds)]
@@ -246,7 +253,7 @@ def initial_states(trainer, seeds: list[int]):
     from foresit_jax.evaluate import agent_params
 
     states = jax.vmap(trainer.init)(jnp.stack([selection.run_key(s) for s in seeds]))
-    return states, jax.vmap(lambda s: agent_params(s, trainer.config.sigma2_max))(states)
+    return states, jax.vmap(lambda s: agent_params(s, trainer.config.sigma2_max, trainer.config.evaluation_noise))(states)
 
 
 def assembled_markdown(folders: dict[str, Path]) -> str:
@@ -307,7 +314,7 @@ def run_method(method: str, args: Args, bar, evaluator, folder: Path, budget: li
     env_params = trainer.env_params
     mesh = devices.seed_mesh(len(seeds))
     states, best_params = initial_states(trainer, seeds)
-    seed_params_of = jax.vmap(lambda s: agent_params(s, config.sigma2_max))
+    seed_params_of = jax.vmap(lambda s: agent_params(s, config.sigma2_max, config.evaluation_noise))
     manager = runs.checkpoint_manager(folder / "checkpoints", 2)
     progress = {"done": 0, "best_sr": [-1.0] * len(seeds), "best_update": [None] * len(seeds),
                 "history": [[] for _ in seeds], "curves": [], "selection_protocol": selection.PROTOCOL_VERSION}  # fmt: skip
@@ -341,6 +348,8 @@ def run_method(method: str, args: Args, bar, evaluator, folder: Path, budget: li
             runs.fail(f"{method}: non-finite loss at update {done + update + 1} of seed {seeds[seed]}; sweep stopped "
                       f"(its last good checkpoint, update {done}, is kept in {folder})", 1)  # fmt: skip
         progress["curves"].append(metrics["charts/success_rate"].tolist())
+        for name in filter(metrics.__contains__, DIAGNOSTICS):  # each seed's mean over the chunk
+            progress.setdefault("diagnostics", {}).setdefault(name, []).append(metrics[name].mean(axis=1).tolist())
         done += n
         seed_params = seed_params_of(states)
         for i, seed in enumerate(seeds):  # model selection, as train does
@@ -365,6 +374,8 @@ def run_method(method: str, args: Args, bar, evaluator, folder: Path, budget: li
                                    by_length=True) for p in (best[i].params, last)]  # fmt: skip
         results.append({"seed": seed, "selected_update": best[i].update, "selected": test[0], "last": test[1],
                         "validation": history[i], "training_success_rate": curves[i].tolist(),
+                        "diagnostics": {name: [chunk[i] for chunk in chunks]
+                                        for name, chunks in progress.get("diagnostics", {}).items()},
                         "numerics": progress["numerics"]})  # fmt: skip
     runs.write_json(folder / "results.json", {"updates": done, "results": results, "curves": curves.tolist(),
                                               "selection_protocol": selection.PROTOCOL_VERSION})  # fmt: skip

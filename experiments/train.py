@@ -125,7 +125,7 @@ def main(args: Args) -> dict:
 
     def validate_and_select(state, done: int) -> dict:
         """Validate after `done` updates; keep the model if it is the best so far."""
-        params = agent_params(state, config.sigma2_max)
+        params = agent_params(state, config.sigma2_max, config.evaluation_noise)
         val = selection.validate(evaluator, params, config, seed, schedule.val_episodes_per_room)
         runs.append_rows(out / "validation", [{"update": done, **val["overall"]}])
         if best.offer(val["overall"]["SR"], done):
@@ -138,7 +138,7 @@ def main(args: Args) -> dict:
     if done and not any(r["update"] == done for r in runs.read_rows(out / "validation")):
         validate_and_select(state, done)
     elif done and best.update == done and best_manager.latest_step() != done:
-        runs.save(best_manager, done, agent_params(state, config.sigma2_max))
+        runs.save(best_manager, done, agent_params(state, config.sigma2_max, config.evaluation_noise))
 
     run_chunk = jax.jit(trainer.run, static_argnums=2)
     previous_rows = runs.read_rows(out / "metrics")
@@ -176,7 +176,7 @@ def main(args: Args) -> dict:
 
     # Final test evaluation of the model selected on validation.
     best_step = best_manager.latest_step()
-    chosen = runs.restore(best_manager, best_step, agent_params(state, config.sigma2_max))
+    chosen = runs.restore(best_manager, best_step, agent_params(state, config.sigma2_max, config.evaluation_noise))
     test = evaluator.evaluate(chosen, config, "test", selection.test_key(seed), schedule.test_episodes_per_room)
     random = evaluator.evaluate_random_policy(config, "test", selection.test_key(seed), schedule.test_episodes_per_room)
     runs.write_json(out / "results_test.json", {"selected_update": best_step, "results": test, "random_policy": random})

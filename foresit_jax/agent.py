@@ -64,7 +64,9 @@ class StepInputs(NamedTuple):
 
     obs: Any  # observation dict, leaves [T, B, ...]
     prev_action_probs: chex.Array  # [T, B, A]
-    imagined: Optional[chex.Array]  # [T, B, H] i_tau given to the policy; None without imagination
+    imagined: Optional[chex.Array]  # [T, B, H] i_tau given to the policy head; None if the head takes none
+    encoder_imagined: Optional[chex.Array] = None  # [T, B, H] i_tau given to the encoder (zeros at an
+    # episode's first step); None unless Config.imagination_input == 'encoder'
 
 
 class Trajectory(NamedTuple):
@@ -124,6 +126,10 @@ class Agent:
         self.config = config
         self.method = config.pieces
         self.imagination = self.method.imagination
+        uses = self.imagination.uses_imagination
+        # Where i_tau enters (Config.imagination_input): the encoder, or the policy head.
+        self.imagination_in_encoder = uses and config.imagination_input == "encoder"
+        self.imagination_in_head = uses and not self.imagination_in_encoder
         # The object-relation graph (ORG) reads the `org` setup's detector features.
         object_graph = ObjectGraph() if self.method.encoder == "org" else None
         # SAVN's learned interaction loss (the maml base), params at params["params"]["learned_loss"].
@@ -134,9 +140,10 @@ class Agent:
             num_actions=config.num_actions,
             hidden_size=config.hidden_size,
             use_imagination=self.imagination.uses_imagination,
-            attention_critic=self.imagination.attention_critic,
+            attention_critic=self.method.attention_critic,
             attention_size=config.attention_size,
             value_hidden=config.value_hidden,
+            imagination_input=config.imagination_input,
         )
         self.imagination_net = ImaginationNet(config.imagination_layer_sizes)
 
@@ -191,15 +198,24 @@ class Agent:
         )
 
     # ------------------------------------------------------------------ acting
-    def lstm_inputs(self, params, obs, prev_action_probs):
-        """The encoder's output, the LSTM's input x_t `[..., F]`."""
-        return self.model.apply(params, obs, prev_action_probs, method=ActorCritic.encoder_features)
+    def lstm_inputs(self, params, obs, prev_action_probs, encoder_imagined=None):
+        """The encoder's output, the LSTM's input x_t `[..., F]` (encoder_imagined: the
+        encoder's i_tau `[..., H]`, with `imagination_in_encoder`)."""
+        return self.model.apply(params, obs, prev_action_probs, encoder_imagined, method=ActorCritic.encoder_features)
 
-    def input_gates(self, params, obs, prev_action_probs, kernels=None):
+    def input_gates(self, params, obs, prev_action_probs, kernels=None, encoder_imagined=None):
         """The encoder up to the LSTM's input gates `[..., 4H]`: everything of a step
         that does not depend on the LSTM carry."""
         kernels = lstm_kernels(encoder_lstm_params(params)) if kernels is None else kernels
-        return lstm_input_gates(kernels, self.lstm_inputs(params, obs, prev_action_probs))
+        return lstm_input_gates(kernels, self.lstm_inputs(params, obs, prev_action_probs, encoder_imagined))
+
+    def encoder_imagined(self, actor: ActorState) -> Optional[chex.Array]:
+        """The i_tau the encoder sees at the lanes' next step `[B, H]`: the running episode's,
+        zeros at an episode's first step (i_tau is imagined from that step's output);
+        None unless i_tau enters the encoder."""
+        if not self.imagination_in_encoder:
+            return None
+        return jnp.where((actor.episode_step == 0)[:, None], 0.0, actor.imagined)
 
     def act(
         self, params, w_params, env, env_params, actor: ActorState, key: chex.PRNGKey, num_steps: int,
@@ -256,7 +272,8 @@ class Agent:
             key, gate_offset = xs
             k_imag, k_act, k_env = jax.random.split(key, 3)
             first = actor.episode_step == 0  # [B]
-            input_gates = self.input_gates(params, actor.obs, actor.prev_probs, kernels)  # [B, 4H]
+            encoder_imagined = self.encoder_imagined(actor)  # [B, H] or None
+            input_gates = self.input_gates(params, actor.obs, actor.prev_probs, kernels, encoder_imagined)  # [B, 4H]
             if gate_offset is not None:
                 input_gates = input_gates + gate_offset
             lstm, s_t = lstm_step(kernels, actor.lstm, input_gates)
@@ -279,7 +296,7 @@ class Agent:
                     ),
                     lambda: actor.imagined,
                 )
-            policy_input = imagined if imag.uses_imagination else None
+            policy_input = imagined if self.imagination_in_head else None
             logits = self.model.apply(params, s_t, policy_input, method=ActorCritic.policy_logits)
             action = distributions.greedy(logits) if greedy else distributions.sample(k_act, logits)
             memory = actor.memory
@@ -292,7 +309,7 @@ class Agent:
             )
             done = term | trunc
             tracker = jax.vmap(imagination.tracker_update)(actor.tracker, info["success"], done & alive)
-            seen = StepInputs(actor.obs, actor.prev_probs, policy_input) if record_inputs else None
+            seen = StepInputs(actor.obs, actor.prev_probs, policy_input, encoder_imagined) if record_inputs else None
             out = (
                 s_t, logits, action, reward, term, trunc, alive, info["success"] & alive, actor.episode_step,
                 s_0, info["optimal_length"], info["room_type"], seen,
@@ -320,7 +337,8 @@ class Agent:
         if whole_episodes:  # nothing is bootstrapped: every counted episode ended (or is cut by design)
             next_state = jnp.zeros_like(actor.s_0)
         else:  # s_T, for V(s*_T) at the cut (Eq. 8); the next window computes it again
-            _, next_state = lstm_step(kernels, actor.lstm, self.input_gates(params, actor.obs, actor.prev_probs, kernels))
+            gates = self.input_gates(params, actor.obs, actor.prev_probs, kernels, self.encoder_imagined(actor))
+            _, next_state = lstm_step(kernels, actor.lstm, gates)
         traj = Trajectory(
             states, logits, actions, rewards, term, trunc, valid, success, episode_step, s_0, opt, room,
             jax.lax.stop_gradient(next_state), actor.episode_step, seen,

@@ -13,6 +13,8 @@ from foresit_jax.methods import GRADIENTS, ROLLOUTS, Method, parse_method
 
 SETUPS: tuple[str, ...] = ("savn", "org")
 IMAGINATION_OPTIMIZERS: tuple[str, ...] = ("sgd", "adam")
+IMAGINATION_INPUTS: tuple[str, ...] = ("head", "encoder", "mlp")
+EVALUATION_NOISES: tuple[str, ...] = ("training_end", "off")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -90,6 +92,25 @@ class Config:
     """Variance of z in the `rnd` ablation, i_tau = tanh(z)."""
     int_interval: int = 10
     """K: the `int` ablation re-imagines from s_t every K steps."""
+    imagination_input: str = "head"
+    """Where i_tau enters the policy. The paper gives pi_theta(a_t | s_t, g_tau, i_tau)
+    (Eq. 6) and "we condition the policy on the imagined sub-goal state" (Section 4.4),
+    and its policy is "a single fully-connected layer" (Section 5.2); it does not say how
+    s_t and i_tau meet. 'head' (the literal reading, the default): the linear policy head
+    over [s_t : i_tau]; i_tau is constant over an episode, so it can only add one fixed
+    offset to the logits of the whole episode. 'encoder': i_tau joins the encoder's
+    input beside g_tau (embedded to `target_features` like the target, ReLU, tiled over
+    the view grid before the 1x1 convolution) at every step after the episode's first
+    (zeros at the first: i_tau is imagined from s_0, the first step's output), and the
+    head sees s_t alone, so the recurrent state can relate what it imagines to what it
+    sees, as SAVN feeds its target. 'mlp': the policy head is a two-layer MLP (ReLU,
+    `value_hidden` units) over [s_t : i_tau], which can relate the two inside one step;
+    the bases get the same MLP over s_t with this value, so a pair changes one thing.
+    Methods without imagination ignore 'head' and 'encoder'."""
+    evaluation_noise: str = "training_end"
+    """The imagination noise at evaluation: 'training_end' (the lanes' mean Eq. 7
+    variance when training stopped: the imagination the policy was trained with) or
+    'off' (i_tau = f_w([s_0 : g_tau]) exactly). The paper does not say."""
 
     # The maml base (SAVN, `foresit_jax.maml`): SAVN's values.
     maml_segment: int = 6
@@ -126,6 +147,9 @@ class Config:
             if value not in supported:
                 needs = ", ".join(f"{k}={v!r}" for k, v in pieces.required_config.items())
                 raise ValueError(f"method {self.method!r} supports {name} {supported}, not {value!r} (it needs {needs}).")
+        for name, valid in (("imagination_input", IMAGINATION_INPUTS), ("evaluation_noise", EVALUATION_NOISES)):
+            if getattr(self, name) not in valid:
+                raise ValueError(f"{name} must be one of {valid}, got {getattr(self, name)!r}.")
         if self.imagination_optimizer not in IMAGINATION_OPTIMIZERS:
             raise ValueError(
                 f"imagination_optimizer must be one of {IMAGINATION_OPTIMIZERS}, "

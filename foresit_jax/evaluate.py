@@ -37,11 +37,16 @@ class AgentParams(NamedTuple):
     noise_variance: chex.Array  # [] sigma^2 used at evaluation
 
 
-def agent_params(state, sigma2_max: float) -> AgentParams:
-    """From a training RunnerState.  The evaluation noise variance is the lanes' mean of
-    Eq. 7 at the end of training: the imagination the policy was trained with."""
+def agent_params(state, sigma2_max: float, evaluation_noise: str = "training_end") -> AgentParams:
+    """From a training RunnerState.  The evaluation noise variance (`Config.evaluation_noise`):
+    'training_end', the lanes' mean of Eq. 7 at the end of training (the imagination the
+    policy was trained with); 'off', zero."""
+    if evaluation_noise not in ("training_end", "off"):
+        raise ValueError(f"evaluation_noise must be 'training_end' or 'off', got {evaluation_noise!r}")
     rho = jax.vmap(imagination.success_rate)(state.actor.tracker)  # [B]
     variance = jnp.mean(imagination.noise_variance(rho, sigma2_max))
+    if evaluation_noise == "off":
+        variance = jnp.zeros_like(variance)
     return AgentParams(state.params, state.imagination_params, variance)
 
 

@@ -151,6 +151,21 @@ def masked_mean(x: chex.Array, mask: chex.Array) -> chex.Array:
     return jnp.sum(x * mask) / jnp.maximum(jnp.sum(mask), 1.0)
 
 
+def masked_variance(x: chex.Array, mask: chex.Array) -> chex.Array:
+    """Population variance of `x` over the entries where `mask` is 1 (0.0 when empty)."""
+    mean = masked_mean(x, mask)
+    return masked_mean((x - mean) ** 2, mask)
+
+
+def explained_variance(v_t: chex.Array, return_t: chex.Array, mask: chex.Array) -> chex.Array:
+    """1 - Var(R - v) / Var(R) over the masked entries: how much of the returns' spread
+    the value baseline explains (1: all, 0: no better than their mean, < 0: worse);
+    0.0 where the returns do not vary."""
+    var_return = masked_variance(return_t, mask)
+    ratio = masked_variance(return_t - v_t, mask) / jnp.maximum(var_return, 1e-8)
+    return jnp.where(var_return > 1e-8, 1.0 - ratio, 0.0)
+
+
 def a3c_loss(
     logits_t: chex.Array,
     a_t: chex.Array,
@@ -197,6 +212,8 @@ def a3c_loss(
         "losses/value_loss": value_loss,
         "losses/entropy": entropy,
         "losses/advantage_mean": masked_mean(advantage_t, valid_t),
+        "losses/advantage_std": jnp.sqrt(masked_variance(advantage_t, valid_t)),
+        "losses/explained_variance": explained_variance(jax.lax.stop_gradient(v_t), return_t, valid_t),
         "losses/value_mean": masked_mean(jax.lax.stop_gradient(v_t), valid_t),
         "losses/return_mean": masked_mean(return_t, valid_t),
         "losses/num_valid_steps": jnp.sum(valid_t.astype(jnp.float32)),

@@ -256,7 +256,9 @@ def adaptive_act(
         # The kernels' gradients, sum_t x_t^T delta_t and sum_t h_{t-1}^T delta_t, kept as their factors.
         seen = traj.inputs
         rows = LowRankUpdate(
-            inputs=agent.lstm_inputs(_join(shared, lanes), seen.obs, seen.prev_action_probs)[:, 0],  # [segment, F]
+            inputs=agent.lstm_inputs(
+                _join(shared, lanes), seen.obs, seen.prev_action_probs, seen.encoder_imagined
+            )[:, 0],  # [segment, F]
             hiddens=jnp.concatenate([lane_actor.lstm[1], traj.states[:-1, 0]]),  # [segment, H] h_{t-1}
             deltas=-cfg.maml_inner_lr * gate_grads[:, 0],  # [segment, 4H]
         )

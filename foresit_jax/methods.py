@@ -1,19 +1,31 @@
 """Methods as compositions of small named pieces (NAVIX style).
 
-A method is a base learner x an encoder x an imagination variant:
+A method is a base learner x an encoder x a critic x an imagination variant:
 
 * base: `a3c` (SAVN's non-adaptive A3C) or `maml` (SAVN's self-adaptive learner:
   inner SGD on a learned interaction loss inside every episode, `foresit_jax.maml`);
 * encoder: `plain` (SAVN's observation encoder) or `org` (ORG's object-relation graph on
   the `org` setup's detector features, `foresit_jax.org`);
+* critic: `plain` (an MLP on s_t, the bases' value head) or `attention` (Eq. 3-4: the
+  MLP on s*_t = sum_j alpha_j v(s_j) + s_t over the episode's states so far). The piece
+  `critic` names the attention critic, `plaincritic` the plain one; without either a method
+  gets its imagination's default (attention for every imagination variant, as the paper's
+  rows have it; plain without imagination), so `a3c+critic` is the attention critic with
+  no imagination and `a3c+foresit+plaincritic` ForeSIT without it;
 * imagination: `none`, `foresit` (Sections 4.2-4.4), or a Table 3 ablation: `rnd`
   (i_tau = tanh(z)), `att` (imagine the attention-weighted average state), `int`
   (re-imagine from s_t every K steps).
 
+Which state f_w learns to imagine depends on the critic: with the attention critic the
+sub-goal is s_{t*}, t* the argmax of the Done step's attention row (Section 4.2); the plain
+critic has no attention, and the sub-goal is then the Done step's own state (the paper's
+footnote 1: "a sub-goal state could potentially be the final goal state"). `att` imagines
+the attention-weighted average, so it needs the attention critic.
+
 Names are '+'-joined pieces in any order, the base defaulting to a3c (and `a3c+maml`
 naming the maml base, A3C trained by MAML, as the paper does): `a3c`,
-`a3c+foresit`, `a3c+org+foresit`, `a3c+maml+foresit`, `org+rnd`; the Table 3 names alone
-(`rnd`, `att`, `int`) mean `a3c+rnd` etc. `parse_method` turns a name into a `Method`;
+`a3c+foresit`, `a3c+org+foresit`, `a3c+maml+foresit`, `org+rnd`, `a3c+critic`; the Table 3
+names alone (`rnd`, `att`, `int`) mean `a3c+rnd` etc. `parse_method` turns a name into a `Method`;
 `Config` validates it with the setup. The agent holds the pieces and calls them; nothing
 else tests a method's name.
 """
@@ -25,12 +37,14 @@ from typing import Callable
 
 import chex
 import jax
-import jax.numpy as jnp
 
 from foresit_jax import imagination as imag
 
 BASES: tuple[str, ...] = ("a3c", "maml")
 ENCODERS: tuple[str, ...] = ("plain", "org")
+CRITICS: tuple[str, ...] = ("plain", "attention")
+# The pieces that name a critic in a method's name.
+CRITIC_PIECES: dict[str, str] = {"critic": "attention", "plaincritic": "plain"}
 GRADIENTS: tuple[str, ...] = ("replay", "through_rollout")
 
 ROLLOUTS: tuple[str, ...] = ("packed", "episodes")
@@ -42,7 +56,8 @@ class Imagination:
 
     source: 'none' (the policy sees s_t only), 'learned' (f_w([s_0 : g_tau]) + noise,
       Eq. 6-7), 'random' (tanh(z), z ~ N(0, rnd_variance I)).
-    attention_critic: value from the attention of Eq. 3-4 (V(s*_t)); else an MLP on s_t.
+    critic: the critic a method with this variant gets unless its name says otherwise
+      ('attention' for every variant of the paper, 'plain' for none).
     subgoal_mode: what f_w learns to imagine: 'argmax' (s_{argmax alpha}) or
       'attention_average' (sum_j alpha_j s_j).
     renew_every_k: renew i_tau from s_t every `Config.int_interval` steps of the episode
@@ -51,7 +66,7 @@ class Imagination:
 
     name: str
     source: str = "none"
-    attention_critic: bool = False
+    critic: str = "plain"
     subgoal_mode: str = "argmax"
     renew_every_k: bool = False
 
@@ -81,11 +96,9 @@ class Imagination:
         imagined = imagine_fn(w_params, jax.lax.stop_gradient(s_t), goal)
         return jax.lax.stop_gradient(imag.add_imagination_noise(key, imagined, noise_variance))
 
-    def zeros(self, batch: int, hidden: int) -> chex.Array:
-        return jnp.zeros((batch, hidden), jnp.float32)
 
 
-_FORESIT = Imagination("foresit", source="learned", attention_critic=True)
+_FORESIT = Imagination("foresit", source="learned", critic="attention")
 
 IMAGINATIONS: dict[str, Imagination] = {
     "none": Imagination("none"),
@@ -98,11 +111,29 @@ IMAGINATIONS: dict[str, Imagination] = {
 
 @dataclasses.dataclass(frozen=True)
 class Method:
-    """One method of the paper: base x encoder x imagination."""
+    """One method of the paper: base x encoder x critic x imagination (critic None: the
+    imagination's default)."""
 
     base: str = "a3c"
     encoder: str = "plain"
     imagination: Imagination = IMAGINATIONS["none"]
+    critic: str | None = None
+
+    def __post_init__(self):
+        if self.critic is None:
+            object.__setattr__(self, "critic", self.imagination.critic)
+        if self.critic not in CRITICS:
+            raise ValueError(f"critic must be one of {CRITICS}, got {self.critic!r}")
+        if self.imagination.subgoal_mode == "attention_average" and self.critic != "attention":
+            raise ValueError(
+                f"imagination {self.imagination.name!r} imagines the attention-weighted average of the "
+                f"episode's states: it needs the attention critic (drop 'plaincritic')"
+            )
+
+    @property
+    def attention_critic(self) -> bool:
+        """Whether the value comes from the attention of Eq. 3-4 (V(s*_t))."""
+        return self.critic == "attention"
 
     @property
     def name(self) -> str:
@@ -111,6 +142,8 @@ class Method:
             parts.append(self.encoder)
         if self.imagination.name != "none":
             parts.append(self.imagination.name)
+        if self.critic != self.imagination.critic:
+            parts.append({v: k for k, v in CRITIC_PIECES.items()}[self.critic])
         return "+".join(parts)
 
     @property
@@ -159,12 +192,13 @@ PAPER_METHODS: tuple[str, ...] = (
     "a3c", "a3c+foresit", "a3c+maml", "a3c+maml+foresit", "a3c+org", "a3c+org+foresit",
     "a3c+org+rnd", "a3c+org+att", "a3c+org+int",
 )  # fmt: skip
-# Methods that run today: the paper's rows and ablations (any other combination of the
-# pieces, e.g. 'a3c+maml+org' or 'a3c+maml+rnd', runs too).
+# Methods that run today: the paper's rows and ablations, and the attention critic alone
+# (any other combination of the pieces, e.g. 'a3c+maml+org', 'a3c+maml+rnd' or
+# 'a3c+foresit+plaincritic', runs too).
 IMPLEMENTED_METHODS: tuple[str, ...] = (
-    "a3c", "a3c+foresit", "a3c+rnd", "a3c+att", "a3c+int",
+    "a3c", "a3c+critic", "a3c+foresit", "a3c+rnd", "a3c+att", "a3c+int",
     "a3c+maml", "a3c+maml+foresit",
-    "a3c+org", "a3c+org+foresit", "a3c+org+rnd", "a3c+org+att", "a3c+org+int",
+    "a3c+org", "a3c+org+critic", "a3c+org+foresit", "a3c+org+rnd", "a3c+org+att", "a3c+org+int",
 )  # fmt: skip
 
 
@@ -174,8 +208,11 @@ def parse_method(name: str) -> Method:
     Raises ValueError naming the valid pieces on an unknown or repeated piece."""
     if not isinstance(name, str) or not name.strip():
         raise ValueError(f"method must be a non-empty name like 'a3c+foresit', got {name!r}")
-    base, encoder, imagination = None, None, None
-    valid = f"bases {list(BASES)}, encoders {[e for e in ENCODERS if e != 'plain']}, imagination {list(IMAGINATIONS)}"
+    base, encoder, critic, imagination = None, None, None, None
+    valid = (
+        f"bases {list(BASES)}, encoders {[e for e in ENCODERS if e != 'plain']}, critics {list(CRITIC_PIECES)}, "
+        f"imagination {list(IMAGINATIONS)}"
+    )
     pieces = name.strip().lower().split("+")
     if "a3c" in pieces and "maml" in pieces:  # 'a3c+maml': MAML trains the A3C learner
         pieces.remove("a3c")
@@ -184,17 +221,27 @@ def parse_method(name: str) -> Method:
             slot, value = "base", piece
         elif piece in ENCODERS:
             slot, value = "encoder", piece
+        elif piece in CRITIC_PIECES:
+            slot, value = "critic", piece
         elif piece in IMAGINATIONS:
             slot, value = "imagination", piece
         else:
             raise ValueError(f"unknown piece {piece!r} in method {name!r}; pieces are '+'-joined {valid}")
-        current = {"base": base, "encoder": encoder, "imagination": imagination}[slot]
+        current = {"base": base, "encoder": encoder, "critic": critic, "imagination": imagination}[slot]
         if current is not None:
             raise ValueError(f"method {name!r} names two {slot} pieces ({current!r} and {value!r})")
         if slot == "base":
             base = value
         elif slot == "encoder":
             encoder = value
+        elif slot == "critic":
+            critic = value
         else:
             imagination = value
-    return Method(base or "a3c", encoder or "plain", IMAGINATIONS[imagination or "none"])
+    try:
+        return Method(
+            base or "a3c", encoder or "plain", IMAGINATIONS[imagination or "none"],
+            CRITIC_PIECES[critic] if critic else None,
+        )  # fmt: skip
+    except ValueError as e:
+        raise ValueError(f"method {name!r}: {e}") from None

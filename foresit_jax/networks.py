@@ -41,6 +41,10 @@ class Encoder(nn.Module):
     concat -> 1x1 conv to `conv_features` (ReLU) -> flatten -> LSTM cell `hidden_size`.
     A 1x1 convolution is a Dense layer over the channel axis, which is how it is written.
 
+    `imagination_features > 0` (`Config.imagination_input='encoder'`): i_tau `[..., H]` ->
+    linear `imagination_features` (ReLU), tiled beside the target's and the action's
+    embeddings; the caller passes zeros where no i_tau exists yet (an episode's first step).
+
     `object_graph` is the hook for the ORG baseline (setup 'org'): a module called as
     `object_graph(obs["detections"] [..., n_cat, 7], obs["target"] [..., D])` returning
     features `[..., F]` that are concatenated to the flattened grid before the LSTM.
@@ -51,20 +55,25 @@ class Encoder(nn.Module):
     conv_features: int = 64
     target_features: int = 64
     action_features: int = 10
+    imagination_features: int = 0
     object_graph: Optional[nn.Module] = None
 
     def setup(self):
         self.view_conv = Dense(self.conv_features)
         self.target_embed = Dense(self.target_features)
         self.action_embed = Dense(self.action_features)
+        if self.imagination_features:
+            self.imagination_embed = Dense(self.imagination_features)
         self.pointwise_conv = GridDense(self.conv_features)
         self.lstm = nn.OptimizedLSTMCell(self.hidden_size)
 
-    def features(self, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array) -> chex.Array:
+    def features(
+        self, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array, imagined: Optional[chex.Array] = None
+    ) -> chex.Array:  # fmt: skip
         """The LSTM's input `[..., 3 * W * conv_features (+ F)]`: everything before the cell.
 
         It depends on no carry, so a whole episode's features can be computed at once
-        (`Agent.replay`)."""
+        (`Agent.replay`). `imagined [..., H]`: i_tau, only with `imagination_features`."""
         view = obs["view"]  # [..., 3, W, Cv]
         target = obs["target"]  # [..., D]
         batch_shape = target.shape[:-1]
@@ -74,9 +83,15 @@ class Encoder(nn.Module):
         image = nn.relu(self.view_conv(view))  # [..., 3, W, 64]
         goal = nn.relu(self.target_embed(target))  # [..., 64]
         action = nn.relu(self.action_embed(prev_action_probs))  # [..., 10]
-        # The 1x1 conv of [image : tile(goal) : tile(action)] ([..., 3, W, 138]), without
-        # building the tiled input (layers.GridDense: the same function, faster).
-        x = nn.relu(self.pointwise_conv(image, goal, action))  # [..., 3, W, 64]
+        vectors = [goal, action]
+        if self.imagination_features:
+            if imagined is None:
+                raise ValueError("Encoder(imagination_features > 0) needs i_tau (zeros where none exists yet).")
+            chex.assert_equal_shape_prefix([imagined, target], len(batch_shape))
+            vectors.append(nn.relu(self.imagination_embed(imagined)))  # [..., imagination_features]
+        # The 1x1 conv of [image : tile(goal) : tile(action) (: tile(i_tau))] ([..., 3, W, 138
+        # (+ 64)]), without building the tiled input (layers.GridDense: the same function, faster).
+        x = nn.relu(self.pointwise_conv(image, *vectors))  # [..., 3, W, 64]
         x = x.reshape(*batch_shape, -1)  # [..., 3 * W * 64]
 
         if self.object_graph is not None:
@@ -87,21 +102,24 @@ class Encoder(nn.Module):
         return x
 
     def __call__(
-        self, carry: LSTMCarry, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array
-    ) -> tuple[LSTMCarry, chex.Array]:
-        carry, s_t = self.lstm(carry, self.features(obs, prev_action_probs))
+        self, carry: LSTMCarry, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array,
+        imagined: Optional[chex.Array] = None,
+    ) -> tuple[LSTMCarry, chex.Array]:  # fmt: skip
+        carry, s_t = self.lstm(carry, self.features(obs, prev_action_probs, imagined))
         return carry, s_t  # s_t: [..., hidden_size]
 
 
 class PolicyHead(nn.Module):
-    """One linear layer -> action logits, over [s_t : i_tau] (or s_t alone).
+    """Action logits over [s_t : i_tau] (or s_t alone): one linear layer, or with
+    `hidden > 0` a two-layer MLP (Dense `hidden`, ReLU, then the linear layer).
 
-    Initialised with a small orthogonal scale (0.01), as SAVN initialises its actor
-    (norm_col_init 0.01), so the initial policy is near uniform.
+    The output layer is initialised with a small orthogonal scale (0.01), as SAVN
+    initialises its actor (norm_col_init 0.01), so the initial policy is near uniform.
     """
 
     num_actions: int = 6
     use_imagination: bool = True
+    hidden: int = 0
 
     @nn.compact
     def __call__(self, s_t: chex.Array, imagined: Optional[chex.Array] = None) -> chex.Array:
@@ -112,6 +130,8 @@ class PolicyHead(nn.Module):
             x = jnp.concatenate([s_t, imagined], axis=-1)  # [..., 2H]
         else:
             x = s_t  # [..., H]
+        if self.hidden:
+            x = nn.relu(Dense(self.hidden, name="hidden")(x))  # [..., hidden]
         return Dense(
             self.num_actions, kernel_init=nn.initializers.orthogonal(0.01), name="actor"
         )(x)  # [..., A]
@@ -241,12 +261,19 @@ class ActorCritic(nn.Module):
     """theta (encoder + policy) and omega (critic) under one parameter tree.
 
     Methods (use with `apply(params, ..., method=ActorCritic.step)` etc.):
-      encode(carry, obs, prev_action_probs) -> (carry, s_t [..., H])
-      encoder_features(obs, prev_action_probs) -> LSTM input [..., F]
+      encode(carry, obs, prev_action_probs, imagined) -> (carry, s_t [..., H])
+      encoder_features(obs, prev_action_probs, imagined) -> LSTM input [..., F]
       policy_logits(s_t, imagined) -> logits [..., A]
       step(carry, obs, prev_action_probs, imagined) -> (carry, s_t, logits)  (both above)
       critic(states [..., T, H], valid [..., T]) -> CriticOutput
     `__call__` runs both once (for `init`).
+
+    `imagination_input` (`Config.imagination_input`): where i_tau enters: 'head' and 'mlp'
+    give it to the policy head (linear, or a two-layer MLP of `value_hidden` units, which
+    the bases get too), 'encoder' to the encoder (`imagination_features` = the target's
+    embedding width). The `imagined` argument of `encode` and `encoder_features` is the
+    encoder's i_tau, of `policy_logits` the head's; `step` routes its one `imagined` to
+    whichever takes it.
     """
 
     num_actions: int = 6
@@ -255,24 +282,35 @@ class ActorCritic(nn.Module):
     attention_critic: bool = True
     attention_size: int = 512
     value_hidden: int = 256
+    imagination_input: str = "head"
     object_graph: Optional[nn.Module] = None
     learned_loss: Optional[nn.Module] = None
 
+    @property
+    def imagination_in_encoder(self) -> bool:
+        return self.use_imagination and self.imagination_input == "encoder"
+
     def setup(self):
-        self.encoder = Encoder(hidden_size=self.hidden_size, object_graph=self.object_graph)
-        self.policy = PolicyHead(self.num_actions, self.use_imagination)
+        # i_tau is embedded as wide as the target it sits beside.
+        features = Encoder.target_features if self.imagination_in_encoder else 0
+        self.encoder = Encoder(hidden_size=self.hidden_size, imagination_features=features, object_graph=self.object_graph)
+        policy_hidden = self.value_hidden if self.imagination_input == "mlp" else 0
+        self.policy = PolicyHead(self.num_actions, self.use_imagination and not self.imagination_in_encoder, policy_hidden)
         self.value_critic = Critic(self.attention_critic, self.attention_size, self.value_hidden)
 
     def encode(
-        self, carry: LSTMCarry, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array
-    ) -> tuple[LSTMCarry, chex.Array]:
+        self, carry: LSTMCarry, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array,
+        imagined: Optional[chex.Array] = None,
+    ) -> tuple[LSTMCarry, chex.Array]:  # fmt: skip
         """One encoder step -> (carry, s_t). Acting splits `step` in two so that i_tau
         can be imagined from s_0 before the first action."""
-        return self.encoder(carry, obs, prev_action_probs)
+        return self.encoder(carry, obs, prev_action_probs, imagined)
 
-    def encoder_features(self, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array) -> chex.Array:
+    def encoder_features(
+        self, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array, imagined: Optional[chex.Array] = None
+    ) -> chex.Array:  # fmt: skip
         """The encoder up to the LSTM's input `[..., F]` (see `Encoder.features`)."""
-        return self.encoder.features(obs, prev_action_probs)
+        return self.encoder.features(obs, prev_action_probs, imagined)
 
     def policy_logits(self, s_t: chex.Array, imagined: Optional[chex.Array] = None) -> chex.Array:
         """pi(. | s_t, i_tau) logits `[..., A]`."""
@@ -285,7 +323,11 @@ class ActorCritic(nn.Module):
         prev_action_probs: chex.Array,
         imagined: Optional[chex.Array] = None,
     ) -> tuple[LSTMCarry, chex.Array, chex.Array]:
-        """`encode` then `policy_logits` -> (carry, s_t, logits)."""
+        """`encode` then `policy_logits` -> (carry, s_t, logits); `imagined` goes to the
+        encoder or to the head, by `imagination_input`."""
+        if self.imagination_in_encoder:
+            carry, s_t = self.encoder(carry, obs, prev_action_probs, imagined)
+            return carry, s_t, self.policy(s_t)
         carry, s_t = self.encoder(carry, obs, prev_action_probs)
         return carry, s_t, self.policy(s_t, imagined)
 

@@ -52,7 +52,10 @@ def replay(agent: Agent, params, traj: Trajectory, initial_carry: LSTMCarry):
         return x.reshape((size,) + x.shape[2:])
 
     kernels = lstm_kernels(encoder_lstm_params(params))
-    gates = agent.input_gates(params, jax.tree.map(flat, inputs.obs), flat(inputs.prev_action_probs), kernels)
+    encoder_imagined = None if inputs.encoder_imagined is None else flat(inputs.encoder_imagined)
+    gates = agent.input_gates(
+        params, jax.tree.map(flat, inputs.obs), flat(inputs.prev_action_probs), kernels, encoder_imagined
+    )  # fmt: skip
     gates = gates.reshape(num_steps, num_lanes, -1)  # [T, B, 4H]: one matmul over the whole segment
     kernels = with_transposed_recurrent_kernel(kernels)
     first = traj.episode_step == 0  # [T, B]

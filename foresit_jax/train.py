@@ -79,7 +79,7 @@ class Trainer:
         self.agent = Agent(config)
         # The attention critic remembers a running episode's states across windows: at most
         # the time limit's worth. Whole-episode updates carry nothing across updates.
-        self.memory_size = limit if self.packed and self.agent.imagination.attention_critic else 0
+        self.memory_size = limit if self.packed and self.agent.method.attention_critic else 0
         self.optimizer = optax.chain(
             optax.clip_by_global_norm(config.max_grad_norm), optax.adam(config.learning_rate)
         )
@@ -199,9 +199,14 @@ class Trainer:
 
     def subgoal_items(self, traj: Trajectory, alpha, keys, success):
         """What each step offers the buffers: (s_0 `[T, B, H]`, g_tau `[T, B, D]`, the
-        critic-selected sub-goal ŝ_tau `[T, B, H]`, add `[T, B]`: an episode ended there
-        successfully)."""
-        subgoals = jnp.swapaxes(subgoals_of_rows(keys, alpha[:, :-1], self.agent.imagination.subgoal_mode), 0, 1)
+        sub-goal ŝ_tau `[T, B, H]`, add `[T, B]`: an episode ended there successfully).
+        ŝ_tau is what the step's attention row selects (Section 4.2: at the Done step,
+        s_{t*}, t* = argmax alpha, over all the episode's states); the plain critic has no
+        attention (alpha None), and ŝ_tau is then the step's own state, the goal state."""
+        if alpha is None:
+            subgoals = jax.lax.stop_gradient(traj.states)
+        else:
+            subgoals = jnp.swapaxes(subgoals_of_rows(keys, alpha[:, :-1], self.agent.imagination.subgoal_mode), 0, 1)
         return traj.s_0, traj.inputs.obs["target"], subgoals, success
 
     def collect_subgoal_items(self, state: RunnerState, env_params, num_windows: int):

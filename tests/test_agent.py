@@ -34,7 +34,7 @@ def test_parameter_tree_of_each_method(method):
     flags, hidden = config.pieces.imagination, config.hidden_size
     critic = params["params"]["value_critic"]
     # Only the attention critic has q, k, v (Eq. 3-4); the plain A3C critic is an MLP.
-    assert {"query", "key", "value"} <= set(critic) if flags.attention_critic else set(critic) == {"value_head"}
+    assert {"query", "key", "value"} <= set(critic) if config.pieces.attention_critic else set(critic) == {"value_head"}
     # The policy is linear over [s_t : i_tau] with imagination, over s_t without.
     policy_inputs = 2 * hidden if flags.uses_imagination else hidden
     chex.assert_shape(params["params"]["policy"]["actor"]["kernel"], (policy_inputs, config.num_actions))

@@ -76,8 +76,8 @@ def changed_fields(a: Imagination, b: Imagination):
 
 def test_method_pieces():
     a3c, foresit = Config(method="a3c").pieces.imagination, Config(method="a3c+foresit").pieces.imagination
-    assert not a3c.uses_imagination and not a3c.attention_critic
-    assert foresit.trains_imagination and foresit.attention_critic
+    assert not a3c.uses_imagination and not Config(method="a3c").pieces.attention_critic
+    assert foresit.trains_imagination and Config(method="a3c+foresit").pieces.attention_critic
     assert foresit.subgoal_mode == "argmax" and not foresit.renew_every_k
     # Each ablation is ForeSIT with exactly one change.
     assert changed_fields(IMAGINATIONS["rnd"], foresit) == {"source"}

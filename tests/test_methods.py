@@ -24,11 +24,39 @@ from foresit_jax.methods import IMAGINATIONS, IMPLEMENTED_METHODS, PAPER_METHODS
         ("maml", "maml", "plain", "none"),
         ("a3c+maml", "maml", "plain", "none"),
         (" A3C+Int ", "a3c", "plain", "int"),
+        ("a3c+critic", "a3c", "plain", "none"),
+        ("org+critic", "a3c", "org", "none"),
+        ("a3c+foresit+plaincritic", "a3c", "plain", "foresit"),
     ],
 )
 def test_names_parse_into_pieces(name, base, encoder, imagination):
     method = parse_method(name)
     assert (method.base, method.encoder, method.imagination.name) == (base, encoder, imagination)
+
+
+@pytest.mark.parametrize(
+    "name, critic, canonical",
+    [
+        ("a3c", "plain", "a3c"), ("a3c+critic", "attention", "a3c+critic"),
+        ("a3c+foresit", "attention", "a3c+foresit"), ("critic+foresit", "attention", "a3c+foresit"),
+        ("a3c+foresit+plaincritic", "plain", "a3c+foresit+plaincritic"), ("a3c+plaincritic", "plain", "a3c"),
+        ("org+rnd", "attention", "a3c+org+rnd"), ("plaincritic+org+rnd", "plain", "a3c+org+rnd+plaincritic"),
+        ("a3c+maml+critic", "attention", "a3c+maml+critic"), ("a3c+org+int+plaincritic", "plain", "a3c+org+int+plaincritic"),
+    ],
+)  # fmt: skip
+def test_the_critic_is_its_own_piece(name, critic, canonical):
+    """Every imagination variant of the paper defaults to the attention critic (its rows
+    keep their meaning), no imagination to the plain one; either can be named."""
+    method = parse_method(name)
+    assert method.critic == critic and method.attention_critic == (critic == "attention")
+    assert method.name == canonical and parse_method(canonical) == method
+
+
+def test_att_needs_the_attention_critic():
+    with pytest.raises(ValueError, match="needs the attention critic"):
+        parse_method("a3c+att+plaincritic")
+    with pytest.raises(ValueError, match="two critic"):
+        parse_method("a3c+critic+plaincritic")
 
 
 def test_canonical_names_round_trip():
@@ -66,10 +94,10 @@ def test_gradient_paths_are_declared_per_method():
 
 def test_imagination_pieces():
     foresit, att, rnd, intv, none = (IMAGINATIONS[n] for n in ("foresit", "att", "rnd", "int", "none"))
-    assert foresit.trains_imagination and foresit.attention_critic and foresit.subgoal_mode == "argmax"
+    assert foresit.trains_imagination and foresit.critic == "attention" and foresit.subgoal_mode == "argmax"
     assert att.trains_imagination and att.subgoal_mode == "attention_average"
     assert rnd.uses_imagination and not rnd.trains_imagination
-    assert not none.uses_imagination and not none.attention_critic
+    assert not none.uses_imagination and none.critic == "plain"
     steps = jnp.arange(25)
     np.testing.assert_array_equal(foresit.renews(steps, 10), steps == 0)
     np.testing.assert_array_equal(intv.renews(steps, 10), steps % 10 == 0)

@@ -41,12 +41,16 @@ def mid_episode_state():
     return state
 
 
-@pytest.mark.parametrize("method", ["a3c+foresit", "a3c"])
-def test_replay_gradient_equals_differentiating_through_the_rollout(method, mid_episode_state):
-    replay_config = dataclasses.replace(REPLAY, method=method)
-    through_config = dataclasses.replace(THROUGH, method=method)
+@pytest.mark.parametrize(
+    "method, reading",
+    [("a3c+foresit", "head"), ("a3c", "head"), ("a3c+foresit", "encoder"), ("a3c+int", "encoder"),
+     ("a3c+foresit", "mlp"), ("a3c", "mlp")],
+)  # fmt: skip
+def test_replay_gradient_equals_differentiating_through_the_rollout(method, reading, mid_episode_state):
+    replay_config = dataclasses.replace(REPLAY, method=method, imagination_input=reading)
+    through_config = dataclasses.replace(THROUGH, method=method, imagination_input=reading)
     state = mid_episode_state
-    if method != "a3c+foresit":  # same lanes and keys, this method's parameters
+    if replay_config != REPLAY:  # same lanes and keys, this method's parameters
         fresh = H.jitted_init(replay_config)(jax.random.PRNGKey(0))
         fresh, _ = H.jitted_update(replay_config)(fresh, H.trainer(replay_config).env_params)
         state = fresh

@@ -182,7 +182,7 @@ def test_every_method_trains_without_nan(method, foresit_run):
         init = H.jitted_init(config)(jax.random.PRNGKey(0))
         H.assert_trees_bitwise_equal(state.imagination_params, init.imagination_params)
         H.assert_trees_bitwise_equal(state.buffers, init.buffers)
-    assert ("query" in state.params["params"]["value_critic"]) == flags.attention_critic
+    assert ("query" in state.params["params"]["value_critic"]) == config.pieces.attention_critic
 
 
 @pytest.mark.parametrize("method", H.ORG_METHODS)

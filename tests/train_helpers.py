@@ -34,7 +34,7 @@ TINY = dict(
     imagination_epochs=1, learning_rate=1e-3,
 )  # fmt: skip
 
-METHODS = ("a3c", "a3c+foresit", "rnd", "att", "int")
+METHODS = ("a3c", "a3c+foresit", "rnd", "att", "int", "a3c+critic", "a3c+foresit+plaincritic")
 ORG_METHODS = ("a3c+org", "a3c+org+foresit", "a3c+org+rnd", "a3c+org+att", "a3c+org+int")
 
 
