@@ -80,7 +80,8 @@ def collect_items(trainer, state, windows: int, seed: int) -> tuple[np.ndarray, 
     state `state` (not updated) ends in `windows` windows (`Trainer.collect_subgoal_items`)."""
     state = state._replace(key=jax.random.fold_in(state.key, seed))
     collect = jax.jit(trainer.collect_subgoal_items, static_argnums=2)
-    s_0, goal, subgoal, add = (np.asarray(x) for x in collect(state, trainer.env_params, windows))
+    items, _ = collect(state, trainer.env_params, windows)
+    s_0, goal, subgoal, add = (np.asarray(x) for x in items)
     add = add.astype(bool)
     return s_0[add], goal[add], subgoal[add]
 

@@ -14,6 +14,9 @@ seed's model selected on validation) over the methods of the paper's tables, the
   paired difference per bucket, for each +ForeSIT pair;
 - the paper's claims, each with a verdict ("holds", "does not hold", "cannot tell at this
   budget": a paired t interval over seeds, `experiments.stats`) and its numbers;
+- the imagination probes (`experiments.probe`) of A3C+ForeSIT and A3C+ORG+ForeSIT, every seed:
+  test SR with i_tau trained, noise-free, from an untrained f_w and shuffled; f_w's fit
+  against the target category's mean; where the sub-goal falls in its episode;
 - the C-VAE comparison (`experiments.cvae_compare`) on the first seed of a ForeSIT method;
 - Figure 3: trajectories of the baseline and of ForeSIT on the same test episodes;
 - Figure 4: t-SNE of imagined states f_w([s_0 : g_tau]) and of the selected sub-goals;
@@ -56,6 +59,9 @@ GROUPS = {
     "org": ("a3c+org", "a3c+org+foresit", "a3c+org+rnd", "a3c+org+int", "a3c+org+att"),
 }
 SETUP_OF = {m: setup for setup, methods in GROUPS.items() for m in methods}
+# The methods the report probes (`experiments.probe`): MAML's adaptive evaluation would
+# make the probes' several evaluations per seed cost more than the rest of the report.
+PROBED = ("a3c+foresit", "a3c+org+foresit")
 PAIRS = (("a3c", "a3c+foresit"), ("a3c+maml", "a3c+maml+foresit"), ("a3c+org", "a3c+org+foresit"))
 TABLE3 = ("a3c+org", "a3c+org+rnd", "a3c+org+int", "a3c+org+att", "a3c+org+foresit")
 # The paper's numbers (Tables 1-3), printed beside ours for orientation only: AI2-THOR is
@@ -106,6 +112,8 @@ class Args:
     """Figure 3: test episodes per room type among which the first with L^g >= 5 is drawn."""
     tsne_points: int = 400
     """Figure 4: most sub-goal items embedded (each gives an imagined and a selected state)."""
+    probe_episodes_per_room: int = 50
+    """Test episodes per room type of each condition of the imagination probes."""
     stop_after_chunks: Optional[int] = None
     """Stop (as if killed) after this many chunks of a setup's sweep; for testing --resume."""
     progress: bool = True
@@ -140,7 +148,7 @@ def check(args: Args) -> None:
         sweep.reuse_sources(setup_args)
         if args.resume and setup_args.resume:
             sweep.check_started(setup_args)
-    for name in ("cvae_windows", "cvae_epochs", "trajectory_candidates", "tsne_points"):
+    for name in ("cvae_windows", "cvae_epochs", "trajectory_candidates", "tsne_points", "probe_episodes_per_room"):
         if getattr(args, name) < 1:
             raise runs.UserError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
 
@@ -475,6 +483,22 @@ def tsne_figure(args: Args, config, trainer, state, items, path: Path) -> int:
 
 
 # ---------------------------------------------------------------------- report.md
+def probe_section(args: Args, results: dict) -> str:
+    """The imagination probes (`experiments.probe`) of the +ForeSIT methods of `PROBED`
+    that ran, every seed, as a report section (also written to probe.json)."""
+    from experiments import probe
+
+    methods = [m for m in PROBED if m in results]
+    if not methods:
+        return "## Imagination probes\n\nNot run: no probed ForeSIT method was trained.\n"
+    models = {}
+    for m in methods:
+        models.update(probe.models_of_sweep(args.out / SETUP_OF[m], (m,)))
+    report = probe.probe(models, args.probe_episodes_per_room, args.cvae_windows)
+    runs.write_json(args.out / "probe.json", report)
+    return probe.markdown(report, args.probe_episodes_per_room, args.cvae_windows, level=2)
+
+
 def write_report(args: Args, results: dict) -> dict:
     out = args.out
     seeds = f"{args.seed}-{args.seed + args.seeds - 1}" if args.seeds > 1 else str(args.seed)
@@ -500,6 +524,7 @@ def write_report(args: Args, results: dict) -> dict:
     lines = claims(results)
     write_csv(out / "claims.csv", [{"claim": c, "verdict": v, "numbers": n} for c, v, n in lines])
     md.append("## The paper's claims\n\n" + claims_markdown(lines))
+    md.append(probe_section(args, results))
 
     foresit = next((m for m in ("a3c+foresit", "a3c+org+foresit", "a3c+maml+foresit") if m in results), None)
     if foresit is None:

@@ -67,16 +67,14 @@ def check_method(method: str) -> None:
 
 def split_arm(arm: str) -> tuple[str, dict]:
     """An arm of a comparison: a method with Config fields of its own, written
-    `METHOD[field=value,...]`, e.g. `a3c+foresit[imagination_input=encoder]` or
-    `a3c[learning_rate=3e-4,imagination_input=mlp]` -> (method, {field: value}); a plain
+    `METHOD@field=value,...`, e.g. `a3c+foresit@imagination_input=encoder` or
+    `a3c@learning_rate=3e-4,imagination_input=mlp` -> (method, {field: value}); a plain
     method name gives no fields. Values are read as the field's type (str, int, float,
-    bool: true/false); a one-line ValueError names what is wrong."""
-    arm = arm.strip()
-    if not arm.endswith("]") or "[" not in arm:
-        if "[" in arm or "]" in arm:
-            raise ValueError(f"arm {arm!r}: write fields as METHOD[field=value,...]")
-        return arm, {}
-    method, _, body = arm[:-1].partition("[")
+    bool: true/false); a one-line ValueError names what is wrong. (No brackets: the name
+    is also a folder name, and orbax's storage cannot read a path with brackets.)"""
+    method, at, body = arm.strip().partition("@")
+    if at and not body.strip():
+        raise ValueError(f"arm {arm!r}: write fields as METHOD@field=value,...")
     defaults = {f.name: f.default for f in dataclasses.fields(Config)}
     fields = {}
     for item in filter(None, (x.strip() for x in body.split(","))):

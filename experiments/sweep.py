@@ -50,7 +50,9 @@ class Args:
     """Train several methods over several seeds and tabulate them as in Table 1."""
 
     methods: tuple[str, ...] = ("a3c", "a3c+foresit")
-    """Methods to compare ('+'-joined pieces, see foresit_jax.methods)."""
+    """Methods to compare ('+'-joined pieces, see foresit_jax.methods), or arms: a method
+    with Config fields of its own, METHOD@field=value,... (e.g.
+    a3c+foresit@imagination_input=encoder; experiments.presets.split_arm)."""
     setup: str = "savn"
     """Environment setup: savn or org (the object-graph methods need org)."""
     seeds: int = 5

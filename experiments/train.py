@@ -32,7 +32,9 @@ class Args:
     """Train one ForeSIT (or baseline) agent."""
 
     method: str = "a3c+foresit"
-    """Method: '+'-joined pieces, e.g. a3c, a3c+foresit, a3c+rnd/att/int, a3c+maml, a3c+maml+foresit, a3c+org, a3c+org+foresit."""
+    """Method: '+'-joined pieces, e.g. a3c, a3c+foresit, a3c+rnd/att/int, a3c+critic, a3c+maml, a3c+maml+foresit,
+    a3c+org, a3c+org+foresit; with Config fields of its own as METHOD@field=value,... (e.g.
+    a3c+foresit@imagination_input=encoder)."""
     setup: str = "savn"
     """Environment setup: savn (first setup, word-vector targets) or org (second setup, detector features)."""
     preset: str = "quick"

@@ -144,6 +144,7 @@ class Agent:
             attention_size=config.attention_size,
             value_hidden=config.value_hidden,
             imagination_input=config.imagination_input,
+            zero_value_init=config.attention_value_init == "zeros",
         )
         self.imagination_net = ImaginationNet(config.imagination_layer_sizes)
 

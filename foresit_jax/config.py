@@ -15,6 +15,7 @@ SETUPS: tuple[str, ...] = ("savn", "org")
 IMAGINATION_OPTIMIZERS: tuple[str, ...] = ("sgd", "adam")
 IMAGINATION_INPUTS: tuple[str, ...] = ("head", "encoder", "mlp")
 EVALUATION_NOISES: tuple[str, ...] = ("training_end", "off")
+ATTENTION_VALUE_INITS: tuple[str, ...] = ("lecun", "zeros")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -72,6 +73,12 @@ class Config:
     """Width of the critic's query and key layers."""
     value_hidden: int = 256
     """Hidden width of the two-layer value MLP."""
+    attention_value_init: str = "lecun"
+    """Initial kernel of the attention critic's v in s*_t = sum_j alpha_j v(s_j) + s_t
+    (Eq. 3): 'lecun' (lecun-normal, as every other layer; the paper gives none), whose
+    sum adds a term as large as s_t itself to the value head's input at the start, or
+    'zeros' (s*_t = s_t at initialisation: the critic starts as the plain one and learns
+    what to add)."""
     imagination_layer_sizes: tuple[int, ...] = (512, 256, 64, 256, 512, 512)
     """Widths of f_w's 6 tanh layers (bottleneck 64); the last must equal hidden_size."""
 
@@ -147,7 +154,8 @@ class Config:
             if value not in supported:
                 needs = ", ".join(f"{k}={v!r}" for k, v in pieces.required_config.items())
                 raise ValueError(f"method {self.method!r} supports {name} {supported}, not {value!r} (it needs {needs}).")
-        for name, valid in (("imagination_input", IMAGINATION_INPUTS), ("evaluation_noise", EVALUATION_NOISES)):
+        for name, valid in (("imagination_input", IMAGINATION_INPUTS), ("evaluation_noise", EVALUATION_NOISES),
+                            ("attention_value_init", ATTENTION_VALUE_INITS)):  # fmt: skip
             if getattr(self, name) not in valid:
                 raise ValueError(f"{name} must be one of {valid}, got {getattr(self, name)!r}.")
         if self.imagination_optimizer not in IMAGINATION_OPTIMIZERS:

@@ -131,16 +131,17 @@ class Evaluator:
             self.params[(split, room)] = self.env.make_params(split, room_types=(room,), training=False)
         return self.params[(split, room)]
 
-    def agent_rollout(self, config: Config, num_steps: int, greedy: bool):
-        """Jitted (params, w_params, env_params, key, sigma2 [N]) -> EpisodeOutcomes [N].
+    def agent_rollout(self, config: Config, num_steps: int, greedy: bool, agent: Agent | None = None):
+        """Jitted (params, w_params, env_params, key, sigma2 [N]) -> EpisodeOutcomes [N]
+        of `agent` (default `Agent(config)`; another one, e.g. a probe's, is compiled apart).
 
         The maml base keeps a copy of the parameters per episode (its inner loop adapts
         each one): its episodes run in groups of at most `MAX_ADAPTIVE_LANES` (`lax.map`),
         so that memory does not grow with the number of evaluation episodes; they are the
         episodes one rollout of all lanes would play (the same reset keys)."""
-        key = ("agent", config, num_steps, greedy)
+        key = ("agent", config, num_steps, greedy, None if agent is None else id(agent))
         if key not in self.compiled:
-            agent, env = Agent(config), self.env
+            agent, env = Agent(config) if agent is None else agent, self.env
 
             def run_group(params, w_params, env_params, key, sigma2, reset_keys=None):
                 traj = agent.rollout(params, w_params, env, env_params, key, sigma2, num_steps, greedy,
@@ -205,12 +206,14 @@ class Evaluator:
     def evaluate(
         self, agent_params: AgentParams, config: Config, split: str = "test", key: chex.PRNGKey | None = None,
         episodes_per_room: int = 250, greedy: bool | None = None, room_types: tuple[str, ...] | None = None,
-        by_length: bool = False,
+        by_length: bool = False, agent: Agent | None = None,
     ) -> dict[str, dict[str, float]]:  # fmt: skip
         """Run `episodes_per_room` episodes in each room type of `split` ("val" or "test").
 
         Returns {"overall": metrics, "kitchen": metrics, ...} with metrics from `summarize`,
         and with `by_length` also "by_length": SR/SPL by bucket of L^g (`envs.metrics.by_length`).
+        agent: the acting agent (default `Agent(config)`); keep the object for as long as
+        this Evaluator, its compiled rollout is cached under the object's id.
         """
         self._check(config, split, episodes_per_room)
         key = jax.random.PRNGKey(0) if key is None else key
@@ -219,7 +222,7 @@ class Evaluator:
         sigma2 = jnp.full((episodes_per_room,), agent_params.noise_variance, jnp.float32)
 
         def run_room(env_params, num_steps, k):
-            run = self.agent_rollout(config, num_steps, greedy)
+            run = self.agent_rollout(config, num_steps, greedy, agent)
             return run(agent_params.params, agent_params.imagination_params, env_params, k, sigma2)
 
         return self._per_room(rooms, split, key, run_room, by_length)

@@ -199,7 +199,10 @@ class Critic(nn.Module):
     `attention=True` (ForeSIT, Eq. 3-4): for every step t at once (causal, masked),
       alpha_t = softmax_j( q(s_t) . k(s_j) / sqrt(t+1) ), j = 0..t valid steps of the episode,
       s*_t = sum_j alpha_tj v(s_j) + s_t,  value_t = MLP(s*_t).
-    q, k: linear `attention_size`; v: linear to the state size (for the residual).
+    q, k: linear `attention_size`; v: linear to the state size (for the residual), its
+    kernel lecun-normal like every other layer's, or zeros (`zero_value_init`,
+    `Config.attention_value_init`): then s*_t = s_t at initialisation and the critic starts
+    as the plain one.
 
     Call with `states [..., T, H]` whose index 0 is the episode's first state (t in
     sqrt(t+1) is the position), and `valid [..., T]` (1 on the episode's steps): the keys
@@ -212,6 +215,7 @@ class Critic(nn.Module):
     attention: bool = True
     attention_size: int = 512
     value_hidden: int = 256
+    zero_value_init: bool = False
 
     @nn.compact
     def __call__(
@@ -231,7 +235,8 @@ class Critic(nn.Module):
             positions = jnp.arange(num_steps)
         query = Dense(self.attention_size, name="query")(states)  # [..., T, Q]
         key = Dense(self.attention_size, name="key")(keys)  # [..., K, Q]
-        value = Dense(state_size, name="value")(keys)  # [..., K, H]
+        init = nn.initializers.zeros_init() if self.zero_value_init else nn.initializers.lecun_normal()
+        value = Dense(state_size, kernel_init=init, name="value")(keys)  # [..., K, H]
         scale = jnp.sqrt(positions.astype(states.dtype) + 1.0)  # [..., T] sqrt(t+1)
         scores = jnp.einsum("...tq,...jq->...tj", query, key) / scale[..., None]  # [..., T, K]
         alpha = masked_softmax(scores, key_mask)  # [..., T, K]
@@ -283,6 +288,7 @@ class ActorCritic(nn.Module):
     attention_size: int = 512
     value_hidden: int = 256
     imagination_input: str = "head"
+    zero_value_init: bool = False
     object_graph: Optional[nn.Module] = None
     learned_loss: Optional[nn.Module] = None
 
@@ -296,7 +302,7 @@ class ActorCritic(nn.Module):
         self.encoder = Encoder(hidden_size=self.hidden_size, imagination_features=features, object_graph=self.object_graph)
         policy_hidden = self.value_hidden if self.imagination_input == "mlp" else 0
         self.policy = PolicyHead(self.num_actions, self.use_imagination and not self.imagination_in_encoder, policy_hidden)
-        self.value_critic = Critic(self.attention_critic, self.attention_size, self.value_hidden)
+        self.value_critic = Critic(self.attention_critic, self.attention_size, self.value_hidden, self.zero_value_init)
 
     def encode(
         self, carry: LSTMCarry, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array,

@@ -209,17 +209,34 @@ class Trainer:
             subgoals = jnp.swapaxes(subgoals_of_rows(keys, alpha[:, :-1], self.agent.imagination.subgoal_mode), 0, 1)
         return traj.s_0, traj.inputs.obs["target"], subgoals, success
 
+    def subgoal_steps(self, traj: Trajectory, alpha) -> chex.Array:
+        """Where each step's sub-goal lies in its episode, `[T, B]` int32: t* (the position
+        of the key its attention row weighs most; the step's own position with the plain
+        critic, whose sub-goal is the step's state). The keys are the memory, positions
+        0..M-1 of the running episode, then the window's states (`Agent.critic`)."""
+        if alpha is None:
+            return traj.episode_step
+        steps = jnp.concatenate([traj.episode_step, traj.next_episode_step[None]], axis=0).T  # [B, T + 1]
+        memory_size = alpha.shape[-1] - steps.shape[-1]
+        memory = jnp.broadcast_to(jnp.arange(memory_size, dtype=steps.dtype), (steps.shape[0], memory_size))
+        key_steps = jnp.concatenate([memory, steps], axis=1)  # [B, M + T + 1]
+        index = jnp.argmax(alpha[:, :-1], axis=-1)  # [B, T]
+        return jnp.take_along_axis(key_steps, index, axis=1).T  # [T, B]
+
     def collect_subgoal_items(self, state: RunnerState, env_params, num_windows: int):
-        """The (s_0, g_tau, ŝ_tau, add) items of `num_windows` windows played by the
-        agent of `state`, which is not updated (the data of the paper's C-VAE comparison);
-        each `[num_windows, T, B, ...]`."""
+        """What `num_windows` windows played by the agent of `state` (not updated) offer
+        the buffers: ((s_0, g_tau, ŝ_tau, add), (t*, step)), each `[num_windows, T, B, ...]`:
+        the items (`subgoal_items`; the data of the paper's C-VAE comparison), the position
+        of each step's sub-goal in its episode (`subgoal_steps`) and the step's own
+        position (at an `add` step, the Done step's: the episode's length - 1)."""
 
         def window(carry, _):
             actor, key, k_act = self.begin_window(*carry, env_params)
             next_actor, traj = self.act(state.params, state.imagination_params, env_params, actor, k_act)
             _, (alpha, keys, _) = self.window_loss(state.params, traj, actor.memory)  # the critic's alpha
             _, stats = ended_episodes(traj)
-            return (next_actor, key), self.subgoal_items(traj, alpha, keys, stats.success)
+            items = self.subgoal_items(traj, alpha, keys, stats.success)
+            return (next_actor, key), (items, (self.subgoal_steps(traj, alpha), traj.episode_step))
 
         _, items = jax.lax.scan(window, (state.actor, state.key), None, length=num_windows)
         return items

@@ -20,7 +20,7 @@ from test_experiments import cli_error
 RUN = ("a3c", "a3c+foresit")
 EXCLUDE = tuple(m for m in paper.SETUP_OF if m not in RUN)
 SECTIONS = ("## Platforms", "## Table 1", "### savn setup", "### org setup", "## Table 2", "## Table 3", "## Model selection",
-            "## SR and SPL by optimal path length", "## The paper's claims", "## The C-VAE comparison",
+            "## SR and SPL by optimal path length", "## The paper's claims", "## Imagination probes", "## The C-VAE comparison",
             "## Figure 4", "## Figure 3", "## Learning curves")  # fmt: skip
 
 
@@ -35,7 +35,8 @@ def test_tiny_report_has_every_table_figure_and_claim_after_a_kill_resume_and_re
     # a3c alone first, killed and resumed; then the report run trains a3c+foresit and
     # copies a3c from the first run (--reuse), as MAML rows run elsewhere would be combined.
     part, out = tmp_path / "a3c_only", tmp_path / "paper"
-    extra = ["--cvae-windows", "20", "--cvae-epochs", "2", "--trajectory-candidates", "8", "--no-progress"]
+    extra = ["--cvae-windows", "20", "--cvae-epochs", "2", "--trajectory-candidates", "8", "--probe-episodes-per-room", "2",
+             "--no-progress"]  # fmt: skip
     only_a3c = ["--exclude", *EXCLUDE, "a3c+foresit"]
     argv = ["--preset", "tiny", "--seeds", "2", *extra]
     assert paper.cli([*argv, "--out", str(part), *only_a3c, "--stop-after-chunks", "1"]) is None  # killed in a3c
@@ -61,7 +62,7 @@ def test_tiny_report_has_every_table_figure_and_claim_after_a_kill_resume_and_re
         assert section in report, section
     assert "Every method was trained on cpu (" in report  # a3c copied from a run on this machine
     assert (out / "table3.csv").read_text() == ""  # none of Table 3's methods ran
-    for name in ("table1.csv", "table2.csv", "by_length.csv", "claims.csv", "cvae_comparison.json",
+    for name in ("table1.csv", "table2.csv", "by_length.csv", "claims.csv", "cvae_comparison.json", "probe.json",
                  "fig4_tsne.png", "fig3_a3c_vs_a3c_foresit.png", "by_length_a3c_vs_a3c_foresit.png",
                  "savn/learning_curves.png"):  # fmt: skip
         assert (out / name).stat().st_size > 0, name

@@ -1,0 +1,250 @@
+"""Probe a trained agent's imagination: `python -m experiments.probe --run runs/quick`.
+
+`--run` is a run folder of `experiments.train` or a sweep folder of `experiments.sweep`
+(every finished method with imagination or the attention critic, or `--methods`; every
+seed). For each seed's selected model (`foresit_jax.probes` has the functions):
+
+* test SR on the same test episodes (the run's test key, `--episodes-per-room` per room
+  type) with i_tau as in training's evaluation (the trained f_w, the noise at the end of
+  training), with the noise off, from an untrained f_w (the run's initial w), and
+  shuffled across episodes; for a method evaluated greedily (ORG), also with sampled
+  actions. Each condition is paired with the first over the seeds (`experiments.stats`);
+* f_w against its targets on `--windows` fresh training windows of the agent (held out:
+  f_w never trained on them): smooth-L1, R^2 over the targets' mean, and over each target
+  category's mean; the variance of f_w's outputs beside the noise's;
+* where the sub-goal falls in its successful episode: t*/T and the share at the Done step.
+
+Writes `probe.md` and `probe.json` into `--run` (refusing to replace them without
+`--overwrite`) and prints the Markdown.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Optional
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from experiments import runs, selection, stats
+from experiments.tables import markdown_table
+
+CONDITIONS = ("trained", "noise off", "untrained f_w", "shuffled", "sampled actions")
+
+
+@dataclasses.dataclass(frozen=True)
+class Args:
+    """Probe whether a trained agent uses its imagination, and what f_w learned."""
+
+    run: Path
+    """A run folder (experiments.train) or a sweep folder (experiments.sweep)."""
+    methods: tuple[str, ...] = ()
+    """For a sweep: the methods to probe (default: every finished one with imagination or
+    the attention critic)."""
+    episodes_per_room: int = 100
+    """Test episodes per room type for each condition."""
+    windows: int = 40
+    """Training windows played to collect f_w's held-out items and the sub-goals."""
+    overwrite: bool = False
+    """Replace an existing probe.md / probe.json."""
+
+
+@dataclasses.dataclass
+class Model:
+    """One seed's model to probe."""
+
+    config: object
+    trainer: object
+    seed: int
+    state: object  # the training RunnerState, with the selected model's params and w
+    selected: object  # AgentParams of the selected model
+
+
+def models_of_run(run: Path) -> dict[str, list[Model]]:
+    """{method: [Model]} of a train run folder."""
+    from foresit_jax.config import Config
+    from foresit_jax.evaluate import agent_params
+    from foresit_jax.train import make_trainer
+
+    info = runs.read_run_info(run)
+    config = Config(**info["config"])
+    trainer = make_trainer(config)
+    like = trainer.init(selection.run_key(info["seed"]))
+    steps = [runs.checkpoint_manager(run / name, 100).latest_step() for name in ("checkpoints", "best")]
+    if None in steps:
+        raise runs.UserError(f"{run} has no finished checkpoint (checkpoints/ and best/); train it to the end first")
+    state = runs.restore(runs.checkpoint_manager(run / "checkpoints", 100), steps[0], like)
+    selected = runs.restore(runs.checkpoint_manager(run / "best", 100), steps[1],
+                            agent_params(like, config.sigma2_max, config.evaluation_noise))  # fmt: skip
+    state = state._replace(params=selected.params, imagination_params=selected.imagination_params)
+    return {config.method: [Model(config, trainer, info["seed"], state, selected)]}
+
+
+def models_of_sweep(folder: Path, methods: tuple[str, ...]) -> dict[str, list[Model]]:
+    """{method: [Model per seed]} of a sweep's finished methods."""
+    from experiments import sweep
+
+    saved = json.loads((folder / "sweep.json").read_text())
+    args = sweep.Args(**{k: tuple(v) if isinstance(v, list) else v for k, v in saved.items() if k != "out"},
+                      out=folder)  # fmt: skip
+    finished = [m for m in args.methods if sweep.finished_seeds(folder / "methods" / m)]
+    unknown = [m for m in methods if m not in finished]
+    if unknown:
+        raise runs.UserError(f"{folder} has no finished {', '.join(unknown)}; finished: {', '.join(finished) or 'none'}")
+    out = {}
+    for method in methods or finished:
+        config, _ = sweep.method_schedule(method, args)
+        if not methods and not (config.pieces.imagination.uses_imagination or config.pieces.attention_critic):
+            continue
+        config, trainer, states, best = sweep.load_method(method, args, folder / "methods" / method)
+        seeds = sweep.finished_seeds(folder / "methods" / method)
+        out[method] = []
+        for i, seed in enumerate(seeds):
+            state, selected = jax.tree.map(lambda x: x[i], (states, best))
+            state = state._replace(params=selected.params, imagination_params=selected.imagination_params)
+            out[method].append(Model(config, trainer, seed, state, selected))
+    return out
+
+
+def sr_conditions(model: Model, evaluator, episodes: int, shuffled) -> dict[str, float]:
+    """Test SR (%) of one model under each applicable condition (`CONDITIONS`); `shuffled`:
+    the config's `ShuffledImagination` agent (one per config: its rollout compiles once)."""
+    from foresit_jax.evaluate import agent_params
+
+    config = model.config
+    key = selection.test_key(model.seed)
+    training_end = agent_params(model.state, config.sigma2_max, "training_end").noise_variance
+    trained = model.selected._replace(noise_variance=training_end)
+    untrained_w = model.trainer.init(selection.run_key(model.seed)).imagination_params
+
+    def sr(params, **kw):
+        return evaluator.evaluate(params, config, "test", key, episodes, **kw)["overall"]["SR"]
+
+    out = {"trained": sr(trained)}
+    if config.pieces.imagination.uses_imagination:
+        out["noise off"] = sr(trained._replace(noise_variance=jnp.zeros_like(training_end)))
+        out["untrained f_w"] = sr(trained._replace(imagination_params=untrained_w))
+        out["shuffled"] = sr(trained, agent=shuffled)
+    if config.pieces.greedy_evaluation:
+        out["sampled actions"] = sr(trained, greedy=False)
+    return out
+
+
+def imagination_items(model: Model, windows: int) -> dict:
+    """f_w's fit, its signal beside the noise, and the sub-goal positions, on the items of
+    `windows` fresh training windows (`Trainer.collect_subgoal_items`)."""
+    from foresit_jax.evaluate import agent_params
+    from foresit_jax.probes import imagination_fit, signal_to_noise, subgoal_position_histogram
+
+    trainer, state = model.trainer, model.state
+    state = state._replace(key=jax.random.fold_in(state.key, 7))  # windows f_w never saw
+    collect = jax.jit(trainer.collect_subgoal_items, static_argnums=2)
+    (s_0, goal, subgoal, add), (t_star, step) = jax.tree.map(np.asarray, collect(state, trainer.env_params, windows))
+    add = add.astype(bool)
+    out = {"subgoal": subgoal_position_histogram(t_star[add], step[add])}
+    if model.config.pieces.imagination.trains_imagination and add.sum() >= 4:
+        predicted = np.asarray(trainer.agent.imagine(state.imagination_params, s_0[add], goal[add]))
+        out["fit"] = imagination_fit(predicted, subgoal[add], goal[add])
+        variance = float(agent_params(state, model.config.sigma2_max, "training_end").noise_variance)
+        out["signal"] = signal_to_noise(predicted, variance)
+    return out
+
+
+def _fmt(x, digits: int = 1) -> str:
+    return "n/a" if x is None or not np.isfinite(x) else f"{x:.{digits}f}"
+
+
+def markdown(report: dict, episodes: int, windows: int, level: int = 1) -> str:
+    h = "#" * level
+    md = [f"{h} Imagination probes\n\nTest SR (%) of each seed's selected model on the same {episodes} test episodes "
+          "per room type under each condition; each condition paired with `trained` over the seeds "
+          "(difference [95% interval]).\n"]  # fmt: skip
+    for method, per_seed in report.items():
+        seeds = [r["seed"] for r in per_seed]
+        md.append(f"{h}# {method} (seeds {', '.join(map(str, seeds))})\n")
+        conditions = [c for c in CONDITIONS if c in per_seed[0]["sr"]]
+        rows = []
+        for c in conditions:
+            values = [r["sr"][c] for r in per_seed]
+            s = stats.summary(values)
+            pair = stats.paired([r["sr"]["trained"] for r in per_seed], values) if c != "trained" else None
+            diff = "" if pair is None else f"{pair['diff']:+.1f} [{_fmt(pair['ci_low'])}, {_fmt(pair['ci_high'])}]"
+            rows.append([c, " / ".join(_fmt(v) for v in values), f"{_fmt(s['mean'])} ± {_fmt(s['std'])}", diff])
+        md.append(markdown_table(rows, ["condition", "SR per seed", "mean ± std", "minus trained"]) + "\n")
+        fits = [r["items"].get("fit") for r in per_seed]
+        if all(fits):
+            cells = []
+            for r in per_seed:
+                f, g = r["items"]["fit"], r["items"]["signal"]
+                cells.append([r["seed"], f["items"], f"{f['smooth_l1']:.4f}", _fmt(f["r2_over_mean"], 2),
+                              _fmt(f["category_r2_over_mean"], 2), _fmt(f["r2_over_category"], 2),
+                              f"{g['signal_variance']:.3f} / {g['noise_variance']:.3f} ({g['signal_share']:.2f})"])  # fmt: skip
+            md.append("f_w on held-out sub-goal items (odd items; the baselines fit on the even ones): "
+                      "R^2 over the targets' mean, the category-mean baseline's, and f_w's over that baseline; "
+                      "i_tau's variance: f_w's outputs across episodes / the noise's (signal share).\n")  # fmt: skip
+            md.append(markdown_table(cells, ["seed", "items", "smooth-L1", "R^2 f_w", "R^2 category mean",
+                                             "R^2 f_w over category", "signal / noise variance"]) + "\n")  # fmt: skip
+        sub = [r["items"]["subgoal"] for r in per_seed]
+        edges = sub[0]["edges"]
+        bins = [f"{edges[i]:.1f}-{edges[i + 1]:.1f}" for i in range(len(edges) - 1)]
+        cells = [[r["seed"], s["episodes"], *(_fmt(100 * x, 0) for x in s["shares"]), _fmt(100 * s["at_done"], 0)]
+                 for r, s in zip(per_seed, sub)]  # fmt: skip
+        md.append(f"Where the sub-goal falls in its successful episode ({windows} training windows): t*/T in % of "
+                  "episodes, and t* = T (the Done step's own state).\n")  # fmt: skip
+        md.append(markdown_table(cells, ["seed", "episodes", *[f"t*/T {b}" for b in bins], "at Done"]) + "\n")
+    return "\n".join(md)
+
+
+def probe(models: dict[str, list[Model]], episodes: int, windows: int) -> dict:
+    """{method: [per seed: {"seed", "sr": `sr_conditions`, "items": `imagination_items`}]}."""
+    from foresit_jax.evaluate import Evaluator
+    from foresit_jax.probes import ShuffledImagination
+
+    report, evaluators, t0 = {}, {}, time.time()
+    for method, seeds in models.items():
+        report[method] = []
+        shuffled = ShuffledImagination(seeds[0].config)
+        for model in seeds:
+            evaluator = evaluators.setdefault(model.config.setup, Evaluator(model.config.setup))
+            sr = sr_conditions(model, evaluator, episodes, shuffled)
+            report[method].append({"seed": model.seed, "sr": sr, "items": imagination_items(model, windows)})
+            print(f"probe {method} seed {model.seed}: {sr} ({time.time() - t0:.0f} s)", flush=True)
+    return report
+
+
+def main(args: Args) -> dict:
+
+    if args.episodes_per_room < 1 or args.windows < 1:
+        raise runs.UserError("--episodes-per-room and --windows must be >= 1")
+    out_md, out_json = args.run / "probe.md", args.run / "probe.json"
+    if out_json.exists() and not args.overwrite:
+        raise runs.UserError(f"{out_json} exists; pass --overwrite to replace it")
+    t0 = time.time()
+    if (args.run / "sweep.json").is_file():
+        models = models_of_sweep(args.run, args.methods)
+    else:
+        if args.methods:
+            raise runs.UserError("--methods is for a sweep folder; a run folder holds one method")
+        models = models_of_run(args.run)
+    if not models:
+        raise runs.UserError(f"{args.run}: no finished method with imagination or the attention critic to probe")
+    report = probe(models, args.episodes_per_room, args.windows)
+    md = markdown(report, args.episodes_per_room, args.windows)
+    runs.write_json(out_json, {"episodes_per_room": args.episodes_per_room, "windows": args.windows, "methods": report})
+    out_md.write_text(md)
+    print(md)
+    print(f"wrote {out_md} and {out_json} ({time.time() - t0:.0f} s)")
+    return report
+
+
+def cli(argv=None) -> None:
+    runs.run_cli(Args, main, argv)
+
+
+if __name__ == "__main__":
+    cli(sys.argv[1:])

@@ -1,0 +1,266 @@
+"""The pieces the mechanism study turns (docs/mechanism.md), against independent references:
+where i_tau enters (`Config.imagination_input`), i_tau while acting, the sub-goal the
+buffers get, the evaluation noise, and the probes (`foresit_jax.probes`)."""
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import train_helpers as H
+from foresit_jax import probes
+from foresit_jax.agent import Agent
+from foresit_jax.config import Config
+from foresit_jax.evaluate import agent_params
+from test_networks import np_attention_critic, np_dense
+
+relu = lambda x: np.maximum(x, 0.0)  # noqa: E731
+
+
+def observation(batch=4, seed=0):
+    env, env_params = H.bathroom_env()
+    obs, _ = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(jax.random.PRNGKey(seed), batch), env_params)
+    return obs
+
+
+def scrambled(params, seed=1, scale=0.5):
+    """The same tree with N(0, scale^2) leaves: far from the near-uniform initial policy
+    and attention, so that inputs visibly matter and argmaxes have no near-ties."""
+    rng = np.random.default_rng(seed)
+    return jax.tree.map(lambda x: jnp.asarray(rng.normal(size=x.shape) * scale, x.dtype), params)
+
+
+# ---------------------------------------------------------------------- where i_tau enters
+def test_the_encoder_reading_feeds_i_tau_beside_the_target():
+    """imagination_input='encoder': the LSTM's input is the 1x1 conv of [view features :
+    tile(g) : tile(action) : tile(i_tau embedded)], built here by hand in numpy; the head
+    sees s_t alone."""
+    config = H.tiny_config("a3c+foresit", imagination_input="encoder")
+    agent = Agent(config)
+    obs = observation()
+    params, _ = agent.init(jax.random.PRNGKey(0), jax.tree.map(lambda x: x[0], obs))
+    params = scrambled(params)
+    rng = np.random.default_rng(0)
+    probs = np.asarray(jax.nn.softmax(rng.normal(size=(4, config.num_actions))), np.float32)
+    imagined = np.tanh(rng.normal(size=(4, config.hidden_size))).astype(np.float32)
+    got = np.asarray(agent.lstm_inputs(params, obs, probs, imagined))
+
+    p = jax.tree.map(lambda x: np.asarray(x, np.float64), params["params"]["encoder"])
+    view = np.asarray(obs["view"], np.float64)
+    for b in range(4):
+        vectors = [relu(np_dense(p["target_embed"], obs["target"][b])), relu(np_dense(p["action_embed"], probs[b])),
+                   relu(np_dense(p["imagination_embed"], imagined[b]))]  # fmt: skip
+        cells = [relu(np_dense(p["pointwise_conv"], np.concatenate([relu(np_dense(p["view_conv"], view[b, r, c])), *vectors])))
+                 for r in range(view.shape[1]) for c in range(view.shape[2])]  # fmt: skip
+        np.testing.assert_allclose(got[b], np.concatenate(cells), rtol=2e-4, atol=2e-5)
+    # i_tau changes the input; the policy head takes s_t alone.
+    assert np.abs(got - np.asarray(agent.lstm_inputs(params, obs, probs, 0 * imagined))).max() > 1e-3
+    assert params["params"]["policy"]["actor"]["kernel"].shape == (config.hidden_size, config.num_actions)
+    with pytest.raises(ValueError, match="needs i_tau"):
+        agent.lstm_inputs(params, obs, probs)
+
+
+@pytest.mark.parametrize("method", ["a3c+foresit", "a3c"])
+def test_the_mlp_reading_is_a_two_layer_head(method):
+    """imagination_input='mlp': logits = Dense(ReLU(Dense([s_t : i_tau]))), and the base gets
+    the same MLP over s_t (so a pair changes one thing)."""
+    config = H.tiny_config(method, imagination_input="mlp")
+    agent = Agent(config)
+    obs = jax.tree.map(lambda x: x[0], observation())
+    params, _ = agent.init(jax.random.PRNGKey(0), obs)
+    params = scrambled(params)
+    rng = np.random.default_rng(1)
+    s_t, i_tau = (np.tanh(rng.normal(size=(3, config.hidden_size))).astype(np.float32) for _ in range(2))
+    uses = config.pieces.imagination.uses_imagination
+    got = agent.model.apply(params, s_t, i_tau if uses else None, method=type(agent.model).policy_logits)
+    p = jax.tree.map(np.asarray, params["params"]["policy"])
+    x = np.concatenate([s_t, i_tau], -1) if uses else s_t
+    np.testing.assert_allclose(got, np_dense(p["actor"], relu(np_dense(p["hidden"], x))), rtol=1e-4, atol=1e-5)
+
+
+# ---------------------------------------------------------------------- i_tau while acting
+@pytest.mark.parametrize("method, reading", [("a3c+foresit", "head"), ("a3c+foresit", "encoder"), ("a3c+int", "head")])
+def test_i_tau_while_acting_is_f_w_of_the_episode_state_it_was_renewed_at(method, reading):
+    """Without noise, every step's i_tau equals f_w([s_k : g]) with k the episode's first
+    step (every K-th step for `int`), so it is constant between renewals; with
+    imagination_input='encoder' the encoder gets it from the step after the first (zeros
+    at the first) and the head gets none. With noise, i_tau - f_w has the noise's variance
+    and is constant over the episode."""
+    config = H.tiny_config(method, imagination_input=reading, int_interval=4, num_steps=30)
+    agent = Agent(config)
+    env, env_params = H.bathroom_env()
+    obs = jax.tree.map(lambda x: x[0], observation())
+    params, w_params = agent.init(jax.random.PRNGKey(0), obs)
+    params, w_params = scrambled(params, 1, 0.3), scrambled(w_params, 2, 0.5)
+    lanes = 8
+
+    @jax.jit
+    def act(variance, key):
+        actor = agent.start(jax.random.PRNGKey(5), env, env_params, lanes)
+        return agent.act(params, w_params, env, env_params, actor, key, 30, noise_variance=variance)[1]
+
+    traj = jax.tree.map(np.asarray, act(jnp.zeros(lanes), jax.random.PRNGKey(6)))
+    seen = traj.inputs
+    given = seen.encoder_imagined if reading == "encoder" else seen.imagined
+    assert (seen.imagined is None) == (reading == "encoder")
+    step, states, goal = traj.episode_step, traj.states, seen.obs["target"]
+    interval = config.int_interval if config.pieces.imagination.renew_every_k else 10**6
+    checked = 0
+    for t in range(30):
+        for b in range(lanes):
+            k = t - step[t, b] % interval  # the step i_tau was last imagined at
+            if reading == "encoder":  # the encoder sees the i_tau imagined up to the step before
+                if step[t, b] == 0:
+                    np.testing.assert_array_equal(given[t, b], 0.0)
+                    continue
+                k = t - 1 - (step[t, b] - 1) % interval
+            want = agent.imagine(w_params, states[k, b], goal[k, b])
+            np.testing.assert_allclose(given[t, b], want, rtol=1e-5, atol=1e-6)
+            checked += 1
+    assert checked > 100 and (step == 0).sum() > lanes, "precondition: several episodes per lane"
+
+    noisy = jax.tree.map(np.asarray, act(jnp.full(lanes, 0.25), jax.random.PRNGKey(6)))
+    given = noisy.inputs.encoder_imagined if reading == "encoder" else noisy.inputs.imagined
+    residual = given - np.asarray(agent.imagine(w_params, noisy.s_0, noisy.inputs.obs["target"]))
+    if method == "a3c+foresit":  # constant over the episode: the same residual at every step
+        for t in range(1, 30):
+            same = (noisy.episode_step[t] > (1 if reading == "encoder" else 0))
+            np.testing.assert_allclose(residual[t][same], residual[t - 1][same], atol=1e-6)
+        firsts = residual[noisy.episode_step == (1 if reading == "encoder" else 0)]
+        assert abs(firsts.std() - 0.5) < 0.05
+
+
+# ---------------------------------------------------------------------- the sub-goal
+def _two_windows(method, seed=0):
+    config = H.tiny_config(method, num_steps=8)
+    trainer = H.trainer(config)
+    state = H.jitted_init(config)(jax.random.PRNGKey(seed))
+    state = state._replace(params=scrambled(state.params, 3, 1.0))
+    actor, key, out = state.actor, state.key, []
+
+    @jax.jit
+    def window(actor, key):
+        actor, key, k_act = trainer.begin_window(actor, key, trainer.env_params)
+        memory = actor.memory
+        next_actor, traj = trainer.act(state.params, state.imagination_params, trainer.env_params, actor, k_act)
+        _, (alpha, keys, _) = trainer.window_loss(state.params, traj, memory)
+        items = trainer.subgoal_items(traj, alpha, keys, traj.success)
+        return next_actor, key, (traj, items, trainer.subgoal_steps(traj, alpha))
+
+    for _ in range(3):
+        actor, key, got = window(actor, key)
+        out.append(jax.tree.map(np.asarray, got))
+    return state, jax.tree.map(lambda *x: np.concatenate(x), *out)
+
+
+def test_the_sub_goal_is_the_argmax_of_the_attention_row_over_the_whole_episode():
+    """Packed windows (an episode's earlier states from the critic's memory): the sub-goal
+    each step offers the buffer, and its position t*, are those of the argmax of that
+    step's row of Eq. 4 computed by numpy over the episode's states from its first step
+    (at the Done step: the paper's ŝ_tau)."""
+    state, (traj, items, t_star) = _two_windows("a3c+foresit")
+    p = jax.tree.map(lambda x: np.asarray(x, np.float64), state.params["params"]["value_critic"])
+    subgoal, step = items[2], traj.episode_step
+    checked = crossing = 0
+    for b in range(step.shape[1]):
+        for t in range(step.shape[0]):
+            start = t - step[t, b]
+            episode = traj.states[start : t + 1, b].astype(np.float64)
+            _, alpha = np_attention_critic(p, episode, np.ones(len(episode), bool))
+            row = alpha[-1]
+            assert row[t_star[t, b]] >= row.max() - 1e-5, "t* is (up to ties) the argmax of the row"
+            np.testing.assert_allclose(subgoal[t, b], episode[t_star[t, b]], rtol=1e-5, atol=1e-6)
+            checked += 1
+            crossing += start < (t // 8) * 8  # the episode began in an earlier window
+    assert checked == step.size and crossing > 10, "precondition: episodes that cross a window's edge"
+
+
+def test_without_the_attention_critic_the_sub_goal_is_the_done_step_state():
+    _, (traj, items, t_star) = _two_windows("a3c+foresit+plaincritic")
+    np.testing.assert_array_equal(items[2], traj.states)
+    np.testing.assert_array_equal(t_star, traj.episode_step)
+
+
+# ---------------------------------------------------------------------- evaluation noise
+def test_evaluation_noise_off_zeroes_the_variance():
+    config = H.tiny_config("a3c+foresit")
+    state = H.jitted_init(config)(jax.random.PRNGKey(0))
+    trained = agent_params(state, 0.9, "training_end")
+    assert float(trained.noise_variance) == pytest.approx(0.9)  # rho = 0 at the start
+    assert float(agent_params(state, 0.9, "off").noise_variance) == 0.0
+    with pytest.raises(ValueError, match="evaluation_noise"):
+        Config(evaluation_noise="none")
+    with pytest.raises(ValueError, match="imagination_input"):
+        Config(imagination_input="policy")
+
+
+# ---------------------------------------------------------------------- probes
+def test_shuffled_imagination_imagines_from_another_episode():
+    config = H.tiny_config("a3c+foresit")
+    agent, shuffled = Agent(config), probes.ShuffledImagination(config)
+    rng = np.random.default_rng(0)
+    s_0, goal = rng.normal(size=(5, config.hidden_size)), rng.normal(size=(5, 300))
+    _, w = agent.init(jax.random.PRNGKey(0), jax.tree.map(lambda x: x[0], observation()))
+    got = np.asarray(shuffled.imagine(w, s_0, goal))
+    for b in range(5):
+        np.testing.assert_allclose(got[b], agent.imagine(w, s_0[b - 1], goal[b - 1]), rtol=1e-5, atol=1e-6)
+
+
+def test_imagination_fit_against_hand_computed_values():
+    rng = np.random.default_rng(0)
+    goals = np.repeat(np.eye(3), 20, axis=0)  # 3 categories, 60 items, alternating halves
+    rng.shuffle(goals)
+    centres = rng.normal(size=(3, 4)) * 2
+    target = goals @ centres + 0.1 * rng.normal(size=(60, 4))
+    perfect = probes.imagination_fit(target, target, goals)
+    assert perfect["r2_over_mean"] == 1.0 and perfect["smooth_l1"] == 0.0 and perfect["r2_over_category"] == 1.0
+    # Predicting each category's centre: about as good as the category baseline, much better than the mean.
+    fit = probes.imagination_fit(goals @ centres, target, goals)
+    assert fit["r2_over_mean"] > 0.95 and abs(fit["r2_over_category"]) < 0.2
+    held = np.arange(1, 60, 2)
+    mean = target[::2].mean(0)
+    sse = ((target[held] - goals[held] @ centres) ** 2).sum()
+    assert fit["r2_over_mean"] == pytest.approx(1 - sse / ((target[held] - mean) ** 2).sum())
+    # The mean itself explains nothing.
+    assert probes.imagination_fit(np.tile(mean, (60, 1)), target, goals)["r2_over_mean"] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_signal_to_noise_and_subgoal_histogram_by_hand():
+    s = probes.signal_to_noise(np.array([[1.0, 0.0], [-1.0, 2.0]]), 0.5)  # variances 1 and 1
+    assert s == {"signal_variance": 1.0, "noise_variance": 0.5, "signal_share": pytest.approx(2 / 3)}
+    h = probes.subgoal_position_histogram(np.array([0, 2, 4, 9, 0]), np.array([9, 9, 4, 9, 0]), bins=2)
+    # ratios 0, 2/9, 1, 1, and T = 0 counts as 1 -> [0, 0.5): 2, [0.5, 1]: 3; t* = T in 3 of 5 (4/4, 9/9, 0/0)
+    assert h["episodes"] == 5 and h["shares"] == [0.4, 0.6] and h["at_done"] == pytest.approx(0.6)
+    with pytest.raises(ValueError, match="outside"):
+        probes.subgoal_position_histogram(np.array([5]), np.array([4]))
+
+
+def test_a_method_is_parsed_with_its_critic_into_the_network():
+    """`a3c+critic` has the attention critic's q, k, v and a plain linear head over s_t."""
+    config = H.tiny_config("a3c+critic")
+    params, _ = jax.eval_shape(Agent(config).init, jax.random.PRNGKey(0), jax.tree.map(lambda x: x[0], observation()))
+    assert {"query", "key", "value", "value_head"} == set(params["params"]["value_critic"])
+    assert params["params"]["policy"]["actor"]["kernel"].shape == (config.hidden_size, config.num_actions)
+    assert dataclasses.replace(config, method="a3c").pieces.attention_critic is False
+
+
+def test_a_zero_initialised_attention_value_starts_as_the_plain_critic():
+    """Config.attention_value_init='zeros': s*_t = s_t at initialisation, so the attention
+    critic's values equal the plain critic's MLP on s_t (the same value-head parameters),
+    whatever the attention weighs; with lecun-normal v they differ."""
+    from foresit_jax import networks
+
+    rng = np.random.default_rng(0)
+    states = np.tanh(rng.normal(size=(2, 7, 16))).astype(np.float32)
+    valid = np.ones((2, 7), bool)
+    for zero, equal in ((True, True), (False, False)):
+        critic = networks.Critic(attention=True, attention_size=8, value_hidden=12, zero_value_init=zero)
+        params = critic.init(jax.random.PRNGKey(1), states, valid)
+        out = critic.apply(params, states, valid)
+        plain = networks.ValueHead(12).apply({"params": params["params"]["value_head"]}, states)
+        assert np.allclose(out.value, plain, atol=1e-6) == equal
+        assert np.allclose(out.attended_state, states, atol=1e-7) == equal
+    with pytest.raises(ValueError, match="attention_value_init"):
+        Config(attention_value_init="ones")
