@@ -445,6 +445,26 @@ def selection_markdown(results: dict[str, list[dict]]) -> str:
         markdown_table(cells, header) + "\n")
 
 
+def diagnostics_markdown(results: dict[str, list[dict]]) -> str:
+    """Training diagnostics (`DIAGNOSTICS`) per method: the mean over seeds of each
+    chunk's mean, at the first, middle and last chunk; '' when no seed recorded any."""
+    rows = []
+    for method, per_seed in results.items():
+        recorded = [r.get("diagnostics") or {} for r in per_seed]
+        names = [n for n in DIAGNOSTICS if all(n in d for d in recorded)]
+        if not names:
+            continue
+        chunks = len(recorded[0][names[0]])
+        picks = sorted({0, chunks // 2, chunks - 1})
+        for i in picks:
+            cells = [f"{np.mean([d[n][i] for d in recorded]):.3g}" if n in names else "" for n in DIAGNOSTICS]
+            rows.append([method, f"{i + 1}/{chunks}", *cells])
+    if not rows:
+        return ""
+    header = ["Method", "chunk", *("f_w loss" if n == "imagination/loss" else n.split("/")[1] for n in DIAGNOSTICS)]
+    return ("## Training diagnostics (mean over seeds of each chunk's mean)\n\n" + markdown_table(rows, header) + "\n")
+
+
 def main(args: Args) -> list[dict] | None:
     """Run (or, with --resume, continue) the sweep; returns Table 1's rows (None when
     stopped by --stop-after-chunks)."""
@@ -494,6 +514,7 @@ def main(args: Args) -> list[dict] | None:
     md = table_markdown(rows, title) + "\n" + selection_markdown(results)
     if len(selected) > 1 and args.seeds > 1:
         md += "\n" + paired_markdown(selected)
+    md += "\n" + diagnostics_markdown(results)
     md += "\n" + numerics.markdown(results, [(args.methods[0], m) for m in args.methods[1:]])
     md += assembled_markdown({method: out / "methods" / method for method in args.methods})
     (out / "table1.md").write_text(md)

@@ -97,7 +97,6 @@ class Imagination:
         return jax.lax.stop_gradient(imag.add_imagination_noise(key, imagined, noise_variance))
 
 
-
 _FORESIT = Imagination("foresit", source="learned", critic="attention")
 
 IMAGINATIONS: dict[str, Imagination] = {

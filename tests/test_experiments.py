@@ -759,7 +759,8 @@ def test_evaluate_cli_reproduces_the_test_results_of_training(finished_run, tmp_
 # ---------------------------------------------------------------------- the README
 README = (REPO / "README.md").read_text()
 BLOCKS = re.findall(r"```(\w+)\n(.*?)```", README, flags=re.S)
-CLI_MODULES = {"experiments.train": train_cli, "experiments.evaluate": evaluate_cli, "experiments.sweep": sweep}
+CLI_MODULES = {"experiments.train": train_cli, "experiments.evaluate": evaluate_cli, "experiments.sweep": sweep,
+               "experiments.probe": importlib.import_module("experiments.probe")}  # fmt: skip
 # Benchmarks the README documents: their flags must parse (they run in their own tests or
 # take minutes by design).
 BENCH_ARGS = {  # commands whose flags are parsed here and which run in their own tests

@@ -264,3 +264,30 @@ def test_a_zero_initialised_attention_value_starts_as_the_plain_critic():
         assert np.allclose(out.attended_state, states, atol=1e-7) == equal
     with pytest.raises(ValueError, match="attention_value_init"):
         Config(attention_value_init="ones")
+
+
+def test_explained_variance_and_advantage_spread_against_numpy():
+    from foresit_jax import losses
+
+    rng = np.random.default_rng(0)
+    returns, values = rng.normal(size=(6, 3)), rng.normal(size=(6, 3))
+    mask = rng.random((6, 3)) > 0.3
+    r, v = returns[mask], values[mask]
+    want = 1 - np.var(r - v) / np.var(r)
+    got = losses.explained_variance(jnp.asarray(values), jnp.asarray(returns), jnp.asarray(mask))
+    assert float(got) == pytest.approx(want, rel=1e-5)
+    assert float(losses.explained_variance(jnp.asarray(returns), jnp.asarray(returns), jnp.asarray(mask))) == pytest.approx(1.0)
+    assert float(losses.masked_variance(jnp.asarray(returns), jnp.asarray(mask))) == pytest.approx(np.var(r), rel=1e-5)
+    assert float(losses.explained_variance(jnp.ones((4,)), jnp.zeros((4,)), jnp.ones((4,), bool))) == 0.0  # no spread
+
+
+def test_sweep_diagnostics_table_by_hand():
+    from experiments import sweep
+
+    seed = lambda x: {"diagnostics": {n: [x, 2 * x, 3 * x] for n in sweep.DIAGNOSTICS[:-1]}}  # noqa: E731
+    md = sweep.diagnostics_markdown({"a3c": [seed(1.0), seed(3.0)], "other": [{}]})
+    lines = [line for line in md.splitlines() if line.startswith("| a3c")]
+    assert [line.split(" | ")[1] for line in lines] == ["1/3", "2/3", "3/3"]  # first, middle, last chunk
+    assert lines[2].split(" | ")[2] == "6"  # mean over the seeds of 3 and 9
+    assert lines[0].rstrip(" |").endswith("| 2") and lines[0].endswith("|  |")  # no f_w loss recorded
+    assert "other" not in md and sweep.diagnostics_markdown({"x": [{}]}) == ""

@@ -68,7 +68,7 @@ def test_tiny_report_has_every_table_figure_and_claim_after_a_kill_resume_and_re
         assert (out / name).stat().st_size > 0, name
     assert not (out / "org").exists()  # every org method excluded: no sweep
     # One line per claim; those with a method left out read "not run".
-    assert len(claims) == len(paper.claims({})) == 14
+    assert len(claims) == len(paper.claims({})) == 18
     verdicts = {c: v.split(":")[0] for c, v in claims.items()}
     assert set(verdicts.values()) <= {"holds", "does not hold", "cannot tell at this budget", paper.NOT_RUN}
     assert verdicts["Table 1: a3c+foresit has a higher SR than a3c"] != paper.NOT_RUN
