@@ -5,8 +5,8 @@
 seed). For each seed's selected model (`foresit_jax.probes` has the functions):
 
 * test SR on the same test episodes (the run's test key, `--episodes-per-room` per room
-  type) with i_tau as in training's evaluation (the trained f_w, the noise at the end of
-  training), with the noise off, from an untrained f_w (the run's initial w), and
+  type) with i_tau as the default evaluation gives it (the trained f_w, the noise at the
+  end of training, whatever `Config.evaluation_noise` the run used), with the noise off, from an untrained f_w (the run's initial w), and
   shuffled across episodes; for a method evaluated greedily (ORG), also with sampled
   actions. Each condition is paired with the first over the seeds (`experiments.stats`);
 * f_w against its targets on `--windows` fresh training windows of the agent (held out:
@@ -14,7 +14,7 @@ seed). For each seed's selected model (`foresit_jax.probes` has the functions):
   category's mean; the variance of f_w's outputs beside the noise's;
 * where the sub-goal falls in its successful episode: t*/T and the share at the Done step.
 
-Writes `probe.md` and `probe.json` into `--run` (refusing to replace them without
+Writes `probe.md` and `probe.json` into `--run` or `--out` (refusing to replace them without
 `--overwrite`) and prints the Markdown.
 """
 
@@ -50,6 +50,8 @@ class Args:
     """Test episodes per room type for each condition."""
     windows: int = 40
     """Training windows played to collect f_w's held-out items and the sub-goals."""
+    out: Optional[Path] = None
+    """Folder for probe.md and probe.json (default: --run)."""
     overwrite: bool = False
     """Replace an existing probe.md / probe.json."""
 
@@ -221,7 +223,8 @@ def main(args: Args) -> dict:
 
     if args.episodes_per_room < 1 or args.windows < 1:
         raise runs.UserError("--episodes-per-room and --windows must be >= 1")
-    out_md, out_json = args.run / "probe.md", args.run / "probe.json"
+    folder = args.run if args.out is None else args.out
+    out_md, out_json = folder / "probe.md", folder / "probe.json"
     if out_json.exists() and not args.overwrite:
         raise runs.UserError(f"{out_json} exists; pass --overwrite to replace it")
     t0 = time.time()
@@ -235,6 +238,7 @@ def main(args: Args) -> dict:
         raise runs.UserError(f"{args.run}: no finished method with imagination or the attention critic to probe")
     report = probe(models, args.episodes_per_room, args.windows)
     md = markdown(report, args.episodes_per_room, args.windows)
+    folder.mkdir(parents=True, exist_ok=True)
     runs.write_json(out_json, {"episodes_per_room": args.episodes_per_room, "windows": args.windows, "methods": report})
     out_md.write_text(md)
     print(md)

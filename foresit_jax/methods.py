@@ -195,9 +195,10 @@ PAPER_METHODS: tuple[str, ...] = (
 # (any other combination of the pieces, e.g. 'a3c+maml+org', 'a3c+maml+rnd' or
 # 'a3c+foresit+plaincritic', runs too).
 IMPLEMENTED_METHODS: tuple[str, ...] = (
-    "a3c", "a3c+critic", "a3c+foresit", "a3c+rnd", "a3c+att", "a3c+int",
+    "a3c", "a3c+foresit", "a3c+rnd", "a3c+att", "a3c+int",
     "a3c+maml", "a3c+maml+foresit",
-    "a3c+org", "a3c+org+critic", "a3c+org+foresit", "a3c+org+rnd", "a3c+org+att", "a3c+org+int",
+    "a3c+org", "a3c+org+foresit", "a3c+org+rnd", "a3c+org+att", "a3c+org+int",
+    "a3c+critic", "a3c+org+critic",
 )  # fmt: skip
 
 
