@@ -126,10 +126,6 @@ class Agent:
         self.config = config
         self.method = config.pieces
         self.imagination = self.method.imagination
-        uses = self.imagination.uses_imagination
-        # Where i_tau enters (Config.imagination_input): the encoder, or the policy head.
-        self.imagination_in_encoder = uses and config.imagination_input == "encoder"
-        self.imagination_in_head = uses and not self.imagination_in_encoder
         # The object-relation graph (ORG) reads the `org` setup's detector features.
         object_graph = ObjectGraph() if self.method.encoder == "org" else None
         # SAVN's learned interaction loss (the maml base), params at params["params"]["learned_loss"].
@@ -147,6 +143,9 @@ class Agent:
             zero_value_init=config.attention_value_init == "zeros",
         )
         self.imagination_net = ImaginationNet(config.imagination_layer_sizes)
+        # Where i_tau enters (Config.imagination_input), as the network decides it.
+        self.imagination_in_encoder = self.model.imagination_in_encoder
+        self.imagination_in_head = self.imagination.uses_imagination and not self.imagination_in_encoder
 
     # ------------------------------------------------------------------ init
     def init(self, key: chex.PRNGKey, obs: dict) -> tuple[Any, Any]:
