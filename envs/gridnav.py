@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from flax import struct
 
 from envs import catalog as C
@@ -71,7 +72,12 @@ class GridNav:
       ``envs.wrappers.FlattenObservationWrapper`` turns it into one float32 vector.
     - Actions: ``Discrete(6)``: 0 MoveAhead (blocked by walls, furniture and floor objects:
       the pose is unchanged), 1 RotateLeft, 2 RotateRight (45 degrees), 3 LookUp, 4 LookDown
-      (camera horizon 0 or 30 degrees down), 5 Done.
+      (camera horizon 0 or 30 degrees down), 5 Done.  An action must have an integer dtype
+      (a float or bool action is a TypeError when ``step`` is traced: truncating 2.7 to 2
+      would hide a bug).  An integer outside 0..5 matches no action: it is a step that
+      leaves the pose unchanged and costs the step penalty, like a blocked MoveAhead (no
+      check inside a jitted step is free); construct with ``check_actions=True`` to have
+      such an action raise instead (a host callback per step: for debugging, not training).
     - Reward: ``params.success_reward`` (+5) on a successful Done (the target visible within
       the success radius), ``params.step_penalty`` (-0.01) on every other step.
     - Termination: ``terminated`` when the agent takes Done (successful or not);
@@ -107,6 +113,7 @@ class GridNav:
       precomputed_views: gather each pose's view from the scene bank's table (fast) or
         ray cast it at every step (same pixels; for checking and benchmarking).
       final_observation: whether ``step`` puts ``final_observation`` in ``info`` (see above).
+      check_actions: raise on an action outside 0..5 (see above; slower, for debugging).
     """
 
     def __init__(
@@ -116,6 +123,7 @@ class GridNav:
         view_width: int = 16,
         precomputed_views: bool = True,
         final_observation: bool = True,
+        check_actions: bool = False,
     ):
         C.check_setup(setup)
         if view_width < 1:
@@ -125,6 +133,7 @@ class GridNav:
         self.view_width = view_width
         self.precomputed_views = precomputed_views
         self.final_observation = bool(final_observation)
+        self.check_actions = bool(check_actions)
         self.categories = C.categories(setup)
         self.num_categories = len(self.categories)
         self.success_radius_m = C.SETUPS[setup][2]
@@ -146,9 +155,7 @@ class GridNav:
     def make_params(self, split: str = "train", room_types=None, training: bool | None = None) -> EnvParams:
         """Params holding the scene bank of ``split`` (optionally some room types only)."""
         C.check_split(split)
-        if isinstance(room_types, (str, int)):
-            room_types = (room_types,)
-        rooms = tuple(range(4)) if room_types is None else tuple(_room_index(r) for r in room_types)
+        rooms = tuple(range(4)) if room_types is None else _room_indices(room_types)
         bank = make_bank(self.setup, C.scene_numbers(split, rooms), self.grid_size, self.view_width)
         return EnvParams(bank=bank, max_steps=time_limits(split == "train" if training is None else training))
 
@@ -229,7 +236,7 @@ class GridNav:
 
     def _step_state(self, key: jax.Array, state: EnvState, action, params: EnvParams):
         del key  # the dynamics are deterministic
-        action = jnp.asarray(action, jnp.int32)
+        action = self._checked_action(action)
         walkable = params.bank.cell_type[state.scene] == C.CELL_FLOOR
         is_done = action == C.DONE
         success = is_done & self.target_in_view(state, params)
@@ -252,6 +259,18 @@ class GridNav:
         return new_state, reward, terminated, truncated, info
 
     # ----------------------------------------------------------------- observation
+    def _checked_action(self, action) -> jax.Array:
+        """`action` as int32, refusing a non-integer dtype (at trace time) and, with
+        ``check_actions``, a value outside 0..5 (at run time, through a host callback)."""
+        action = jnp.asarray(action)
+        if not jnp.issubdtype(action.dtype, jnp.integer):
+            raise TypeError(f"GridNav.step: the action must be an integer in 0..{C.NUM_ACTIONS - 1}, got dtype "
+                            f"{action.dtype}; cast it (e.g. jnp.argmax(...) or .astype(jnp.int32))")  # fmt: skip
+        action = action.astype(jnp.int32)
+        if self.check_actions:
+            jax.debug.callback(_raise_on_bad_action, action)
+        return action
+
     def view(self, state: EnvState, params: EnvParams):
         """(sem int32 [3, W], depth float32 [3, W] in cells) seen from the state's pose."""
         bank = params.bank
@@ -320,11 +339,31 @@ class GridNav:
         return jnp.where(here == 1, C.DONE, jnp.argmin(costs)).astype(jnp.int32)
 
 
+def _raise_on_bad_action(action) -> None:
+    action = np.asarray(action)
+    bad = (action < 0) | (action >= C.NUM_ACTIONS)
+    if bad.any():
+        raise ValueError(f"GridNav.step: action {action[bad].ravel()[0]} is outside 0..{C.NUM_ACTIONS - 1} "
+                         f"({int(bad.sum())} of {action.size} in this call)")  # fmt: skip
+
+
+def _room_indices(room_types) -> tuple[int, ...]:
+    """Room type names or indices as indices; one ValueError names what is wrong."""
+    if isinstance(room_types, (str, int, np.integer)):
+        room_types = (room_types,)
+    rooms = tuple(_room_index(r) for r in room_types)
+    if not rooms:
+        raise ValueError(f"room_types must name at least one room type (of {list(C.ROOM_TYPES)}), or be None for all")
+    return rooms
+
+
 def _room_index(room) -> int:
     if isinstance(room, str):
         if room not in C.ROOM_TYPES:
             raise ValueError(f"unknown room type {room!r}; choose from {list(C.ROOM_TYPES)}")
         return C.ROOM_TYPES.index(room)
+    if isinstance(room, bool) or not isinstance(room, (int, np.integer)):
+        raise ValueError(f"a room type is a name ({', '.join(C.ROOM_TYPES)}) or an index 0..3, got {room!r}")
     if not 0 <= int(room) < 4:
         raise ValueError(f"room type index must be in 0..3, got {room}")
     return int(room)

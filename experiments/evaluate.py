@@ -60,6 +60,7 @@ def main(args: Args) -> dict:
     out_json = args.run / f"results_{args.split}{suffix}.json"
     if out_json.exists() and not args.overwrite:
         raise runs.UserError(f"{out_json} exists; pass --overwrite to replace it")
+    runs.claim(args.run)  # the one writer of the run folder, and writable, before any work
 
     trainer = make_trainer(config)
     like_state = trainer.init(jax.random.PRNGKey(0))

@@ -125,6 +125,12 @@ def extend(history: list | None, done: int, here: dict | None = None) -> tuple[l
     return kept + [{"from_update": done, "platform": here}], (warning if done else None)
 
 
+def rewind(history: list | None, done: int) -> list | None:
+    """`history` as it was when the run had trained `done` updates (a resume that falls
+    back to an earlier checkpoint): the stretches that began after it are dropped."""
+    return [h for h in history if h["from_update"] <= done] or None if history else history
+
+
 def platforms_of(history: list | None) -> list[str]:
     """The descriptions of a run's platforms, in order (a run that recorded none: one
     'not recorded')."""

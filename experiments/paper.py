@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import json
 import sys
 import time
 from pathlib import Path
@@ -181,7 +180,7 @@ def main(args: Args) -> dict | None:
         if sweep.main(sweep_args(args, setup, methods)) is None:
             print("stopped (continue with --resume)")
             return None
-        per_seed = json.loads((args.out / setup / "results_per_seed.json").read_text())
+        per_seed = runs.read_json(args.out / setup / "results_per_seed.json")
         results.update(per_seed)
     print(f"sweeps done ({time.time() - t0:.0f} s); writing the report", flush=True)
     return write_report(args, results)

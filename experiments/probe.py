@@ -21,7 +21,6 @@ Writes `probe.md` and `probe.json` into `--run` or `--out` (refusing to replace 
 from __future__ import annotations
 
 import dataclasses
-import json
 import sys
 import time
 from pathlib import Path
@@ -91,7 +90,7 @@ def models_of_sweep(folder: Path, methods: tuple[str, ...]) -> dict[str, list[Mo
     """{method: [Model per seed]} of a sweep's finished methods."""
     from experiments import sweep
 
-    saved = json.loads((folder / "sweep.json").read_text())
+    saved = runs.read_json(folder / "sweep.json")
     args = sweep.Args(**{k: tuple(v) if isinstance(v, list) else v for k, v in saved.items() if k != "out"},
                       out=folder)  # fmt: skip
     finished = [m for m in args.methods if sweep.finished_seeds(folder / "methods" / m)]
@@ -236,6 +235,7 @@ def main(args: Args) -> dict:
         models = models_of_run(args.run)
     if not models:
         raise runs.UserError(f"{args.run}: no finished method with imagination or the attention critic to probe")
+    runs.claim(folder)  # the one writer of the folder, and writable, before the probe's work
     report = probe(models, args.episodes_per_room, args.windows)
     md = markdown(report, args.episodes_per_room, args.windows)
     folder.mkdir(parents=True, exist_ok=True)

@@ -7,11 +7,19 @@ A run folder holds:
   checkpoints/        orbax checkpoints of the whole training state (latest few)
   best/               the agent with the best validation SR (model selection)
   results_<split>.json/.md, learning_curve.png
+  .lock               held (an OS lock, `claim`) by the one process writing the folder
+
+Every checkpoint gets a checksum of its files at save (`save`), checked before it is
+restored (`restore`): a corrupt or truncated one is one line naming it, and a resume falls
+back to the newest intact one (`intact_steps`).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import errno
+import fcntl
+import hashlib
 import json
 import math
 import os
@@ -46,6 +54,55 @@ def run_cli(args_class, main, argv=None):
         return main(args)
     except (UserError, ValueError) as e:
         fail(str(e))
+    except OSError as e:  # disk full, read-only, not a directory: one line, not a traceback
+        if e.errno not in _USER_ERRNOS:
+            raise
+        fail(os_message(e), status=1 if e.errno in (errno.ENOSPC, errno.EDQUOT) else 2)
+
+
+# What the user's disk or paths did, not a bug: reported in one line.
+_USER_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.ENOTDIR, errno.EISDIR,
+                errno.EEXIST, errno.ENOENT}  # fmt: skip
+
+
+def os_message(e: OSError) -> str:
+    where = f"{e.filename}: " if e.filename else ""
+    return f"{where}{e.strerror or e}" + (" (free some space, then continue with --resume)"
+                                          if e.errno in (errno.ENOSPC, errno.EDQUOT) else "")  # fmt: skip
+
+
+# ---------------------------------------------------------------------- one writer per folder
+LOCK_FILE = ".lock"
+_held: dict[Path, int] = {}  # folder -> file descriptor of its lock, for this process's life
+
+
+def claim(path: Path) -> None:
+    """Make this process the one writer of the folder `path` (created if missing): an
+    exclusive OS lock (flock) on `path`/.lock, held until the process exits (a crash
+    releases it; the file left behind locks nothing). Another process holding it is a
+    UserError naming its pid; claiming a folder this process holds is a no-op."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise UserError(f"{path} is a file, not a folder; choose another --out")
+    path.mkdir(parents=True, exist_ok=True)
+    key = path.resolve()
+    if key in _held:
+        return
+    fd = os.open(path / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        holder = os.read(fd, 64).decode(errors="replace").strip() or "unknown"
+        os.close(fd)
+        raise UserError(f"{path} is being written by another process (pid {holder}); wait for it to finish, "
+                        "or choose another --out") from None  # fmt: skip
+    os.ftruncate(fd, 0)
+    os.write(fd, str(os.getpid()).encode())
+    _held[key] = fd
+
+
+def _contents(path: Path) -> list[Path]:
+    return [p for p in path.iterdir() if p.name != LOCK_FILE]
 
 
 def is_run(path: Path) -> bool:
@@ -53,24 +110,32 @@ def is_run(path: Path) -> bool:
 
 
 def prepare_run_dir(path: Path, resume: bool, overwrite: bool, marker: str = RUN_FILE, kind: str = "run") -> None:
-    """Create a fresh output folder, or check the one to resume. Never overwrites a user's
-    folder silently: only a folder holding `marker` (what this program writes first, e.g.
-    run.json or sweep.json) is ever deleted, and only with --overwrite."""
+    """Create a fresh output folder, or check the one to resume, after claiming it (`claim`:
+    one writer per folder). Never overwrites a user's folder silently: only a folder
+    holding `marker` (what this program writes first, e.g. run.json or sweep.json) is ever
+    emptied, and only with --overwrite."""
     if resume and overwrite:
         raise UserError("--resume and --overwrite exclude each other")
     if resume:
         if not (path / marker).is_file():
             raise UserError(f"{path} is not a {kind} folder (no {marker}); nothing to resume")
+        claim(path)
         return
-    if path.exists() and any(path.iterdir()):
+    if path.exists() and path.is_dir() and _contents(path):
+        if (path / marker).is_file():
+            claim(path)  # a folder of ours that another process is writing: say so, with its pid
         if not overwrite:
             hint = "use --resume to continue it or --overwrite to replace it" if kind == "run" else (
                 "use --overwrite to replace it or choose another --out")
             raise UserError(f"{path} already exists and is not empty; {hint}")
         if not (path / marker).is_file():
             raise UserError(f"{path} is not a {kind} folder (no {marker}); refusing to delete it, choose another --out")
-        shutil.rmtree(path)
-    path.mkdir(parents=True, exist_ok=True)
+    claim(path)  # before looking again: a process that started at the same instant is refused here
+    if _contents(path):
+        if not overwrite:
+            raise UserError(f"{path} was written by another process a moment ago; choose another --out")
+        for p in _contents(path):
+            shutil.rmtree(p) if p.is_dir() and not p.is_symlink() else p.unlink()
 
 
 def write_started_args(path: Path, args, keep: tuple[str, ...]) -> None:
@@ -86,7 +151,7 @@ def resumed_args(args, marker: str, kind: str, keep: tuple[str, ...]):
     in one line (a flag at its default cannot be told from one not given and is ignored);
     the fields in `keep` are taken from `args`."""
     prepare_run_dir(args.out, resume=True, overwrite=args.overwrite, marker=marker, kind=kind)
-    saved = json.loads((args.out / marker).read_text())
+    saved = read_json(args.out / marker)
     saved = {k: tuple(v) if isinstance(v, list) else v for k, v in saved.items() if k != "out"}
     defaults = type(args)()
     clash = [f"--{k.replace('_', '-')} {getattr(args, k)} (started with {v})" for k, v in saved.items()
@@ -104,7 +169,15 @@ def write_run_info(path: Path, info: dict) -> None:
 def read_run_info(path: Path) -> dict:
     if not is_run(path):
         raise UserError(f"{path} is not a run folder (no {RUN_FILE}); pass the --out folder of experiments.train")
-    return json.loads((path / RUN_FILE).read_text())
+    return read_json(path / RUN_FILE)
+
+
+def read_json(path: Path):
+    """A JSON file this project wrote; a broken one is a UserError naming it."""
+    try:
+        return json.loads(Path(path).read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise UserError(f"{path} is not valid JSON ({e}); it was damaged after it was written") from None
 
 
 # ---------------------------------------------------------------------- JSON
@@ -168,27 +241,52 @@ def metric_rows(metrics: dict, first_update: int, previous: dict | None = None) 
 
 
 def append_rows(path: Path, rows: list[dict]) -> None:
-    """Append rows to `path`.jsonl (strict JSON, NaN as null) and `path`.csv."""
+    """Append rows to `path`.jsonl (strict JSON, NaN as null) and `path`.csv, in one write
+    each (a kill can still cut the last line: `read_rows` drops a cut one)."""
     with open(path.with_suffix(".jsonl"), "a") as f:
-        for row in rows:
-            f.write(to_json(row) + "\n")
+        f.write("".join(to_json(row) + "\n" for row in rows))
     write_csv(path.with_suffix(".csv"), rows, append=True)
 
 
 def read_rows(path: Path) -> list[dict]:
+    """The rows of `path`.jsonl. A last line a kill cut short (no newline, not JSON) is
+    dropped with a warning: it is rewritten when its updates run again. A broken line
+    elsewhere is a UserError naming the file and line."""
     path = path.with_suffix(".jsonl")
     if not path.exists():
         return []
-    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    text = path.read_text()
+    lines = text.split("\n")
+    rows = []
+    for i, line in enumerate(lines):
+        if not line.strip():
+            continue
+        try:
+            rows.append(json.loads(line))
+        except json.JSONDecodeError:
+            if i == len(lines) - 1:  # the last line, with no newline after it: a cut append
+                print(f"warning: {path}: dropped a partial last line (a write was cut short)", file=sys.stderr)
+                break
+            raise UserError(f"{path}: line {i + 1} is not valid JSON; it was damaged after it was written") from None
+    return rows
 
 
 def truncate_rows(path: Path, last_update: int) -> None:
-    """Drop rows after `last_update` (written after the checkpoint a resume starts from)."""
+    """Drop rows after `last_update` (written after the checkpoint a resume starts from)
+    and a cut last line (`read_rows`); each file is replaced whole (written, then renamed:
+    a kill leaves the old file or the new one)."""
     rows = [r for r in read_rows(path) if r["update"] <= last_update]
     for suffix in (".jsonl", ".csv"):
-        path.with_suffix(suffix).unlink(missing_ok=True)
-    if rows:
-        append_rows(path, rows)
+        target = path.with_suffix(suffix)
+        if not rows:
+            target.unlink(missing_ok=True)
+            continue
+        tmp = target.with_name(target.name + ".tmp")
+        if suffix == ".jsonl":
+            tmp.write_text("".join(to_json(row) + "\n" for row in rows))
+        else:
+            write_csv(tmp, rows)
+        os.replace(tmp, target)
 
 
 def first_nonfinite(metrics: dict) -> int | None:
@@ -196,6 +294,40 @@ def first_nonfinite(metrics: dict) -> int | None:
     loss = np.asarray(metrics["losses/total_loss"])
     bad = np.flatnonzero(~np.isfinite(loss))
     return int(bad[0]) if len(bad) else None
+
+
+def finite_seeds(tree, num_seeds: int | None = None) -> np.ndarray:
+    """Whether every float of `tree` (a training state: parameters, optimiser moments,
+    f_w) is finite: a bool, or with `num_seeds` one per seed (leaves stacked over seeds).
+    The loss is computed before each update, so a finite loss can still leave NaN
+    weights behind (an infinite step, for one): this is checked before every save."""
+    ok = np.ones(num_seeds or 1, bool)
+    for leaf in jax.tree.leaves(tree):
+        if not jax.dtypes.issubdtype(leaf.dtype, np.floating):
+            continue
+        ok &= np.isfinite(np.asarray(leaf)).reshape(len(ok), -1).all(1)
+    return ok if num_seeds else ok[0]
+
+
+# Divergence, short of NaN: bounds about 1000x past what quick training shows (its
+# gradient norm stays below 4 and |loss| below 2; entropy, at most ln 6 = 1.79, above 0.3).
+DIVERGENCE_BOUNDS = {"losses/grad_norm": 1e4, "losses/total_loss": 1e4}
+COLLAPSED_ENTROPY = 1e-3
+
+
+def divergence(metrics: dict) -> str | None:
+    """A warning when a chunk's metrics ({name: [..., n]}) show divergence short of NaN:
+    a loss or gradient norm beyond `DIVERGENCE_BOUNDS` (or infinite), or the policy's
+    entropy below `COLLAPSED_ENTROPY` (deterministic: it no longer explores); None if not."""
+    found = []
+    for name, bound in DIVERGENCE_BOUNDS.items():
+        x = np.abs(np.asarray(metrics.get(name, 0.0), float))
+        if not (x <= bound).all():
+            found.append(f"{name.split('/')[-1]} reached {np.nanmax(np.where(np.isnan(x), -np.inf, x)):.3g} (bound {bound:g})")
+    entropy = np.asarray(metrics.get("losses/entropy", 1.0), float)
+    if (entropy < COLLAPSED_ENTROPY).any():
+        found.append(f"the policy's entropy fell to {np.nanmin(entropy):.3g} (collapsed below {COLLAPSED_ENTROPY:g})")
+    return "training may be diverging: " + "; ".join(found) + " (a lower --learning-rate may help)" if found else None
 
 
 # ---------------------------------------------------------------------- checkpoints
@@ -206,11 +338,69 @@ def checkpoint_manager(path: Path, keep: int):
     return ocp.CheckpointManager(path.absolute(), options=options)
 
 
+CHECKSUM_FILE = "foresit_sha256.json"
+
+
+class CorruptCheckpoint(UserError):
+    """A checkpoint whose files are not those saved (or that orbax cannot read)."""
+
+
+def step_dir(manager, step: int) -> Path:
+    return Path(str(manager.directory)) / str(step)
+
+
+def _digest(folder: Path) -> str:
+    """SHA-256 over every file under `folder` (but the checksum file): names and bytes."""
+    h = hashlib.sha256()
+    for f in sorted(p for p in folder.rglob("*") if p.is_file() and p.name != CHECKSUM_FILE):
+        h.update(str(f.relative_to(folder)).encode() + b"\0")
+        with open(f, "rb") as stream:
+            for block in iter(lambda: stream.read(1 << 20), b""):
+                h.update(block)
+        h.update(b"\0")
+    return h.hexdigest()
+
+
 def save(manager, step: int, tree) -> None:
+    """Save `tree` as checkpoint `step` and record its checksum (`verify`)."""
     import orbax.checkpoint as ocp
 
     manager.save(step, args=ocp.args.StandardSave(tree), force=True)
     manager.wait_until_finished()
+    folder = step_dir(manager, step)
+    write_json(folder / CHECKSUM_FILE, {"sha256": _digest(folder)})
+
+
+def verify(manager, step: int) -> None:
+    """Raise CorruptCheckpoint (one line naming it) when checkpoint `step`'s files are not
+    those `save` wrote. A checkpoint without a checksum (saved before checksums were
+    recorded) passes."""
+    folder = step_dir(manager, step)
+    recorded = folder / CHECKSUM_FILE
+    if not recorded.is_file():
+        return
+    try:
+        expected = json.loads(recorded.read_text())["sha256"]
+    except (json.JSONDecodeError, KeyError, TypeError, UnicodeDecodeError):
+        raise CorruptCheckpoint(f"checkpoint {folder} is damaged (its checksum file cannot be read)") from None
+    if _digest(folder) != expected:
+        raise CorruptCheckpoint(f"checkpoint {folder} is corrupt or truncated: its files no longer match the "
+                                "checksum recorded when it was saved")  # fmt: skip
+
+
+def intact_step(manager, at_most: int | None = None) -> tuple[int | None, list[str]]:
+    """The newest checkpoint step (at most `at_most`) that `verify` passes, or None, and
+    one line per newer one skipped as corrupt."""
+    skipped = []
+    for step in sorted(manager.all_steps(), reverse=True):
+        if at_most is not None and step > at_most:
+            continue
+        try:
+            verify(manager, step)
+            return step, skipped
+        except CorruptCheckpoint as e:
+            skipped.append(str(e))
+    return None, skipped
 
 
 def drop_steps_after(manager, step: int) -> None:
@@ -229,10 +419,15 @@ def restore(manager, step: int, like):
     "Termination timeout for all reduce") and failed in a process with 1 device."""
     import orbax.checkpoint as ocp
 
+    verify(manager, step)
     first = jax.sharding.SingleDeviceSharding(jax.local_devices()[0])
     abstract = jax.tree.map(lambda x: jax.ShapeDtypeStruct(np.shape(x), x.dtype, sharding=getattr(x, "sharding", first)),
                             like)  # fmt: skip
-    return manager.restore(step, args=ocp.args.StandardRestore(abstract))
+    try:
+        return manager.restore(step, args=ocp.args.StandardRestore(abstract))
+    except Exception as e:  # orbax's (often multi-line) reason, as one line naming the checkpoint
+        reason = " ".join(str(e).split())[:300]
+        raise CorruptCheckpoint(f"cannot restore checkpoint {step_dir(manager, step)}: {type(e).__name__}: {reason}") from None
 
 
 # ---------------------------------------------------------------------- reports

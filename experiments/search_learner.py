@@ -95,9 +95,17 @@ def run_variant(args: Args, overrides: dict, keys=None) -> dict:
 
 
 def main(args: Args) -> list[dict]:
+    variants = []
+    for i, text in enumerate(args.variants):  # every variant parsed before any trains
+        try:
+            variants.append(json.loads(text))
+        except json.JSONDecodeError as e:
+            raise SystemExit(f"error: --variants item {i + 1} ({text!r}) is not a JSON object: {e}") from None
+        if not isinstance(variants[-1], dict):
+            raise SystemExit(f"error: --variants item {i + 1} ({text!r}) is not a JSON object of Config fields")
     results = []
-    for text in args.variants:
-        result = run_variant(args, json.loads(text))
+    for overrides in variants:
+        result = run_variant(args, overrides)
         summary = {k: v for k, v in result.items() if k != "curve"}
         print(json.dumps(summary), flush=True)
         if args.out:

@@ -26,7 +26,6 @@ whose every seed they finished between them (e.g. seeds 0-1 in one sweep and 2-4
 from __future__ import annotations
 
 import dataclasses
-import json
 import shutil
 import sys
 import time
@@ -125,7 +124,7 @@ def reuse_sources(args: Args) -> list[Path]:
             raise runs.UserError(f"--reuse {folder}: not a sweep folder (no sweep.json)")
         if folder.resolve() == Path(args.out).resolve():
             raise runs.UserError(f"--reuse {folder}: the sweep being written (--out); to continue it use --resume")
-        started = json.loads((folder / "sweep.json").read_text())
+        started = runs.read_json(folder / "sweep.json")
         clash = [f"--{k.replace('_', '-')} {started.get(k)} there, {getattr(args, k)} here" for k in PROTOCOL
                  if started.get(k) != getattr(args, k)]  # fmt: skip
         if clash:
@@ -147,7 +146,7 @@ def method_protocol(folder: Path) -> int | None:
     were recorded there, and so not known), else None (not started)."""
     for name, unrecorded in (("results.json", 1), ("progress.json", None)):
         if (folder / name).is_file():
-            return json.loads((folder / name).read_text()).get("selection_protocol", unrecorded)
+            return runs.read_json(folder / name).get("selection_protocol", unrecorded)
     return None
 
 
@@ -163,7 +162,7 @@ def finished_seeds(folder: Path) -> list[int]:
     """The seeds a sweep's method folder has finished (none when it has not finished)."""
     if not (folder / "results.json").is_file():
         return []
-    return [r["seed"] for r in json.loads((folder / "results.json").read_text())["results"]]
+    return [r["seed"] for r in runs.read_json(folder / "results.json")["results"]]
 
 
 def _seed_ranges(seeds) -> str:
@@ -226,7 +225,7 @@ def assemble(method: str, args: Args, parts: dict[int, Path], target: Path) -> N
     seeds = seeds_of(args)
     loaded = {}
     for folder in dict.fromkeys(parts.values()):
-        done = json.loads((folder / "results.json").read_text())
+        done = runs.read_json(folder / "results.json")
         *_, states, best = load_method(method, args, folder)
         loaded[folder] = (done, finished_seeds(folder), states, best)
     updates = {done["updates"] for done, *_ in loaded.values()}
@@ -264,7 +263,7 @@ def assembled_markdown(folders: dict[str, Path]) -> str:
     the folder each seed came from; '' when none was."""
     lines = []
     for method, folder in folders.items():
-        done = json.loads((folder / "results.json").read_text()) if (folder / "results.json").is_file() else {}
+        done = runs.read_json(folder / "results.json") if (folder / "results.json").is_file() else {}
         where = {}  # source folder -> its seeds
         for seed, source in done.get("assembled_from", {}).items():
             where.setdefault(source, []).append(int(seed))
@@ -285,10 +284,27 @@ def load_method(method: str, args: Args, folder: Path):
 
     config, _ = method_schedule(method, args)
     trainer = make_trainer(config)
-    done = json.loads((folder / "results.json").read_text())["updates"]
+    done = runs.read_json(folder / "results.json")["updates"]
     states, best = initial_states(trainer, finished_seeds(folder))
     restored = runs.restore(runs.checkpoint_manager(folder / "checkpoints", 2), done, {"states": states, "best": best})
     return config, trainer, restored["states"], restored["best"]
+
+
+def rewind(progress: dict, step: int) -> dict:
+    """`progress` (a method's progress.json) as it was after update `step`, a chunk's end
+    (for a resume whose newer checkpoints are corrupt): the chunks after it are dropped,
+    and each seed's best model is chosen again from its validations up to `step`."""
+    lengths = np.cumsum([len(c[0]) if c else 0 for c in progress["curves"]])
+    chunks = int(np.searchsorted(lengths, step, side="right"))
+    history = [[h for h in seed_history if h["update"] <= step] for seed_history in progress["history"]]
+    best = [selection.Selection() for _ in history]
+    for b, seed_history in zip(best, history):
+        for h in seed_history:
+            b.offer(h["SR"], h["update"])
+    diagnostics = {name: chunks_[:chunks] for name, chunks_ in progress.get("diagnostics", {}).items()}
+    return {**progress, "done": step, "history": history, "curves": progress["curves"][:chunks],
+            "diagnostics": diagnostics, "best_sr": [b.sr for b in best], "best_update": [b.update for b in best],
+            "numerics": numerics.rewind(progress.get("numerics"), step)}  # fmt: skip
 
 
 def run_method(method: str, args: Args, bar, evaluator, folder: Path, budget: list) -> tuple | None:
@@ -307,7 +323,7 @@ def run_method(method: str, args: Args, bar, evaluator, folder: Path, budget: li
     from foresit_jax.train import make_trainer
 
     if (folder / "results.json").exists():
-        done = json.loads((folder / "results.json").read_text())
+        done = runs.read_json(folder / "results.json")
         bar(done["updates"], {"method": method})
         return done["results"], np.arange(1, done["updates"] + 1), np.array(done["curves"], float)
     config, schedule = method_schedule(method, args)
@@ -321,14 +337,22 @@ def run_method(method: str, args: Args, bar, evaluator, folder: Path, budget: li
     progress = {"done": 0, "best_sr": [-1.0] * len(seeds), "best_update": [None] * len(seeds),
                 "history": [[] for _ in seeds], "curves": [], "selection_protocol": selection.PROTOCOL_VERSION}  # fmt: skip
     if (folder / "progress.json").exists():
-        progress = json.loads((folder / "progress.json").read_text())  # its protocol: see check_started
+        progress = runs.read_json(folder / "progress.json")  # its protocol: see check_started
+    # A kill between a chunk's checkpoint and its progress.json leaves a newer checkpoint
+    # that nothing else records: drop it, that chunk runs again (to the same result).
+    runs.drop_steps_after(manager, progress["done"])
+    if progress["done"]:
+        intact, skipped = runs.intact_step(manager, progress["done"])
+        for line in skipped:
+            print(f"warning: {method}: {line}; skipped", file=sys.stderr, flush=True)
+        if intact != progress["done"]:
+            progress = rewind(progress, intact or 0)
+            print(f"warning: {method}: continuing from update {progress['done']}", file=sys.stderr, flush=True)
+            runs.drop_steps_after(manager, progress["done"])
     # The platform of the updates still to come (experiments.numerics).
     progress["numerics"], warning = numerics.extend(progress.get("numerics"), progress["done"])
     if warning:
         print(f"warning: {method}: {warning}", file=sys.stderr, flush=True)
-    # A kill between a chunk's checkpoint and its progress.json leaves a newer checkpoint
-    # that nothing else records: drop it, that chunk runs again (to the same result).
-    runs.drop_steps_after(manager, progress["done"])
     if progress["done"]:
         restored = runs.restore(manager, progress["done"], {"states": states, "best": best_params})
         states, best_params = restored["states"], restored["best"]
@@ -345,10 +369,19 @@ def run_method(method: str, args: Args, bar, evaluator, folder: Path, budget: li
         states, metrics = run(states, env_params, n)
         metrics = jax.tree.map(np.asarray, metrics)  # [seeds, n]
         loss = metrics["losses/total_loss"]
-        if not np.isfinite(loss).all():
-            seed, update = np.argwhere(~np.isfinite(loss))[0]
-            runs.fail(f"{method}: non-finite loss at update {done + update + 1} of seed {seeds[seed]}; sweep stopped "
-                      f"(its last good checkpoint, update {done}, is kept in {folder})", 1)  # fmt: skip
+        finite = runs.finite_seeds(states, len(seeds))
+        if not np.isfinite(loss).all() or not finite.all():
+            kept = (f"its last checkpoint, update {manager.latest_step()} (finite), is kept in {folder}"
+                    if manager.latest_step() is not None else "no checkpoint was written (the first chunk diverged)")
+            if not np.isfinite(loss).all():
+                seed, update = np.argwhere(~np.isfinite(loss))[0]
+                what = f"non-finite loss at update {done + update + 1} of seed {seeds[seed]}"
+            else:
+                what = f"non-finite parameters after update {done + n} in seed(s) {[s for s, ok in zip(seeds, finite) if not ok]}"
+            runs.fail(f"{method}: {what}; sweep stopped, {kept}; a lower learning rate may help", 1)
+        warning = runs.divergence(metrics)
+        if warning:
+            print(f"warning: {method}, updates {done + 1}-{done + n}: {warning}", file=sys.stderr, flush=True)
         progress["curves"].append(metrics["charts/success_rate"].tolist())
         for name in filter(metrics.__contains__, DIAGNOSTICS):  # each seed's mean over the chunk
             progress.setdefault("diagnostics", {}).setdefault(name, []).append(metrics[name].mean(axis=1).tolist())

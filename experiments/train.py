@@ -5,10 +5,17 @@ Shows a progress bar (updates, frames/s, success rate, ETA); writes per-update m
 chunk (the best model by validation SR is kept: model selection), and at the end the test
 evaluation of the selected model (JSON and Markdown) and a learning-curve PNG.
 
-`--resume` continues an interrupted run from its last checkpoint and ends bit-identical to
-an uninterrupted run with the same seed on the same platform (run.json records the platform
-of each stretch of updates, and a resume on another one warns: `experiments.numerics`).  An existing run folder is never overwritten
-without `--resume` or `--overwrite`.
+`--resume` continues an interrupted run from its last intact checkpoint (a corrupt one is
+skipped, saying so) and ends bit-identical to an uninterrupted run with the same seed on the
+same platform (run.json records the platform of each stretch of updates, and a resume on
+another one warns: `experiments.numerics`).  With `--resume`, `--num-updates` beyond the
+run's extends it; any other flag that differs from the run's is refused (`resume_conflicts`);
+a finished run is left as it is.  An existing run folder is never overwritten without
+`--resume` or `--overwrite`, and one process at a time writes it (`runs.claim`).
+
+Parameters and optimiser state are checked finite before every checkpoint: a run that
+produced NaN or inf stops with an error naming its last finite checkpoint; a loss or
+gradient norm far out of range, or a collapsed entropy, is warned of (`runs.divergence`).
 """
 
 from __future__ import annotations
@@ -78,6 +85,19 @@ def build(args: Args):
     return config, schedule
 
 
+def resume_conflicts(args: Args, info: dict) -> list[str]:
+    """The flags given with --resume (those not at their defaults: one at its default
+    cannot be told from one not given) whose values differ from the run's, as
+    `--flag value (the run has ...)`; --num-updates is not one (it extends the run)."""
+    config, schedule = info["config"], info["schedule"]
+    run = {"method": info.get("arm", info["method"]), "setup": config["setup"], "preset": info["preset"],
+           "seed": info["seed"], "num_lanes": config["num_lanes"], "learning_rate": config["learning_rate"],
+           **{k: schedule[k] for k in ("chunk_updates", "test_episodes_per_room", "val_episodes_per_room")}}  # fmt: skip
+    defaults = Args()
+    return [f"--{k.replace('_', '-')} {getattr(args, k)} (the run has {v})" for k, v in run.items()
+            if getattr(args, k) != getattr(defaults, k) and getattr(args, k) != v]  # fmt: skip
+
+
 def main(args: Args) -> dict:
     from foresit_jax.config import Config
     from foresit_jax.evaluate import Evaluator, agent_params
@@ -92,12 +112,24 @@ def main(args: Args) -> dict:
     if args.resume:
         info = runs.read_run_info(out)
         selection.check_resumable(info.get("selection_protocol"), str(out))
+        clash = resume_conflicts(args, info)
+        if clash:
+            raise runs.UserError(f"--resume continues {out} with its own settings; drop {', '.join(clash)} "
+                                 "(only --num-updates may differ: it extends the run)")  # fmt: skip
         config = Config(**info["config"])
         schedule = Schedule(**info["schedule"])
         seed = info["seed"]
+        if args.num_updates is not None and args.num_updates < config.num_updates:
+            raise runs.UserError(f"--num-updates {args.num_updates} would shorten {out} ({config.num_updates} updates); "
+                                 "--resume can only extend a run")  # fmt: skip
+        if args.num_updates is not None and args.num_updates != config.num_updates:
+            config = dataclasses.replace(config, num_updates=args.num_updates)
+            print(f"extending {out} to {config.num_updates} updates (it had {info['config']['num_updates']})")
+            info = {**info, "config": dataclasses.asdict(config)}
+            runs.write_run_info(out, info)
     else:
         seed = args.seed
-        info = {"method": config.method, "preset": args.preset, "seed": seed,
+        info = {"method": config.method, "arm": args.method, "preset": args.preset, "seed": seed,
                 "config": dataclasses.asdict(config), "schedule": dataclasses.asdict(schedule),
                 "selection_protocol": selection.PROTOCOL_VERSION, "numerics": numerics.extend(None, 0)[0]}  # fmt: skip
         runs.write_run_info(out, info)
@@ -109,12 +141,25 @@ def main(args: Args) -> dict:
     manager = runs.checkpoint_manager(out / "checkpoints", schedule.keep_checkpoints)
     best_manager = runs.checkpoint_manager(out / "best", 1)
     done = 0
+    if args.resume and (out / "results_test.json").is_file() and (manager.latest_step() or 0) >= config.num_updates:
+        print(f"{out} is finished ({config.num_updates} updates) and its results are written; nothing to do "
+              "(pass --num-updates N to extend it)")  # fmt: skip
+        return runs.read_json(out / "results_test.json")["results"]
     if args.resume and manager.latest_step() is not None:
-        done = int(manager.latest_step())
-        state = runs.restore(manager, done, state)
-        print(f"resuming {out} from update {done}")
+        intact, skipped = runs.intact_step(manager)
+        for line in skipped:
+            print(f"warning: {line}; skipped", file=sys.stderr, flush=True)
+        if intact is None:
+            print(f"warning: no intact checkpoint in {out / 'checkpoints'}; starting again from update 0",
+                  file=sys.stderr, flush=True)  # fmt: skip
+        else:
+            done = int(intact)
+            state = runs.restore(manager, done, state)
+            print(f"resuming {out} from update {done}")
+        runs.drop_steps_after(manager, done)  # the corrupt ones skipped
+        runs.drop_steps_after(best_manager, done)  # a best model of those updates is chosen again
     if args.resume:  # the platform of the updates still to come (experiments.numerics)
-        history, warning = numerics.extend(info.get("numerics"), done)
+        history, warning = numerics.extend(numerics.rewind(info.get("numerics"), done), done)
         if history != info.get("numerics"):
             runs.write_run_info(out, {**info, "numerics": history})
         if warning:
@@ -155,9 +200,16 @@ def main(args: Args) -> dict:
         new_state, metrics = run_chunk(state, env_params, n)
         metrics = jax.tree.map(np.asarray, metrics)
         bad = runs.first_nonfinite(metrics)
-        if bad is not None:
-            runs.fail(f"non-finite loss at update {done + bad + 1}; training stopped, the last good checkpoint "
-                      f"(update {done}) is kept in {out / 'checkpoints'}", status=1)  # fmt: skip
+        if bad is not None or not runs.finite_seeds(new_state):
+            what = f"non-finite loss at update {done + bad + 1}" if bad is not None else (
+                f"non-finite parameters after update {done + n} (the loss, computed before each update, was finite)")
+            kept = manager.latest_step()
+            kept = (f"its last checkpoint (update {kept}, finite) is kept in {out / 'checkpoints'}" if kept is not None
+                    else "no checkpoint was written (the first chunk diverged)")  # fmt: skip
+            runs.fail(f"{what}; training stopped, {kept}; a lower --learning-rate may help", status=1)
+        warning = runs.divergence(metrics)
+        if warning:
+            print(f"warning: updates {done + 1}-{done + n}: {warning}", file=sys.stderr, flush=True)
         state = new_state
         rows = runs.metric_rows(metrics, done, last_row)
         last_row = rows[-1]
@@ -168,7 +220,7 @@ def main(args: Args) -> dict:
         dt = time.time() - t0
         useful = float(np.sum(metrics["frames/useful"]))  # steps that entered the loss
         bar(n, {"useful fps": f"{useful / dt:,.0f}", "SR": f"{metrics['charts/success_rate'].mean():.3f}",
-                "val SR": f"{val['overall']['SR']:.1f}%"})  # fmt: skip
+                "val SR": f"{val['overall']['SR']:.1f}%", **({"warning": "diverging"} if warning else {})})  # fmt: skip
         chunks_run += 1
         if args.stop_after_chunks is not None and chunks_run >= args.stop_after_chunks and done < total:
             bar(0, None)

@@ -8,6 +8,7 @@ a config: use `dataclasses.replace(config, field=value)` for a variant (it re-va
 from __future__ import annotations
 
 import dataclasses
+import math
 
 from foresit_jax.methods import GRADIENTS, ROLLOUTS, Method, parse_method
 
@@ -175,6 +176,10 @@ class Config:
                 raise ValueError(f"{name} must be >= 1, got {value}.")
         if isinstance(self.maml_inner_updates, bool) or not isinstance(self.maml_inner_updates, int) or self.maml_inner_updates < 0:
             raise ValueError(f"maml_inner_updates must be an int >= 0, got {self.maml_inner_updates!r}.")
+        for f in dataclasses.fields(self):  # inf or NaN breaks a run and cannot be saved in strict JSON
+            value = getattr(self, f.name)
+            if isinstance(value, float) and not math.isfinite(value):
+                raise ValueError(f"{f.name} must be a finite number, got {value!r}.")
         for name in ("learning_rate", "imagination_lr", "max_grad_norm", "rnd_variance", "maml_inner_lr"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)!r}.")
