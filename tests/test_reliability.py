@@ -9,6 +9,8 @@ range; a metrics line cut by a kill.
 
 from __future__ import annotations
 
+import dataclasses
+import errno
 import os
 import shutil
 import subprocess
@@ -221,6 +223,21 @@ def test_resume_skips_a_corrupt_checkpoint_and_ends_as_the_uninterrupted_run(run
         assert (out / name).read_bytes() == (run6 / name).read_bytes(), name
 
 
+def test_a_sweep_resumes_past_a_corrupt_checkpoint_to_the_same_numbers(tmp_path, capsys):
+    args = sweep.Args(methods=("a3c",), seeds=2, preset="tiny", seed=1, num_updates=6, progress=False,
+                      val_episodes_per_room=4, test_episodes_per_room=4)  # fmt: skip
+    whole, killed = tmp_path / "whole", tmp_path / "killed"
+    sweep.main(dataclasses.replace(args, out=whole))
+    assert sweep.main(dataclasses.replace(args, out=killed, stop_after_chunks=2)) is None
+    corrupt(killed / "methods" / "a3c" / "checkpoints" / "4", "flipped")
+    capsys.readouterr()
+    sweep.cli(["--out", str(killed), "--resume", "--no-progress"])
+    err = capsys.readouterr().err
+    assert "is corrupt or truncated" in err and "continuing from update 2" in err, err
+    for name in ("results_per_seed.json", "table1.csv"):
+        assert (killed / name).read_text() == (whole / name).read_text(), name
+
+
 def test_a_corrupt_best_model_is_one_line_and_the_good_results_stay(run6, tmp_path, capsys):
     out = tmp_path / "corrupt_best"
     shutil.copytree(run6, out)
@@ -368,6 +385,15 @@ def test_out_that_is_a_file_or_under_a_file_is_one_line(tmp_path, capsys):
         line = one_line_error(train_cli.cli, ["--preset", "tiny", "--out", out], capsys, code=code)
         assert str(a_file) in line, line
     assert a_file.read_text() == "mine"
+
+
+def test_a_full_disk_is_one_line_that_says_how_to_continue(tmp_path, capsys, monkeypatch):
+    def full(path, x):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+
+    monkeypatch.setattr(runs, "write_json", full)
+    line = one_line_error(train_cli.cli, ["--preset", "tiny", "--out", tmp_path / "full"], capsys, code=1)
+    assert line == f"error: {tmp_path / 'full' / 'run.json'}: No space left on device (free some space, then continue with --resume)"
 
 
 def test_search_learner_parses_every_variant_before_training(monkeypatch):
