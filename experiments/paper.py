@@ -573,6 +573,11 @@ def cli(argv=None) -> dict | None:
     return runs.run_cli(Args, main, argv)
 
 
-if __name__ == "__main__":
-    devices.split_host_into_devices()  # before jax starts (see experiments.devices)
+def console() -> None:
+    """The `foresit-paper` console script: as `python -m experiments.paper`."""
+    devices.split_host_into_devices()  # before jax starts: faster on a CPU (see experiments.devices)
     cli(sys.argv[1:])
+
+
+if __name__ == "__main__":
+    console()

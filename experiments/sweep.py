@@ -563,6 +563,11 @@ def cli(argv=None) -> None:
     runs.run_cli(Args, main, argv)
 
 
-if __name__ == "__main__":
+def console() -> None:
+    """The `foresit-sweep` console script: as `python -m experiments.sweep`."""
     devices.split_host_into_devices()  # before jax starts: faster on a CPU (see experiments.devices)
     cli(sys.argv[1:])
+
+
+if __name__ == "__main__":
+    console()

@@ -859,3 +859,21 @@ def test_readme_python_blocks_run_at_a_tiny_size():
             assert np.isfinite(np.asarray(metrics["losses/total_loss"])).all()
         if "envs.make" in body:
             assert "obs" in namespace and "state" in namespace
+
+
+def test_console_scripts_are_the_module_programs(monkeypatch, capsys):
+    """Each console script of pyproject.toml names a function that runs its module's CLI
+    (`foresit-train --help` prints train's usage)."""
+    import tomllib
+
+    scripts = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())["project"]["scripts"]
+    assert set(scripts) == {"foresit-train", "foresit-evaluate", "foresit-sweep", "foresit-paper", "foresit-probe"}
+    for name, target in scripts.items():
+        module, function = target.split(":")
+        assert module == f"experiments.{name.removeprefix('foresit-')}"
+        monkeypatch.setattr(sys, "argv", [name, "--help"])
+        monkeypatch.setenv("XLA_FLAGS", os.environ.get("XLA_FLAGS", ""))  # restored after (sweep sets it)
+        with pytest.raises(SystemExit) as exc:
+            getattr(importlib.import_module(module), function)()
+        assert exc.value.code == 0
+        assert importlib.import_module(module).Args.__doc__.split("\n")[0].strip() in capsys.readouterr().out
