@@ -396,6 +396,26 @@ def test_a_full_disk_is_one_line_that_says_how_to_continue(tmp_path, capsys, mon
     assert line == f"error: {tmp_path / 'full' / 'run.json'}: No space left on device (free some space, then continue with --resume)"
 
 
+def test_evaluate_on_a_read_only_run_folder_fails_before_evaluating(run6, tmp_path, capsys, monkeypatch):
+    """A read-only folder, simulated (these tests may run as root, whom permissions do not
+    stop): opening its lock file fails as on a read-only file system, before any work."""
+    out = tmp_path / "read_only"
+    shutil.copytree(run6, out)
+    (out / runs.LOCK_FILE).unlink()
+    real_open = os.open
+
+    def read_only(path, *args, **kwargs):
+        if str(path).startswith(str(out)):
+            raise OSError(errno.EROFS, os.strerror(errno.EROFS), str(path))
+        return real_open(path, *args, **kwargs)
+
+    monkeypatch.setattr(runs.os, "open", read_only)
+    monkeypatch.setattr(evaluate_cli, "selection", None)  # evaluating would fail on it: it must not get there
+    line = one_line_error(evaluate_cli.cli, ["--run", out, "--split", "val"], capsys)
+    assert line == f"error: {out / runs.LOCK_FILE}: {os.strerror(errno.EROFS)}"
+    assert not (out / "results_val.json").exists()
+
+
 def test_search_learner_parses_every_variant_before_training(monkeypatch):
     trained = []
     monkeypatch.setattr(search_learner, "run_variant", lambda args, overrides: trained.append(overrides))
