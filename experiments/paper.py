@@ -39,6 +39,7 @@ seeds, on several machines or one after another.
 from __future__ import annotations
 
 import dataclasses
+import importlib.util
 import functools
 import sys
 import time
@@ -165,6 +166,8 @@ def main(args: Args) -> dict | None:
     if args.resume:
         args = runs.resumed_args(args, "paper.json", "paper run", keep=keep)
     check(args)
+    if importlib.util.find_spec("sklearn") is None:  # Figure 4's t-SNE, drawn after the training
+        raise runs.UserError("the paper report needs scikit-learn (Figure 4's t-SNE): pip install 'foresit_jax[paper]'")
     for method in SETUP_OF:  # fail before any training
         sweep.method_schedule(method, dataclasses.replace(sweep.Args(), preset=args.preset, setup=SETUP_OF[method]))
     if not args.resume:

@@ -771,13 +771,17 @@ BENCH_ARGS = {  # commands whose flags are parsed here and which run in their ow
 }
 
 
-def readme_commands() -> list[list[str]]:
-    """Every `python -m experiments.X ...` of the README's bash blocks, as argv lists."""
+DOCS = {path.name: path.read_text() for path in sorted((REPO / "docs").glob("*.md"))}
+
+
+def readme_commands(text: str = README) -> list[list[str]]:
+    """Every `python -m experiments.X ...` of the bash blocks of `text` (the README's by
+    default), as argv lists (a line ending in a backslash continues on the next)."""
     commands = []
-    for lang, body in BLOCKS:
+    for lang, body in re.findall(r"```(\w+)\n(.*?)```", text, flags=re.S):
         if lang != "bash":
             continue
-        for line in body.splitlines():
+        for line in body.replace("\\\n", " ").splitlines():
             for part in line.split("&&"):
                 words = shlex.split(part, comments=True)
                 if words[:2] == ["python", "-m"] and words[2].startswith("experiments."):
@@ -796,6 +800,22 @@ def test_readme_commands_parse():
         assert dataclasses.is_dataclass(args)
     for module in set(re.findall(r"python -m (experiments\.\w+)", README)):
         assert importlib.util.find_spec(module) is not None, module
+    for link in re.findall(r"\]\(((?!https?:)[^)#]+)\)", README):  # relative links and the picture exist
+        assert (REPO / link).exists(), link
+
+
+@pytest.mark.parametrize("doc", sorted(DOCS))
+def test_docs_commands_parse(doc):
+    """The commands of docs/ name modules that exist, and their flags are accepted (the
+    README's also run, at a tiny size, below)."""
+    text = DOCS[doc]
+    for module, *argv in readme_commands(text):
+        parser = CLI_MODULES[module].Args if module in CLI_MODULES else BENCH_ARGS[module]()
+        assert dataclasses.is_dataclass(tyro.cli(parser, args=argv)), (doc, module, argv)
+    for module in set(re.findall(r"python -m (experiments\.\w+)", text)):
+        assert importlib.util.find_spec(module) is not None, (doc, module)
+    for link in re.findall(r"\]\(((?!https?:)[^)#]+)\)", text):  # relative links lead somewhere
+        assert (REPO / "docs" / link).exists(), (doc, link)
 
 
 def tiny_argv(module: str, argv: list[str], folder: Path) -> list[str]:
