@@ -881,6 +881,17 @@ def test_readme_python_blocks_run_at_a_tiny_size():
             assert "obs" in namespace and "state" in namespace
 
 
+def test_extending_blocks_run():
+    """docs/extending.md's Python blocks run as written (they are small by design)."""
+    blocks = re.findall(r"```python\n(.*?)```", DOCS["extending.md"], flags=re.S)
+    assert len(blocks) >= 2
+    for body in blocks:
+        exec(compile(body, "docs/extending.md", "exec"), {})  # noqa: S102
+    from foresit_jax import methods
+
+    assert "myint" not in methods.IMAGINATIONS  # the example cleans up after itself
+
+
 def test_console_scripts_are_the_module_programs(monkeypatch, capsys):
     """Each console script of pyproject.toml names a function that runs its module's CLI
     (`foresit-train --help` prints train's usage)."""
