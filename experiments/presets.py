@@ -13,7 +13,13 @@ fields given explicitly override both.
 
 from __future__ import annotations
 
+import ast
 import dataclasses
+import inspect
+import typing
+from typing import Annotated, Optional
+
+import tyro
 
 from envs.gridnav import TRAIN_TIME_LIMIT
 from foresit_jax.config import Config
@@ -117,3 +123,44 @@ def preset(name: str, method: str, **overrides) -> tuple[Config, Schedule]:
         required = {**required, "num_steps": max(fields.get("num_steps", Config.num_steps), TRAIN_TIME_LIMIT)}
     config = Config(method=method, **{**fields, **required, **given})
     return config, schedule
+
+
+# ---------------------------------------------------------------------- Config fields as flags
+def _field_docs(cls) -> dict[str, str]:
+    """The docstrings written under a dataclass's fields (one line each)."""
+    body = ast.parse(inspect.getsource(cls)).body[0].body
+    return {a.target.id: " ".join(b.value.value.split()) for a, b in zip(body, body[1:])
+            if isinstance(a, ast.AnnAssign) and isinstance(b, ast.Expr) and isinstance(b.value, ast.Constant)
+            and isinstance(b.value.value, str)}  # fmt: skip
+
+
+def config_fields(name: str, exclude: tuple[str, ...]) -> type:
+    """A frozen dataclass of every Config field but `exclude` (a CLI's own flags), each
+    optional and None by default: as a CLI's nested, unprefixed argument (`--gamma 0.9`,
+    `--room-types bathroom kitchen`) it overrides the preset's value of what it sets,
+    with Config's own documentation as its help."""
+    docs, hints = _field_docs(Config), typing.get_type_hints(Config)
+    fields = [(f.name, Annotated[Optional[hints[f.name]], tyro.conf.arg(help=docs.get(f.name, ""))],
+               dataclasses.field(default=None))
+              for f in dataclasses.fields(Config) if f.name not in exclude]  # fmt: skip
+    return dataclasses.make_dataclass(name, fields, frozen=True)
+
+
+# Fields no CLI sets: the method and setup are flags of their own, the action count is the
+# environment's.
+_NOT_FLAGS = ("method", "setup", "num_actions")
+
+
+def config_flag(fields_type: type):
+    """The annotation of a CLI's field holding `fields_type` (`config_fields`): unprefixed."""
+    return Annotated[fields_type, tyro.conf.OmitArgPrefixes,
+                     tyro.conf.arg(help="Config fields: each overrides the preset's value (default: the preset's)")]
+
+
+def given(fields) -> dict:
+    """The fields a user set in a `config_fields` instance (not None)."""
+    return {k: v for k, v in dataclasses.asdict(fields).items() if v is not None}
+
+
+TrainConfigFields = config_fields("TrainConfigFields", (*_NOT_FLAGS, "num_updates", "num_lanes", "learning_rate"))
+SweepConfigFields = config_fields("SweepConfigFields", (*_NOT_FLAGS, "num_updates"))

@@ -91,8 +91,7 @@ def models_of_sweep(folder: Path, methods: tuple[str, ...]) -> dict[str, list[Mo
     from experiments import sweep
 
     saved = runs.read_json(folder / "sweep.json")
-    args = sweep.Args(**{k: tuple(v) if isinstance(v, list) else v for k, v in saved.items() if k != "out"},
-                      out=folder)  # fmt: skip
+    args = runs.args_from_saved(sweep.Args, saved, out=folder)
     finished = [m for m in args.methods if sweep.finished_seeds(folder / "methods" / m)]
     unknown = [m for m in methods if m not in finished]
     if unknown:

@@ -151,15 +151,37 @@ def resumed_args(args, marker: str, kind: str, keep: tuple[str, ...]):
     in one line (a flag at its default cannot be told from one not given and is ignored);
     the fields in `keep` are taken from `args`."""
     prepare_run_dir(args.out, resume=True, overwrite=args.overwrite, marker=marker, kind=kind)
-    saved = read_json(args.out / marker)
-    saved = {k: tuple(v) if isinstance(v, list) else v for k, v in saved.items() if k != "out"}
+    started = args_from_saved(type(args), read_json(args.out / marker), out=args.out)
     defaults = type(args)()
-    clash = [f"--{k.replace('_', '-')} {getattr(args, k)} (started with {v})" for k, v in saved.items()
-             if jsonable(getattr(args, k)) not in (jsonable(getattr(defaults, k)), jsonable(v))]  # fmt: skip
+    clash = []
+    for f in dataclasses.fields(args):
+        if f.name in (*keep, "resume", "overwrite", "out"):
+            continue
+        mine, theirs, default = (getattr(x, f.name) for x in (args, started, defaults))
+        if dataclasses.is_dataclass(mine):  # nested flags (e.g. Config fields): each on its own
+            clash += [f"--{k.replace('_', '-')} {v} (started with {getattr(theirs, k)})"
+                      for k, v in dataclasses.asdict(mine).items()
+                      if v is not None and jsonable(v) != jsonable(getattr(theirs, k))]  # fmt: skip
+        elif jsonable(mine) not in (jsonable(default), jsonable(theirs)):
+            clash.append(f"--{f.name.replace('_', '-')} {mine} (started with {theirs})")
     if clash:
         raise UserError(f"--resume continues {args.out} with the arguments it was started with; drop {', '.join(clash)}")
-    return dataclasses.replace(type(args)(**{**saved, "out": args.out}), resume=True,
-                               **{k: getattr(args, k) for k in keep})  # fmt: skip
+    return dataclasses.replace(started, resume=True, **{k: getattr(args, k) for k in keep})
+
+
+def args_from_saved(cls, saved: dict, **given):
+    """A CLI's arguments (`cls`, a dataclass) from what `write_started_args` saved: JSON
+    lists back to tuples, nested dataclasses rebuilt (a field saved before it existed
+    takes its default); `given` overrides."""
+    defaults, values = cls(), {}
+    for f in dataclasses.fields(cls):
+        if f.name not in saved:
+            continue
+        value, default = saved[f.name], getattr(defaults, f.name)
+        if dataclasses.is_dataclass(default) and isinstance(value, dict):
+            value = type(default)(**{k: tuple(v) if isinstance(v, list) else v for k, v in value.items()})
+        values[f.name] = tuple(value) if isinstance(value, list) else value
+    return cls(**{**values, **given})
 
 
 def write_run_info(path: Path, info: dict) -> None:

@@ -37,7 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from experiments import devices, numerics, runs, selection, stats
-from experiments.presets import preset
+from experiments.presets import SweepConfigFields, config_flag, given, preset
 from experiments.progress import progress_bar
 from experiments.tables import markdown_table, write_csv
 
@@ -85,6 +85,8 @@ class Args:
     """Stop (as if killed) after this many chunks of this invocation; for testing --resume."""
     progress: bool = True
     """Show the progress bar."""
+    config: config_flag(SweepConfigFields) = dataclasses.field(default_factory=SweepConfigFields)
+    """Every other Config field for every method, e.g. --learning-rate 3e-4: the preset's (or the arm's) unless given."""
 
 
 # Training diagnostics kept per seed and chunk (the chunk's mean), in results.json: what
@@ -101,7 +103,7 @@ def seeds_of(args: Args) -> list[int]:
 
 def method_schedule(method: str, args: Args):
     """The preset's Config and Schedule of `method`, with the sweep's overrides."""
-    config, schedule = preset(args.preset, method, num_updates=args.num_updates, setup=args.setup)
+    config, schedule = preset(args.preset, method, num_updates=args.num_updates, setup=args.setup, **given(args.config))
     sched = {k: getattr(args, k) for k in ("test_episodes_per_room", "val_episodes_per_room")}
     return config, dataclasses.replace(schedule, **{k: v for k, v in sched.items() if v is not None})
 
@@ -111,7 +113,14 @@ def method_schedule(method: str, args: Args):
 # sweep is the run `train --seed s` makes (the same key, validation and test episodes),
 # whichever seeds were vmapped beside it (up to the float rounding of the vmapped program,
 # see the module docstring), so seeds of several sweeps combine into one.
-PROTOCOL = ("setup", "preset", "num_updates", "test_episodes_per_room", "val_episodes_per_room")
+PROTOCOL = ("setup", "preset", "num_updates", "test_episodes_per_room", "val_episodes_per_room", "config")
+
+
+def _protocol_value(args: Args, name: str):
+    """What a sweep's `name` of PROTOCOL is, as JSON: the Config fields it set (none for
+    a sweep saved before it could set them)."""
+    value = runs.jsonable(getattr(args, name))
+    return {k: v for k, v in value.items() if v is not None} if name == "config" else value
 
 
 def reuse_sources(args: Args) -> list[Path]:
@@ -124,9 +133,9 @@ def reuse_sources(args: Args) -> list[Path]:
             raise runs.UserError(f"--reuse {folder}: not a sweep folder (no sweep.json)")
         if folder.resolve() == Path(args.out).resolve():
             raise runs.UserError(f"--reuse {folder}: the sweep being written (--out); to continue it use --resume")
-        started = runs.read_json(folder / "sweep.json")
-        clash = [f"--{k.replace('_', '-')} {started.get(k)} there, {getattr(args, k)} here" for k in PROTOCOL
-                 if started.get(k) != getattr(args, k)]  # fmt: skip
+        started = runs.args_from_saved(Args, runs.read_json(folder / "sweep.json"), out=folder)
+        clash = [f"--{k.replace('_', '-')} {_protocol_value(started, k)} there, {_protocol_value(args, k)} here"
+                 for k in PROTOCOL if _protocol_value(started, k) != _protocol_value(args, k)]  # fmt: skip
         if clash:
             raise runs.UserError(f"--reuse {folder}: run with another protocol ({'; '.join(clash)}); "
                                  "only sweeps of the same protocol can be combined")  # fmt: skip
@@ -526,7 +535,7 @@ def main(args: Args) -> list[dict] | None:
     used = devices.seed_mesh(args.seeds).devices.size
     print(f"{len(args.methods)} method(s) x {args.seeds} seed(s), the seeds spread over {used} of the "
           f"{jax.device_count()} local device(s)", flush=True)  # fmt: skip
-    config, _ = preset(args.preset, args.methods[0], num_updates=args.num_updates, setup=args.setup)
+    config, _ = method_schedule(args.methods[0], args)
     evaluator = Evaluator(args.setup)  # one for the sweep: each method's evaluation compiles once
     bar = progress_bar(config.num_updates * len(args.methods), 0, args.progress)
     t0 = time.time()

@@ -30,7 +30,7 @@ import jax
 import numpy as np
 
 from experiments import numerics, runs, selection
-from experiments.presets import Schedule, preset
+from experiments.presets import Schedule, TrainConfigFields, config_flag, given, preset
 from experiments.progress import progress_bar
 
 
@@ -70,12 +70,14 @@ class Args:
     """Stop (as if interrupted) after this many chunks of this invocation; for testing --resume."""
     progress: bool = True
     """Show the progress bar."""
+    config: config_flag(TrainConfigFields) = dataclasses.field(default_factory=TrainConfigFields)
+    """Every other Config field, e.g. --gamma 0.9 --room-types bathroom: the preset's value unless given."""
 
 
 def build(args: Args):
     """Config and Schedule from the arguments (or from the run folder when resuming)."""
     overrides = dict(num_updates=args.num_updates, num_lanes=args.num_lanes, learning_rate=args.learning_rate,
-                     setup=args.setup)  # fmt: skip
+                     setup=args.setup, **given(args.config))  # fmt: skip
     config, schedule = preset(args.preset, args.method, **overrides)
     sched = {k: getattr(args, k) for k in ("chunk_updates", "test_episodes_per_room", "val_episodes_per_room")}
     schedule = dataclasses.replace(schedule, **{k: v for k, v in sched.items() if v is not None})
@@ -94,8 +96,10 @@ def resume_conflicts(args: Args, info: dict) -> list[str]:
            "seed": info["seed"], "num_lanes": config["num_lanes"], "learning_rate": config["learning_rate"],
            **{k: schedule[k] for k in ("chunk_updates", "test_episodes_per_room", "val_episodes_per_room")}}  # fmt: skip
     defaults = Args()
-    return [f"--{k.replace('_', '-')} {getattr(args, k)} (the run has {v})" for k, v in run.items()
-            if getattr(args, k) != getattr(defaults, k) and getattr(args, k) != v]  # fmt: skip
+    clash = [f"--{k.replace('_', '-')} {getattr(args, k)} (the run has {v})" for k, v in run.items()
+             if getattr(args, k) != getattr(defaults, k) and getattr(args, k) != v]  # fmt: skip
+    return clash + [f"--{k.replace('_', '-')} {v} (the run has {config[k]})" for k, v in given(args.config).items()
+                    if runs.jsonable(v) != config[k]]  # fmt: skip
 
 
 def main(args: Args) -> dict:

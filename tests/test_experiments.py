@@ -463,8 +463,8 @@ def test_a_sweep_arm_trains_its_own_config_and_is_probed_from_its_checkpoints(tm
     sweep.main(dataclasses.replace(sweep_args(out), methods=(arm,)))
     report = probe.main(probe.Args(run=out, episodes_per_room=2, windows=4))
     assert [r["seed"] for r in report[arm]] == [SEED, SEED + 1]
-    config, _, states, _ = sweep.load_method(arm, sweep.Args(**{**json.loads((out / "sweep.json").read_text()),
-                                                                 "methods": (arm,), "out": out}), out / "methods" / arm)  # fmt: skip
+    args = runs.args_from_saved(sweep.Args, runs.read_json(out / "sweep.json"), methods=(arm,), out=out)
+    config, _, states, _ = sweep.load_method(arm, args, out / "methods" / arm)
     assert config.imagination_input == "encoder" and "imagination_embed" in states.params["params"]["encoder"]
 
 
@@ -705,7 +705,10 @@ def test_the_sweep_command_asks_for_two_host_devices_unless_the_user_chose(monke
     monkeypatch.setenv("XLA_FLAGS", "--xla_force_host_platform_device_count=1")
     devices.split_host_into_devices()
     assert os.environ["XLA_FLAGS"] == "--xla_force_host_platform_device_count=1"
-    assert "devices.split_host_into_devices()" in (REPO / "experiments" / "sweep.py").read_text().split("__main__")[-1]
+    import inspect
+
+    assert "devices.split_host_into_devices()" in inspect.getsource(sweep.console)  # `foresit-sweep`
+    assert "console()" in (REPO / "experiments" / "sweep.py").read_text().split("__main__")[-1]  # python -m
 
 
 def test_seeds_go_to_the_most_devices_that_divide_them():
@@ -908,3 +911,49 @@ def test_console_scripts_are_the_module_programs(monkeypatch, capsys):
             getattr(importlib.import_module(module), function)()
         assert exc.value.code == 0
         assert importlib.import_module(module).Args.__doc__.split("\n")[0].strip() in capsys.readouterr().out
+
+
+def test_every_config_field_is_a_flag_of_train_and_sweep():
+    """Each Config field but the action count (the environment's) is a flag of train and
+    of sweep: its own, or one of the unprefixed Config fields (presets.config_fields)."""
+    wanted = {f.name for f in dataclasses.fields(Config)} - {"num_actions", "method"}
+    for cli in (train_cli, sweep):
+        own = {f.name for f in dataclasses.fields(cli.Args)}
+        nested = {f.name for f in dataclasses.fields(cli.Args().config)}
+        assert wanted <= own | nested and not own & nested, cli.__name__
+    args = tyro.cli(train_cli.Args, args=["--gamma", "0.9", "--room-types", "bathroom", "kitchen",
+                                          "--imagination-layer-sizes", "8", "128", "--maml-first-order", "True"])  # fmt: skip
+    config, _ = train_cli.build(args)
+    assert (config.gamma, config.room_types, config.maml_first_order) == (0.9, ("bathroom", "kitchen"), True)
+    assert config.entropy_coef == presets.preset("quick", "a3c+foresit")[0].entropy_coef  # the rest: the preset's
+
+
+def test_config_flags_reach_the_run_and_resume_refuses_other_values(tmp_path, capsys):
+    out = tmp_path / "gamma"
+    train_cli.main(dataclasses.replace(tiny_args(out, stop_after_chunks=1),
+                                       config=presets.TrainConfigFields(gamma=0.9, entropy_coef=0.02)))  # fmt: skip
+    assert (run_config(out).gamma, run_config(out).entropy_coef) == (0.9, 0.02)
+    line = cli_error(train_cli.cli, ["--out", out, "--resume", "--gamma", "0.5"], capsys)
+    assert "--gamma 0.5 (the run has 0.9)" in line
+    train_cli.cli(["--out", str(out), "--resume", "--gamma", "0.9", "--no-progress"])  # the run's own value: fine
+    assert runs.read_json(out / "results_test.json")["results"]
+
+
+def test_sweep_config_flags_are_saved_resumed_and_part_of_the_protocol(tmp_path, capsys):
+    base = sweep.Args(methods=("a3c",), seeds=1, preset="tiny", seed=SEED, progress=False, **SWEEP_EPISODES)
+    first = dataclasses.replace(base, out=tmp_path / "lr", config=presets.SweepConfigFields(learning_rate=3e-4))
+    assert sweep.main(dataclasses.replace(first, stop_after_chunks=1)) is None
+    line = cli_error(sweep.cli, ["--out", first.out, "--resume", "--learning-rate", "1e-3"], capsys)
+    assert "--learning-rate 0.001 (started with 0.0003)" in line
+    sweep.cli(["--out", str(first.out), "--resume", "--no-progress"])
+    config, *_ = sweep.load_method("a3c", first, first.out / "methods" / "a3c")
+    assert config.learning_rate == 3e-4
+    # Reuse takes only the sweeps of the same Config fields.
+    other = dataclasses.replace(base, out=tmp_path / "other", reuse=(first.out,))
+    line = cli_error(sweep.cli, ["--methods", "a3c", "--seeds", "1", "--preset", "tiny", "--seed", SEED,
+                                 "--out", other.out, "--reuse", first.out], capsys)  # fmt: skip
+    assert "run with another protocol" in line and "--config" in line
+    # A sweep saved before it had Config fields reads back with none set.
+    saved = runs.read_json(first.out / "sweep.json")
+    del saved["config"]
+    assert runs.args_from_saved(sweep.Args, saved).config == presets.SweepConfigFields()
