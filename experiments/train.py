@@ -24,12 +24,12 @@ import dataclasses
 import sys
 import time
 from pathlib import Path
-from typing import Optional
+from typing import Literal, Optional
 
 import jax
 import numpy as np
 
-from experiments import numerics, runs, selection
+from experiments import numerics, runs, selection, tracking
 from experiments.presets import Schedule, TrainConfigFields, config_flag, given, preset
 from experiments.progress import progress_bar
 
@@ -70,6 +70,9 @@ class Args:
     """Stop (as if interrupted) after this many chunks of this invocation; for testing --resume."""
     progress: bool = True
     """Show the progress bar."""
+    track: Literal["none", "tensorboard", "wandb"] = "none"
+    """Also log the metrics and validations to TensorBoard (<out>/tensorboard) or Weights & Biases
+    (offline without WANDB_API_KEY, <out>/wandb); needs pip install 'foresit_jax[track]'."""
     config: config_flag(TrainConfigFields) = dataclasses.field(default_factory=TrainConfigFields)
     """Every other Config field, e.g. --gamma 0.9 --room-types bathroom: the preset's value unless given."""
 
@@ -108,6 +111,7 @@ def main(args: Args) -> dict:
     from foresit_jax.train import make_trainer
 
     out = args.out
+    tracking.check(args.track)
     if not args.resume:
         # Validate the arguments before touching --out (with --overwrite, a typo must not
         # delete the existing run and then fail).
@@ -170,6 +174,7 @@ def main(args: Args) -> dict:
             print(f"warning: {warning}", file=sys.stderr, flush=True)
     runs.truncate_rows(out / "metrics", done)
     runs.truncate_rows(out / "validation", done)
+    tracker = tracking.make(args.track, out, info)
     best = selection.Selection()
     for r in runs.read_rows(out / "validation"):
         best.offer(r["SR"], r["update"])
@@ -179,6 +184,7 @@ def main(args: Args) -> dict:
         params = agent_params(state, config.sigma2_max, config.evaluation_noise)
         val = selection.validate(evaluator, params, config, seed, schedule.val_episodes_per_room)
         runs.append_rows(out / "validation", [{"update": done, **val["overall"]}])
+        tracker.log([{"update": done, **val["overall"]}], prefix="validation/")
         if best.offer(val["overall"]["SR"], done):
             runs.save(best_manager, done, params)
         return val
@@ -218,6 +224,7 @@ def main(args: Args) -> dict:
         rows = runs.metric_rows(metrics, done, last_row)
         last_row = rows[-1]
         runs.append_rows(out / "metrics", rows)
+        tracker.log(rows)
         done += n
         runs.save(manager, done, state)
         val = validate_and_select(state, done)  # model selection on the validation split
@@ -228,9 +235,11 @@ def main(args: Args) -> dict:
         chunks_run += 1
         if args.stop_after_chunks is not None and chunks_run >= args.stop_after_chunks and done < total:
             bar(0, None)
+            tracker.close()
             print(f"stopped after {chunks_run} chunks at update {done} (resume with --resume)")
             return {"stopped_at": done}
     bar(0, None)
+    tracker.close()
 
     # Final test evaluation of the model selected on validation.
     best_step = best_manager.latest_step()
