@@ -1,21 +1,40 @@
-"""The progress bar of training and sweeps (tqdm, advanced once per chunk on the host)."""
+"""The progress bar of training and sweeps (tqdm).
+
+It moves at the end of each chunk (with the chunk's postfix: frames/s, SR, validation SR)
+and, through `advance.at`, inside a chunk: the jitted chunk calls it after every update
+(`Trainer.run`'s `on_update`), so a 500-update chunk no longer sits still for half a minute.
+"""
 
 from __future__ import annotations
+
+import numpy as np
 
 
 def progress_bar(total: int, initial: int, enabled: bool):
     """A tqdm bar over `total` updates starting at `initial`; returns `advance(n, postfix)`:
-    call it with (n, {name: value}) after each chunk and with (0, None) to close the bar."""
+    call it with (n, {name: value}) after each chunk of n updates and with (0, None) to
+    close the bar. `advance.at(position)` moves the bar to `position` updates within a
+    chunk (never back; a vmapped chunk passes every seed's count, the furthest is taken)."""
     from tqdm import tqdm
 
     bar = tqdm(total=total, initial=initial, unit="upd", disable=not enabled, dynamic_ncols=True,
                bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} updates [{elapsed}<{remaining}{postfix}]")  # fmt: skip
+    chunk_end = [initial]
 
     def advance(n: int, postfix: dict | None) -> None:
         if postfix is None:
             bar.close()
             return
+        chunk_end[0] += n
         bar.set_postfix(postfix, refresh=False)
-        bar.update(n)
+        bar.update(chunk_end[0] - bar.n)
 
+    def at(position) -> None:
+        position = int(np.max(position))
+        if position > bar.n:
+            bar.update(position - bar.n)
+
+    advance.at = at
+    advance.position = lambda: chunk_end[0]  # where the last chunk ended
+    advance.enabled = enabled
     return advance

@@ -369,7 +369,10 @@ def run_method(method: str, args: Args, bar, evaluator, folder: Path, budget: li
     states = devices.shard_seeds(states, mesh)
     best = [selection.Selection(sr, update, devices.seed_slice(best_params, i))
             for i, (sr, update) in enumerate(zip(progress["best_sr"], progress["best_update"]))]  # fmt: skip
-    run = trainer.run_seeds
+    # With the bar shown, the chunk moves it after every update (`Trainer.run`'s on_update;
+    # the state's update count is this method's, the bar counts every method's).
+    offset = bar.position() - progress["done"]
+    run = trainer.seeds_runner(lambda update: bar.at(offset + np.max(update))) if bar.enabled else trainer.run_seeds
     done, history = progress["done"], progress["history"]
     while done < config.num_updates:
         if budget[0] is not None and budget[0] <= 0:

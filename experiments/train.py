@@ -21,6 +21,7 @@ gradient norm far out of range, or a collapsed entropy, is warned of (`runs.dive
 from __future__ import annotations
 
 import dataclasses
+import functools
 import sys
 import time
 from pathlib import Path
@@ -197,11 +198,13 @@ def main(args: Args) -> dict:
     elif done and best.update == done and best_manager.latest_step() != done:
         runs.save(best_manager, done, agent_params(state, config.sigma2_max, config.evaluation_noise))
 
-    run_chunk = jax.jit(trainer.run, static_argnums=2)
     previous_rows = runs.read_rows(out / "metrics")
     last_row = previous_rows[-1] if previous_rows else None
     total = config.num_updates
     bar = progress_bar(total, done, args.progress)
+    # With the bar shown, the chunk moves it after every update (a host callback that reads
+    # the update counter only: the same numbers).
+    run_chunk = jax.jit(functools.partial(trainer.run, on_update=bar.at if args.progress else None), static_argnums=2)
     chunks_run = 0
     t_start = time.time()
     while done < total:

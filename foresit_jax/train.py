@@ -273,9 +273,22 @@ class Trainer:
         }
         return w_params, buffers, metrics
 
-    def run(self, state: RunnerState, env_params, num_updates: int) -> tuple[RunnerState, dict]:
-        """`num_updates` updates in a `lax.scan`; metrics stacked `[num_updates]`."""
-        return jax.lax.scan(lambda s, _: self.update(s, env_params), state, None, length=num_updates)
+    def run(self, state: RunnerState, env_params, num_updates: int, on_update: Callable | None = None
+            ) -> tuple[RunnerState, dict]:  # fmt: skip
+        """`num_updates` updates in a `lax.scan`; metrics stacked `[num_updates]`.
+
+        `on_update`, if given, is a host function called after every update with the
+        state's update count (`jax.debug.callback`; under vmap, once per seed): for a
+        progress display inside a long jitted chunk. It reads a counter only, so the
+        numbers are those of a run without it (tests/test_train.py)."""
+
+        def body(s, _):
+            s, metrics = self.update(s, env_params)
+            if on_update is not None:
+                jax.debug.callback(on_update, s.update)
+            return s, metrics
+
+        return jax.lax.scan(body, state, None, length=num_updates)
 
     @functools.cached_property
     def run_seeds(self):
@@ -283,7 +296,12 @@ class Trainer:
         env_params, num_updates (static)) -> (states, metrics `[seeds, num_updates]`).
         Built once per Trainer, so that every chunk (and every sweep of this Trainer)
         reuses its compiled programs; the seed axis may be sharded over devices."""
-        return jax.jit(jax.vmap(self.run, in_axes=(0, None, None)), static_argnums=2)
+        return self.seeds_runner(None)
+
+    def seeds_runner(self, on_update: Callable | None):
+        """`run_seeds` with `on_update` (see `run`)."""
+        return jax.jit(jax.vmap(functools.partial(self.run, on_update=on_update), in_axes=(0, None, None)),
+                       static_argnums=2)  # fmt: skip
 
     def train(self, key: chex.PRNGKey) -> tuple[RunnerState, dict]:
         """The whole run in one jittable function: init, then `config.num_updates` updates."""

@@ -274,3 +274,25 @@ def test_training_on_an_easy_setting_raises_the_success_rate():
     _, _, first, last = H.easy_setting_run(config, *H.bathroom_env())
     assert first < 0.3, first
     assert last > 0.5 and last > first + 0.25, (first, last)
+
+
+def test_the_progress_callback_sees_every_update_and_changes_no_number():
+    """`Trainer.run`'s on_update (the progress bar inside a chunk) is called after every
+    update with the update count (vmapped over seeds: once per seed), and the states and
+    metrics are those of a run without it, bit for bit."""
+    trainer = H.trainer(FORESIT)
+    state = H.jitted_init(FORESIT)(jax.random.PRNGKey(3))
+    seen = []
+    plain = jax.jit(trainer.run, static_argnums=2)(state, trainer.env_params, 3)
+    reported = jax.jit(functools.partial(trainer.run, on_update=lambda u: seen.append(np.asarray(u).tolist())),
+                       static_argnums=2)(state, trainer.env_params, 3)  # fmt: skip
+    jax.block_until_ready(reported)
+    H.assert_trees_bitwise_equal(plain, reported)
+    assert seen == [1, 2, 3]
+    states = jax.vmap(trainer.init)(jax.random.split(jax.random.PRNGKey(4), 2))
+    seen.clear()
+    plain = trainer.run_seeds(states, trainer.env_params, 2)
+    reported = trainer.seeds_runner(lambda u: seen.append(np.asarray(u).tolist()))(states, trainer.env_params, 2)
+    jax.block_until_ready(reported)
+    H.assert_trees_bitwise_equal(plain, reported)
+    assert sorted(seen) == [1, 1, 2, 2], seen  # vmapped: once per seed and update
