@@ -384,11 +384,24 @@ def _digest(folder: Path) -> str:
 
 
 def save(manager, step: int, tree) -> None:
-    """Save `tree` as checkpoint `step` and record its checksum (`verify`)."""
+    """Save `tree` as checkpoint `step` and record its checksum (`verify`). A disk too full
+    for it is an OSError (ENOSPC) before orbax starts writing: orbax's failure in the
+    middle of a write prints hundreds of lines from its storage threads."""
     import orbax.checkpoint as ocp
 
-    manager.save(step, args=ocp.args.StandardSave(tree), force=True)
-    manager.wait_until_finished()
+    folder = Path(str(manager.directory))
+    need = sum(int(getattr(leaf, "nbytes", 0)) for leaf in jax.tree.leaves(tree))
+    free = shutil.disk_usage(folder).free
+    if free < need * 1.25 + (1 << 20):
+        raise OSError(errno.ENOSPC, f"No space left on device for checkpoint {step} (about {need / 2**20:.1f} MB; "
+                                    f"{free / 2**20:.1f} MB free)", str(folder))  # fmt: skip
+    try:
+        manager.save(step, args=ocp.args.StandardSave(tree), force=True)
+        manager.wait_until_finished()
+    except Exception as e:
+        if "No space left on device" in str(e) or "os_error_code='28'" in str(e):
+            raise OSError(errno.ENOSPC, f"No space left on device while writing checkpoint {step}", str(folder)) from None
+        raise
     folder = step_dir(manager, step)
     write_json(folder / CHECKSUM_FILE, {"sha256": _digest(folder)})
 

@@ -396,6 +396,18 @@ def test_a_full_disk_is_one_line_that_says_how_to_continue(tmp_path, capsys, mon
     assert line == f"error: {tmp_path / 'full' / 'run.json'}: No space left on device (free some space, then continue with --resume)"
 
 
+def test_a_disk_too_full_for_a_checkpoint_is_one_line_before_orbax_writes(tmp_path, capsys, monkeypatch):
+    """(A real full disk, a 20 MB tmpfs with a filler, gave this line, and the run resumed
+    to the files of an uninterrupted one once the filler was deleted; orbax failing in the
+    middle of a write printed 931 lines.)"""
+    usage = shutil.disk_usage(tmp_path)
+    monkeypatch.setattr(runs.shutil, "disk_usage", lambda path: usage._replace(free=100_000))
+    out = tmp_path / "full_at_checkpoint"
+    line = one_line_error(train_cli.cli, ["--preset", "tiny", "--out", out, "--no-progress"], capsys, code=1)
+    assert "No space left on device for checkpoint 2" in line and "continue with --resume" in line, line
+    assert not list((out / "checkpoints").iterdir())
+
+
 def test_evaluate_on_a_read_only_run_folder_fails_before_evaluating(run6, tmp_path, capsys, monkeypatch):
     """A read-only folder, simulated (these tests may run as root, whom permissions do not
     stop): opening its lock file fails as on a read-only file system, before any work."""
