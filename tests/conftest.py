@@ -34,6 +34,18 @@ def pytest_configure(config):
     jax.config.update("jax_compilation_cache_dir", os.environ.get(_CACHE))
 
 
+@pytest.fixture(scope="module")
+def cheap_experiments():
+    """In-process calls of the experiments CLIs made cheap for a test module
+    (`train_helpers.patch_for_experiments`); a module asks for it with
+    `pytestmark = pytest.mark.usefixtures("cheap_experiments")`."""
+    import train_helpers
+
+    with pytest.MonkeyPatch.context() as mp:
+        train_helpers.patch_for_experiments(mp)
+        yield
+
+
 # Module-scoped fixtures that train (tens of seconds each): the tests that use one are
 # sent to one xdist worker together (`--dist loadgroup` in pyproject.toml), so it is built
 # once, not once on each worker.

@@ -34,11 +34,8 @@ REPO = Path(__file__).resolve().parents[1]
 SEED = 3
 
 
-@pytest.fixture(scope="module", autouse=True)
-def cheap_experiments():
-    with pytest.MonkeyPatch.context() as mp:
-        H.patch_for_experiments(mp)
-        yield
+# Cheap in-process CLI calls for every test of this module (tests/conftest.py).
+pytestmark = pytest.mark.usefixtures("cheap_experiments")
 
 
 def tiny_args(out: Path, **kwargs) -> train_cli.Args:

@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 
 import envs
-import train_helpers as H
 from envs.metrics import LENGTH_BUCKETS, bucket_label, by_length
 from experiments import paper
 from test_experiments import cli_error
@@ -24,11 +23,8 @@ SECTIONS = ("## Platforms", "## Table 1", "### savn setup", "### org setup", "##
             "## Figure 4", "## Figure 3", "## Learning curves")  # fmt: skip
 
 
-@pytest.fixture(scope="module", autouse=True)
-def cheap_experiments():
-    with pytest.MonkeyPatch.context() as mp:
-        H.patch_for_experiments(mp)
-        yield
+# Cheap in-process CLI calls for every test of this module (tests/conftest.py).
+pytestmark = pytest.mark.usefixtures("cheap_experiments")
 
 
 def test_tiny_report_has_every_table_figure_and_claim_after_a_kill_resume_and_reuse(tmp_path, capsys):

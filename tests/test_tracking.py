@@ -11,16 +11,12 @@ from pathlib import Path
 
 import pytest
 
-import train_helpers as H
 from experiments import runs, tracking
 from experiments import train as train_cli
 
 
-@pytest.fixture(scope="module", autouse=True)
-def cheap_experiments():
-    with pytest.MonkeyPatch.context() as mp:
-        H.patch_for_experiments(mp)
-        yield
+# Cheap in-process CLI calls for every test of this module (tests/conftest.py).
+pytestmark = pytest.mark.usefixtures("cheap_experiments")
 
 
 def tiny(out: Path, **kwargs) -> train_cli.Args:
