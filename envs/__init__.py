@@ -27,7 +27,7 @@ def make(env_id: str = "GridNav-v0", setup: str = "savn", split: str = "train", 
 
     Args:
       env_id: "GridNav-v0".
-      setup: "savn" or "org" (see DESIGN.md).
+      setup: "savn" or "org" (see docs/design.md).
       split: "train" (layouts 1-20), "val" (21, 23, ..., 29) or "test" (22, 24, ..., 30).
       room_types: None for all four, or some of "kitchen", "living_room", "bedroom",
         "bathroom" (names or indices).

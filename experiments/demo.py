@@ -54,7 +54,7 @@ class DemoConfig:
     out: Path = Path("runs/demo")
     """folder for the pictures and results.md"""
     setup: Literal["savn", "org"] = "savn"
-    """target setup (see DESIGN.md)"""
+    """target setup (see docs/design.md)"""
     overwrite: bool = False
     """replace files that already exist in --out"""
     seed: int = 0

@@ -13,8 +13,8 @@ for one episode, padded to `T` steps; `valid_t` is 1 for the steps of that episo
 
 * `terminated_t` (the agent chose Done): nothing follows, no bootstrap.
 * `truncated_t` (time limit): also no bootstrap, as in SAVN (its `a3c_loss` sets R = 0
-  whenever the episode is over, time limit included). DESIGN.md: "the time-limit
-  bootstraps nothing".
+  whenever the episode is over, time limit included); docs/design.md, one update's step 4:
+  "Done and the time limit bootstrap nothing".
 * padding: a padding step neither contributes (outputs are zeroed) nor is bootstrapped
   from (the step before it gets discount 0 even without a done flag).
 

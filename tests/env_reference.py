@@ -2,7 +2,7 @@
 
 Nothing here calls into ``envs`` except for the enum values of ``envs.catalog`` (cell
 types, height bands, semantic classes, actions), so the tests compare the jitted
-environment against code written from the specification (DESIGN.md and the docstring of
+environment against code written from the specification (docs/design.md and the docstring of
 ``envs/raycast.py``), not against itself.
 
 - ``reference_view``: the first-person view by marching each ray in tiny steps.
@@ -21,7 +21,7 @@ import numpy as np
 from envs import catalog as C
 
 # --------------------------------------------------------------------------- spec facts
-# Written out by hand from DESIGN.md / the raycast docstring (not imported from envs).
+# Written out by hand from docs/design.md / the raycast docstring (not imported from envs).
 FIELD_OF_VIEW_DEG = 100.0
 # Heading 0 = north (row - 1), clockwise in 45 degree steps.
 SPEC_DELTAS = ((-1, 0), (-1, 1), (0, 1), (1, 1), (1, 0), (1, -1), (0, -1), (-1, -1))

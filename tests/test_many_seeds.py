@@ -1,4 +1,4 @@
-"""A seed sweep with many seeds in one program finishes (DESIGN.md's known hazard: a
+"""A seed sweep with many seeds in one program finishes (docs/design.md's known hazard: a
 16-seed vmapped loop was seen to hang on jax 0.10.2's CPU backend), and the seeds differ."""
 
 import jax
