@@ -11,7 +11,7 @@ A run folder holds:
 
 Every checkpoint gets a checksum of its files at save (`save`), checked before it is
 restored (`restore`): a corrupt or truncated one is one line naming it, and a resume falls
-back to the newest intact one (`intact_steps`).
+back to the newest intact one (`intact_step`).
 """
 
 from __future__ import annotations
