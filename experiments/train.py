@@ -204,7 +204,8 @@ def main(args: Args) -> dict:
     bar = progress_bar(total, done, args.progress)
     # With the bar shown, the chunk moves it after every update (a host callback that reads
     # the update counter only: the same numbers).
-    run_chunk = jax.jit(functools.partial(trainer.run, on_update=bar.at if args.progress else None), static_argnums=2)
+    run_chunk = jax.jit(functools.partial(trainer.run, on_update=bar.at) if args.progress else trainer.run,
+                        static_argnums=2)  # fmt: skip
     chunks_run = 0
     t_start = time.time()
     while done < total:

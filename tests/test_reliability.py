@@ -162,8 +162,8 @@ def test_nan_weights_in_a_later_chunk_stop_the_run_naming_a_checkpoint_that_exis
     trainer = H.cached_trainer(Config(**runs.read_run_info(out)["config"]))
     real_run = trainer.run
 
-    def poisoned(state, env_params, n):  # the chunk's loss stays finite; its weights do not
-        state, metrics = real_run(state, env_params, n)
+    def poisoned(state, env_params, n, **kwargs):  # the chunk's loss stays finite; its weights do not
+        state, metrics = real_run(state, env_params, n, **kwargs)
         return state._replace(params=jax.tree.map(lambda x: x * jnp.nan, state.params)), metrics
 
     monkeypatch.setattr(trainer, "run", poisoned)
