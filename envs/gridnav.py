@@ -258,7 +258,6 @@ class GridNav:
         }
         return new_state, reward, terminated, truncated, info
 
-    # ----------------------------------------------------------------- observation
     def _checked_action(self, action) -> jax.Array:
         """`action` as int32, refusing a non-integer dtype (at trace time) and, with
         ``check_actions``, a value outside 0..5 (at run time, through a host callback)."""
@@ -271,6 +270,7 @@ class GridNav:
             jax.debug.callback(_raise_on_bad_action, action)
         return action
 
+    # ----------------------------------------------------------------- observation
     def view(self, state: EnvState, params: EnvParams):
         """(sem int32 [3, W], depth float32 [3, W] in cells) seen from the state's pose."""
         bank = params.bank

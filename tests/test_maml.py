@@ -229,8 +229,14 @@ def _meta_objective(first_order: bool):
     return jax.jit(jax.value_and_grad(objective), compiler_options=H.FAST_COMPILE), params
 
 
+def enable_x64():
+    """float64 inside a `with`: `jax.enable_x64(True)` where jax has it (0.10 does, and
+    has no `jax.experimental.enable_x64`; 0.7 has only the latter)."""
+    return jax.enable_x64(True) if hasattr(jax, "enable_x64") else jax.experimental.enable_x64()
+
+
 def test_meta_gradient_matches_finite_differences_and_has_its_second_order_term():
-    with jax.experimental.enable_x64():
+    with enable_x64():
         value_and_grad, params = _meta_objective(first_order=False)
         objective = lambda p: value_and_grad(p)[0]  # noqa: E731  (one compiled program)
         value, grads = value_and_grad(params)
