@@ -1,7 +1,7 @@
 """The progress bar of training and sweeps (tqdm).
 
 It moves at the end of each chunk (with the chunk's postfix: frames/s, SR, validation SR)
-and, through `advance.at`, inside a chunk: the jitted chunk calls it after every update
+and, through `advance.at`, inside a chunk: the jitted chunk calls it every 10th update
 (`Trainer.run`'s `on_update`), so a 500-update chunk no longer sits still for half a minute.
 """
 

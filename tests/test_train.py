@@ -15,6 +15,7 @@ import pytest
 
 import train_helpers as H
 from foresit_jax import imagination
+from foresit_jax import train as train_module
 
 FORESIT = H.tiny_config("a3c+foresit")
 
@@ -278,17 +279,18 @@ def test_training_on_an_easy_setting_raises_the_success_rate():
 
 def test_the_progress_callback_sees_every_update_and_changes_no_number():
     """`Trainer.run`'s on_update (the progress bar inside a chunk) is called after every
-    update with the update count (vmapped over seeds: once per seed), and the states and
-    metrics are those of a run without it, bit for bit."""
+    PROGRESS_EVERY-th update with the update count (vmapped over seeds: after every update,
+    once per seed), and the states and metrics are those of a run without it, bit for bit."""
     trainer = H.trainer(FORESIT)
     state = H.jitted_init(FORESIT)(jax.random.PRNGKey(3))
     seen = []
-    plain = jax.jit(trainer.run, static_argnums=2)(state, trainer.env_params, 3)
+    n = 2 * train_module.PROGRESS_EVERY + 1
+    plain = jax.jit(trainer.run, static_argnums=2)(state, trainer.env_params, n)
     reported = jax.jit(functools.partial(trainer.run, on_update=lambda u: seen.append(np.asarray(u).tolist())),
-                       static_argnums=2)(state, trainer.env_params, 3)  # fmt: skip
+                       static_argnums=2)(state, trainer.env_params, n)  # fmt: skip
     jax.block_until_ready(reported)
     H.assert_trees_bitwise_equal(plain, reported)
-    assert seen == [1, 2, 3]
+    assert seen == [train_module.PROGRESS_EVERY, 2 * train_module.PROGRESS_EVERY]
     states = jax.vmap(trainer.init)(jax.random.split(jax.random.PRNGKey(4), 2))
     seen.clear()
     plain = trainer.run_seeds(states, trainer.env_params, 2)
