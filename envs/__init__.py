@@ -8,10 +8,15 @@
 ``envs`` knows nothing of the agent.  Building a split's scene bank takes seconds the first
 time; it is then cached on disk (``envs.bank``: ``$FORESIT_CACHE_DIR``, default
 ``~/.cache/foresit_jax``; ``FORESIT_NO_CACHE=1`` turns that off).  gymnax-style code:
-``envs.spaces`` mirrors gymnax's space classes (``envs.spaces.to_gymnax`` converts them),
-``envs.wrappers`` has ``FlattenObservationWrapper``, ``LogWrapper`` and
-``LegacyStepAPIWrapper`` (five-value step).
+``envs.make_gymnax`` returns ``(env, params)`` as ``gymnax.make`` does (flat float32
+observations, gymnax's spaces, the installed gymnax's step convention: ``envs.gymnax_compat``),
+and registers GridNav with gymnax's registry when gymnax has been imported before ``envs``
+(else ``envs.register_gymnax()``).  ``envs.spaces`` mirrors gymnax's space classes
+(``envs.spaces.to_gymnax`` converts them), ``envs.wrappers`` has
+``FlattenObservationWrapper``, ``LogWrapper`` and ``LegacyStepAPIWrapper`` (five-value step).
 """
+
+import sys
 
 from envs import catalog, metrics, spaces, wrappers
 from envs.bank import SceneBank, pose_from_index, pose_index
@@ -45,7 +50,13 @@ def make(env_id: str = "GridNav-v0", setup: str = "savn", split: str = "train", 
     return env, env.make_params(split, room_types=room_types, training=training)
 
 
+from envs.gymnax_compat import make_gymnax, register_gymnax  # noqa: E402 (needs make and REGISTERED)
+
+if "gymnax" in sys.modules:  # importing gymnax costs seconds: register only if the user has
+    register_gymnax()
+
 __all__ = [
     "ACTIONS", "ROOM_TYPES", "SPLITS", "EnvParams", "EnvState", "GridNav", "SceneBank", "catalog",
-    "make", "metrics", "pose_from_index", "pose_index", "spaces", "time_limits", "wrappers",
+    "make", "make_gymnax", "metrics", "pose_from_index", "pose_index", "register_gymnax", "spaces",
+    "time_limits", "wrappers",
 ]  # fmt: skip

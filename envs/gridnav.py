@@ -11,6 +11,8 @@ reward, termination, ``info`` keys) is in the docstring of ``GridNav``.
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -159,8 +161,9 @@ class GridNav:
         bank = make_bank(self.setup, C.scene_numbers(split, rooms), self.grid_size, self.view_width)
         return EnvParams(bank=bank, max_steps=time_limits(split == "train" if training is None else training))
 
-    @property
+    @functools.cached_property
     def default_params(self) -> EnvParams:
+        """The training split's params, built on first use and kept (not rebuilt per access)."""
         return self.make_params("train")
 
     def action_space(self, params: EnvParams | None = None) -> spaces.Discrete:

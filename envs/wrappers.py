@@ -1,16 +1,17 @@
 """Wrappers (gymnax style): a flat observation vector, the five-value legacy step API and
 episode statistics.
 
-A PureJaxRL-style stack over GridNav::
+A PureJaxRL-style stack over GridNav (``envs.make_gymnax`` gives the first two layers in
+one call, with gymnax's space classes)::
 
     env, params = envs.make("GridNav-v0")
-    env = LegacyStepAPIWrapper(LogWrapper(FlattenObservationWrapper(env)))
+    env = LogWrapper(LegacyStepAPIWrapper(FlattenObservationWrapper(env)))
     # env.observation_space(params).shape == (N,), env.action_space(params).n == 6
     # obs, state, reward, done, info = env.step(key, state, action, params)
 
-``FlattenObservationWrapper`` and ``LogWrapper`` (ours) take the six-value step of GridNav;
-``FlattenObservationWrapper`` also takes a five-value one, so PureJaxRL's own
-``LogWrapper`` can go over ``LegacyStepAPIWrapper(FlattenObservationWrapper(env))``.
+``FlattenObservationWrapper`` and ``LogWrapper`` (ours) take the six-value step of GridNav
+and a five-value one, so PureJaxRL's own ``LogWrapper`` can go over
+``LegacyStepAPIWrapper(FlattenObservationWrapper(env))`` too.
 """
 
 from __future__ import annotations
@@ -122,46 +123,54 @@ class LegacyStepAPIWrapper(Wrapper):
 
 @struct.dataclass
 class LogEnvState:
+    """PureJaxRL's / gymnax's ``LogEnvState`` fields, plus the last episode's success and SPL."""
+
     env_state: object
-    episode_return: jax.Array  # float32 [] running return of the current episode
-    episode_length: jax.Array  # int32 [] running length of the current episode
-    returned_episode_return: jax.Array  # float32 [] return of the last finished episode
-    returned_episode_length: jax.Array  # int32 []
+    episode_returns: jax.Array  # float32 [] running return of the current episode
+    episode_lengths: jax.Array  # int32 [] running length of the current episode
+    returned_episode_returns: jax.Array  # float32 [] return of the last finished episode
+    returned_episode_lengths: jax.Array  # int32 []
     returned_episode_success: jax.Array  # bool []
     returned_episode_spl: jax.Array  # float32 [] envs.metrics.spl: success * L_opt / max(L, L_opt)
+    timestep: jax.Array  # int32 [] steps taken since reset (across episodes), the last one included
 
 
 class LogWrapper(Wrapper):
-    """Keeps the statistics of the last finished episode in the state and in ``info``:
-    ``returned_episode_return``, ``..._length``, ``..._success``, ``..._spl`` and
-    ``returned_episode`` (whether an episode ended at this step).  SPL is
-    ``envs.metrics.spl`` of the episode.  Works over the six-value step of GridNav (the
-    env's ``info`` must carry ``success`` and ``optimal_length``)."""
+    """Keeps the statistics of the last finished episode in the state and in ``info``,
+    under PureJaxRL's and gymnax's names: ``returned_episode_returns``,
+    ``returned_episode_lengths``, ``returned_episode`` (whether an episode ended at this
+    step) and ``timestep`` (steps since ``reset``, this one included, as PureJaxRL counts),
+    plus ``returned_episode_success`` and ``returned_episode_spl`` (``envs.metrics.spl`` of
+    the episode).  Works over a six-value step (GridNav) or a five-value one
+    (``envs.make_gymnax(step_api="done")``), and returns the same number of values; the
+    wrapped env's ``info`` must carry ``success`` and ``optimal_length``, as GridNav's does."""
 
     def reset(self, key, params=None):
         obs, env_state = self._env.reset(key, params)
         zero_f, zero_i = jnp.zeros((), jnp.float32), jnp.zeros((), jnp.int32)
-        return obs, LogEnvState(env_state, zero_f, zero_i, zero_f, zero_i, jnp.zeros((), bool), zero_f)
+        return obs, LogEnvState(env_state, zero_f, zero_i, zero_f, zero_i, jnp.zeros((), bool), zero_f, zero_i)
 
     def step(self, key, state, action, params=None):
-        obs, env_state, reward, terminated, truncated, info = self._env.step(key, state.env_state, action, params)
-        done = terminated | truncated
-        ret = state.episode_return + reward
-        length = state.episode_length + 1
+        obs, env_state, reward, *flags, info = self._env.step(key, state.env_state, action, params)
+        done = flags[0] | flags[1] if len(flags) == 2 else flags[0]
+        ret = state.episode_returns + reward
+        length = state.episode_lengths + 1
         spl = spl_term(info["success"], length, info["optimal_length"])
         state = LogEnvState(
             env_state=env_state,
-            episode_return=jnp.where(done, 0.0, ret),
-            episode_length=jnp.where(done, 0, length),
-            returned_episode_return=jnp.where(done, ret, state.returned_episode_return),
-            returned_episode_length=jnp.where(done, length, state.returned_episode_length),
+            episode_returns=jnp.where(done, 0.0, ret),
+            episode_lengths=jnp.where(done, 0, length),
+            returned_episode_returns=jnp.where(done, ret, state.returned_episode_returns),
+            returned_episode_lengths=jnp.where(done, length, state.returned_episode_lengths),
             returned_episode_success=jnp.where(done, info["success"], state.returned_episode_success),
             returned_episode_spl=jnp.where(done, spl, state.returned_episode_spl).astype(jnp.float32),
+            timestep=state.timestep + 1,
         )
         info = dict(info)
         info["returned_episode"] = done
-        info["returned_episode_return"] = state.returned_episode_return
-        info["returned_episode_length"] = state.returned_episode_length
+        info["returned_episode_returns"] = state.returned_episode_returns
+        info["returned_episode_lengths"] = state.returned_episode_lengths
         info["returned_episode_success"] = state.returned_episode_success
         info["returned_episode_spl"] = state.returned_episode_spl
-        return obs, state, reward, terminated, truncated, info
+        info["timestep"] = state.timestep
+        return (obs, state, reward, *flags, info)

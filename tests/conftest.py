@@ -49,7 +49,7 @@ def cheap_experiments():
 # Module-scoped fixtures that train (tens of seconds each): the tests that use one are
 # sent to one xdist worker together (`--dist loadgroup` in pyproject.toml), so it is built
 # once, not once on each worker.
-SHARED_TRAINING_FIXTURES = ("finished_run", "tiny_sweep")
+SHARED_TRAINING_FIXTURES = ("finished_run", "tiny_sweep", "ppo_run")
 
 
 # tryfirst: xdist's worker reads the marks in its own pytest_collection_modifyitems, which

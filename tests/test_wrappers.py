@@ -57,17 +57,20 @@ class ScriptedEnv:
         return jnp.zeros(2), state, jnp.float32(1.5), ended, jnp.array(False), info
 
 
-def test_log_wrapper_caps_spl_and_keeps_the_last_episode():
-    env = LogWrapper(ScriptedEnv())
+@pytest.mark.parametrize("five_values", [False, True], ids=["six-value step", "five-value step"])
+def test_log_wrapper_caps_spl_and_keeps_the_last_episode(five_values):
+    env = LogWrapper(LegacyStepAPIWrapper(ScriptedEnv()) if five_values else ScriptedEnv())
     _, state = env.reset(jax.random.key(0))
     step = jax.jit(env.step)
     seen = []
     for t in range(5):
-        _, state, _, _, _, info = step(jax.random.key(t), state, 0)
-        seen.append(tuple(float(info[f"returned_episode_{k}"]) for k in ("return", "length", "success", "spl")))
+        out = step(jax.random.key(t), state, 0)
+        assert len(out) == (5 if five_values else 6)
+        state, info = out[1], out[-1]
+        seen.append(tuple(float(info[f"returned_episode_{k}"]) for k in ("returns", "lengths", "success", "spl")))
         assert bool(info["returned_episode"]) == (t % 2 == 1)
     assert seen == [(0, 0, 0, 0), (3.0, 2, 1, 1.0), (3.0, 2, 1, 1.0), (3.0, 2, 1, 1.0), (3.0, 2, 1, 1.0)]
-    assert float(state.episode_return) == 1.5 and int(state.episode_length) == 1
+    assert float(state.episode_returns) == 1.5 and int(state.episode_lengths) == 1 and int(state.timestep) == 5
 
 
 NUM_ENVS, NUM_STEPS = 16, 120
@@ -107,9 +110,9 @@ def test_purejaxrl_style_loop_runs_under_jit(purejaxrl_rollout):
     w, c = base.view_width, base.num_semantic + 1
     chex.assert_shape(obsv["view"], (NUM_STEPS, NUM_ENVS, 3, w, c))
     chex.assert_shape(obsv["target"], (NUM_STEPS, NUM_ENVS, 300))
-    chex.assert_shape([action, reward, done, info["returned_episode_return"]], (NUM_STEPS, NUM_ENVS))
+    chex.assert_shape([action, reward, done, info["returned_episode_returns"]], (NUM_STEPS, NUM_ENVS))
     chex.assert_type([reward, done], [jnp.float32, bool])
-    chex.assert_tree_all_finite((obsv, reward, info["returned_episode_return"], info["returned_episode_spl"]))
+    chex.assert_tree_all_finite((obsv, reward, info["returned_episode_returns"], info["returned_episode_spl"]))
     np.testing.assert_array_equal(done, info["terminated"] | info["truncated"])
     np.testing.assert_array_equal(done, info["returned_episode"])
     assert bool(info["truncated"].any()) and bool(info["terminated"].any())
@@ -134,7 +137,7 @@ def test_log_wrapper_statistics_match_a_hand_accumulation(purejaxrl_rollout):
                 assert success == (info["terminated"][t, lane] and reward[t, lane] == np.float32(5.0))
                 last = (ret, length, success, success * optimal / max(length, optimal))
                 ends += 1
-            got = tuple(info[f"returned_episode_{k}"][t, lane] for k in ("return", "length", "success", "spl"))
+            got = tuple(info[f"returned_episode_{k}"][t, lane] for k in ("returns", "lengths", "success", "spl"))
             np.testing.assert_allclose(got[0], last[0], rtol=1e-6, atol=1e-6, err_msg=f"lane {lane} step {t}")
             assert got[1:3] == last[1:3], (lane, t, got, last)
             np.testing.assert_allclose(got[3], last[3], rtol=1e-6, err_msg=f"lane {lane} step {t}")

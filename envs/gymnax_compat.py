@@ -1,0 +1,201 @@
+"""GridNav for code written against gymnax: ``envs.make_gymnax``.
+
+    env, params = envs.make_gymnax("GridNav-v0")   # where the code had gymnax.make("CartPole-v1")
+    obs, state = env.reset(key, params)            # obs: float32 [N], one flat vector
+    obs, state, reward, done, info = env.step(key, state, action, params)
+
+What it returns is what ``gymnax.make`` returns for one of gymnax's own environments:
+
+- the observation is one flat float32 vector (the layout of
+  ``envs.wrappers.FlattenObservationWrapper``: view, target, then ORG's detections), and
+  ``observation_space`` a ``Box`` of that size; ``action_space`` is ``Discrete(6)``.  The
+  space classes are gymnax's own (``gymnax.environments.spaces``) when gymnax is installed,
+  so its wrappers' ``isinstance`` checks pass, and ``envs.spaces``' look-alikes otherwise.
+- ``step`` resets automatically and follows the step convention of the gymnax that is
+  installed, which is what code written for that gymnax unpacks (``step_api``):
+
+  - ``"done"``, five values ``obs, state, reward, done, info`` with
+    ``done = terminated | truncated``: gymnax before 1.0, and PureJaxRL's ``ppo.py`` and
+    wrappers, which unpack five.  Chosen too when gymnax is not installed.
+    ``info`` has no ``final_observation`` unless ``final_observation=True``.
+  - ``"terminated_truncated"``, six values ``obs, state, reward, terminated, truncated,
+    info``: gymnax 1.0 and later.  ``info["final_observation"]`` (the flat observation
+    before the reset) is there by default, since gymnax 1.x's own
+    ``FlattenObservationWrapper`` reads it at every step.
+
+  Either way ``info`` holds GridNav's facts about the step (``success``,
+  ``episode_length``, ``optimal_length``, ``room_type``, ``scene``, ``target``,
+  ``terminated``, ``truncated``: ``envs.gridnav.GridNav``).
+- ``default_params`` is computed once (the params of the split asked for).
+- ``name``, ``num_actions``, ``reset_env``, ``step_env`` (no automatic reset; the same
+  number of values as ``step``) and ``get_obs``, as gymnax's ``Environment`` has them.
+
+``register_gymnax()`` adds GridNav-v0 to gymnax's registry (gymnax 1.0 and later have
+one; it returns False for an older gymnax or none), after which
+``gymnax.make("GridNav-v0", **kwargs)`` is ``make_gymnax`` with those keywords.
+``import envs`` registers it when gymnax has been imported already; importing gymnax takes
+seconds, so ``envs`` never imports it itself.  gymnax is an optional dependency: nothing
+here needs it.
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib.metadata
+import importlib.util
+import re
+
+import jax
+
+from envs import spaces
+from envs.gridnav import GridNav
+from envs.wrappers import FlattenObservationWrapper
+
+STEP_APIS = ("auto", "done", "terminated_truncated")
+
+
+def installed_gymnax_version() -> tuple[int, ...] | None:
+    """(major, minor, patch) of the installed gymnax, or None when it is not installed."""
+    if importlib.util.find_spec("gymnax") is None:
+        return None
+    try:
+        text = importlib.metadata.version("gymnax")
+    except importlib.metadata.PackageNotFoundError:  # importable but without metadata
+        return None
+    return tuple(int(part) for part in re.findall(r"\d+", text)[:3])
+
+
+def default_step_api() -> str:
+    """The step convention of the installed gymnax: six values from 1.0 on, five before
+    (and without gymnax, PureJaxRL's five)."""
+    version = installed_gymnax_version()
+    return "terminated_truncated" if version is not None and version >= (1,) else "done"
+
+
+def _space_classes():
+    """gymnax's space module when gymnax is installed, else ``envs.spaces``."""
+    if installed_gymnax_version() is None:
+        return spaces
+    from gymnax.environments import spaces as gymnax_spaces  # optional dependency
+
+    return gymnax_spaces
+
+
+class GymnaxGridNav:
+    """GridNav behind the interface of a gymnax ``Environment`` (see the module docstring).
+
+    Build it with ``make_gymnax``.  ``reset`` and ``step`` are jitted with the environment
+    static, as gymnax's are; under an outer jit or vmap they trace inline.
+    """
+
+    def __init__(self, env: GridNav, params, step_api: str):
+        self._flat = FlattenObservationWrapper(env)
+        self.gridnav = env
+        self.step_api = step_api
+        self._params = params
+
+    # ----------------------------------------------------------------- gymnax API
+    @property
+    def name(self) -> str:
+        return self.gridnav.name
+
+    @property
+    def num_actions(self) -> int:
+        return self.gridnav.num_actions
+
+    @property
+    def default_params(self):
+        """The params of the split ``make_gymnax`` was asked for, built once."""
+        return self._params
+
+    @property
+    def final_observation(self) -> bool:
+        return self.gridnav.final_observation
+
+    def observation_space(self, params=None):
+        box = self._flat.observation_space(params)
+        return _space_classes().Box(box.low, box.high, box.shape, box.dtype)
+
+    def action_space(self, params=None):
+        return _space_classes().Discrete(self.num_actions)
+
+    @functools.partial(jax.jit, static_argnames=("self",))
+    def reset(self, key: jax.Array, params=None):
+        return self.reset_env(key, self.default_params if params is None else params)
+
+    @functools.partial(jax.jit, static_argnames=("self",))
+    def step(self, key: jax.Array, state, action, params=None):
+        params = self.default_params if params is None else params
+        return self._in_convention(*self._flat.step(key, state, action, params))
+
+    def reset_env(self, key: jax.Array, params):
+        return self._flat.reset(key, params)
+
+    def step_env(self, key: jax.Array, state, action, params):
+        obs, state, reward, terminated, truncated, info = self.gridnav.step_env(key, state, action, params)
+        return self._in_convention(self._flat.flatten(obs, params), state, reward, terminated, truncated, info)
+
+    def get_obs(self, state, params=None):
+        params = self.default_params if params is None else params
+        return self._flat.flatten(self.gridnav.get_obs(state, params), params)
+
+    def _in_convention(self, obs, state, reward, terminated, truncated, info):
+        if self.step_api == "done":
+            return obs, state, reward, terminated | truncated, info
+        return obs, state, reward, terminated, truncated, info
+
+    def __repr__(self) -> str:
+        return f"GymnaxGridNav({self.gridnav.setup!r}, step_api={self.step_api!r})"
+
+
+def make_gymnax(env_id: str = "GridNav-v0", *, step_api: str = "auto", final_observation: bool | None = None,
+                setup: str = "savn", split: str = "train", room_types=None, training: bool | None = None,
+                **env_kwargs):
+    """``(env, params)`` as ``gymnax.make`` returns them (see the module docstring).
+
+    Args:
+      env_id: "GridNav-v0".
+      step_api: "auto" (the installed gymnax's convention: ``default_step_api()``),
+        "done" (five values) or "terminated_truncated" (six).
+      final_observation: put the flat observation before the automatic reset in
+        ``info["final_observation"]``; by default only with the six-value step.
+      setup, split, room_types, training, env_kwargs: as ``envs.make``.
+    """
+    from envs import make  # envs/__init__ imports this module
+
+    if step_api not in STEP_APIS:
+        raise ValueError(f"step_api must be one of {STEP_APIS}, got {step_api!r}")
+    step_api = default_step_api() if step_api == "auto" else step_api
+    if final_observation is None:
+        final_observation = step_api == "terminated_truncated"
+    env, params = make(env_id, setup=setup, split=split, room_types=room_types, training=training,
+                       final_observation=bool(final_observation), **env_kwargs)
+    wrapped = GymnaxGridNav(env, params, step_api)
+    return wrapped, wrapped.default_params
+
+
+def _gymnax_factory(env_id: str, **kwargs) -> GymnaxGridNav:
+    return make_gymnax(env_id, **kwargs)[0]
+
+
+def register_gymnax() -> bool:
+    """Add GridNav's ids to gymnax's registry, so that ``gymnax.make("GridNav-v0", **kw)``
+    works.  Returns whether gymnax has a registry to add to (gymnax 1.0 and later).
+    Calling it again is harmless."""
+    from envs import REGISTERED
+
+    if installed_gymnax_version() is None:
+        return False
+    from gymnax import registration  # optional dependency
+
+    register = getattr(registration, "register", None)
+    if register is None:  # gymnax before 1.0: make() is a fixed list
+        return False
+    for env_id in REGISTERED:
+        if env_id not in getattr(registration, "registered_envs", ()):
+            register(env_id, functools.partial(_gymnax_factory, env_id))
+    return True
+
+
+__all__ = ["STEP_APIS", "GymnaxGridNav", "default_step_api", "installed_gymnax_version", "make_gymnax",
+           "register_gymnax"]

@@ -1,0 +1,165 @@
+"""envs.make_gymnax: GridNav as gymnax.make returns an environment (flat float32
+observations, gymnax's spaces, the installed gymnax's step convention, cached default
+params), checked against GridNav itself; and the registration with gymnax's registry.  The
+tests that need gymnax are skipped with a reason without it (CI installs it: the dev extra).
+The PPO loops over it are tests/test_envs_purejaxrl_ppo.py."""
+
+import subprocess
+import sys
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import envs
+from envs import gymnax_compat
+from envs import spaces as own_spaces
+from envs.wrappers import FlattenObservationWrapper
+
+GYMNAX = gymnax_compat.installed_gymnax_version()
+needs_gymnax = pytest.mark.skipif(GYMNAX is None, reason="gymnax is not installed (pip install -e '.[gymnax]')")
+needs_gymnax_1 = pytest.mark.skipif(GYMNAX is None or GYMNAX < (1,), reason="needs gymnax >= 1.0 (its registry)")
+ROOMS = ("bathroom",)
+
+
+@pytest.fixture(scope="module")
+def pair():
+    """The five- and six-value forms over one scene bank, and GridNav itself."""
+    five, params = envs.make_gymnax(room_types=ROOMS, step_api="done", final_observation=True)
+    six = gymnax_compat.GymnaxGridNav(five.gridnav, params, "terminated_truncated")
+    return five, six, params
+
+
+def rollout(env, params, actions, key=0):
+    """Steps ``env`` (one lane) through ``actions``; returns each step's outputs (numpy)."""
+    obs, state = env.reset(jax.random.key(key), params)
+    outs = [(np.asarray(obs),)]
+    for t, action in enumerate(actions):
+        out = env.step(jax.random.key(1000 + t), state, jnp.int32(action), params)
+        state = out[1]
+        outs.append(jax.tree.map(np.asarray, (out[0], *out[2:])))
+    return outs
+
+
+def test_both_conventions_step_as_gridnav_does(pair):
+    """Same keys and actions: the observation is GridNav's, flattened; the five-value step's
+    done is terminated | truncated of the six-value one; the rest is identical."""
+    five, six, params = pair
+    flat = FlattenObservationWrapper(five.gridnav)
+    # Done at once ends an episode; then a walk long enough to hit the 30-step limit.
+    actions = [5] + [0, 1, 0, 2, 3, 4] * 6
+    a, b = rollout(five, params, actions), rollout(six, params, actions)
+    obs, state = five.gridnav.reset(jax.random.key(0), params)
+    np.testing.assert_array_equal(a[0][0], np.asarray(flat.flatten(obs)))
+    np.testing.assert_array_equal(a[0][0], b[0][0])
+    ends = 0
+    for t, action in enumerate(actions, start=1):
+        obs_g, state, reward_g, term, trunc, info_g = five.gridnav.step(
+            jax.random.key(1000 + t - 1), state, jnp.int32(action), params)
+        obs5, reward5, done5, info5 = a[t]
+        obs6, reward6, term6, trunc6, info6 = b[t]
+        np.testing.assert_array_equal(obs5, np.asarray(flat.flatten(obs_g)))
+        np.testing.assert_array_equal(obs5, obs6)
+        assert reward5 == reward6 == np.asarray(reward_g)
+        assert (bool(term6), bool(trunc6)) == (bool(term), bool(trunc))
+        assert bool(done5) == bool(term6 | trunc6)
+        ends += bool(done5)
+        np.testing.assert_array_equal(info5["final_observation"], np.asarray(flat.flatten(info_g["final_observation"])))
+        for key in ("success", "episode_length", "optimal_length", "room_type", "terminated", "truncated"):
+            assert info5[key] == info6[key] == np.asarray(info_g[key]), key
+    assert bool(a[1][2]) and ends == 2  # the Done, then the 30-step training limit
+
+
+def test_the_observation_is_flat_float32_inside_its_box(pair):
+    five, _, params = pair
+    space = five.observation_space(params)
+    obs, state = five.reset(jax.random.key(3), params)
+    assert obs.dtype == jnp.float32 and obs.shape == space.shape == (3 * 16 * (4 + 18 + 1) + 300,)
+    assert bool(space.contains(obs))
+    assert five.action_space(params).n == five.num_actions == 6
+    assert five.name == "GridNav-v0"
+    np.testing.assert_array_equal(five.get_obs(state, params), obs)
+
+
+def test_final_observation_by_default_only_with_six_values():
+    five, params = envs.make_gymnax(room_types=ROOMS, step_api="done")
+    six, _ = envs.make_gymnax(room_types=ROOMS, step_api="terminated_truncated")
+    _, state = five.reset(jax.random.key(0), params)
+    info5 = five.step(jax.random.key(1), state, jnp.int32(0), params)[-1]
+    info6 = six.step(jax.random.key(1), state, jnp.int32(0), params)[-1]
+    assert "final_observation" not in info5 and info6["final_observation"].shape == six.observation_space().shape
+
+
+def test_step_env_does_not_reset(pair):
+    five, six, params = pair
+    _, state = five.reset(jax.random.key(0), params)
+    for env, n in ((five, 5), (six, 6)):
+        out = env.step_env(jax.random.key(1), state, jnp.int32(5), params)  # Done: the episode ends
+        assert len(out) == n
+        obs, new_state = out[0], out[1]
+        assert int(new_state.time) == 1, "step_env must not reset"
+        np.testing.assert_array_equal(obs, env.get_obs(new_state, params))
+
+
+def test_default_params_are_built_once(monkeypatch):
+    from envs import gridnav
+
+    calls = []
+    real = gridnav.make_bank
+    monkeypatch.setattr(gridnav, "make_bank", lambda *a, **k: calls.append(a) or real(*a, **k))
+    env, params = envs.make_gymnax(room_types=ROOMS)
+    assert len(calls) == 1
+    assert env.default_params is env.default_params is params
+    grid = envs.GridNav()
+    assert grid.default_params is grid.default_params
+    assert len(calls) == 2
+    # params=None takes the default params, as in gymnax
+    obs, _ = env.reset(jax.random.key(0))
+    np.testing.assert_array_equal(obs, env.reset(jax.random.key(0), params)[0])
+    assert len(calls) == 2
+
+
+def test_a_wrong_step_api_is_refused():
+    with pytest.raises(ValueError, match="step_api must be one of"):
+        envs.make_gymnax(step_api="four")
+
+
+def test_without_gymnax_the_step_has_five_values_and_the_spaces_are_envs_own(monkeypatch):
+    monkeypatch.setattr(gymnax_compat, "installed_gymnax_version", lambda: None)
+    assert gymnax_compat.default_step_api() == "done"
+    assert gymnax_compat.register_gymnax() is False
+    env, params = envs.make_gymnax(room_types=ROOMS)
+    assert env.step_api == "done" and not env.final_observation
+    assert type(env.observation_space(params)) is own_spaces.Box
+    assert type(env.action_space(params)) is own_spaces.Discrete
+
+
+@needs_gymnax
+def test_with_gymnax_the_spaces_are_gymnax_own():
+    from gymnax.environments import spaces as gymnax_spaces
+
+    env, params = envs.make_gymnax(room_types=ROOMS)
+    assert isinstance(env.observation_space(params), gymnax_spaces.Box)
+    assert isinstance(env.action_space(params), gymnax_spaces.Discrete)
+    assert env.step_api == ("terminated_truncated" if GYMNAX >= (1,) else "done")
+
+
+@needs_gymnax_1
+def test_gymnax_make_builds_it_with_keywords_once_registered():
+    import gymnax
+
+    assert envs.register_gymnax() and envs.register_gymnax()  # a second call is harmless
+    env, params = gymnax.make("GridNav-v0", room_types=ROOMS, step_api="done", setup="org")
+    assert isinstance(env, gymnax_compat.GymnaxGridNav) and env.step_api == "done"
+    assert env.gridnav.setup == "org" and params is env.default_params
+    assert "GridNav-v0" in gymnax.registered_envs
+
+
+@needs_gymnax_1
+def test_importing_envs_after_gymnax_registers_it():
+    code = ("import gymnax, envs; env, p = gymnax.make('GridNav-v0', room_types=('bathroom',)); "
+            "print(type(env).__name__, env.step_api)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["GymnaxGridNav", "terminated_truncated"]
