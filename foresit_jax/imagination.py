@@ -6,8 +6,9 @@ unbatched (one env lane = one A3C agent) and stacked over lanes with `jax.vmap`
 (`jax.vmap(buffer_add)(buffers, ...)`), except `train_full_buffers`, which takes the
 stacked buffers `[B, M, ...]` because lanes update the shared f_w one after another.
 
-How the f_w update is wired (one training update = one episode per lane):
-  1. after the rollout, each successful lane adds (s_0, g_tau, ŝ_tau) to its buffer
+How the f_w update is wired (the Trainer calls this at every step of a window, in time
+order, `Trainer.store_and_train`):
+  1. each lane whose episode ended successfully at that step adds (s_0, g_tau, ŝ_tau) to its buffer
      (`buffer_add`, a no-op for failed episodes);
   2. `train_full_buffers(shared_params, buffers, ...)` visits the lanes whose buffer is
      full, in lane order. Each such lane copies the CURRENT shared parameters (including

@@ -6,11 +6,12 @@ recursions `lax.scan` over the leading axis only. `r_t` is the reward received a
 acting at step t, `v_t` the value estimate of the state at step t, `discount_t` the
 discount applied to whatever follows step t (0 where the episode ended there).
 
-Episode ends in a fixed-length padded rollout. One training update runs every env lane
-for one episode, padded to `T` steps; `valid_t` is 1 for the steps of that episode
+Episode ends inside a window. One training update runs every env lane for a window of
+`T` steps: with packed windows (the default) episodes follow one another and every step is
+valid; with whole-episode windows (`Config.rollout='episodes'`, and evaluation) each lane
+plays one episode padded to `T` steps, and `valid_t` is 1 for the steps of that episode
 (including its last one) and 0 for the padding after it. Three rules, in
 `episode_discounts`:
-
 * `terminated_t` (the agent chose Done): nothing follows, no bootstrap.
 * `truncated_t` (time limit): also no bootstrap, as in SAVN (its `a3c_loss` sets R = 0
   whenever the episode is over, time limit included); docs/design.md, one update's step 4:

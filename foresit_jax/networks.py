@@ -6,10 +6,12 @@
   Eq. 3-4 over the current episode's states (MLP on s*_t, ForeSIT).
 * `ImaginationNet`: f_w, 6 tanh layers with a bottleneck, [s_0 : g_tau] -> imagined s.
 * `ActorCritic`: Encoder + PolicyHead + Critic under one parameter tree (theta, omega),
-  with methods `step` (acting) and `critic` (values over an episode).
-* Pure helpers: `unroll`, `last_valid_index`, `last_step_attention`, `select_subgoal`,
-  `episode_attention_mask`. The LSTM cell's split form (used by acting and the replay
-  gradient) is in `foresit_jax.lstm`.
+  with methods `encoder_features` and `policy_logits` (acting and the replay) and
+  `critic` (values over a window).
+* Pure helpers: `causal_episode_mask`, `window_attention_mask` (which states each step
+  attends to), `masked_softmax`, `subgoals_of_rows` (the sub-goal each attention row
+  selects). The LSTM cell's split form (used by acting and the replay gradient) is in
+  `foresit_jax.lstm`.
 
 Every module works unbatched or with any leading batch dims (Dense acts on the last
 axis); the critic's time axis is the second to last of `states`.
@@ -17,20 +19,15 @@ axis); the critic's time axis is the second to last of `states`.
 
 from __future__ import annotations
 
-from typing import Any, Mapping, NamedTuple, Optional, Sequence
+from typing import Mapping, NamedTuple, Optional, Sequence
 
 import chex
 import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
-from foresit_jax import distributions
 from foresit_jax.layers import Dense, GridDense
 from foresit_jax.lstm import LSTMCarry, initial_carry, reset_carry  # noqa: F401 (re-exported)
-
-# f_w layer widths: 6 tanh layers, bottleneck 64, output = LSTM size (512).
-IMAGINATION_LAYER_SIZES: tuple[int, ...] = (512, 256, 64, 256, 512, 512)
-
 
 class Encoder(nn.Module):
     """SAVN encoder: observation, target and previous action probabilities -> s_t.
@@ -72,8 +69,8 @@ class Encoder(nn.Module):
     ) -> chex.Array:  # fmt: skip
         """The LSTM's input `[..., 3 * W * conv_features (+ F)]`: everything before the cell.
 
-        It depends on no carry, so a whole episode's features can be computed at once
-        (`Agent.replay`). `imagined [..., H]`: i_tau, only with `imagination_features`."""
+        It depends on no carry, so a whole window's features can be computed at once
+        (`foresit_jax.replay`). `imagined [..., H]`: i_tau, only with `imagination_features`."""
         view = obs["view"]  # [..., 3, W, Cv]
         target = obs["target"]  # [..., D]
         batch_shape = target.shape[:-1]
@@ -252,7 +249,7 @@ class ImaginationNet(nn.Module):
     the LSTM size; tanh everywhere, so the output lies in (-1, 1) like the LSTM's h.
     """
 
-    layer_sizes: Sequence[int] = IMAGINATION_LAYER_SIZES
+    layer_sizes: Sequence[int] = (512, 256, 64, 256, 512, 512)  # Config.imagination_layer_sizes
 
     @nn.compact
     def __call__(self, s_0: chex.Array, goal: chex.Array) -> chex.Array:
@@ -265,7 +262,7 @@ class ImaginationNet(nn.Module):
 class ActorCritic(nn.Module):
     """theta (encoder + policy) and omega (critic) under one parameter tree.
 
-    Methods (use with `apply(params, ..., method=ActorCritic.step)` etc.):
+    Methods (use with `apply(params, ..., method=ActorCritic.policy_logits)` etc.):
       encode(carry, obs, prev_action_probs, imagined) -> (carry, s_t [..., H])
       encoder_features(obs, prev_action_probs, imagined) -> LSTM input [..., F]
       policy_logits(s_t, imagined) -> logits [..., A]
@@ -356,71 +353,11 @@ class ActorCritic(nn.Module):
         return carry, s_t, logits, out.value
 
 
-def unroll(
-    model: ActorCritic,
-    params: Any,
-    carry: LSTMCarry,
-    obs_t: Mapping[str, chex.Array],
-    prev_action_probs_t: chex.Array,
-    imagined_t: Optional[chex.Array] = None,
-) -> tuple[LSTMCarry, chex.Array, chex.Array]:
-    """Run `ActorCritic.step` over a time-major sequence (for the loss).
-
-    obs_t leaves `[T, ...]`, prev_action_probs_t `[T, ..., A]`, imagined_t `[T, ..., H]`
-    (or None without imagination); carry `[..., H]` is the carry before step 0 (zeros at
-    an episode start; no reset inside, one episode per lane). Returns
-    (final carry, states [T, ..., H], logits [T, ..., A]).
-    """
-
-    def body(carry, inputs):
-        obs, prev_probs, imagined = inputs
-        carry, s_t, logits = model.apply(
-            params, carry, obs, prev_probs, imagined, method=ActorCritic.step
-        )
-        return carry, (s_t, logits)
-
-    carry, (states, logits) = jax.lax.scan(
-        body, carry, (obs_t, prev_action_probs_t, imagined_t)
-    )
-    return carry, states, logits
-
-
-def last_valid_index(valid: chex.Array) -> chex.Array:
-    """Index T of the last valid step, `[..., T] -> [...]` int32 (valid is a prefix)."""
-    return jnp.sum(valid.astype(jnp.int32), axis=-1) - 1
-
-
-def last_step_attention(alpha: chex.Array, valid: chex.Array) -> chex.Array:
-    """alpha of the last valid step T over s_0..s_T: `[..., T, T], [..., T] -> [..., T]`."""
-    index = last_valid_index(valid)  # [...]
-    return jnp.take_along_axis(alpha, index[..., None, None], axis=-2)[..., 0, :]
-
-
-def select_subgoal(
-    states: chex.Array, alpha_last: chex.Array, mode: str = "argmax"
-) -> chex.Array:
-    """Sub-goal ŝ_tau from an episode's states `[..., T, H]` and `alpha_last [..., T]`.
-
-    mode 'argmax' (ForeSIT): s_{t*}, t* = argmax_t alpha_t (first index on ties).
-    mode 'attention_average' (the `att` ablation): sum_j alpha_j s_j.
-    Both are stop-gradient (targets for f_w). Padding steps must carry alpha = 0
-    (`last_step_attention` guarantees it).
-    """
-    chex.assert_equal_shape_prefix([states, alpha_last], alpha_last.ndim)
-    states, alpha_last = jax.lax.stop_gradient((states, alpha_last))
-    if mode == "argmax":
-        index = jnp.argmax(alpha_last, axis=-1)  # [...]
-        return jnp.take_along_axis(states, index[..., None, None], axis=-2)[..., 0, :]
-    if mode == "attention_average":
-        return jnp.einsum("...t,...th->...h", alpha_last, states)
-    raise ValueError(f"Unknown sub-goal mode {mode!r}; use 'argmax' or 'attention_average'.")
-
-
 def subgoals_of_rows(keys: chex.Array, alpha: chex.Array, mode: str = "argmax") -> chex.Array:
     """The sub-goal each attention row would select: `keys [..., K, H]`, `alpha [..., R, K]`
-    -> `[..., R, H]` (stop-gradient), as `select_subgoal` does for one row: the key with
-    the largest weight ('argmax', first on ties) or the weighted average
-    ('attention_average'). Masked keys carry alpha = 0."""
+    -> `[..., R, H]` (stop-gradient, targets for f_w): the key with the largest weight
+    ('argmax', ForeSIT's s_{t*}, first on ties) or the weighted average
+    ('attention_average', the `att` ablation). Masked keys carry alpha = 0."""
     chex.assert_equal_shape_prefix([keys, alpha], keys.ndim - 2)
     keys, alpha = jax.lax.stop_gradient((keys, alpha))
     if mode == "argmax":
@@ -429,8 +366,3 @@ def subgoals_of_rows(keys: chex.Array, alpha: chex.Array, mode: str = "argmax") 
     if mode == "attention_average":
         return jnp.einsum("...rk,...kh->...rh", alpha, keys)
     raise ValueError(f"Unknown sub-goal mode {mode!r}; use 'argmax' or 'attention_average'.")
-
-
-def action_probs(logits: chex.Array) -> chex.Array:
-    """Softmax of the logits (the encoder's next `prev_action_probs`)."""
-    return distributions.probs(logits)

@@ -266,7 +266,21 @@ class CriticTest(chex.TestCase):
         self.assertEqual(shapes["value_head"]["out"]["kernel"], (256, 1))
 
 
+def unroll_steps(model, params, carry, obs_t, prev_action_probs_t, imagined_t=None):
+    """`ActorCritic.step` scanned over a time-major sequence (one episode per lane, no
+    reset): (final carry, states [T, ..., H], logits [T, ..., A])."""
+
+    def body(carry, inputs):
+        carry, s_t, logits = model.apply(params, carry, *inputs, method=networks.ActorCritic.step)
+        return carry, (s_t, logits)
+
+    carry, (states, logits) = jax.lax.scan(body, carry, (obs_t, prev_action_probs_t, imagined_t))
+    return carry, states, logits
+
+
 class SubgoalTest(chex.TestCase):
+    """subgoals_of_rows: the sub-goal each attention row selects (what the buffers get)."""
+
     def setUp(self):
         super().setUp()
         # Hand-made episode of 4 states plus one padding step.
@@ -283,42 +297,36 @@ class SubgoalTest(chex.TestCase):
         eye = dict(kernel=jnp.eye(3), bias=jnp.zeros(3))
         params = {"params": {**params["params"], "query": eye, "key": eye}}
         alpha = critic.apply(params, self.states, self.valid).alpha
-        alpha_last = networks.last_step_attention(alpha, self.valid)
+        alpha_last = alpha[3]
         expected = np.exp(np.array([0.0, 6.0, 0.0, 4.0]) / 2.0)
         np.testing.assert_allclose(alpha_last[:4], expected / expected.sum(), rtol=1e-5)
         self.assertEqual(float(alpha_last[4]), 0.0)
-        subgoal = networks.select_subgoal(self.states, alpha_last)
-        np.testing.assert_array_equal(subgoal, [0.0, 3.0, 0.0])
+        subgoal = networks.subgoals_of_rows(self.states, alpha[3:4])
+        np.testing.assert_array_equal(subgoal, [[0.0, 3.0, 0.0]])
 
     @chex.variants(with_jit=True, without_jit=True)
     def test_select_modes(self):
-        alpha = jnp.array([0.1, 0.2, 0.4, 0.3, 0.0])
-        argmax = self.variant(lambda s, a: networks.select_subgoal(s, a, "argmax"))
-        average = self.variant(lambda s, a: networks.select_subgoal(s, a, "attention_average"))
-        np.testing.assert_array_equal(argmax(self.states, alpha), [0.0, 0.0, 1.0])
-        np.testing.assert_allclose(average(self.states, alpha), [0.1 * 3.0, 0.2 * 3.0 + 0.3 * 2.0, 0.4 * 1.0], rtol=1e-6)
+        alpha = jnp.array([[0.1, 0.2, 0.4, 0.3, 0.0]])
+        argmax = self.variant(lambda s, a: networks.subgoals_of_rows(s, a, "argmax"))
+        average = self.variant(lambda s, a: networks.subgoals_of_rows(s, a, "attention_average"))
+        np.testing.assert_array_equal(argmax(self.states, alpha), [[0.0, 0.0, 1.0]])
+        np.testing.assert_allclose(average(self.states, alpha), [[0.1 * 3.0, 0.2 * 3.0 + 0.3 * 2.0, 0.4 * 1.0]],
+                                   rtol=1e-6)  # fmt: skip
         # Ties go to the first index.
-        tie = jnp.array([0.0, 0.4, 0.2, 0.4, 0.0])
-        np.testing.assert_array_equal(argmax(self.states, tie), [0.0, 3.0, 0.0])
+        tie = jnp.array([[0.0, 0.4, 0.2, 0.4, 0.0]])
+        np.testing.assert_array_equal(argmax(self.states, tie), [[0.0, 3.0, 0.0]])
 
-    def test_batched_and_stop_gradient(self):
-        states = jnp.stack([self.states, 2 * self.states])  # [2, T, 3]
-        alpha = jnp.array([[0, 0, 1.0, 0, 0], [1.0, 0, 0, 0, 0]])
-        out = networks.select_subgoal(states, alpha)
-        chex.assert_shape(out, (2, 3))
-        np.testing.assert_array_equal(out, [[0, 0, 1.0], [6.0, 0, 0]])
+    def test_rows_batched_and_stop_gradient(self):
+        states = jnp.stack([self.states, 2 * self.states])  # [2, K, 3]
+        alpha = jnp.array([[[0, 0, 1.0, 0, 0], [1.0, 0, 0, 0, 0]], [[1.0, 0, 0, 0, 0], [0, 0, 0, 1.0, 0]]])
+        out = networks.subgoals_of_rows(states, alpha)  # [2, R=2, 3]
+        chex.assert_shape(out, (2, 2, 3))
+        np.testing.assert_array_equal(out, [[[0, 0, 1.0], [3.0, 0, 0]], [[6.0, 0, 0], [0, 4.0, 0]]])
         for mode in ("argmax", "attention_average"):
-            grad = jax.grad(lambda s: networks.select_subgoal(s, alpha, mode).sum())(states)
+            grad = jax.grad(lambda s: networks.subgoals_of_rows(s, alpha, mode).sum())(states)
             np.testing.assert_array_equal(grad, 0.0)
         with self.assertRaisesRegex(ValueError, "mode"):
-            networks.select_subgoal(states, alpha, "median")
-
-    def test_last_valid_index(self):
-        valid = jnp.array([[1, 1, 1, 0], [1, 1, 1, 1], [1, 0, 0, 0]])
-        np.testing.assert_array_equal(networks.last_valid_index(valid), [2, 3, 0])
-        alpha = jnp.arange(3 * 16, dtype=jnp.float32).reshape(3, 4, 4)
-        rows = networks.last_step_attention(alpha, valid)
-        np.testing.assert_array_equal(rows, np.stack([alpha[0, 2], alpha[1, 3], alpha[2, 0]]))
+            networks.subgoals_of_rows(states, alpha, "median")
 
 
 class ImaginationNetTest(chex.TestCase):
@@ -382,7 +390,7 @@ class ActorCriticTest(chex.TestCase):
         imagined = np.tanh(self.rng.normal(size=(T, B, H))).astype(np.float32)
         carry0 = networks.initial_carry((B,), H)
         unroll = jax.jit(chex.assert_max_traces(
-            lambda p, c, o, pr, i: networks.unroll(self.model, p, c, o, pr, i), n=1
+            lambda p, c, o, pr, i: unroll_steps(self.model, p, c, o, pr, i), n=1
         ))
         carry, states, logits = unroll(self.params, carry0, obs, probs, imagined)
         unroll(self.params, carry0, obs, probs, imagined + 0.1)  # no retrace
@@ -431,7 +439,7 @@ class ActorCriticTest(chex.TestCase):
         params = random_params(self.rng, model, carry, random_obs(self.rng), random_probs(self.rng))
         self.assertEqual(params["params"]["policy"]["actor"]["kernel"].shape, (H, A))
         self.assertEqual(set(params["params"]["value_critic"]), {"value_head"})
-        carry_out, states, logits = jax.jit(functools.partial(networks.unroll, model))(
+        carry_out, states, logits = jax.jit(functools.partial(unroll_steps, model))(
             params, carry, random_obs(self.rng, (3,)), random_probs(self.rng, (3,))
         )
         chex.assert_shape(logits, (3, A))
