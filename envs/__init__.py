@@ -19,7 +19,8 @@ and registers GridNav with gymnax's registry when gymnax has been imported befor
 import sys
 
 from envs import catalog, metrics, spaces, wrappers
-from envs.bank import SceneBank, pose_from_index, pose_index
+from envs.bank import SceneBank
+from envs.dynamics import pose_from_index, pose_index
 from envs.catalog import ACTIONS, ROOM_TYPES, SPLITS
 from envs.gridnav import EnvParams, EnvState, GridNav, time_limits
 

@@ -14,7 +14,7 @@ compressed ``.npz`` (a few MB) under ``$FORESIT_CACHE_DIR/banks/`` (default
 ``~/.cache/foresit_jax/banks/``, or ``$XDG_CACHE_HOME/foresit_jax/banks/``).  The file
 name carries a hash of everything that determines the arrays (``bank_cache_key``): the
 setup, scene numbers, grid size, view width, the source of envs/scenes.py, bank.py,
-raycast.py and catalog.py, and the numpy, jax and jaxlib versions and the jax backend that
+dynamics.py, raycast.py and catalog.py, and the numpy, jax and jaxlib versions and the jax backend that
 build it.  So editing the generator or upgrading jax selects a new file; stale files are
 never read (delete the folder to reclaim the space).  Files are written atomically (a
 temporary file, then ``os.replace``), so concurrent processes are safe; a file that cannot
@@ -39,6 +39,7 @@ import numpy as np
 from flax import struct
 
 from envs import catalog as C
+from envs.dynamics import pose_from_index, pose_index, transition
 from envs.raycast import (
     DEPTH_RESOLUTION, NUM_ROWS, ROW_BANDS, ROW_MAX_DIST, ROW_MIN_DIST, _first_hit, column_angles_deg, ray_cells,
 )  # fmt: skip
@@ -64,51 +65,6 @@ class SceneBank:
     starts: jax.Array  # int32 [S, K, G*G*8] start poses (pose index // 2), valid ones first
     num_starts: jax.Array  # int32 [S, K]
     target_vectors: jax.Array  # float32 [n_categories, D] what the agent is given as target
-
-
-def pose_index(pos, heading, horizon, grid_size: int):
-    """Flat index of a pose: ((row * G + col) * 8 + heading) * 2 + horizon."""
-    return ((pos[..., 0] * grid_size + pos[..., 1]) * C.NUM_HEADINGS + heading) * C.NUM_HORIZONS + horizon
-
-
-def pose_from_index(index, grid_size: int):
-    """Inverse of pose_index: (pos [..., 2], heading, horizon)."""
-    horizon = index % C.NUM_HORIZONS
-    rest = index // C.NUM_HORIZONS
-    heading = rest % C.NUM_HEADINGS
-    cell = rest // C.NUM_HEADINGS
-    return jnp.stack([cell // grid_size, cell % grid_size], -1), heading, horizon
-
-
-def move_ahead(walkable, pos, heading):
-    """MoveAhead from ``pos``: the new position, unchanged when blocked.
-
-    walkable: bool [G, G].  A diagonal step also needs both cells it passes between to be
-    free (no cutting corners of walls or furniture).
-    """
-    delta = jnp.asarray(C.HEADING_DELTAS)[heading]
-    target = pos + delta
-    side_a = pos + delta * jnp.array([1, 0])
-    side_b = pos + delta * jnp.array([0, 1])
-    ok = walkable[target[0], target[1]] & walkable[side_a[0], side_a[1]] & walkable[side_b[0], side_b[1]]
-    return jnp.where(ok, target, pos)
-
-
-def transition(walkable, pos, heading, horizon, action):
-    """The pose after ``action`` (Done leaves the pose unchanged)."""
-    moved = move_ahead(walkable, pos, heading)
-    pos = jnp.where(action == C.MOVE_AHEAD, moved, pos)
-    heading = jnp.where(
-        action == C.ROTATE_LEFT,
-        (heading - 1) % C.NUM_HEADINGS,
-        jnp.where(action == C.ROTATE_RIGHT, (heading + 1) % C.NUM_HEADINGS, heading),
-    )
-    horizon = jnp.where(
-        action == C.LOOK_UP,
-        jnp.maximum(horizon - 1, 0),
-        jnp.where(action == C.LOOK_DOWN, jnp.minimum(horizon + 1, C.NUM_HORIZONS - 1), horizon),
-    )
-    return pos, heading, horizon
 
 
 @functools.partial(jax.jit, static_argnames=("view_width",))
@@ -188,7 +144,7 @@ BANK_CACHE_FORMAT = 1  # bump when the file layout (not the arrays) changes
 CACHE_DIR_ENV = "FORESIT_CACHE_DIR"  # root of the disk cache; banks go to its "banks" folder
 NO_CACHE_ENV = "FORESIT_NO_CACHE"  # "1" (anything but "", "0", "false", "no"): no disk cache
 # The modules whose source determines a bank's arrays (hashed into the cache key).
-_GENERATOR_SOURCES = ("scenes.py", "bank.py", "raycast.py", "catalog.py")
+_GENERATOR_SOURCES = ("scenes.py", "bank.py", "dynamics.py", "raycast.py", "catalog.py")
 
 
 def bank_cache_dir() -> Path | None:
@@ -368,5 +324,5 @@ def make_bank(setup: str, scene_numbers, grid_size: int, view_width: int) -> Sce
 
 __all__ = [
     "SceneBank", "NUM_ROWS", "bank_cache_dir", "bank_cache_key", "bank_cache_path", "build_bank", "compute_bank",
-    "make_bank", "pose_index", "pose_from_index", "transition",
+    "make_bank",
 ]  # fmt: skip

@@ -20,7 +20,8 @@ from flax import struct
 
 from envs import catalog as C
 from envs import spaces
-from envs.bank import UNREACHABLE, SceneBank, make_bank, move_ahead, pose_index, transition
+from envs.bank import UNREACHABLE, SceneBank, make_bank
+from envs.dynamics import pose_index, transition
 from envs.raycast import DEPTH_RESOLUTION, NUM_ROWS, cast_view
 
 TRAIN_TIME_LIMIT = 30  # SAVN's training episode length
@@ -372,4 +373,4 @@ def _room_index(room) -> int:
     return int(room)
 
 
-__all__ = ["EnvParams", "EnvState", "GridNav", "time_limits", "UNREACHABLE", "move_ahead"]
+__all__ = ["EnvParams", "EnvState", "GridNav", "time_limits", "UNREACHABLE"]
