@@ -159,7 +159,7 @@ def combinations(bench: BenchConfig):
         rollout = rollout if rollout in pieces.rollouts else pieces.rollouts[0]
         gradient = gradient if gradient in pieces.gradients else pieces.gradients[0]
         extra = parse_variant(variant)
-        if pieces.base != "maml":  # the maml_* fields change nothing elsewhere: one row
+        if not pieces.base_piece.adapts_in_episode:  # the maml_* fields change only an adapting base: one row
             extra = {k: v for k, v in extra.items() if not k.startswith("maml_")}
         label = f"{method} {rollout} {gradient}" + (f" {variant}" if extra else "")
         if (label, lanes) in seen:

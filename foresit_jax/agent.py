@@ -29,7 +29,7 @@ import jax
 import jax.numpy as jnp
 
 import envs.metrics
-from foresit_jax import distributions, imagination, maml
+from foresit_jax import distributions, imagination
 from foresit_jax.config import Config
 from foresit_jax.lstm import (
     LowRankUpdate,
@@ -42,7 +42,6 @@ from foresit_jax.lstm import (
     reset_carry,
 )
 from foresit_jax.networks import ActorCritic, CriticOutput, ImaginationNet, window_attention_mask
-from foresit_jax.org import ObjectGraph
 
 
 class ActorState(NamedTuple):
@@ -126,13 +125,11 @@ class Agent:
         self.config = config
         self.method = config.pieces
         self.imagination = self.method.imagination
-        # The object-relation graph (ORG) reads the `org` setup's detector features.
-        object_graph = ObjectGraph() if self.method.encoder == "org" else None
-        # SAVN's learned interaction loss (the maml base), params at params["params"]["learned_loss"].
-        learned_loss = maml.LearnedLoss(segment=config.maml_segment) if self.method.base == "maml" else None
         self.model = ActorCritic(
-            object_graph=object_graph,
-            learned_loss=learned_loss,
+            # ORG's object-relation graph over the `org` setup's detector features (None: none).
+            object_graph=self.method.encoder_piece.object_graph(),
+            # SAVN's learned interaction loss (the maml base; params["params"]["learned_loss"]).
+            learned_loss=self.method.base_piece.learned_loss(config),
             num_actions=config.num_actions,
             hidden_size=config.hidden_size,
             use_imagination=self.imagination.uses_imagination,
@@ -232,20 +229,15 @@ class Agent:
           (so that two windows can replay exactly one longer window's steps).
         Returns (the actor state after the window, the window's Trajectory).
 
-        The `maml` base adapts each lane's parameters inside its episode
-        (`foresit_jax.maml.adaptive_act`): whole episodes only, in training and evaluation.
+        How a window is acted is the base's (`methods.Base.act`): the a3c base runs
+        `act_window` under one parameter set; the maml base adapts each lane's parameters
+        inside its episode (`foresit_jax.maml.adaptive_act`): whole episodes only, in
+        training and evaluation.
         """
-        if self.method.base == "maml":
-            if not whole_episodes or step_keys is not None:
-                raise ValueError("the maml base acts in whole episodes (rollout='episodes'), without step_keys")
-            actor, traj, _ = maml.adaptive_act(
-                self, params, w_params, env, env_params, actor, key, num_steps, greedy=greedy,
-                noise_variance=noise_variance, record_inputs=record_inputs,
-            )  # fmt: skip
-            return actor, traj
-        return self.act_window(
-            params, w_params, env, env_params, actor, key, num_steps, greedy=greedy, whole_episodes=whole_episodes,
-            noise_variance=noise_variance, record_inputs=record_inputs, step_keys=step_keys,
+        return self.method.base_piece.act(
+            self, params, w_params, env, env_params, actor, key, num_steps, greedy=greedy,
+            whole_episodes=whole_episodes, noise_variance=noise_variance, record_inputs=record_inputs,
+            step_keys=step_keys,
         )  # fmt: skip
 
     def act_window(

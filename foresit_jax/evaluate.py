@@ -151,7 +151,7 @@ class Evaluator:
 
             def run(params, w_params, env_params, key, sigma2):
                 episodes = sigma2.shape[0]
-                groups, group = group_layout(episodes, MAX_ADAPTIVE_LANES if config.pieces.base == "maml" else None)
+                groups, group = group_layout(episodes, MAX_ADAPTIVE_LANES if config.pieces.base_piece.adapts_in_episode else None)
                 if groups == 1:
                     return run_group(params, w_params, env_params, key, sigma2)
                 # The episodes are those of one rollout of all lanes (its reset keys), so

@@ -26,19 +26,25 @@ Names are '+'-joined pieces in any order, the base defaulting to a3c (and `a3c+m
 naming the maml base, A3C trained by MAML, as the paper does): `a3c`,
 `a3c+foresit`, `a3c+org+foresit`, `a3c+maml+foresit`, `org+rnd`, `a3c+critic`; the Table 3
 names alone (`rnd`, `att`, `int`) mean `a3c+rnd` etc. `parse_method` turns a name into a `Method`;
-`Config` validates it with the setup. The agent holds the pieces and calls them; nothing
-else tests a method's name.
+`Config` validates it with the setup. Each piece is a small record of behaviour the agent
+calls (`Base`: how a window is acted and the network's extra module; `Encoder`: ORG's
+object graph and its evaluation protocol; `Imagination`: where i_tau comes from and what
+f_w learns); nothing outside this module tests a piece's name (tests/test_methods.py
+checks it).
 """
 
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable
+from typing import Callable, Optional
 
 import chex
+import flax.linen as nn
 import jax
 
 from foresit_jax import imagination as imag
+from foresit_jax import maml
+from foresit_jax.org import ObjectGraph
 
 BASES: tuple[str, ...] = ("a3c", "maml")
 ENCODERS: tuple[str, ...] = ("plain", "org")
@@ -108,6 +114,66 @@ IMAGINATIONS: dict[str, Imagination] = {
 }
 
 
+def act_in_windows(agent, params, w_params, env, env_params, actor, key, num_steps: int, **options):
+    """The a3c base's acting: one parameter set for the whole window (`Agent.act_window`)."""
+    return agent.act_window(params, w_params, env, env_params, actor, key, num_steps, **options)
+
+
+def act_adapting(agent, params, w_params, env, env_params, actor, key, num_steps: int, *, whole_episodes: bool,
+                 step_keys=None, **options):  # fmt: skip
+    """The maml base's acting: SAVN's inner loop adapts each lane's parameters inside its
+    episode (`foresit_jax.maml.adaptive_act`); whole episodes only."""
+    if not whole_episodes or step_keys is not None:
+        raise ValueError("the maml base acts in whole episodes (rollout='episodes'), without step_keys")
+    actor, traj, _ = maml.adaptive_act(agent, params, w_params, env, env_params, actor, key, num_steps, **options)
+    return actor, traj
+
+
+@dataclasses.dataclass(frozen=True)
+class Base:
+    """A base learner, as the agent uses it.
+
+    act: acts a window, `(agent, params, w_params, env, env_params, actor, key, num_steps,
+      greedy=, whole_episodes=, noise_variance=, record_inputs=, step_keys=) -> (actor, traj)`.
+    learned_loss: the network's extra module for the base (maml's L_phi), from the Config;
+      None for none.
+    adapts_in_episode: the parameters change inside an episode (maml): acting must be
+      differentiated through (the replay re-runs a window under one parameter set), in
+      whole episodes (the inner loop counts steps from the start; the meta-loss spans the
+      episode), with the previous action probabilities carrying gradient (as in SAVN,
+      whose episode is one graph); evaluation holds a parameter copy per lane.
+    """
+
+    name: str
+    act: Callable = act_in_windows
+    learned_loss: Callable[..., Optional[nn.Module]] = lambda config: None
+    adapts_in_episode: bool = False
+
+
+@dataclasses.dataclass(frozen=True)
+class Encoder:
+    """An observation encoder piece: `object_graph()` is the module ORG adds to SAVN's
+    encoder (None for none); `greedy_evaluation`: evaluate with the argmax action (ORG's
+    own protocol; SAVN and the paper's other rows sample); `required_setup`: the setup
+    whose observations it needs (ORG: the detector features of `org`)."""
+
+    name: str
+    object_graph: Callable[[], Optional[nn.Module]] = lambda: None
+    greedy_evaluation: bool = False
+    required_setup: Optional[str] = None
+
+
+BASE_PIECES: dict[str, Base] = {
+    "a3c": Base("a3c"),
+    "maml": Base("maml", act=act_adapting, adapts_in_episode=True,
+                 learned_loss=lambda config: maml.LearnedLoss(segment=config.maml_segment)),  # fmt: skip
+}
+ENCODER_PIECES: dict[str, Encoder] = {
+    "plain": Encoder("plain"),
+    "org": Encoder("org", object_graph=ObjectGraph, greedy_evaluation=True, required_setup="org"),
+}
+
+
 @dataclasses.dataclass(frozen=True)
 class Method:
     """One method of the paper: base x encoder x critic x imagination (critic None: the
@@ -119,6 +185,9 @@ class Method:
     critic: str | None = None
 
     def __post_init__(self):
+        if self.base not in BASE_PIECES or self.encoder not in ENCODER_PIECES:
+            raise ValueError(f"base must be one of {BASES} and encoder one of {ENCODERS}, got {self.base!r}, "
+                             f"{self.encoder!r}")  # fmt: skip
         if self.critic is None:
             object.__setattr__(self, "critic", self.imagination.critic)
         if self.critic not in CRITICS:
@@ -128,6 +197,14 @@ class Method:
                 f"imagination {self.imagination.name!r} imagines the attention-weighted average of the "
                 f"episode's states: it needs the attention critic (drop 'plaincritic')"
             )
+
+    @property
+    def base_piece(self) -> Base:
+        return BASE_PIECES[self.base]
+
+    @property
+    def encoder_piece(self) -> Encoder:
+        return ENCODER_PIECES[self.encoder]
 
     @property
     def attention_critic(self) -> bool:
@@ -150,7 +227,7 @@ class Method:
         """Gradient paths this method supports. The replay re-runs the modules over a
         window's recorded inputs under ONE parameter set: right for a3c, wrong for maml,
         whose steps run under the parameters adapted so far in the episode."""
-        return ("through_rollout",) if self.base == "maml" else GRADIENTS
+        return ("through_rollout",) if self.base_piece.adapts_in_episode else GRADIENTS
 
     @property
     def action_probs_carry_gradient(self) -> bool:
@@ -159,31 +236,31 @@ class Method:
         (the inner and the meta-gradient both flow through them). a3c: no, they are inputs
         like the observation, which is what lets the replay re-run a window from its
         recorded inputs (the differentiate-through-rollout reference matches it)."""
-        return self.base == "maml"
+        return self.base_piece.adapts_in_episode
 
     @property
     def rollouts(self) -> tuple[str, ...]:
         """Rollout layouts this method supports: maml's inner loop counts steps from each
         episode's start and its meta-loss spans the whole episode, so it needs whole
         episodes (SAVN's layout)."""
-        return ("episodes",) if self.base == "maml" else ROLLOUTS
+        return ("episodes",) if self.base_piece.adapts_in_episode else ROLLOUTS
 
     @property
     def required_config(self) -> dict:
         """Config fields this method needs (a preset sets them for it): maml acts in
         whole episodes, differentiated through the rollout."""
-        return {"rollout": "episodes", "gradient": "through_rollout"} if self.base == "maml" else {}
+        return {"rollout": "episodes", "gradient": "through_rollout"} if self.base_piece.adapts_in_episode else {}
 
     @property
     def greedy_evaluation(self) -> bool:
         """Whether evaluation takes the argmax action: ORG's own protocol (its evaluation
         is greedy); SAVN's (and the paper's other rows) sample from the policy."""
-        return self.encoder == "org"
+        return self.encoder_piece.greedy_evaluation
 
     @property
     def required_setup(self) -> str | None:
         """The object graph needs the `org` setup's detector features."""
-        return "org" if self.encoder == "org" else None
+        return self.encoder_piece.required_setup
 
 
 # The paper's names for its rows, for reference (Table 1 and Table 3).

@@ -102,3 +102,54 @@ def test_imagination_pieces():
     np.testing.assert_array_equal(foresit.renews(steps, 10), steps == 0)
     np.testing.assert_array_equal(intv.renews(steps, 10), steps % 10 == 0)
     assert dataclasses.replace(foresit, name="x") != foresit  # frozen, comparable
+
+
+def test_no_code_outside_the_pieces_tests_a_base_or_encoder_name():
+    """Methods compose from the pieces' behaviour (`Base`, `Encoder`, `Imagination`
+    records): outside foresit_jax/methods.py no module compares a base's or an
+    encoder's name."""
+    import re
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    pattern = re.compile(r"""\.(base|encoder)\s*[!=]=|[!=]=\s*["'](maml|org|a3c|plain)["']""")
+    offenders = []
+    for folder in ("foresit_jax", "experiments", "examples"):  # envs knows no methods (its setups are "org" too)
+        for path in sorted((root / folder).glob("*.py")):
+            if path.name == "methods.py":
+                continue
+            for number, line in enumerate(path.read_text().splitlines(), 1):
+                if pattern.search(line) and "setup" not in line:
+                    offenders.append(f"{path.relative_to(root)}:{number}: {line.strip()}")
+    assert not offenders, "\n".join(offenders)
+
+
+def test_the_agent_acts_through_its_bases_act():
+    """`Agent.act` is the base piece's `act` (here a3c's, wrapped to count its calls)."""
+    import jax
+
+    from foresit_jax import methods
+    from foresit_jax.agent import Agent
+    from foresit_jax.train import make_env
+
+    calls = []
+
+    def counting(*args, **options):
+        calls.append(options)
+        return methods.act_in_windows(*args, **options)
+
+    config = Config(method="a3c", room_types=("bathroom",), num_lanes=2, num_steps=3, hidden_size=8,
+                    attention_size=8, value_hidden=8, imagination_layer_sizes=(8, 8))  # fmt: skip
+    pieces = dict(methods.BASE_PIECES, a3c=dataclasses.replace(methods.BASE_PIECES["a3c"], act=counting))
+    original = methods.BASE_PIECES
+    methods.BASE_PIECES = pieces
+    try:
+        agent = Agent(config)
+        env, env_params = make_env(config)
+        obs, _ = env.reset(jax.random.key(0), env_params)
+        params, w_params = agent.init(jax.random.key(1), obs)
+        actor = agent.start(jax.random.key(2), env, env_params, 2)
+        _, traj = agent.act(params, w_params, env, env_params, actor, jax.random.key(3), 3, greedy=True)
+    finally:
+        methods.BASE_PIECES = original
+    assert len(calls) == 1 and calls[0]["greedy"] is True and traj.actions.shape == (3, 2)
