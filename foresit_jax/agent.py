@@ -88,6 +88,25 @@ class Trajectory(NamedTuple):
     inputs: Optional[StepInputs] = None  # recorded with record_inputs=True
 
 
+class StepRecord(NamedTuple):
+    """What one step of `Agent.act_window` records; stacked over the window, the
+    `Trajectory`'s per-step fields (same names)."""
+
+    states: chex.Array
+    logits: chex.Array
+    actions: chex.Array
+    rewards: chex.Array
+    terminated: chex.Array
+    truncated: chex.Array
+    valid: chex.Array
+    success: chex.Array
+    episode_step: chex.Array
+    s_0: chex.Array
+    optimal_length: chex.Array
+    room_type: chex.Array
+    inputs: Optional[StepInputs]
+
+
 class EpisodeStats(NamedTuple):
     success: chex.Array  # [B] bool
     length: chex.Array  # [B] int32 actions taken, Done included
@@ -302,9 +321,10 @@ class Agent:
             done = term | trunc
             tracker = jax.vmap(imagination.tracker_update)(actor.tracker, info["success"], done & alive)
             seen = StepInputs(actor.obs, actor.prev_probs, policy_input, encoder_imagined) if record_inputs else None
-            out = (
-                s_t, logits, action, reward, term, trunc, alive, info["success"] & alive, actor.episode_step,
-                s_0, info["optimal_length"], info["room_type"], seen,
+            out = StepRecord(
+                states=s_t, logits=logits, actions=action, rewards=reward, terminated=term, truncated=trunc,
+                valid=alive, success=info["success"] & alive, episode_step=actor.episode_step, s_0=s_0,
+                optimal_length=info["optimal_length"], room_type=info["room_type"], inputs=seen,
             )  # fmt: skip
             probs = distributions.probs(logits)
             if not self.method.action_probs_carry_gradient:
@@ -325,16 +345,13 @@ class Agent:
         step_keys = jax.random.split(key, num_steps) if step_keys is None else step_keys
         alive = jnp.ones((num_lanes,), bool) if alive is None else alive
         (actor, _), out = jax.lax.scan(step, (actor, alive), (step_keys, gate_offsets))
-        states, logits, actions, rewards, term, trunc, valid, success, episode_step, s_0, opt, room, seen = out
         if whole_episodes:  # nothing is bootstrapped: every counted episode ended (or is cut by design)
             next_state = jnp.zeros_like(actor.s_0)
         else:  # s_T, for V(s*_T) at the cut (Eq. 8); the next window computes it again
             gates = self.input_gates(params, actor.obs, actor.prev_probs, kernels, self.encoder_imagined(actor))
             _, next_state = lstm_step(kernels, actor.lstm, gates)
-        traj = Trajectory(
-            states, logits, actions, rewards, term, trunc, valid, success, episode_step, s_0, opt, room,
-            jax.lax.stop_gradient(next_state), actor.episode_step, seen,
-        )  # fmt: skip
+        traj = Trajectory(**out._asdict(), next_state=jax.lax.stop_gradient(next_state),
+                          next_episode_step=actor.episode_step)  # fmt: skip
         return actor, traj
 
     def rollout(

@@ -56,6 +56,16 @@ class RunnerState(NamedTuple):
     update: chex.Array  # int32 [] updates done
 
 
+class WindowResult(NamedTuple):
+    """What `Trainer.loss_and_grad` returns beside the loss (the aux of its value_and_grad)."""
+
+    next_actor: ActorState  # the lanes after the window
+    traj: Trajectory  # the window (states and logits differentiable in the params, replayed)
+    alpha: Any  # [B, T + 1, K] the critic's attention rows, or None (plain critic)
+    keys: chex.Array  # [B, K, H] the states alpha weighs
+    metrics: dict  # the loss's scalars
+
+
 def make_env(config: Config, split: str = "train", room_types=None, training: bool | None = None):
     """The environment of a config (foresit_jax sees envs only through its public API)."""
     import envs
@@ -132,22 +142,22 @@ class Trainer:
         )  # fmt: skip
 
     def loss_and_grad(self, params, w_params, env_params, actor: ActorState, key):
-        """((loss, (next actor, traj, alpha, keys, metrics)), grads) of one window, by the
-        config's gradient path (see `Config.gradient`; both give the same gradient)."""
+        """((loss, WindowResult), grads) of one window, by the config's gradient path (see
+        `Config.gradient`; both give the same gradient)."""
         if self.config.gradient == "replay":
             next_actor, traj = self.act(params, w_params, env_params, actor, key)
 
             def loss_fn(p):
                 replay_traj = replayed(self.agent, p, traj, actor.lstm)
                 loss, aux = self.window_loss(p, replay_traj, actor.memory)
-                return loss, (next_actor, replay_traj, *aux)
+                return loss, WindowResult(next_actor, replay_traj, *aux)
 
         else:
 
             def loss_fn(p):
                 next_actor, traj = self.act(p, w_params, env_params, actor, key)
                 loss, aux = self.window_loss(p, traj, actor.memory)
-                return loss, (next_actor, traj, *aux)
+                return loss, WindowResult(next_actor, traj, *aux)
 
         return jax.value_and_grad(loss_fn, has_aux=True)(params)
 
@@ -163,9 +173,8 @@ class Trainer:
         cfg, imag = self.config, self.agent.imagination
         actor, key, k_act = self.begin_window(state.actor, state.key, env_params)
         rho = jax.vmap(imagination.success_rate)(actor.tracker)  # [B] at the window's start
-        (loss, (next_actor, traj, alpha, keys, metrics)), grads = self.loss_and_grad(
-            state.params, state.imagination_params, env_params, actor, k_act
-        )
+        (loss, window), grads = self.loss_and_grad(state.params, state.imagination_params, env_params, actor, k_act)
+        next_actor, traj, alpha, keys, metrics = window
         updates, opt_state = self.optimizer.update(grads, state.opt_state, state.params)
         params = optax.apply_updates(state.params, updates)
 
