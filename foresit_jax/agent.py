@@ -272,7 +272,7 @@ class Agent:
         lstm_update: a low-rank change of the LSTM's kernels (the maml base's adapted
           kernels, `foresit_jax.maml`); gate_offsets: `[num_steps, B, 4H]` added to each
           step's gate pre-activations (zeros whose gradient is the pre-activations')."""
-        cfg, imag = self.config, self.imagination
+        cfg, variant = self.config, self.imagination  # the method's Imagination piece
         num_lanes = actor.episode_step.shape[0]
         lanes = jnp.arange(num_lanes)
         memory_size = 0 if actor.memory is None else actor.memory.shape[1]
@@ -290,19 +290,19 @@ class Agent:
             lstm, s_t = lstm_step(kernels, actor.lstm, input_gates)
             s_0 = jnp.where(first[:, None], s_t, actor.s_0)
             imagined = actor.imagined
-            if imag.uses_imagination:
+            if variant.uses_imagination:
                 if noise_variance is None:
                     rho = jax.vmap(imagination.success_rate)(actor.tracker)
                     variance = imagination.noise_variance(rho, cfg.sigma2_max)  # [B]
                 else:
                     variance = noise_variance
-                renew = imag.renews(actor.episode_step, cfg.int_interval)  # [B]
+                renew = variant.renews(actor.episode_step, cfg.int_interval)  # [B]
                 goal = actor.obs["target"]
                 imagined = jax.lax.cond(
                     jnp.any(renew),
                     lambda: jnp.where(
                         renew[:, None],
-                        imag.imagine(self.imagine, w_params, s_t, goal, k_imag, variance, cfg.rnd_variance),
+                        variant.imagine(self.imagine, w_params, s_t, goal, k_imag, variance, cfg.rnd_variance),
                         actor.imagined,
                     ),
                     lambda: actor.imagined,

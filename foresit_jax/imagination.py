@@ -10,7 +10,7 @@ How the f_w update is wired (the Trainer calls this at every step of a window, i
 order, `Trainer.store_and_train`):
   1. each lane whose episode ended successfully at that step adds (s_0, g_tau, ŝ_tau) to its buffer
      (`buffer_add`, a no-op for failed episodes);
-  2. `train_full_buffers(shared_params, buffers, ...)` visits the lanes whose buffer is
+  2. `train_full_buffers(w_params, buffers, ...)` visits the lanes whose buffer is
      full, in lane order. Each such lane copies the CURRENT shared parameters (including
      what earlier lanes pushed in this same call), trains them `epochs` epochs over its
      M items, one item per optimiser step in buffer order (Algorithm 1's inner loop),
@@ -151,7 +151,7 @@ def train_on_buffer(
 
 
 def train_full_buffers(
-    shared_params: Any,
+    w_params: Any,
     buffers: ReplayBuffer,
     apply_fn: ImagineFn,
     optimizer: optax.GradientTransformation,
@@ -160,7 +160,7 @@ def train_full_buffers(
     """Update the shared f_w from every lane whose buffer is full, then empty those.
 
     Args:
-      shared_params: the shared f_w parameters.
+      w_params: the shared f_w parameters.
       buffers: stacked per-lane buffers, leaves `[B, M, ...]`, count `[B]`.
     Returns:
       (new shared params, buffers with the full ones emptied, metrics) where metrics are
@@ -193,7 +193,7 @@ def train_full_buffers(
         )
 
     _, params, loss_sum, first_sum, last_sum = jax.lax.while_loop(
-        cond, body, (jnp.zeros((), jnp.int32), shared_params, zero, zero, zero)
+        cond, body, (jnp.zeros((), jnp.int32), w_params, zero, zero, zero)
     )
     denominator = jnp.maximum(num_full, 1).astype(jnp.float32)
     cleared = jax.vmap(buffer_clear)(buffers)

@@ -42,7 +42,7 @@ import chex
 import flax.linen as nn
 import jax
 
-from foresit_jax import imagination as imag
+from foresit_jax import imagination
 from foresit_jax import maml
 from foresit_jax.org import ObjectGraph
 
@@ -98,9 +98,9 @@ class Imagination:
         """i_tau `[B, H]` for the policy (stop-gradient: the policy loss never trains f_w
         or, through it, s_0). learned: f_w([s_t : g]) + N(0, sigma2); random: tanh(N(0, v))."""
         if self.source == "random":
-            return imag.random_imagination(key, s_t.shape, rnd_variance)
+            return imagination.random_imagination(key, s_t.shape, rnd_variance)
         imagined = imagine_fn(w_params, jax.lax.stop_gradient(s_t), goal)
-        return jax.lax.stop_gradient(imag.add_imagination_noise(key, imagined, noise_variance))
+        return jax.lax.stop_gradient(imagination.add_imagination_noise(key, imagined, noise_variance))
 
 
 _FORESIT = Imagination("foresit", source="learned", critic="attention")

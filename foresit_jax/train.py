@@ -62,7 +62,7 @@ class WindowResult(NamedTuple):
     next_actor: ActorState  # the lanes after the window
     traj: Trajectory  # the window (states and logits differentiable in the params, replayed)
     alpha: Any  # [B, T + 1, K] the critic's attention rows, or None (plain critic)
-    keys: chex.Array  # [B, K, H] the states alpha weighs
+    key_states: chex.Array  # [B, K, H] the states alpha weighs (the attention's keys)
     metrics: dict  # the loss's scalars
 
 
@@ -120,9 +120,9 @@ class Trainer:
     def window_loss(self, params, traj: Trajectory, memory: chex.Array):
         """The A3C loss (Eq. 8-9) of one window whose states and logits are differentiable
         in `params`. memory: the critic's memory at the window's start `[B, M, H]` (or None).
-        Returns (loss, (alpha `[B, T + 1, K]` or None, keys `[B, K, H]`, metrics))."""
+        Returns (loss, (alpha `[B, T + 1, K]` or None, key_states `[B, K, H]`, metrics))."""
         cfg = self.config
-        critic, keys = self.agent.critic(params, traj, memory)
+        critic, key_states = self.agent.critic(params, traj, memory)
         value, bootstrap = critic.value[:-1], critic.value[-1]  # [T, B], [B] V(s*_T)
         if not self.packed:
             bootstrap = jnp.zeros_like(bootstrap)  # whole episodes: nothing to bootstrap
@@ -132,7 +132,7 @@ class Trainer:
         loss, metrics = losses.a3c_loss(
             traj.logits, traj.actions, value, advantage, returns, traj.valid, cfg.entropy_coef, cfg.value_coef,
         )  # fmt: skip
-        return loss, (critic.alpha, keys, metrics)
+        return loss, (critic.alpha, key_states, metrics)
 
     def act(self, params, w_params, env_params, actor: ActorState, key) -> tuple[ActorState, Trajectory]:
         """One window of every lane (inputs recorded, for the replay and the buffers)."""
@@ -170,19 +170,19 @@ class Trainer:
         return actor, key, k_act
 
     def update(self, state: RunnerState, env_params) -> tuple[RunnerState, dict]:
-        cfg, imag = self.config, self.agent.imagination
+        cfg, variant = self.config, self.agent.imagination  # the Imagination piece
         actor, key, k_act = self.begin_window(state.actor, state.key, env_params)
         rho = jax.vmap(imagination.success_rate)(actor.tracker)  # [B] at the window's start
         (loss, window), grads = self.loss_and_grad(state.params, state.imagination_params, env_params, actor, k_act)
-        next_actor, traj, alpha, keys, metrics = window
+        next_actor, traj, alpha, key_states, metrics = window
         updates, opt_state = self.optimizer.update(grads, state.opt_state, state.params)
         params = optax.apply_updates(state.params, updates)
 
         buffers, w_params = state.buffers, state.imagination_params
         metrics = dict(metrics)
         ended, stats = ended_episodes(traj)
-        if imag.trains_imagination:
-            items = self.subgoal_items(traj, alpha, keys, stats.success)
+        if variant.trains_imagination:
+            items = self.subgoal_items(traj, alpha, key_states, stats.success)
             w_params, buffers, imag_metrics = self.store_and_train(w_params, buffers, items)
             metrics.update(imag_metrics)
         num_ended = jnp.sum(ended.astype(jnp.float32))
@@ -211,7 +211,7 @@ class Trainer:
         new_state = RunnerState(params, opt_state, w_params, buffers, next_actor, key, state.update + 1)
         return new_state, metrics
 
-    def subgoal_items(self, traj: Trajectory, alpha, keys, success):
+    def subgoal_items(self, traj: Trajectory, alpha, key_states, success):
         """What each step offers the buffers: (s_0 `[T, B, H]`, g_tau `[T, B, D]`, the
         sub-goal ŝ_tau `[T, B, H]`, add `[T, B]`: an episode ended there successfully).
         ŝ_tau is what the step's attention row selects (Section 4.2: at the Done step,
@@ -220,7 +220,7 @@ class Trainer:
         if alpha is None:
             subgoals = jax.lax.stop_gradient(traj.states)
         else:
-            subgoals = jnp.swapaxes(subgoals_of_rows(keys, alpha[:, :-1], self.agent.imagination.subgoal_mode), 0, 1)
+            subgoals = jnp.swapaxes(subgoals_of_rows(key_states, alpha[:, :-1], self.agent.imagination.subgoal_mode), 0, 1)
         return traj.s_0, traj.inputs.obs["target"], subgoals, success
 
     def subgoal_steps(self, traj: Trajectory, alpha) -> chex.Array:
@@ -247,9 +247,9 @@ class Trainer:
         def window(carry, _):
             actor, key, k_act = self.begin_window(*carry, env_params)
             next_actor, traj = self.act(state.params, state.imagination_params, env_params, actor, k_act)
-            _, (alpha, keys, _) = self.window_loss(state.params, traj, actor.memory)  # the critic's alpha
+            _, (alpha, key_states, _) = self.window_loss(state.params, traj, actor.memory)  # the critic's alpha
             _, stats = ended_episodes(traj)
-            items = self.subgoal_items(traj, alpha, keys, stats.success)
+            items = self.subgoal_items(traj, alpha, key_states, stats.success)
             return (next_actor, key), (items, (self.subgoal_steps(traj, alpha), traj.episode_step))
 
         _, items = jax.lax.scan(window, (state.actor, state.key), None, length=num_windows)
