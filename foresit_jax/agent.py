@@ -259,6 +259,27 @@ class Agent:
             step_keys=step_keys,
         )  # fmt: skip
 
+    def imagined_at_step(self, w_params, actor: ActorState, s_t: chex.Array, key: chex.PRNGKey,
+                         noise_variance: Optional[chex.Array]) -> chex.Array:  # fmt: skip
+        """i_tau for a step `[B, H]` (Eq. 6-7): renewed where the Imagination piece says (an
+        episode's first step; every K steps for `int`) from s_t (= s_0 at the first step),
+        with noise of each lane's variance (`noise_variance` `[B]`, or Eq. 7 from its success
+        tracker), else the running episode's. Unchanged without imagination."""
+        cfg, variant = self.config, self.imagination  # the method's Imagination piece
+        if not variant.uses_imagination:
+            return actor.imagined
+        if noise_variance is None:
+            noise_variance = imagination.noise_variance(jax.vmap(imagination.success_rate)(actor.tracker), cfg.sigma2_max)
+        renew = variant.renews(actor.episode_step, cfg.int_interval)  # [B]
+        goal = actor.obs["target"]
+
+        def renewed():
+            where = renew[:, None]
+            return jnp.where(where, variant.imagine(self.imagine, w_params, s_t, goal, key, noise_variance,
+                                                    cfg.rnd_variance), actor.imagined)  # fmt: skip
+
+        return jax.lax.cond(jnp.any(renew), renewed, lambda: actor.imagined)
+
     def act_window(
         self, params, w_params, env, env_params, actor: ActorState, key: chex.PRNGKey, num_steps: int,
         *, greedy: bool = False, whole_episodes: bool = False, noise_variance: Optional[chex.Array] = None,
@@ -272,7 +293,6 @@ class Agent:
         lstm_update: a low-rank change of the LSTM's kernels (the maml base's adapted
           kernels, `foresit_jax.maml`); gate_offsets: `[num_steps, B, 4H]` added to each
           step's gate pre-activations (zeros whose gradient is the pre-activations')."""
-        cfg, variant = self.config, self.imagination  # the method's Imagination piece
         num_lanes = actor.episode_step.shape[0]
         lanes = jnp.arange(num_lanes)
         memory_size = 0 if actor.memory is None else actor.memory.shape[1]
@@ -289,32 +309,14 @@ class Agent:
                 input_gates = input_gates + gate_offset
             lstm, s_t = lstm_step(kernels, actor.lstm, input_gates)
             s_0 = jnp.where(first[:, None], s_t, actor.s_0)
-            imagined = actor.imagined
-            if variant.uses_imagination:
-                if noise_variance is None:
-                    rho = jax.vmap(imagination.success_rate)(actor.tracker)
-                    variance = imagination.noise_variance(rho, cfg.sigma2_max)  # [B]
-                else:
-                    variance = noise_variance
-                renew = variant.renews(actor.episode_step, cfg.int_interval)  # [B]
-                goal = actor.obs["target"]
-                imagined = jax.lax.cond(
-                    jnp.any(renew),
-                    lambda: jnp.where(
-                        renew[:, None],
-                        variant.imagine(self.imagine, w_params, s_t, goal, k_imag, variance, cfg.rnd_variance),
-                        actor.imagined,
-                    ),
-                    lambda: actor.imagined,
-                )
+            imagined = self.imagined_at_step(w_params, actor, s_t, k_imag, noise_variance)  # [B, H]
             policy_input = imagined if self.imagination_in_head else None
             logits = self.model.apply(params, s_t, policy_input, method=ActorCritic.policy_logits)
             action = distributions.greedy(logits) if greedy else distributions.sample(k_act, logits)
             memory = actor.memory
-            if memory_size:
+            if memory_size:  # s_t at its position in the episode, for the critic of later windows
                 memory = memory.at[lanes, jnp.minimum(actor.episode_step, memory_size - 1)].set(
-                    jax.lax.stop_gradient(s_t)
-                )
+                    jax.lax.stop_gradient(s_t))  # fmt: skip
             obs, env_state, reward, term, trunc, info = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
                 jax.random.split(k_env, num_lanes), actor.env_state, action, env_params
             )
