@@ -31,16 +31,7 @@ import jax.numpy as jnp
 import envs.metrics
 from foresit_jax import distributions, imagination
 from foresit_jax.config import Config
-from foresit_jax.lstm import (
-    LowRankUpdate,
-    LSTMCarry,
-    encoder_lstm_params,
-    initial_carry,
-    lstm_input_gates,
-    lstm_kernels,
-    lstm_step,
-    reset_carry,
-)
+from foresit_jax.lstm import LowRankUpdate, LSTMCarry, LSTMKernels, initial_carry, lstm_input_gates, lstm_step, reset_carry
 from foresit_jax.networks import ActorCritic, CriticOutput, ImaginationNet, window_attention_mask
 
 
@@ -219,10 +210,14 @@ class Agent:
         encoder's i_tau `[..., H]`, with `imagination_in_encoder`)."""
         return self.model.apply(params, obs, prev_action_probs, encoder_imagined, method=ActorCritic.encoder_features)
 
+    def lstm_kernels(self, params) -> LSTMKernels:
+        """The encoder LSTM's kernels in `params` (`ActorCritic.lstm_kernels`)."""
+        return self.model.apply(params, method=ActorCritic.lstm_kernels)
+
     def input_gates(self, params, obs, prev_action_probs, kernels=None, encoder_imagined=None):
         """The encoder up to the LSTM's input gates `[..., 4H]`: everything of a step
         that does not depend on the LSTM carry."""
-        kernels = lstm_kernels(encoder_lstm_params(params)) if kernels is None else kernels
+        kernels = self.lstm_kernels(params) if kernels is None else kernels
         return lstm_input_gates(kernels, self.lstm_inputs(params, obs, prev_action_probs, encoder_imagined))
 
     def encoder_imagined(self, actor: ActorState) -> Optional[chex.Array]:
@@ -296,7 +291,7 @@ class Agent:
         num_lanes = actor.episode_step.shape[0]
         lanes = jnp.arange(num_lanes)
         memory_size = 0 if actor.memory is None else actor.memory.shape[1]
-        kernels = lstm_kernels(encoder_lstm_params(params))._replace(update=lstm_update)  # once, outside the loop
+        kernels = self.lstm_kernels(params)._replace(update=lstm_update)  # once, outside the loop
 
         def step(carry, xs):
             actor, alive = carry

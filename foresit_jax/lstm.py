@@ -10,8 +10,10 @@ computes: the same concatenated kernels, the same dots, the same additions in th
 order. The parameter names are flax's: a flax upgrade that renames or reorders them
 fails `tests/test_lstm.py`, not a run.
 
-`encoder_lstm_params(params)` is the one place that knows where the LSTM sits in the
-agent's parameter tree.
+Acting and the replay get the kernels from the network itself
+(`ActorCritic.lstm_kernels`, `Agent.lstm_kernels`); `encoder_lstm_params(params)` is the
+one place that knows where the LSTM sits in the agent's parameter tree, for the maml
+base, which splits that tree into the kernels it adapts and the rest.
 """
 
 from __future__ import annotations

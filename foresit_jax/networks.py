@@ -27,7 +27,7 @@ import jax
 import jax.numpy as jnp
 
 from foresit_jax.layers import Dense, GridDense
-from foresit_jax.lstm import LSTMCarry, initial_carry, reset_carry  # noqa: F401 (re-exported)
+from foresit_jax.lstm import LSTMCarry, LSTMKernels, initial_carry, lstm_kernels, reset_carry  # noqa: F401 (re-exported)
 
 class Encoder(nn.Module):
     """SAVN encoder: observation, target and previous action probabilities -> s_t.
@@ -104,6 +104,12 @@ class Encoder(nn.Module):
     ) -> tuple[LSTMCarry, chex.Array]:  # fmt: skip
         carry, s_t = self.lstm(carry, self.features(obs, prev_action_probs, imagined))
         return carry, s_t  # s_t: [..., hidden_size]
+
+    def lstm_kernels(self) -> LSTMKernels:
+        """The LSTM's parameters as the concatenated kernels of its split form
+        (`foresit_jax.lstm`: input gates for a whole window at once, then the recurrent
+        step), which acting, the replay and MAML run instead of calling the cell."""
+        return lstm_kernels(self.lstm.variables["params"])
 
 
 class PolicyHead(nn.Module):
@@ -266,6 +272,7 @@ class ActorCritic(nn.Module):
       encode(carry, obs, prev_action_probs, imagined) -> (carry, s_t [..., H])
       encoder_features(obs, prev_action_probs, imagined) -> LSTM input [..., F]
       policy_logits(s_t, imagined) -> logits [..., A]
+      lstm_kernels() -> the encoder LSTM's kernels, for its split form (foresit_jax.lstm)
       step(carry, obs, prev_action_probs, imagined) -> (carry, s_t, logits)  (both above)
       critic(states [..., T, H], valid [..., T]) -> CriticOutput
     `__call__` runs both once (for `init`).
@@ -318,6 +325,10 @@ class ActorCritic(nn.Module):
     def policy_logits(self, s_t: chex.Array, imagined: Optional[chex.Array] = None) -> chex.Array:
         """pi(. | s_t, i_tau) logits `[..., A]`."""
         return self.policy(s_t, imagined)
+
+    def lstm_kernels(self) -> LSTMKernels:
+        """The encoder LSTM's kernels (`Encoder.lstm_kernels`)."""
+        return self.encoder.lstm_kernels()
 
     def step(
         self,

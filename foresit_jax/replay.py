@@ -23,14 +23,7 @@ from __future__ import annotations
 import jax
 
 from foresit_jax.agent import Agent, Trajectory
-from foresit_jax.lstm import (
-    LSTMCarry,
-    encoder_lstm_params,
-    lstm_kernels,
-    lstm_step,
-    reset_carry,
-    with_transposed_recurrent_kernel,
-)
+from foresit_jax.lstm import LSTMCarry, lstm_step, reset_carry, with_transposed_recurrent_kernel
 from foresit_jax.networks import ActorCritic
 
 
@@ -51,7 +44,7 @@ def replay(agent: Agent, params, traj: Trajectory, initial_carry: LSTMCarry):
     def flat(x):  # [T, B, ...] -> [T * B, ...]
         return x.reshape((size,) + x.shape[2:])
 
-    kernels = lstm_kernels(encoder_lstm_params(params))
+    kernels = agent.lstm_kernels(params)
     encoder_imagined = None if inputs.encoder_imagined is None else flat(inputs.encoder_imagined)
     gates = agent.input_gates(
         params, jax.tree.map(flat, inputs.obs), flat(inputs.prev_action_probs), kernels, encoder_imagined

@@ -145,3 +145,23 @@ def test_low_rank_update_equals_the_dense_kernels_in_numpy():
     prevs = unroll(kernels, offsets)[1]  # h_{t-1} [T, B, H]
     np.testing.assert_allclose(grads.input_kernel, jnp.einsum("tbf,tbg->fg", xs, deltas), rtol=1e-4, atol=1e-5)
     np.testing.assert_allclose(grads.recurrent_kernel, jnp.einsum("tbh,tbg->hg", prevs, deltas), rtol=1e-4, atol=1e-5)
+
+
+def test_the_agents_lstm_kernels_come_from_its_encoder_cell():
+    """`Agent.lstm_kernels` (the network's own method) gives the kernels of the encoder's
+    cell, the ones at the parameter path MAML splits by, and they run the cell exactly."""
+    from foresit_jax.agent import Agent
+    from foresit_jax.config import Config
+
+    agent = Agent(Config(method="a3c", hidden_size=H, attention_size=4, value_hidden=4, imagination_layer_sizes=(4, H)))
+    obs = {"view": jnp.zeros((3, 2, 23)), "target": jnp.ones((300,))}
+    params, _ = agent.init(jax.random.key(0), obs)
+    mine = agent.lstm_kernels(params)
+    chex.assert_trees_all_equal(mine, lstm.lstm_kernels(lstm.encoder_lstm_params(params)))
+    cell = nn.OptimizedLSTMCell(H)
+    x = jax.random.normal(jax.random.key(1), (B, 3 * 2 * 64))
+    carry = (jax.random.normal(jax.random.key(2), (B, H)), jax.random.normal(jax.random.key(3), (B, H)))
+    (c, h), out = cell.apply({"params": lstm.encoder_lstm_params(params)}, carry, x)
+    (c2, h2), out2 = lstm.lstm_step(mine, carry, lstm.lstm_input_gates(mine, x))
+    np.testing.assert_allclose(out2, out, rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(c2, c, rtol=1e-6, atol=1e-6)
