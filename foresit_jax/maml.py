@@ -264,12 +264,12 @@ def adaptive_act(
         )
         if cfg.maml_first_order:
             grads, rows = jax.lax.stop_gradient((grads, rows))
-        going = traj.valid[-1] & ~(traj.terminated[-1] | traj.truncated[-1])  # [1] the episode runs on
-        rows = rows._replace(deltas=jnp.where(going[0], rows.deltas, 0.0))
+        still_alive = traj.valid[-1] & ~(traj.terminated[-1] | traj.truncated[-1])  # [1] the episode runs on (alive next)
+        rows = rows._replace(deltas=jnp.where(still_alive[0], rows.deltas, 0.0))
         update = rows if update is None else update.concat(rows)
         if not record_inputs:
             traj = traj._replace(inputs=None)
-        return inner_step(lanes, grads, cfg.maml_inner_lr, going[0]), update, next_actor, traj, going
+        return inner_step(lanes, grads, cfg.maml_inner_lr, still_alive[0]), update, next_actor, traj, still_alive
 
     update = None
     thetas, trajs, done_steps = [AdaptedParams(shared, lanes, update)], [], 0
