@@ -79,7 +79,8 @@ class Config:
     (Eq. 3): 'lecun' (lecun-normal, as every other layer; the paper gives none), whose
     sum adds a term as large as s_t itself to the value head's input at the start, or
     'zeros' (s*_t = s_t at initialisation: the critic starts as the plain one and learns
-    what to add)."""
+    what to add). Measured (docs/mechanism.md, Study 3): 'zeros' does not recover the
+    attention critic's cost against the plain one."""
     imagination_layer_sizes: tuple[int, ...] = (512, 256, 64, 256, 512, 512)
     """Widths of f_w's 6 tanh layers (bottleneck 64); the last must equal hidden_size."""
 
@@ -93,7 +94,9 @@ class Config:
     imagination_lr: float = 1e-3
     """Learning rate beta of f_w (the paper does not give it)."""
     sigma2_max: float = 0.9
-    """Maximum imagination-noise variance sigma^2_max (Eq. 7)."""
+    """Maximum imagination-noise variance sigma^2_max (Eq. 7). The paper's 0.9 keeps most
+    of i_tau's variance noise at this budget; 0.1 (a deviation) keeps the signal above it,
+    and gained nothing either (docs/mechanism.md, Study 3)."""
     success_window: int = 100
     """Episodes in each lane's moving success rate rho."""
     rnd_variance: float = 0.5
