@@ -72,13 +72,23 @@ def default_step_api() -> str:
     return "terminated_truncated" if version is not None and version >= (1,) else "done"
 
 
+def _import_gymnax(module: str = "gymnax"):
+    """Import a gymnax module, or say in one line why an installed gymnax cannot be."""
+    try:
+        return importlib.import_module(module)
+    except ImportError as error:
+        raise ImportError(
+            f"gymnax {'.'.join(map(str, installed_gymnax_version() or ()))} is installed but cannot be "
+            f"imported ({type(error).__name__}: {error}); gymnax 1.0.1 imports `six` without declaring it: "
+            f"pip install six (or pip install 'foresit_jax[gymnax]')"
+        ) from error
+
+
 def _space_classes():
     """gymnax's space module when gymnax is installed, else ``envs.spaces``."""
     if installed_gymnax_version() is None:
         return spaces
-    from gymnax.environments import spaces as gymnax_spaces  # optional dependency
-
-    return gymnax_spaces
+    return _import_gymnax("gymnax.environments.spaces")  # optional dependency
 
 
 class GymnaxGridNav:
@@ -186,8 +196,7 @@ def register_gymnax() -> bool:
 
     if installed_gymnax_version() is None:
         return False
-    from gymnax import registration  # optional dependency
-
+    registration = _import_gymnax("gymnax.registration")  # optional dependency
     register = getattr(registration, "register", None)
     if register is None:  # gymnax before 1.0: make() is a fixed list
         return False

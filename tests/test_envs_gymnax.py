@@ -163,3 +163,18 @@ def test_importing_envs_after_gymnax_registers_it():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ["GymnaxGridNav", "terminated_truncated"]
+
+
+def test_an_installed_gymnax_that_cannot_be_imported_is_one_clear_line(monkeypatch):
+    """gymnax 1.0.1 imports `six` without declaring it; without six, the error says so."""
+
+    def broken(name, *args, **kwargs):
+        raise ModuleNotFoundError("No module named 'six'")
+
+    monkeypatch.setattr(gymnax_compat, "installed_gymnax_version", lambda: (1, 0, 1))
+    monkeypatch.setattr(gymnax_compat.importlib, "import_module", broken)
+    env, params = envs.make_gymnax(room_types=ROOMS)
+    with pytest.raises(ImportError, match=r"gymnax 1\.0\.1 is installed but cannot be imported .*pip install six"):
+        env.observation_space(params)
+    with pytest.raises(ImportError, match="pip install six"):
+        envs.register_gymnax()

@@ -96,6 +96,12 @@ def test_the_examples_window_loss_and_gradient_are_the_trainers(pair):
     assert float(jnp.max(jnp.abs(grads["params"]["policy"]["actor"]["kernel"]))) > 0
 
 
+def without_key_bias(params):
+    critic = {k: v for k, v in params["params"]["value_critic"].items() if k != "key"}
+    critic["key"] = {"kernel": params["params"]["value_critic"]["key"]["kernel"]}
+    return {"params": {**params["params"], "value_critic": critic}}
+
+
 def test_the_examples_updates_end_where_the_trainers_do(pair):
     """UPDATES whole updates from the same state: f_w trains in some of them (the buffers
     fill), and the parameters, f_w, buffers and success trackers end the same."""
@@ -104,7 +110,10 @@ def test_the_examples_updates_end_where_the_trainers_do(pair):
     theirs, metrics = run(state, trainer.env_params, UPDATES)
     ours, _ = jax.jit(lambda s: jax.lax.scan(update, s, None, UPDATES))(as_example_state(ex, state))
     assert float(metrics["imagination/num_trained_lanes"].sum()) >= 2
-    assert_trees_close(ours.params, theirs.params, rtol=1e-3, scale=1e-4)
+    # The attention key's bias adds q . b to every score of a row, which the softmax
+    # ignores: its gradient is 0 in exact arithmetic and rounding noise in floats, and Adam
+    # turns noise into steps of size lr. It follows the rounding, not the algorithm.
+    assert_trees_close(without_key_bias(ours.params), without_key_bias(theirs.params), rtol=1e-3, scale=1e-4)
     assert_trees_close(ours.w_params, theirs.imagination_params, rtol=1e-3, scale=1e-4)
     assert_trees_close(tuple(ours.buffers), tuple(theirs.buffers), rtol=1e-3, scale=1e-4)
     for a, b in zip(ours.lanes.tracker, theirs.actor.tracker):
