@@ -269,8 +269,8 @@ class Agent:
         goal = actor.obs["target"]
 
         def renewed():
-            where = renew[:, None]
-            return jnp.where(where, variant.imagine(self.imagine, w_params, s_t, goal, key, noise_variance,
+            mask = renew[:, None]  # [B, 1], before the imagination (the order of the lowered program's ops)
+            return jnp.where(mask, variant.imagine(self.imagine, w_params, s_t, goal, key, noise_variance,
                                                     cfg.rnd_variance), actor.imagined)  # fmt: skip
 
         return jax.lax.cond(jnp.any(renew), renewed, lambda: actor.imagined)
