@@ -6,7 +6,7 @@
     obs, state, reward, terminated, truncated, info = env.step(key, state, action, params)
 
 ``envs`` knows nothing of the agent.  Building a split's scene bank takes seconds the first
-time; it is then cached on disk (``envs.bank``: ``$FORESIT_CACHE_DIR``, default
+time; it is then cached on disk (``envs.bank_cache``: ``$FORESIT_CACHE_DIR``, default
 ``~/.cache/foresit_jax``; ``FORESIT_NO_CACHE=1`` turns that off).  gymnax-style code:
 ``envs.make_gymnax`` returns ``(env, params)`` as ``gymnax.make`` does (flat float32
 observations, gymnax's spaces, the installed gymnax's step convention: ``envs.gymnax_compat``),

@@ -9,35 +9,20 @@ counting Done (SAVN's node count), by breadth-first relaxation over the pose gra
 each (scene, target), the start poses (free cell, any heading, horizon 0) from which the
 target is reachable but not already solved.
 
-Caching.  A built bank is kept in memory (``build_bank`` is lru-cached) and on disk, as a
-compressed ``.npz`` (a few MB) under ``$FORESIT_CACHE_DIR/banks/`` (default
-``~/.cache/foresit_jax/banks/``, or ``$XDG_CACHE_HOME/foresit_jax/banks/``).  The file
-name carries a hash of everything that determines the arrays (``bank_cache_key``): the
-setup, scene numbers, grid size, view width, the source of envs/scenes.py, bank.py,
-dynamics.py, raycast.py and catalog.py, and the numpy, jax and jaxlib versions and the jax backend that
-build it.  So editing the generator or upgrading jax selects a new file; stale files are
-never read (delete the folder to reclaim the space).  Files are written atomically (a
-temporary file, then ``os.replace``), so concurrent processes are safe; a file that cannot
-be read, or whose arrays do not match the expected names, shapes and dtypes, is rebuilt.
-``FORESIT_NO_CACHE=1`` turns the disk cache off (neither read nor written); a cache
-folder that cannot be written only costs a warning.
+Caching: a built bank is kept in memory (``build_bank`` is lru-cached) and on disk
+(``envs.bank_cache``).
 """
 
 from __future__ import annotations
 
 import functools
-import hashlib
-import json
-import os
-import tempfile
-import warnings
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
+from envs import bank_cache as cache
 from envs import catalog as C
 from envs.dynamics import pose_from_index, pose_index, transition
 from envs.raycast import (
@@ -140,59 +125,6 @@ def _distances(goal, next_poses):
     return dist
 
 
-BANK_CACHE_FORMAT = 1  # bump when the file layout (not the arrays) changes
-CACHE_DIR_ENV = "FORESIT_CACHE_DIR"  # root of the disk cache; banks go to its "banks" folder
-NO_CACHE_ENV = "FORESIT_NO_CACHE"  # "1" (anything but "", "0", "false", "no"): no disk cache
-# The modules whose source determines a bank's arrays (hashed into the cache key).
-_GENERATOR_SOURCES = ("scenes.py", "bank.py", "dynamics.py", "raycast.py", "catalog.py")
-
-
-def bank_cache_dir() -> Path | None:
-    """The folder of cached banks, or None when the disk cache is off (FORESIT_NO_CACHE)."""
-    if os.environ.get(NO_CACHE_ENV, "").strip().lower() not in ("", "0", "false", "no"):
-        return None
-    root = os.environ.get(CACHE_DIR_ENV)
-    if not root:
-        root = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "foresit_jax"
-    return Path(root).expanduser() / "banks"
-
-
-@functools.lru_cache(maxsize=1)
-def _generator_digest() -> str:
-    """sha256 of the source of the modules that generate a bank, and of the library versions."""
-    digest = hashlib.sha256()
-    here = Path(__file__).resolve().parent
-    for name in _GENERATOR_SOURCES:
-        digest.update(name.encode() + b"\0" + (here / name).read_bytes() + b"\0")
-    import jaxlib
-
-    versions = (np.__version__, jax.__version__, jaxlib.__version__, jax.default_backend())
-    digest.update(repr(versions).encode())
-    return digest.hexdigest()
-
-
-def bank_cache_key(setup: str, scene_numbers, grid_size: int, view_width: int) -> str:
-    """Hex sha256 of every input that determines the arrays of a bank (see the module doc)."""
-    inputs = {
-        "format": BANK_CACHE_FORMAT,
-        "setup": setup,
-        "scene_numbers": [int(n) for n in scene_numbers],
-        "grid_size": int(grid_size),
-        "view_width": int(view_width),
-        "generator": _generator_digest(),
-    }
-    return hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()
-
-
-def bank_cache_path(setup: str, scene_numbers, grid_size: int, view_width: int) -> Path | None:
-    """Where the bank of these inputs is (or would be) cached; None when caching is off."""
-    folder = bank_cache_dir()
-    if folder is None:
-        return None
-    key = bank_cache_key(setup, scene_numbers, grid_size, view_width)
-    return folder / f"{setup}-{len(scene_numbers)}scenes-g{grid_size}-w{view_width}-{key[:32]}.npz"
-
-
 def _expected_arrays(setup: str, num_scenes: int, grid_size: int, view_width: int) -> dict:
     """name -> (shape, dtype) of every array of a bank."""
     s, g, k = num_scenes, grid_size, _max_targets(setup)
@@ -213,58 +145,20 @@ def _max_targets(setup: str) -> int:
     return max(len(C.SETUPS[setup][1][r]) for r in range(4))
 
 
-def _load_cached(path: Path, key: str, expected: dict) -> dict | None:
-    """The arrays of a cache file, or None when it is missing, unreadable or not as expected."""
-    if not path.is_file():
-        return None
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            if str(data["cache_key"]) != key or set(data.files) != set(expected) | {"cache_key"}:
-                raise ValueError("keys differ")
-            arrays = {name: data[name] for name in expected}
-        for name, (shape, dtype) in expected.items():
-            if arrays[name].shape != shape or arrays[name].dtype != dtype:
-                raise ValueError(f"{name}: {arrays[name].shape} {arrays[name].dtype}, expected {shape} {dtype}")
-        return arrays
-    except Exception as error:  # noqa: BLE001 (a corrupt or foreign file: rebuild, never crash)
-        warnings.warn(f"ignoring the unreadable scene-bank cache file {path} ({error!r}); rebuilding it", stacklevel=3)
-        return None
-
-
-def _save_cached(path: Path, key: str, arrays: dict) -> None:
-    """Write atomically (a temporary file in the same folder, then os.replace)."""
-    tmp = None
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.stem + ".", suffix=".tmp")
-        with os.fdopen(fd, "wb") as f:
-            np.savez_compressed(f, cache_key=np.asarray(key), **arrays)
-        os.replace(tmp, path)
-        tmp = None
-    except OSError as error:
-        warnings.warn(f"could not write the scene-bank cache file {path} ({error!r})", stacklevel=3)
-    finally:
-        if tmp is not None:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
-
-
 @functools.lru_cache(maxsize=16)
 def build_bank(setup: str, scene_numbers: tuple[int, ...], grid_size: int, view_width: int) -> dict:
     """Numpy arrays of a SceneBank, cached in memory and on disk (see the module doc).
 
     The first build of a split takes seconds (all four room types of the train split: about
     10 s on one CPU core); loading it from the disk cache takes a fraction of a second."""
-    path = bank_cache_path(setup, scene_numbers, grid_size, view_width)
+    path = cache.bank_cache_path(setup, scene_numbers, grid_size, view_width)
     if path is None:
         return compute_bank(setup, scene_numbers, grid_size, view_width)
-    key = bank_cache_key(setup, scene_numbers, grid_size, view_width)
-    arrays = _load_cached(path, key, _expected_arrays(setup, len(scene_numbers), grid_size, view_width))
+    key = cache.bank_cache_key(setup, scene_numbers, grid_size, view_width)
+    arrays = cache.load(path, key, _expected_arrays(setup, len(scene_numbers), grid_size, view_width))
     if arrays is None:
         arrays = compute_bank(setup, scene_numbers, grid_size, view_width)
-        _save_cached(path, key, arrays)
+        cache.save(path, key, arrays)
     return arrays
 
 
@@ -322,7 +216,4 @@ def make_bank(setup: str, scene_numbers, grid_size: int, view_width: int) -> Sce
     return SceneBank(**{k: jnp.asarray(v) for k, v in arrays.items()})
 
 
-__all__ = [
-    "SceneBank", "NUM_ROWS", "bank_cache_dir", "bank_cache_key", "bank_cache_path", "build_bank", "compute_bank",
-    "make_bank",
-]  # fmt: skip
+__all__ = ["SceneBank", "NUM_ROWS", "build_bank", "compute_bank", "make_bank"]

@@ -311,13 +311,6 @@ def truncate_rows(path: Path, last_update: int) -> None:
         os.replace(tmp, target)
 
 
-def first_nonfinite(metrics: dict) -> int | None:
-    """Index of the first update whose loss is NaN or inf, or None."""
-    loss = np.asarray(metrics["losses/total_loss"])
-    bad = np.flatnonzero(~np.isfinite(loss))
-    return int(bad[0]) if len(bad) else None
-
-
 def finite_seeds(tree, num_seeds: int | None = None) -> np.ndarray:
     """Whether every float of `tree` (a training state: parameters, optimiser moments,
     f_w) is finite: a bool, or with `num_seeds` one per seed (leaves stacked over seeds).

@@ -36,7 +36,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from experiments import devices, numerics, runs, selection, stats
+from experiments import devices, loop, numerics, runs, selection, stats
 from experiments.presets import SweepConfigFields, config_flag, given, preset
 from experiments.progress import progress_bar
 from experiments.tables import markdown_table, write_csv
@@ -327,7 +327,8 @@ def run_method(method: str, args: Args, bar, evaluator, folder: Path, budget: li
     seeds' training states and selected models, then `progress.json` (updates done,
     validation history, curves); at the end `results.json`.  A finished method is read
     back; a started one continues from its last checkpoint, bit for bit on the same platform
-    (progress.json records the platform of each stretch, `experiments.numerics`)."""
+    (progress.json records the platform of each stretch, `experiments.numerics`). The
+    loop is `train`'s (`experiments.loop`); what differs is what a chunk records."""
     from foresit_jax.evaluate import agent_params
     from foresit_jax.train import make_trainer
 
@@ -348,16 +349,10 @@ def run_method(method: str, args: Args, bar, evaluator, folder: Path, budget: li
     if (folder / "progress.json").exists():
         progress = runs.read_json(folder / "progress.json")  # its protocol: see check_started
     # A kill between a chunk's checkpoint and its progress.json leaves a newer checkpoint
-    # that nothing else records: drop it, that chunk runs again (to the same result).
-    runs.drop_steps_after(manager, progress["done"])
-    if progress["done"]:
-        intact, skipped = runs.intact_step(manager, progress["done"])
-        for line in skipped:
-            print(f"warning: {method}: {line}; skipped", file=sys.stderr, flush=True)
-        if intact != progress["done"]:
-            progress = rewind(progress, intact or 0)
-            print(f"warning: {method}: continuing from update {progress['done']}", file=sys.stderr, flush=True)
-            runs.drop_steps_after(manager, progress["done"])
+    # that nothing else records: it is dropped, and that chunk runs again (to the same result).
+    intact = loop.resume_point(manager, folder / "checkpoints", progress["done"], label=f"{method}: ")
+    if intact != progress["done"]:
+        progress = rewind(progress, intact)
     # The platform of the updates still to come (experiments.numerics).
     progress["numerics"], warning = numerics.extend(progress.get("numerics"), progress["done"])
     if warning:
@@ -373,45 +368,34 @@ def run_method(method: str, args: Args, bar, evaluator, folder: Path, budget: li
     # the state's update count is this method's, the bar counts every method's).
     offset = bar.position() - progress["done"]
     run = trainer.seeds_runner(lambda update: bar.at(offset + np.max(update))) if bar.enabled else trainer.run_seeds
-    done, history = progress["done"], progress["history"]
-    while done < config.num_updates:
-        if budget[0] is not None and budget[0] <= 0:
-            return None
-        n = min(schedule.chunk_updates, config.num_updates - done)
-        states, metrics = run(states, env_params, n)
-        metrics = jax.tree.map(np.asarray, metrics)  # [seeds, n]
-        loss = metrics["losses/total_loss"]
-        finite = runs.finite_seeds(states, len(seeds))
-        if not np.isfinite(loss).all() or not finite.all():
-            kept = (f"its last checkpoint, update {manager.latest_step()} (finite), is kept in {folder}"
-                    if manager.latest_step() is not None else "no checkpoint was written (the first chunk diverged)")
-            if not np.isfinite(loss).all():
-                seed, update = np.argwhere(~np.isfinite(loss))[0]
-                what = f"non-finite loss at update {done + update + 1} of seed {seeds[seed]}"
-            else:
-                what = f"non-finite parameters after update {done + n} in seed(s) {[s for s, ok in zip(seeds, finite) if not ok]}"
-            runs.fail(f"{method}: {what}; sweep stopped, {kept}; a lower learning rate may help", 1)
-        warning = runs.divergence(metrics)
-        if warning:
-            print(f"warning: {method}, updates {done + 1}-{done + n}: {warning}", file=sys.stderr, flush=True)
+    history = progress["history"]
+
+    def after_chunk(states, chunk: loop.Chunk) -> None:
+        """Record the chunk, select each seed's model on validation (as train does),
+        checkpoint the states and the selected models, then progress.json; move the bar."""
+        metrics = chunk.metrics  # [seeds, n]
         progress["curves"].append(metrics["charts/success_rate"].tolist())
         for name in filter(metrics.__contains__, DIAGNOSTICS):  # each seed's mean over the chunk
             progress.setdefault("diagnostics", {}).setdefault(name, []).append(metrics[name].mean(axis=1).tolist())
-        done += n
         seed_params = seed_params_of(states)
-        for i, seed in enumerate(seeds):  # model selection, as train does
+        for i, seed in enumerate(seeds):
             params = devices.seed_slice(seed_params, i)
             val = selection.validate(evaluator, params, config, seed, schedule.val_episodes_per_room)
-            history[i].append({"update": done, **val["overall"]})
-            best[i].offer(val["overall"]["SR"], done, params)
+            history[i].append({"update": chunk.done, **val["overall"]})
+            best[i].offer(val["overall"]["SR"], chunk.done, params)
         best_params = jax.tree.map(lambda *x: np.stack(x), *[b.params for b in best])
-        runs.save(manager, done, {"states": states, "best": best_params})
-        progress.update(done=done, best_sr=[b.sr for b in best], best_update=[b.update for b in best])
+        runs.save(manager, chunk.done, {"states": states, "best": best_params})
+        progress.update(done=chunk.done, best_sr=[b.sr for b in best], best_update=[b.update for b in best])
         runs.write_json(folder / "progress.json", progress)
-        if budget[0] is not None:
-            budget[0] -= 1
         val_sr = np.mean([h[-1]["SR"] for h in history])
-        bar(n, {"method": method, "SR": f"{metrics['charts/success_rate'].mean():.3f}", "val SR": f"{val_sr:.1f}%"})
+        bar(chunk.n, {"method": method, "SR": f"{metrics['charts/success_rate'].mean():.3f}", "val SR": f"{val_sr:.1f}%"})
+
+    states, done = loop.run_chunks(run, states, env_params, done=progress["done"], total=config.num_updates,
+                                   chunk_updates=schedule.chunk_updates, after_chunk=after_chunk, manager=manager,
+                                   checkpoints=folder / "checkpoints", seeds=seeds, budget=budget,
+                                   label=f"{method}: ")  # fmt: skip
+    if done < config.num_updates:
+        return None
     curves = np.concatenate([np.array(c, float) for c in progress["curves"]], axis=1)
     last_params = seed_params_of(states)
     results = []

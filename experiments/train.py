@@ -11,7 +11,9 @@ same platform (run.json records the platform of each stretch of updates, and a r
 another one warns: `experiments.numerics`).  With `--resume`, `--num-updates` beyond the
 run's extends it; any other flag that differs from the run's is refused (`resume_conflicts`);
 a finished run is left as it is.  An existing run folder is never overwritten without
-`--resume` or `--overwrite`, and one process at a time writes it (`runs.claim`).
+`--resume` or `--overwrite`, and one process at a time writes it (`runs.claim`).  The loop
+(chunks, the non-finite stop, where a resume continues) is the one `sweep` runs too:
+`experiments.loop`.
 
 Parameters and optimiser state are checked finite before every checkpoint: a run that
 produced NaN or inf stops with an error naming its last finite checkpoint; a loss or
@@ -30,7 +32,7 @@ from typing import Literal, Optional
 import jax
 import numpy as np
 
-from experiments import numerics, runs, selection, tracking
+from experiments import loop, numerics, runs, selection, tracking
 from experiments.presets import Schedule, TrainConfigFields, config_flag, given, preset
 from experiments.progress import progress_bar
 
@@ -154,20 +156,13 @@ def main(args: Args) -> dict:
         print(f"{out} is finished ({config.num_updates} updates) and its results are written; nothing to do "
               "(pass --num-updates N to extend it)")  # fmt: skip
         return runs.read_json(out / "results_test.json")["results"]
-    if args.resume and manager.latest_step() is not None:
-        intact, skipped = runs.intact_step(manager)
-        for line in skipped:
-            print(f"warning: {line}; skipped", file=sys.stderr, flush=True)
-        if intact is None:
-            print(f"warning: no intact checkpoint in {out / 'checkpoints'}; starting again from update 0",
-                  file=sys.stderr, flush=True)  # fmt: skip
-        else:
-            done = int(intact)
+    if args.resume:
+        done = loop.resume_point(manager, out / "checkpoints")
+        if done:
             state = runs.restore(manager, done, state)
             print(f"resuming {out} from update {done}")
-        runs.drop_steps_after(manager, done)  # the corrupt ones skipped
         runs.drop_steps_after(best_manager, done)  # a best model of those updates is chosen again
-    if args.resume:  # the platform of the updates still to come (experiments.numerics)
+        # The platform of the updates still to come (experiments.numerics)
         history, warning = numerics.extend(numerics.rewind(info.get("numerics"), done), done)
         if history != info.get("numerics"):
             runs.write_run_info(out, {**info, "numerics": history})
@@ -206,44 +201,30 @@ def main(args: Args) -> dict:
     # the update counter only: the same numbers).
     run_chunk = jax.jit(functools.partial(trainer.run, on_update=bar.at) if args.progress else trainer.run,
                         static_argnums=2)  # fmt: skip
-    chunks_run = 0
     t_start = time.time()
-    while done < total:
-        n = min(schedule.chunk_updates, total - done)
-        t0 = time.time()
-        new_state, metrics = run_chunk(state, env_params, n)
-        metrics = jax.tree.map(np.asarray, metrics)
-        bad = runs.first_nonfinite(metrics)
-        if bad is not None or not runs.finite_seeds(new_state):
-            what = f"non-finite loss at update {done + bad + 1}" if bad is not None else (
-                f"non-finite parameters after update {done + n} (the loss, computed before each update, was finite)")
-            kept = manager.latest_step()
-            kept = (f"its last checkpoint (update {kept}, finite) is kept in {out / 'checkpoints'}" if kept is not None
-                    else "no checkpoint was written (the first chunk diverged)")  # fmt: skip
-            runs.fail(f"{what}; training stopped, {kept}; a lower --learning-rate may help", status=1)
-        warning = runs.divergence(metrics)
-        if warning:
-            print(f"warning: updates {done + 1}-{done + n}: {warning}", file=sys.stderr, flush=True)
-        state = new_state
-        rows = runs.metric_rows(metrics, done, last_row)
+
+    def after_chunk(state, chunk: loop.Chunk) -> None:
+        """Record the chunk, checkpoint it, validate and select, move the bar."""
+        nonlocal last_row
+        rows = runs.metric_rows(chunk.metrics, chunk.done - chunk.n, last_row)
         last_row = rows[-1]
         runs.append_rows(out / "metrics", rows)
         tracker.log(rows)
-        done += n
-        runs.save(manager, done, state)
-        val = validate_and_select(state, done)  # model selection on the validation split
-        dt = time.time() - t0
-        useful = float(np.sum(metrics["frames/useful"]))  # steps that entered the loss
-        bar(n, {"useful fps": f"{useful / dt:,.0f}", "SR": f"{metrics['charts/success_rate'].mean():.3f}",
-                "val SR": f"{val['overall']['SR']:.1f}%", **({"warning": "diverging"} if warning else {})})  # fmt: skip
-        chunks_run += 1
-        if args.stop_after_chunks is not None and chunks_run >= args.stop_after_chunks and done < total:
-            bar(0, None)
-            tracker.close()
-            print(f"stopped after {chunks_run} chunks at update {done} (resume with --resume)")
-            return {"stopped_at": done}
+        runs.save(manager, chunk.done, state)
+        val = validate_and_select(state, chunk.done)  # model selection on the validation split
+        useful = float(np.sum(chunk.metrics["frames/useful"]))  # steps that entered the loss
+        bar(chunk.n, {"useful fps": f"{useful / (time.time() - chunk.started):,.0f}",
+                      "SR": f"{chunk.metrics['charts/success_rate'].mean():.3f}", "val SR": f"{val['overall']['SR']:.1f}%",
+                      **({"warning": "diverging"} if chunk.warning else {})})  # fmt: skip
+
+    state, done = loop.run_chunks(run_chunk, state, env_params, done=done, total=total,
+                                  chunk_updates=schedule.chunk_updates, after_chunk=after_chunk, manager=manager,
+                                  checkpoints=out / "checkpoints", budget=[args.stop_after_chunks])  # fmt: skip
     bar(0, None)
     tracker.close()
+    if done < total:
+        print(f"stopped after {args.stop_after_chunks} chunks at update {done} (resume with --resume)")
+        return {"stopped_at": done}
 
     # Final test evaluation of the model selected on validation.
     best_step = best_manager.latest_step()

@@ -1,4 +1,4 @@
-"""The scene bank's disk cache (envs.bank): a cached bank equals a fresh build bit for bit,
+"""The scene bank's disk cache (envs.bank_cache): a cached bank equals a fresh build bit for bit,
 bad files are rebuilt, the key follows every input, the cache can be turned off; and the
 bank's view table equals raycast.cast_view at every pose.
 
@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from envs import bank as B
+from envs import bank_cache as BC
 from envs import catalog as C
 from envs.raycast import DEPTH_RESOLUTION, cast_view
 
@@ -23,8 +24,8 @@ ARGS = ("savn", (401, 402), 20, 2)
 
 @pytest.fixture
 def cache_dir(tmp_path, monkeypatch):
-    monkeypatch.setenv(B.CACHE_DIR_ENV, str(tmp_path))
-    monkeypatch.delenv(B.NO_CACHE_ENV, raising=False)
+    monkeypatch.setenv(BC.CACHE_DIR_ENV, str(tmp_path))
+    monkeypatch.delenv(BC.NO_CACHE_ENV, raising=False)
     return tmp_path / "banks"
 
 
@@ -53,7 +54,7 @@ def forbid_building(monkeypatch):
 
 
 def test_cached_bank_equals_a_fresh_build_bitwise(cache_dir, fresh, monkeypatch):
-    path = B.bank_cache_path(*ARGS)
+    path = BC.bank_cache_path(*ARGS)
     assert path.parent == cache_dir and not path.exists()
     first = build()  # builds and writes the file
     assert path.exists()
@@ -68,7 +69,7 @@ def test_cached_bank_equals_a_fresh_build_bitwise(cache_dir, fresh, monkeypatch)
     ["garbage", "truncated", "empty", "other_key", "wrong_shape", "missing_array"],
 )
 def test_a_bad_cache_file_is_rebuilt_not_fatal(cache_dir, fresh, damage):
-    path = B.bank_cache_path(*ARGS)
+    path = BC.bank_cache_path(*ARGS)
     build()
     good = path.read_bytes()
     if damage == "garbage":
@@ -92,7 +93,7 @@ def test_a_bad_cache_file_is_rebuilt_not_fatal(cache_dir, fresh, damage):
         arrays = build()
     assert_bitwise_equal(arrays, fresh)
     with np.load(path) as data:  # the file was rewritten whole
-        assert str(data["cache_key"]) == B.bank_cache_key(*ARGS)
+        assert str(data["cache_key"]) == BC.bank_cache_key(*ARGS)
         assert_bitwise_equal({k: data[k] for k in data.files if k != "cache_key"}, fresh)
 
 
@@ -107,57 +108,57 @@ def test_the_key_changes_with_every_input(cache_dir, monkeypatch):
         (setup, numbers, 24, width),
         (setup, numbers, grid, 3),
     ]
-    keys = [B.bank_cache_key(*v) for v in variants]
-    paths = [B.bank_cache_path(*v) for v in variants]
+    keys = [BC.bank_cache_key(*v) for v in variants]
+    paths = [BC.bank_cache_path(*v) for v in variants]
     assert len(set(keys)) == len(keys) and len(set(paths)) == len(paths)
-    assert B.bank_cache_key(*ARGS) == B.bank_cache_key(setup, list(numbers), np.int64(grid), width)
-    monkeypatch.setattr(B, "_generator_digest", lambda: "another generator")
-    assert B.bank_cache_key(*ARGS) != keys[0]
+    assert BC.bank_cache_key(*ARGS) == BC.bank_cache_key(setup, list(numbers), np.int64(grid), width)
+    monkeypatch.setattr(BC, "_generator_digest", lambda: "another generator")
+    assert BC.bank_cache_key(*ARGS) != keys[0]
 
 
 def test_the_generator_digest_follows_the_source_files(tmp_path, monkeypatch):
     """Editing any of scenes.py, bank.py, raycast.py, catalog.py changes the digest."""
-    here = Path(B.__file__).resolve().parent
-    for name in B._GENERATOR_SOURCES:
+    here = Path(BC.__file__).resolve().parent
+    for name in BC._GENERATOR_SOURCES:
         shutil.copy(here / name, tmp_path / name)
-    monkeypatch.setattr(B, "__file__", str(tmp_path / "bank.py"))
-    digest = B._generator_digest.__wrapped__
+    monkeypatch.setattr(BC, "__file__", str(tmp_path / "bank_cache.py"))
+    digest = BC._generator_digest.__wrapped__
     base = digest()
-    assert base == B._generator_digest()  # the copies are the real sources
+    assert base == BC._generator_digest()  # the copies are the real sources
     seen = {base}
-    for name in B._GENERATOR_SOURCES:
+    for name in BC._GENERATOR_SOURCES:
         original = (tmp_path / name).read_bytes()
         (tmp_path / name).write_bytes(original + b"\n# edited\n")
         seen.add(digest())
         (tmp_path / name).write_bytes(original)
-    assert len(seen) == 1 + len(B._GENERATOR_SOURCES)
+    assert len(seen) == 1 + len(BC._GENERATOR_SOURCES)
     assert digest() == base
 
 
 @pytest.mark.parametrize("value", ["1", "true", "yes"])
 def test_the_cache_can_be_turned_off(cache_dir, fresh, monkeypatch, value):
-    monkeypatch.setenv(B.NO_CACHE_ENV, value)
-    assert B.bank_cache_dir() is None and B.bank_cache_path(*ARGS) is None
+    monkeypatch.setenv(BC.NO_CACHE_ENV, value)
+    assert BC.bank_cache_dir() is None and BC.bank_cache_path(*ARGS) is None
     assert_bitwise_equal(build(), fresh)
     assert not cache_dir.exists()
 
 
 def test_default_cache_folder(monkeypatch, tmp_path):
-    monkeypatch.delenv(B.CACHE_DIR_ENV, raising=False)
-    monkeypatch.delenv(B.NO_CACHE_ENV, raising=False)
+    monkeypatch.delenv(BC.CACHE_DIR_ENV, raising=False)
+    monkeypatch.delenv(BC.NO_CACHE_ENV, raising=False)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
-    assert B.bank_cache_dir() == tmp_path / "foresit_jax" / "banks"
+    assert BC.bank_cache_dir() == tmp_path / "foresit_jax" / "banks"
     monkeypatch.delenv("XDG_CACHE_HOME")
-    assert B.bank_cache_dir() == Path.home() / ".cache" / "foresit_jax" / "banks"
-    monkeypatch.setenv(B.NO_CACHE_ENV, "0")
-    assert B.bank_cache_dir() is not None
+    assert BC.bank_cache_dir() == Path.home() / ".cache" / "foresit_jax" / "banks"
+    monkeypatch.setenv(BC.NO_CACHE_ENV, "0")
+    assert BC.bank_cache_dir() is not None
 
 
 def test_an_unwritable_cache_folder_only_warns(tmp_path, monkeypatch, fresh):
     blocker = tmp_path / "a_file"
     blocker.write_text("the cache folder cannot be made under a file")
-    monkeypatch.setenv(B.CACHE_DIR_ENV, str(blocker))
-    monkeypatch.delenv(B.NO_CACHE_ENV, raising=False)
+    monkeypatch.setenv(BC.CACHE_DIR_ENV, str(blocker))
+    monkeypatch.delenv(BC.NO_CACHE_ENV, raising=False)
     with pytest.warns(UserWarning, match="could not write"):
         assert_bitwise_equal(build(), fresh)
 
@@ -167,7 +168,7 @@ def test_make_uses_the_disk_cache(cache_dir, monkeypatch):
     import envs
 
     env, params = envs.make("GridNav-v0", split="val", room_types="bathroom", view_width=1)
-    path = B.bank_cache_path("savn", tuple(C.scene_numbers("val", [C.BATHROOM])), 20, 1)
+    path = BC.bank_cache_path("savn", tuple(C.scene_numbers("val", [C.BATHROOM])), 20, 1)
     assert path.exists()
     with np.load(path) as data:
         np.testing.assert_array_equal(data["view_sem"], params.bank.view_sem)

@@ -156,6 +156,15 @@ def test_a_step_that_leaves_inf_weights_behind_a_finite_loss_is_not_reported(tmp
     assert not list((out / "checkpoints").glob("*")) and not (out / "results_test.json").exists()
 
 
+def test_a_sweep_names_the_seed_whose_weights_went_non_finite(tmp_path, capsys):
+    """The same fault in a sweep (the loop train and sweep share, experiments.loop)."""
+    out = tmp_path / "inf_sweep"
+    line = one_line_error(sweep.cli, ["--methods", "a3c", "--seeds", "2", "--seed", "3", "--preset", "tiny", "--out", out,
+                                      "--no-progress", "--learning-rate", "1e39", "--num-updates", "1"], capsys, code=1)  # fmt: skip
+    assert "a3c: non-finite parameters after update 1 in seed(s) [3, 4]" in line, line
+    assert "no checkpoint was written" in line and not (out / "methods" / "a3c" / "progress.json").exists(), line
+
+
 def test_nan_weights_in_a_later_chunk_stop_the_run_naming_a_checkpoint_that_exists(tmp_path, capsys, monkeypatch):
     out = tmp_path / "nan_later"
     train_cli.main(tiny(out, stop_after_chunks=1))

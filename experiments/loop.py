@@ -1,0 +1,123 @@
+"""The run loop `train` and `sweep` share (and `paper`, which runs sweeps).
+
+A run, of one seed (`train`) or of several vmapped (`sweep`), is the same loop:
+
+    resume_point       where a resumed run continues: its newest intact checkpoint
+    run_chunks         run a chunk of updates; stop, naming the update and the seed, on a
+                       non-finite loss or parameter; warn of divergence short of NaN; hand
+                       the chunk to the caller's `after_chunk` (which records its metrics,
+                       checkpoints, validates and selects the model, moves the bar); stop
+                       early when the invocation's chunk budget (--stop-after-chunks) is spent
+
+What differs between the two is only what they record, and lives in their `after_chunk`:
+`train` writes one run's files (metrics.jsonl, validation.jsonl, best/), `sweep` a
+method's progress.json and one checkpoint of every seed's state and selected model.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+from typing import Callable, NamedTuple, Optional, Sequence
+
+import jax
+import numpy as np
+
+from experiments import runs
+
+
+def warn(line: str) -> None:
+    print(f"warning: {line}", file=sys.stderr, flush=True)
+
+
+class Chunk(NamedTuple):
+    """One chunk of updates, as `run_chunks` hands it to its caller's `after_chunk`."""
+
+    metrics: dict  # name -> [n] (or [seeds, n]) numpy, one value per update
+    done: int  # updates done, this chunk included
+    n: int  # updates in this chunk
+    warning: Optional[str]  # the divergence warning (`runs.divergence`), or None
+    started: float  # time.time() when the chunk began (for frames/s)
+
+
+def resume_point(manager, folder: Path, recorded: Optional[int] = None, label: str = "") -> int:
+    """The update a resumed run continues from: its newest intact checkpoint, at most
+    `recorded` (the last update the run's own records cover, when it keeps any beyond
+    its checkpoints: a sweep's progress.json). Every corrupt checkpoint is skipped,
+    saying so, and every one after the step chosen is deleted (those updates run again,
+    to the same numbers). 0 when there is none."""
+    if recorded is not None:  # saved after the records were: nothing else knows them
+        runs.drop_steps_after(manager, recorded)
+    if manager.latest_step() is None:
+        if recorded:
+            warn(f"{label}no checkpoint in {folder}; starting again from update 0")
+        return 0
+    intact, skipped = runs.intact_step(manager)
+    for line in skipped:
+        warn(f"{label}{line}; skipped")
+    step = intact or 0
+    if intact is None:
+        warn(f"{label}no intact checkpoint in {folder}; starting again from update 0")
+    elif skipped or (recorded is not None and step != recorded):
+        warn(f"{label}continuing from update {step}")
+    runs.drop_steps_after(manager, step)
+    return step
+
+
+def nonfinite(metrics: dict, state, done: int, n: int, seeds: Optional[Sequence[int]] = None) -> Optional[str]:
+    """What went non-finite in a chunk of `n` updates after the first `done`, or None: the
+    first update whose loss is NaN or inf, or else the parameters (the loss is computed
+    before each update, so a finite loss can leave NaN weights behind). With `seeds`,
+    the metrics and the state are stacked over them and the message names the seed."""
+    loss = np.asarray(metrics["losses/total_loss"]).reshape(len(seeds) if seeds else 1, -1)
+    bad = np.argwhere(~np.isfinite(loss))
+    if len(bad):
+        seed, update = bad[0]
+        return f"non-finite loss at update {done + update + 1}" + (f" of seed {seeds[seed]}" if seeds else "")
+    finite = np.atleast_1d(runs.finite_seeds(state, len(seeds) if seeds else None))
+    if finite.all():
+        return None
+    which = f" in seed(s) {[s for s, ok in zip(seeds, finite) if not ok]}" if seeds else ""
+    return f"non-finite parameters after update {done + n}{which} (the loss, computed before each update, was finite)"
+
+
+def kept_checkpoint(manager, folder: Path) -> str:
+    """Where a stopped run's last good state is, for its error message."""
+    step = manager.latest_step()
+    if step is None:
+        return "no checkpoint was written (the first chunk diverged)"
+    return f"its last checkpoint (update {step}, finite) is kept in {folder}"
+
+
+def run_chunks(run: Callable, state, env_params, *, done: int, total: int, chunk_updates: int,
+               after_chunk: Callable, manager, checkpoints: Path, seeds: Optional[Sequence[int]] = None,
+               budget: Optional[list] = None, label: str = ""):  # fmt: skip
+    """Train from update `done` to `total` in chunks of `chunk_updates`: `run(state,
+    env_params, n)` (a jitted `Trainer.run` or `run_seeds`) -> (state, metrics), then
+    `after_chunk(state, Chunk(metrics, done, n, warning, started))` with `done` counting the chunk and
+    `warning` the divergence warning or None. `budget` is a one-item list of the chunks
+    this invocation may still run ([None]: no limit), spent as they run. Returns
+    (state, done): `done < total` when the budget ran out first.
+
+    A non-finite loss or parameter stops the process (exit status 1) before anything of
+    the chunk is recorded, naming the update, the seed and the last checkpoint (`manager`,
+    in the folder `checkpoints`), which is finite: every saved state passed this check."""
+    while done < total:
+        if budget is not None and budget[0] is not None and budget[0] <= 0:
+            break
+        n, started = min(chunk_updates, total - done), time.time()
+        new_state, metrics = run(state, env_params, n)
+        metrics = jax.tree.map(np.asarray, metrics)
+        what = nonfinite(metrics, new_state, done, n, seeds)
+        if what is not None:
+            runs.fail(f"{label}{what}; training stopped, {kept_checkpoint(manager, checkpoints)}; "
+                      "a lower --learning-rate may help", status=1)  # fmt: skip
+        warning = runs.divergence(metrics)
+        if warning:
+            warn(f"{label}updates {done + 1}-{done + n}: {warning}")
+        state, done = new_state, done + n
+        after_chunk(state, Chunk(metrics, done, n, warning, started))
+        if budget is not None and budget[0] is not None:
+            budget[0] -= 1
+    return state, done
