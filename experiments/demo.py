@@ -37,7 +37,8 @@ from envs import catalog as C
 from envs import render
 from envs.metrics import LONG_PATH_MIN
 from experiments.tables import markdown_table
-from foresit_jax.evaluate import EpisodeOutcomes, outcome_metrics, random_policy_rollout
+from foresit_jax.agent import EpisodeStats
+from foresit_jax.evaluate import outcome_metrics, random_policy_rollout
 
 RANDOM_SR_MAX = 10.0  # %
 LONG_FRACTION_RANGE = (40.0, 80.0)  # % of episodes with L^g >= 5
@@ -67,7 +68,7 @@ def output_files(out: Path) -> list[Path]:
 
 
 def oracle_rollout(env, num_lanes: int, num_steps: int):
-    """Jitted (params, key) -> (obs, state, EpisodeOutcomes [lanes], poses) of the oracle
+    """Jitted (params, key) -> (obs, state, EpisodeStats [lanes], poses) of the oracle
     (``env.optimal_action``), each lane's first episode; poses: [T, lanes, ...] the pose
     after each step, before any auto-reset (for the pictures).
 
@@ -102,12 +103,12 @@ def oracle_rollout(env, num_lanes: int, num_steps: int):
         (_, active, record), poses = jax.lax.scan(
             body, (state, jnp.ones(num_lanes, bool), record), jax.random.split(key_steps, num_steps)
         )
-        return obs, state, EpisodeOutcomes(record["success"], record["length"], record["optimal_length"], ~active), poses
+        return obs, state, EpisodeStats(record["success"], record["length"], record["optimal_length"], ~active), poses
 
     return rollout
 
 
-def metrics(outcomes: EpisodeOutcomes) -> dict[str, float]:
+def metrics(outcomes: EpisodeStats) -> dict[str, float]:
     """SR, SPL, SR>=5, SPL>=5 in % (as evaluation computes them), mean L^g, share of
     L^g >= 5, episode count."""
     table = outcome_metrics(outcomes)
@@ -188,7 +189,7 @@ def main(config: DemoConfig) -> int:
                 outcomes = random(params, key_room)
             else:
                 obs, state, outcomes, poses = oracle(params, key_room)
-            outcomes = EpisodeOutcomes(*(np.asarray(x)[: per_room[i]] for x in outcomes))
+            outcomes = jax.tree.map(lambda x: np.asarray(x)[: per_room[i]], outcomes)  # noqa: B023
             if not outcomes.ended.all():
                 raise RuntimeError(f"{room}: an episode outlived {num_steps} steps (the time limit should end it)")
             results[policy][room] = metrics(outcomes)
@@ -197,7 +198,7 @@ def main(config: DemoConfig) -> int:
                 pictures[room] = (params, jax.tree.map(lambda x: np.asarray(x[0]), (obs, state)),
                                   [np.asarray(p[:, 0]) for p in poses], int(outcomes.length[0]))  # fmt: skip
         timings[f"{policy} rollouts (compile included)"] = time.perf_counter() - t
-        results[policy]["overall"] = metrics(EpisodeOutcomes(*(np.concatenate(x) for x in zip(*pooled[policy]))))
+        results[policy]["overall"] = metrics(jax.tree.map(lambda *x: np.concatenate(x), *pooled[policy]))
 
     t = time.perf_counter()
     for room, (params, (obs, state), (pos, heading, horizon), length) in pictures.items():

@@ -395,7 +395,7 @@ def trajectories_figure(args: Args, base: str, other: str, path: Path) -> str:
     one per room type: the first of `trajectory_candidates` whose L^g >= 5 (a fixed rule,
     not a choice of good-looking ones); each method acts by its own evaluation protocol."""
     from envs.render import render_topdown
-    from foresit_jax.agent import Agent
+    from foresit_jax.agent import Agent, BoundEnv
     from foresit_jax.evaluate import Evaluator
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -405,7 +405,7 @@ def trajectories_figure(args: Args, base: str, other: str, path: Path) -> str:
     env, n = evaluator.env, args.trajectory_candidates
     key = selection.test_key(args.seed)
     rooms = next(iter(loaded.values()))[0].room_types or ROOM_TYPES
-    rollouts = {m: jax.jit(functools.partial(Agent(config).rollout, env=env, greedy=config.pieces.greedy_evaluation),
+    rollouts = {m: jax.jit(functools.partial(Agent(config).rollout, greedy=config.pieces.greedy_evaluation),
                            static_argnames="num_steps") for m, (config, _) in loaded.items()}  # fmt: skip
     replay = jax.jit(functools.partial(_replay_positions, env))
     panels, lines = [], []
@@ -420,9 +420,8 @@ def trajectories_figure(args: Args, base: str, other: str, path: Path) -> str:
         i = int(long[0])
         row = []
         for method, (config, params) in loaded.items():
-            traj = rollouts[method](params.params, params.imagination_params, env_params=env_params, key=k,
-                                    noise_variance=jnp.full((n,), params.noise_variance), num_steps=num_steps,
-                                    reset_keys=reset_keys)  # fmt: skip
+            acting = params._replace(noise_variance=jnp.full((n,), params.noise_variance))
+            traj = rollouts[method](acting, BoundEnv(env, env_params), k, num_steps=num_steps, reset_keys=reset_keys)
             actions, valid, success = (np.asarray(x)[:, i] for x in (traj.actions, traj.valid, traj.success))
             steps = int(valid.sum())
             poses = np.asarray(replay(env_params, reset_keys[i], actions))[: steps + 1]

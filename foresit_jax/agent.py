@@ -6,6 +6,9 @@ parameter tree, theta and omega; f_w under its own tree, w) and its method's pie
 ``step`` vmapped over lanes; per-episode facts read from the step's ``info``:
 ``success``, ``optimal_length``, ``room_type``), never from the environment's state.
 
+Acting takes three records: `AgentParams` (what acts: theta/omega, f_w's w, the noise
+variance), `BoundEnv` (the environment bound to its parameters once) and `ActOptions` (how:
+greedy or sampled, packed windows or whole episodes, whether to record the inputs).
 `act` runs every lane for a window of `num_steps` steps from an `ActorState` and returns
 the next `ActorState` and the window's `Trajectory`. Lanes never idle: episodes follow one
 another inside a window (the environment auto-resets), and an episode cut at the window's
@@ -15,7 +18,7 @@ start the LSTM carry and the previous action probabilities are zeroed and i_tau 
 imagined from s_0 with the lane's current noise variance (Eq. 6-7; every K steps for the
 `int` ablation); each ended episode's outcome updates the lane's success tracker (rho).
 
-`whole_episodes=True` is SAVN's layout: every lane starts a fresh episode and only its
+`ActOptions(whole_episodes=True)` is SAVN's layout: every lane starts a fresh episode and only its
 first episode counts (`valid`); what follows it in the window is padding. Evaluation uses
 it (`rollout`), and so does training with `Config.rollout='episodes'` (the reference).
 """
@@ -27,12 +30,49 @@ from typing import Any, NamedTuple, Optional
 import chex
 import jax
 import jax.numpy as jnp
+from flax import struct
 
 import envs.metrics
 from foresit_jax import distributions, imagination
 from foresit_jax.config import Config
 from foresit_jax.lstm import LowRankUpdate, LSTMCarry, LSTMKernels, initial_carry, lstm_input_gates, lstm_step, reset_carry
 from foresit_jax.networks import ActorCritic, CriticOutput, ImaginationNet, window_attention_mask
+
+
+class AgentParams(NamedTuple):
+    """What acts: theta/omega, w, and the imagination noise's variance."""
+
+    params: Any  # the ActorCritic's parameters (encoder, policy, critic; maml's L_phi)
+    imagination_params: Any  # f_w's parameters w
+    noise_variance: Optional[chex.Array] = None  # [] or [B] fixed (evaluation); None: each
+    # lane's Eq. 7 from its success tracker (training)
+
+
+@struct.dataclass
+class BoundEnv:
+    """An environment with the GridNav API bound to its parameters (a split's scene bank),
+    once, by whoever holds both (the Trainer, an evaluation room)."""
+
+    env: Any = struct.field(pytree_node=False)
+    params: Any = None
+
+    def reset(self, keys: chex.Array):
+        """Every lane reset, one key each: (obs, env_state), leaves `[B, ...]`."""
+        return jax.vmap(self.env.reset, in_axes=(0, None))(keys, self.params)
+
+    def step(self, keys: chex.Array, env_state, action: chex.Array):
+        """Every lane stepped (auto-reset): (obs, env_state, reward, terminated, truncated, info)."""
+        return jax.vmap(self.env.step, in_axes=(0, 0, 0, None))(keys, env_state, action, self.params)
+
+
+class ActOptions(NamedTuple):
+    """How a window is acted."""
+
+    greedy: bool = False  # the argmax action (ORG's evaluation) instead of a sample
+    whole_episodes: bool = False  # SAVN's layout: each lane's first episode counts, the rest is padding
+    record_inputs: bool = True  # keep each step's encoder and policy inputs (Trajectory.inputs, the replay's)
+    step_keys: Optional[chex.Array] = None  # [num_steps, 2] the steps' keys instead of split(key) (so that
+    # two windows can replay exactly one longer window's steps)
 
 
 class ActorState(NamedTuple):
@@ -99,12 +139,16 @@ class StepRecord(NamedTuple):
 
 
 class EpisodeStats(NamedTuple):
-    success: chex.Array  # [B] bool
-    length: chex.Array  # [B] int32 actions taken, Done included
-    optimal_length: chex.Array  # [B] int32
-    spl: chex.Array  # [B] float32 success * L^g / max(L, L^g)
-    ended: chex.Array  # [B] bool, the episode ended inside the rollout
-    room_type: chex.Array  # [B] int32
+    """Per-episode facts, `[N]` for a batch of whole episodes (one per lane: `episode_stats`,
+    evaluation's; `foresit_jax.evaluate.random_policy_rollout`) or `[T, B]` for the steps
+    of a packed window (`ended_episodes`)."""
+
+    success: chex.Array  # bool, a successful Done
+    length: chex.Array  # int32 L: actions taken, Done included
+    optimal_length: chex.Array  # int32 L^g: the oracle's shortest number of actions
+    ended: chex.Array  # bool, the episode ended (Done or time limit) within the rollout
+    spl: Optional[chex.Array] = None  # float32 success * L^g / max(L, L^g); None where not computed
+    room_type: Optional[chex.Array] = None  # int32; None where not recorded
 
 
 def episode_stats(traj: Trajectory) -> EpisodeStats:
@@ -115,7 +159,7 @@ def episode_stats(traj: Trajectory) -> EpisodeStats:
     ended = jnp.any((traj.terminated | traj.truncated) & valid, axis=0)
     opt = traj.optimal_length[0]
     spl = envs.metrics.spl(success, length, opt)
-    return EpisodeStats(success, length, opt, spl, ended, traj.room_type[0])
+    return EpisodeStats(success, length, opt, ended, spl, traj.room_type[0])
 
 
 def ended_episodes(traj: Trajectory) -> tuple[chex.Array, EpisodeStats]:
@@ -125,7 +169,7 @@ def ended_episodes(traj: Trajectory) -> tuple[chex.Array, EpisodeStats]:
     length = traj.episode_step + 1
     success = traj.success & ended
     spl = envs.metrics.spl(success, length, traj.optimal_length)
-    return ended, EpisodeStats(success, length, traj.optimal_length, spl, ended, traj.room_type)
+    return ended, EpisodeStats(success, length, traj.optimal_length, ended, spl, traj.room_type)
 
 
 class Agent:
@@ -175,7 +219,7 @@ class Agent:
         return self.imagination_net.apply(w_params, s_0, goal)
 
     def start(
-        self, key, env, env_params, num_lanes: int, memory_size: int = 0, tracker=None, reset_keys=None
+        self, key, env: BoundEnv, num_lanes: int, memory_size: int = 0, tracker=None, reset_keys=None
     ) -> ActorState:
         """Every lane at the start of a fresh episode. memory_size: states of an episode
         the attention critic can remember across windows (the training time limit; 0 when
@@ -186,7 +230,7 @@ class Agent:
             raise ValueError(f"num_lanes must be a positive int, got {num_lanes!r}")
         cfg = self.config
         reset_keys = jax.random.split(key, num_lanes) if reset_keys is None else reset_keys
-        obs, env_state = jax.vmap(env.reset, in_axes=(0, None))(reset_keys, env_params)
+        obs, env_state = env.reset(reset_keys)
         hidden = cfg.hidden_size
         zeros = jnp.zeros((num_lanes, hidden), jnp.float32)
         if tracker is None:
@@ -229,40 +273,30 @@ class Agent:
         return jnp.where((actor.episode_step == 0)[:, None], 0.0, actor.imagined)
 
     def act(
-        self, params, w_params, env, env_params, actor: ActorState, key: chex.PRNGKey, num_steps: int,
-        *, greedy: bool = False, whole_episodes: bool = False, noise_variance: Optional[chex.Array] = None,
-        record_inputs: bool = True, step_keys: Optional[chex.Array] = None,
+        self, acting: AgentParams, env: BoundEnv, actor: ActorState, key: chex.PRNGKey, num_steps: int,
+        options: ActOptions = ActOptions(),
     ) -> tuple[ActorState, Trajectory]:  # fmt: skip
-        """Run every lane `num_steps` steps from `actor` (see the module docstring).
-
-        noise_variance: `[B]` imagination-noise variance per lane, fixed (evaluation); by
-          default each lane's Eq. 7 from its success tracker at the episode's start.
-        record_inputs: keep each step's encoder and policy inputs (`Trajectory.inputs`,
-          for the replay gradient).
-        step_keys: `[num_steps, 2]` the keys of the steps, instead of splitting `key`
-          (so that two windows can replay exactly one longer window's steps).
-        Returns (the actor state after the window, the window's Trajectory).
+        """Run every lane `num_steps` steps from `actor` (see the module docstring); returns
+        (the actor state after the window, the window's Trajectory).
 
         How a window is acted is the base's (`methods.Base.act`): the a3c base runs
         `act_window` under one parameter set; the maml base adapts each lane's parameters
         inside its episode (`foresit_jax.maml.adaptive_act`): whole episodes only, in
         training and evaluation.
         """
-        return self.method.base_piece.act(
-            self, params, w_params, env, env_params, actor, key, num_steps, greedy=greedy,
-            whole_episodes=whole_episodes, noise_variance=noise_variance, record_inputs=record_inputs,
-            step_keys=step_keys,
-        )  # fmt: skip
+        return self.method.base_piece.act(self, acting, env, actor, key, num_steps, options)
 
-    def imagined_at_step(self, w_params, actor: ActorState, s_t: chex.Array, key: chex.PRNGKey,
-                         noise_variance: Optional[chex.Array]) -> chex.Array:  # fmt: skip
+    def imagined_at_step(self, acting: AgentParams, actor: ActorState, s_t: chex.Array,
+                         key: chex.PRNGKey) -> chex.Array:  # fmt: skip
         """i_tau for a step `[B, H]` (Eq. 6-7): renewed where the Imagination piece says (an
-        episode's first step; every K steps for `int`) from s_t (= s_0 at the first step),
-        with noise of each lane's variance (`noise_variance` `[B]`, or Eq. 7 from its success
-        tracker), else the running episode's. Unchanged without imagination."""
+        episode's first step; every K steps for `int`) from s_t (= s_0 at the first step)
+        by f_w (`acting.imagination_params`), with noise of each lane's variance
+        (`acting.noise_variance` `[B]`, or Eq. 7 from its success tracker), else the
+        running episode's. Unchanged without imagination."""
         cfg, variant = self.config, self.imagination  # the method's Imagination piece
         if not variant.uses_imagination:
             return actor.imagined
+        noise_variance = acting.noise_variance
         if noise_variance is None:
             noise_variance = imagination.noise_variance(jax.vmap(imagination.success_rate)(actor.tracker), cfg.sigma2_max)
         renew = variant.renews(actor.episode_step, cfg.int_interval)  # [B]
@@ -270,15 +304,14 @@ class Agent:
 
         def renewed():
             mask = renew[:, None]  # [B, 1], before the imagination (the order of the lowered program's ops)
-            return jnp.where(mask, variant.imagine(self.imagine, w_params, s_t, goal, key, noise_variance,
+            return jnp.where(mask, variant.imagine(self.imagine, acting.imagination_params, s_t, goal, key, noise_variance,
                                                     cfg.rnd_variance), actor.imagined)  # fmt: skip
 
         return jax.lax.cond(jnp.any(renew), renewed, lambda: actor.imagined)
 
     def act_window(
-        self, params, w_params, env, env_params, actor: ActorState, key: chex.PRNGKey, num_steps: int,
-        *, greedy: bool = False, whole_episodes: bool = False, noise_variance: Optional[chex.Array] = None,
-        record_inputs: bool = True, step_keys: Optional[chex.Array] = None, alive: Optional[chex.Array] = None,
+        self, acting: AgentParams, env: BoundEnv, actor: ActorState, key: chex.PRNGKey, num_steps: int,
+        options: ActOptions = ActOptions(), *, alive: Optional[chex.Array] = None,
         lstm_update: Optional[LowRankUpdate] = None, gate_offsets: Optional[chex.Array] = None,
     ) -> tuple[ActorState, Trajectory]:  # fmt: skip
         """`act` under one parameter set for the whole window (every base's step).
@@ -288,9 +321,7 @@ class Agent:
         lstm_update: a low-rank change of the LSTM's kernels (the maml base's adapted
           kernels, `foresit_jax.maml`); gate_offsets: `[num_steps, B, 4H]` added to each
           step's gate pre-activations (zeros whose gradient is the pre-activations')."""
-        num_lanes = actor.episode_step.shape[0]
-        lanes = jnp.arange(num_lanes)
-        memory_size = 0 if actor.memory is None else actor.memory.shape[1]
+        params, lanes = acting.params, jnp.arange(actor.episode_step.shape[0])
         kernels = self.lstm_kernels(params)._replace(update=lstm_update)  # once, outside the loop
 
         def step(carry, xs):
@@ -304,45 +335,29 @@ class Agent:
                 input_gates = input_gates + gate_offset
             lstm, s_t = lstm_step(kernels, actor.lstm, input_gates)
             s_0 = jnp.where(first[:, None], s_t, actor.s_0)
-            imagined = self.imagined_at_step(w_params, actor, s_t, k_imag, noise_variance)  # [B, H]
+            imagined = self.imagined_at_step(acting, actor, s_t, k_imag)  # [B, H]
             policy_input = imagined if self.imagination_in_head else None
             logits = self.model.apply(params, s_t, policy_input, method=ActorCritic.policy_logits)
-            action = distributions.greedy(logits) if greedy else distributions.sample(k_act, logits)
-            memory = actor.memory
-            if memory_size:  # s_t at its position in the episode, for the critic of later windows
-                memory = memory.at[lanes, jnp.minimum(actor.episode_step, memory_size - 1)].set(
-                    jax.lax.stop_gradient(s_t))  # fmt: skip
-            obs, env_state, reward, term, trunc, info = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
-                jax.random.split(k_env, num_lanes), actor.env_state, action, env_params
+            action = distributions.greedy(logits) if options.greedy else distributions.sample(k_act, logits)
+            memory = self.remember(actor, s_t, lanes)
+            obs, env_state, reward, term, trunc, info = env.step(
+                jax.random.split(k_env, lanes.shape[0]), actor.env_state, action
             )
             done = term | trunc
             tracker = jax.vmap(imagination.tracker_update)(actor.tracker, info["success"], done & alive)
-            seen = StepInputs(actor.obs, actor.prev_probs, policy_input, encoder_imagined) if record_inputs else None
+            seen = StepInputs(actor.obs, actor.prev_probs, policy_input, encoder_imagined) if options.record_inputs else None
             out = StepRecord(
                 states=s_t, logits=logits, actions=action, rewards=reward, terminated=term, truncated=trunc,
                 valid=alive, success=info["success"] & alive, episode_step=actor.episode_step, s_0=s_0,
                 optimal_length=info["optimal_length"], room_type=info["room_type"], inputs=seen,
             )  # fmt: skip
-            probs = distributions.probs(logits)
-            if not self.method.action_probs_carry_gradient:
-                probs = jax.lax.stop_gradient(probs)
-            next_actor = ActorState(
-                env_state=env_state,
-                obs=obs,
-                lstm=reset_carry(done, lstm),
-                prev_probs=jnp.where(done[:, None], 0.0, probs),
-                imagined=imagined,
-                s_0=s_0,
-                episode_step=jnp.where(done, 0, actor.episode_step + 1),
-                memory=memory,
-                tracker=tracker,
-            )
-            return (next_actor, alive & ~done if whole_episodes else alive), out
+            next_actor = self.next_actor(actor, done, lstm, logits, env_state, obs, imagined, s_0, memory, tracker)
+            return (next_actor, alive & ~done if options.whole_episodes else alive), out
 
-        step_keys = jax.random.split(key, num_steps) if step_keys is None else step_keys
-        alive = jnp.ones((num_lanes,), bool) if alive is None else alive
+        step_keys = jax.random.split(key, num_steps) if options.step_keys is None else options.step_keys
+        alive = jnp.ones(lanes.shape, bool) if alive is None else alive
         (actor, _), out = jax.lax.scan(step, (actor, alive), (step_keys, gate_offsets))
-        if whole_episodes:  # nothing is bootstrapped: every counted episode ended (or is cut by design)
+        if options.whole_episodes:  # nothing is bootstrapped: every counted episode ended (or is cut by design)
             next_state = jnp.zeros_like(actor.s_0)
         else:  # s_T, for V(s*_T) at the cut (Eq. 8); the next window computes it again
             gates = self.input_gates(params, actor.obs, actor.prev_probs, kernels, self.encoder_imagined(actor))
@@ -351,25 +366,54 @@ class Agent:
                           next_episode_step=actor.episode_step)  # fmt: skip
         return actor, traj
 
+    @staticmethod
+    def remember(actor: ActorState, s_t: chex.Array, lanes: chex.Array) -> Optional[chex.Array]:
+        """The episode's states so far with s_t `[B, H]` at its position, for the attention
+        critic of later windows (without gradient); None when nothing is carried across
+        windows. lanes: `arange(B)`."""
+        if actor.memory is None or not actor.memory.shape[1]:
+            return actor.memory
+        last = actor.memory.shape[1] - 1
+        return actor.memory.at[lanes, jnp.minimum(actor.episode_step, last)].set(jax.lax.stop_gradient(s_t))
+
+    def next_actor(self, actor: ActorState, done, lstm, logits, env_state, obs, imagined, s_0, memory,
+                   tracker) -> ActorState:  # fmt: skip
+        """The lanes after a step: an episode that ended (`done` `[B]`) starts afresh (its
+        LSTM carry, previous action probabilities and step count zeroed)."""
+        probs = distributions.probs(logits)
+        if not self.method.action_probs_carry_gradient:
+            probs = jax.lax.stop_gradient(probs)
+        return ActorState(
+            env_state=env_state,
+            obs=obs,
+            lstm=reset_carry(done, lstm),
+            prev_probs=jnp.where(done[:, None], 0.0, probs),
+            imagined=imagined,
+            s_0=s_0,
+            episode_step=jnp.where(done, 0, actor.episode_step + 1),
+            memory=memory,
+            tracker=tracker,
+        )
+
     def rollout(
-        self, params, w_params, env, env_params, key, noise_variance, num_steps: int, greedy: bool = False,
+        self, acting: AgentParams, env: BoundEnv, key, num_steps: int, greedy: bool = False,
         record_inputs: bool = False, num_lanes: Optional[int] = None, reset_keys: Optional[chex.Array] = None,
     ) -> Trajectory:  # fmt: skip
         """One whole episode per lane from a fresh start, padded to `num_steps`
-        (evaluation). noise_variance `[B]` (or a scalar with `num_lanes`). The lanes reset
-        with `split(split(key)[0], B)` unless `reset_keys` `[B, ...]` are given."""
-        noise_variance = jnp.asarray(noise_variance, jnp.float32)
+        (evaluation), with `acting.noise_variance` `[B]` (or a scalar with `num_lanes`).
+        The lanes reset with `split(split(key)[0], B)` unless `reset_keys` `[B, ...]` are given."""
+        if acting.noise_variance is None:
+            raise ValueError("rollout: give AgentParams.noise_variance, the evaluation's fixed variance")
+        noise_variance = jnp.asarray(acting.noise_variance, jnp.float32)
         if num_lanes is None:
             if noise_variance.ndim != 1:
                 raise ValueError("rollout: give num_lanes, or noise_variance with one entry per lane")
             num_lanes = noise_variance.shape[0]
-        noise_variance = jnp.broadcast_to(noise_variance, (num_lanes,))
+        acting = acting._replace(noise_variance=jnp.broadcast_to(noise_variance, (num_lanes,)))
         k_start, k_act = jax.random.split(key)
-        actor = self.start(k_start, env, env_params, num_lanes, reset_keys=reset_keys)
-        _, traj = self.act(
-            params, w_params, env, env_params, actor, k_act, num_steps, greedy=greedy, whole_episodes=True,
-            noise_variance=noise_variance, record_inputs=record_inputs,
-        )  # fmt: skip
+        actor = self.start(k_start, env, num_lanes, reset_keys=reset_keys)
+        options = ActOptions(greedy=greedy, whole_episodes=True, record_inputs=record_inputs)
+        _, traj = self.act(acting, env, actor, k_act, num_steps, options)
         return traj
 
     # ------------------------------------------------------------------ critic

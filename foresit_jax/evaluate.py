@@ -14,7 +14,7 @@ functions `evaluate` and `evaluate_random_policy` make one when none is given.
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import Any
 
 import chex
 import jax
@@ -25,16 +25,8 @@ import envs
 from envs.catalog import ROOM_TYPES
 from envs.metrics import summarize  # (also re-exported: foresit_jax.evaluate.summarize)
 from foresit_jax import imagination
-from foresit_jax.agent import Agent, episode_stats
+from foresit_jax.agent import Agent, AgentParams, BoundEnv, EpisodeStats, episode_stats
 from foresit_jax.config import Config
-
-
-class AgentParams(NamedTuple):
-    """What acting needs: theta/omega, w, and the imagination-noise variance."""
-
-    params: Any
-    imagination_params: Any
-    noise_variance: chex.Array  # [] sigma^2 used at evaluation
 
 
 def agent_params(state, sigma2_max: float, evaluation_noise: str = "training_end") -> AgentParams:
@@ -50,22 +42,13 @@ def agent_params(state, sigma2_max: float, evaluation_noise: str = "training_end
     return AgentParams(state.params, state.imagination_params, variance)
 
 
-class EpisodeOutcomes(NamedTuple):
-    """Per-episode facts of a batch of evaluation episodes (one episode per lane)."""
-
-    success: chex.Array  # [N] bool, a successful Done
-    length: chex.Array  # [N] int32 L: actions taken, Done included
-    optimal_length: chex.Array  # [N] int32 L^g: the oracle's shortest number of actions
-    ended: chex.Array  # [N] bool, the episode ended (Done or time limit) within the rollout
-
-
-def outcome_metrics(outcomes: EpisodeOutcomes) -> dict[str, float]:
+def outcome_metrics(outcomes: EpisodeStats) -> dict[str, float]:
     """SR, SPL, SR>=5, SPL>=5 (in %) and counts of per-episode outcomes (`envs.metrics`)."""
     success, length, optimal = (np.asarray(x) for x in outcomes[:3])
     return summarize(success, np.asarray(envs.metrics.spl(success, length, optimal)), optimal)
 
 
-def random_policy_rollout(env, env_params, key: chex.PRNGKey, episodes: int, num_steps: int) -> EpisodeOutcomes:
+def random_policy_rollout(env, env_params, key: chex.PRNGKey, episodes: int, num_steps: int) -> EpisodeStats:
     """The uniformly random policy: `episodes` episodes, one per lane, each lane stepped
     `num_steps` times and only its first episode kept (the reference a trained agent must
     beat). Jittable; per-episode facts come from the environment's `info`.
@@ -83,12 +66,15 @@ def random_policy_rollout(env, env_params, key: chex.PRNGKey, episodes: int, num
         _, state, _, terminated, truncated, info = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
             jax.random.split(k_env, episodes), state, action, env_params
         )
-        return (state, alive & ~(terminated | truncated)), (info["success"] & alive, alive, info["optimal_length"])
+        facts = (info["success"] & alive, alive, info["optimal_length"], info["room_type"])
+        return (state, alive & ~(terminated | truncated)), facts
 
-    (_, alive), (success, acted, optimal) = jax.lax.scan(
+    (_, alive), (success, acted, optimal, room_type) = jax.lax.scan(
         step, (state, jnp.ones(episodes, bool)), jax.random.split(k_steps, num_steps)
     )  # [T, N] each
-    return EpisodeOutcomes(success.any(0), acted.sum(0, dtype=jnp.int32), optimal[0], ~alive)
+    success, length = success.any(0), acted.sum(0, dtype=jnp.int32)
+    spl = envs.metrics.spl(success, length, optimal[0])
+    return EpisodeStats(success, length, optimal[0], ~alive, spl, room_type[0])
 
 
 # Episodes evaluated at once by methods that adapt a copy of the parameters per episode
@@ -132,7 +118,7 @@ class Evaluator:
         return self.params[(split, room)]
 
     def agent_rollout(self, config: Config, num_steps: int, greedy: bool, agent: Agent | None = None):
-        """Jitted (params, w_params, env_params, key, sigma2 [N]) -> EpisodeOutcomes [N]
+        """Jitted (params, w_params, env_params, key, sigma2 [N]) -> EpisodeStats [N]
         of `agent` (default `Agent(config)`; another one, e.g. a probe's, is compiled apart).
 
         The maml base keeps a copy of the parameters per episode (its inner loop adapts
@@ -144,10 +130,9 @@ class Evaluator:
             agent, env = Agent(config) if agent is None else agent, self.env
 
             def run_group(params, w_params, env_params, key, sigma2, reset_keys=None):
-                traj = agent.rollout(params, w_params, env, env_params, key, sigma2, num_steps, greedy,
-                                     reset_keys=reset_keys)  # fmt: skip
-                stats = episode_stats(traj)
-                return EpisodeOutcomes(stats.success, stats.length, stats.optimal_length, stats.ended)
+                traj = agent.rollout(AgentParams(params, w_params, sigma2), BoundEnv(env, env_params), key, num_steps,
+                                     greedy, reset_keys=reset_keys)  # fmt: skip
+                return episode_stats(traj)
 
             def run(params, w_params, env_params, key, sigma2):
                 episodes = sigma2.shape[0]
@@ -170,7 +155,7 @@ class Evaluator:
         return self.compiled[key]
 
     def random_rollout(self, num_steps: int, episodes: int):
-        """Jitted (env_params, key) -> EpisodeOutcomes [episodes] of `random_policy_rollout`."""
+        """Jitted (env_params, key) -> EpisodeStats [episodes] of `random_policy_rollout`."""
         key = ("random", num_steps, episodes)
         if key not in self.compiled:
             env = self.env
@@ -180,7 +165,7 @@ class Evaluator:
     def _per_room(self, rooms, split, key, run_room, by_length: bool = False) -> dict[str, dict[str, float]]:
         """{room: metrics, ..., "overall": metrics over the pooled episodes, and with
         `by_length` "by_length": `envs.metrics.by_length` of the pooled episodes}; `run_room`
-        (env_params, num_steps, key) -> EpisodeOutcomes; rooms get keys split from `key`."""
+        (env_params, num_steps, key) -> EpisodeStats; rooms get keys split from `key`."""
         results, pooled = {}, []
         for room, k in zip(rooms, jax.random.split(key, len(rooms))):
             env_params = self.room_params(split, room)
@@ -188,7 +173,7 @@ class Evaluator:
             outcomes = jax.tree.map(np.asarray, run_room(env_params, num_steps, k))
             results[room] = outcome_metrics(outcomes)
             pooled.append(outcomes)
-        pooled = EpisodeOutcomes(*(np.concatenate(parts) for parts in zip(*pooled)))
+        pooled = jax.tree.map(lambda *parts: np.concatenate(parts), *pooled)
         results["overall"] = outcome_metrics(pooled)
         if by_length:
             spl = np.asarray(envs.metrics.spl(pooled.success, pooled.length, pooled.optimal_length))

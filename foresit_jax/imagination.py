@@ -150,24 +150,50 @@ def train_on_buffer(
     return params, step_losses
 
 
-def train_full_buffers(
+class ImaginationLosses(NamedTuple):
+    """f_w's training losses summed over the lanes it trained on, so that any number of
+    `train_full_buffers` calls (one per step of a window) add up before one mean."""
+
+    trained: chex.Array  # [] float32, lanes whose full buffer f_w trained on
+    loss: chex.Array  # [] the sum over them of each lane's mean loss (all epochs)
+    first_epoch: chex.Array  # [] ... of its first epoch
+    last_epoch: chex.Array  # [] ... of its last epoch
+
+    @classmethod
+    def zeros(cls) -> "ImaginationLosses":
+        zero = jnp.zeros((), jnp.float32)
+        return cls(zero, zero, zero, zero)
+
+    def plus(self, other: "ImaginationLosses") -> "ImaginationLosses":
+        return ImaginationLosses(*(a + b for a, b in zip(self, other)))
+
+    def metrics(self) -> dict[str, chex.Array]:
+        """`imagination/num_trained_lanes` and, averaged over the trained lanes (0 if
+        none), `imagination/loss`, `imagination/first_epoch_loss`, `imagination/last_epoch_loss`."""
+        denominator = jnp.maximum(self.trained, 1.0)
+        return {
+            "imagination/num_trained_lanes": self.trained,
+            "imagination/loss": self.loss / denominator,
+            "imagination/first_epoch_loss": self.first_epoch / denominator,
+            "imagination/last_epoch_loss": self.last_epoch / denominator,
+        }
+
+
+def train_on_full_buffers(
     w_params: Any,
     buffers: ReplayBuffer,
     apply_fn: ImagineFn,
     optimizer: optax.GradientTransformation,
     epochs: int,
-) -> tuple[Any, ReplayBuffer, Mapping[str, chex.Array]]:
+) -> tuple[Any, ReplayBuffer, ImaginationLosses]:
     """Update the shared f_w from every lane whose buffer is full, then empty those.
 
     Args:
       w_params: the shared f_w parameters.
       buffers: stacked per-lane buffers, leaves `[B, M, ...]`, count `[B]`.
     Returns:
-      (new shared params, buffers with the full ones emptied, metrics) where metrics are
-      `imagination/num_trained_lanes` and, averaged over the trained lanes (0 if none),
-      `imagination/loss` (all steps), `imagination/first_epoch_loss`,
-      `imagination/last_epoch_loss`.
-    See the module docstring for the order and semantics.
+      (new shared params, buffers with the full ones emptied, the losses summed over the
+      trained lanes). See the module docstring for the order and semantics.
     """
     full = buffer_is_full(buffers)  # [B]
     num_lanes = full.shape[0]
@@ -195,20 +221,25 @@ def train_full_buffers(
     _, params, loss_sum, first_sum, last_sum = jax.lax.while_loop(
         cond, body, (jnp.zeros((), jnp.int32), w_params, zero, zero, zero)
     )
-    denominator = jnp.maximum(num_full, 1).astype(jnp.float32)
     cleared = jax.vmap(buffer_clear)(buffers)
     buffers = jax.tree.map(
         lambda new, old: jnp.where(full.reshape((num_lanes,) + (1,) * (old.ndim - 1)), new, old),
         cleared,
         buffers,
     )
-    metrics = {
-        "imagination/num_trained_lanes": num_full,
-        "imagination/loss": loss_sum / denominator,
-        "imagination/first_epoch_loss": first_sum / denominator,
-        "imagination/last_epoch_loss": last_sum / denominator,
-    }
-    return params, buffers, metrics
+    return params, buffers, ImaginationLosses(num_full.astype(jnp.float32), loss_sum, first_sum, last_sum)
+
+
+def train_full_buffers(
+    w_params: Any,
+    buffers: ReplayBuffer,
+    apply_fn: ImagineFn,
+    optimizer: optax.GradientTransformation,
+    epochs: int,
+) -> tuple[Any, ReplayBuffer, Mapping[str, chex.Array]]:
+    """`train_on_full_buffers` with its losses as metrics (`ImaginationLosses.metrics`)."""
+    params, buffers, losses = train_on_full_buffers(w_params, buffers, apply_fn, optimizer, epochs)
+    return params, buffers, losses.metrics()
 
 
 class SuccessTracker(NamedTuple):

@@ -218,32 +218,31 @@ def _unlane(tree):
     return jax.tree.map(lambda x: x[:, 0], tree)  # [B, 1, ...] -> [B, ...]
 
 
-def adaptive_act(
-    agent, params, w_params, env, env_params, actor, key: chex.PRNGKey, num_steps: int, *,
-    greedy: bool = False, noise_variance: chex.Array | None = None, record_inputs: bool = True,
-) -> tuple[Any, Any, list[AdaptedParams]]:  # fmt: skip
+def adaptive_act(agent, acting, env, actor, key: chex.PRNGKey, num_steps: int, options) -> tuple[Any, Any, list[AdaptedParams]]:
     """One whole episode per lane (from `actor`, every lane at an episode start) with
-    SAVN's inner loop. Returns (actor after the window, Trajectory `[num_steps, B]`,
-    the parameters each lane used: `AdaptedParams`, theta_0 first, then theta_i after
-    each update slot (unchanged in lanes whose episode had ended))."""
+    SAVN's inner loop, acting as `acting` (`AgentParams`: theta_0, w, the noise variance)
+    in `env` (`BoundEnv`) with `options` (`ActOptions`: greedy, record_inputs; whole
+    episodes). Returns (actor after the window, Trajectory `[num_steps, B]`, the
+    parameters each lane used: `AdaptedParams`, theta_0 first, then theta_i after each
+    update slot (unchanged in lanes whose episode had ended))."""
     cfg = agent.config
     num_lanes = actor.episode_step.shape[0]
+    noise_variance = acting.noise_variance
     if noise_variance is None:  # Eq. 7 from each lane's tracker (it changes only when the episode ends)
         rho = jax.vmap(imagination.success_rate)(actor.tracker)
         noise_variance = imagination.noise_variance(rho, cfg.sigma2_max)
     variance = jnp.broadcast_to(jnp.asarray(noise_variance, jnp.float32), (num_lanes,))[:, None]  # [B, 1]
-    shared, lanes = _split(params)
+    shared, lanes = _split(acting.params)
     lanes = jax.tree.map(lambda x: jnp.broadcast_to(x, (num_lanes,) + x.shape), lanes)
     kernel_dtype = jax.tree.leaves(shared)[0].dtype
     lane_actor = _per_lane(actor)
     alive = jnp.ones((num_lanes, 1), bool)
 
     def window(lanes, update, lane_actor, key, variance, alive, steps, record, gate_offsets=None):  # one lane
-        return agent.act_window(
-            _join(shared, lanes), w_params, env, env_params, lane_actor, key, steps, greedy=greedy,
-            whole_episodes=True, noise_variance=variance, record_inputs=record, alive=alive,
-            lstm_update=update, gate_offsets=gate_offsets,
-        )  # fmt: skip
+        lane_acting = acting._replace(params=_join(shared, lanes), noise_variance=variance)
+        lane_options = options._replace(whole_episodes=True, record_inputs=record)
+        return agent.act_window(lane_acting, env, lane_actor, key, steps, lane_options, alive=alive,
+                                lstm_update=update, gate_offsets=gate_offsets)  # fmt: skip
 
     def segment(lanes, update, lane_actor, key, variance, alive):  # one lane
         def loss(lanes, gate_offsets):
@@ -253,21 +252,13 @@ def adaptive_act(
 
         zeros = jnp.zeros((cfg.maml_segment, 1, 4 * cfg.hidden_size), kernel_dtype)
         (_, (next_actor, traj)), (grads, gate_grads) = jax.value_and_grad(loss, (0, 1), has_aux=True)(lanes, zeros)
-        # The kernels' gradients, sum_t x_t^T delta_t and sum_t h_{t-1}^T delta_t, kept as their factors.
-        seen = traj.inputs
-        rows = LowRankUpdate(
-            inputs=agent.lstm_inputs(
-                _join(shared, lanes), seen.obs, seen.prev_action_probs, seen.encoder_imagined
-            )[:, 0],  # [segment, F]
-            hiddens=jnp.concatenate([lane_actor.lstm[1], traj.states[:-1, 0]]),  # [segment, H] h_{t-1}
-            deltas=-cfg.maml_inner_lr * gate_grads[:, 0],  # [segment, 4H]
-        )
+        rows = _kernel_update(agent, _join(shared, lanes), lane_actor, traj, gate_grads)
         if cfg.maml_first_order:
             grads, rows = jax.lax.stop_gradient((grads, rows))
         still_alive = traj.valid[-1] & ~(traj.terminated[-1] | traj.truncated[-1])  # [1] the episode runs on (alive next)
         rows = rows._replace(deltas=jnp.where(still_alive[0], rows.deltas, 0.0))
         update = rows if update is None else update.concat(rows)
-        if not record_inputs:
+        if not options.record_inputs:
             traj = traj._replace(inputs=None)
         return inner_step(lanes, grads, cfg.maml_inner_lr, still_alive[0]), update, next_actor, traj, still_alive
 
@@ -284,12 +275,31 @@ def adaptive_act(
         done_steps += cfg.maml_segment
     if num_steps > done_steps:
         steps = num_steps - done_steps
-        rest = lambda *a: window(*a, steps, record_inputs)  # noqa: E731
+        rest = lambda *a: window(*a, steps, options.record_inputs)  # noqa: E731
         lane_actor, traj = jax.vmap(rest)(lanes, update, lane_actor, jax.random.split(keys[-1], num_lanes), variance, alive)
         trajs.append(traj)
+    traj = _joined(trajs)  # (before the actor: the order of the lowered program's ops)
+    return _unlane(lane_actor), traj, thetas
+
+
+def _kernel_update(agent, params, lane_actor, traj, gate_grads) -> LowRankUpdate:
+    """The LSTM kernels' inner step of one lane's segment, as factors (module doc, "Adapted
+    kernels"): the gradients sum_t x_t^T delta_t and sum_t h_{t-1}^T delta_t, kept as the
+    segment's inputs x_t `[segment, F]` (under `params`, the lane's theta_i), carries
+    h_{t-1} `[segment, H]` and -lr delta_t `[segment, 4H]` (`gate_grads`: d L_phi / d gates)."""
+    seen = traj.inputs
+    return LowRankUpdate(
+        inputs=agent.lstm_inputs(params, seen.obs, seen.prev_action_probs, seen.encoder_imagined)[:, 0],
+        hiddens=jnp.concatenate([lane_actor.lstm[1], traj.states[:-1, 0]]),
+        deltas=-agent.config.maml_inner_lr * gate_grads[:, 0],
+    )
+
+
+def _joined(trajs):
+    """The lanes' segment trajectories (leaves `[B, steps, 1, ...]`) as one Trajectory
+    `[T, B, ...]`, bootstrapped from the last one's next state."""
     last = trajs[-1]
     per_step = [t._replace(next_state=None, next_episode_step=None) for t in trajs]
     per_step = jax.tree.map(lambda *xs: jnp.concatenate(xs, axis=1), *per_step)  # leaves [B, T, 1, ...]
     per_step = jax.tree.map(lambda x: jnp.swapaxes(x[:, :, 0], 0, 1), per_step)  # [T, B, ...]
-    traj = per_step._replace(next_state=last.next_state[:, 0], next_episode_step=last.next_episode_step[:, 0])
-    return _unlane(lane_actor), traj, thetas
+    return per_step._replace(next_state=last.next_state[:, 0], next_episode_step=last.next_episode_step[:, 0])

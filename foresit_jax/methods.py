@@ -114,18 +114,17 @@ IMAGINATIONS: dict[str, Imagination] = {
 }
 
 
-def act_in_windows(agent, params, w_params, env, env_params, actor, key, num_steps: int, **options):
+def act_in_windows(agent, acting, env, actor, key, num_steps: int, options):
     """The a3c base's acting: one parameter set for the whole window (`Agent.act_window`)."""
-    return agent.act_window(params, w_params, env, env_params, actor, key, num_steps, **options)
+    return agent.act_window(acting, env, actor, key, num_steps, options)
 
 
-def act_adapting(agent, params, w_params, env, env_params, actor, key, num_steps: int, *, whole_episodes: bool,
-                 step_keys=None, **options):  # fmt: skip
+def act_adapting(agent, acting, env, actor, key, num_steps: int, options):
     """The maml base's acting: SAVN's inner loop adapts each lane's parameters inside its
     episode (`foresit_jax.maml.adaptive_act`); whole episodes only."""
-    if not whole_episodes or step_keys is not None:
+    if not options.whole_episodes or options.step_keys is not None:
         raise ValueError("the maml base acts in whole episodes (rollout='episodes'), without step_keys")
-    actor, traj, _ = maml.adaptive_act(agent, params, w_params, env, env_params, actor, key, num_steps, **options)
+    actor, traj, _ = maml.adaptive_act(agent, acting, env, actor, key, num_steps, options)
     return actor, traj
 
 
@@ -133,8 +132,8 @@ def act_adapting(agent, params, w_params, env, env_params, actor, key, num_steps
 class Base:
     """A base learner, as the agent uses it.
 
-    act: acts a window, `(agent, params, w_params, env, env_params, actor, key, num_steps,
-      greedy=, whole_episodes=, noise_variance=, record_inputs=, step_keys=) -> (actor, traj)`.
+    act: acts a window, `(agent, acting: AgentParams, env: BoundEnv, actor, key, num_steps,
+      options: ActOptions) -> (actor, traj)` (the records of `foresit_jax.agent`).
     learned_loss: the network's extra module for the base (maml's L_phi), from the Config;
       None for none.
     adapts_in_episode: the parameters change inside an episode (maml): acting must be

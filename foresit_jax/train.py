@@ -33,7 +33,7 @@ import jax.numpy as jnp
 import optax
 
 from foresit_jax import imagination, losses
-from foresit_jax.agent import ActorState, Agent, Trajectory, ended_episodes
+from foresit_jax.agent import ActOptions, ActorState, Agent, AgentParams, BoundEnv, Trajectory, ended_episodes
 from foresit_jax.config import Config
 from foresit_jax.networks import subgoals_of_rows
 from foresit_jax.replay import replayed
@@ -102,6 +102,11 @@ class Trainer:
             config.imagination_optimizer, config.imagination_lr
         )
 
+    def bind(self, env_params) -> BoundEnv:
+        """The trainer's environment bound to `env_params` (those `run` was given), once
+        per update: everything below acts in the `BoundEnv`."""
+        return BoundEnv(self.env, env_params)
+
     # ------------------------------------------------------------------ state
     def init(self, key: chex.PRNGKey) -> RunnerState:
         cfg = self.config
@@ -111,7 +116,7 @@ class Trainer:
         goal_size = obs["target"].shape[-1]
         lanes = lambda x: jnp.broadcast_to(x, (cfg.num_lanes,) + x.shape)  # noqa: E731
         buffers = jax.tree.map(lanes, imagination.buffer_init(cfg.buffer_size, cfg.hidden_size, goal_size))
-        actor = self.agent.start(k_actor, self.env, self.env_params, cfg.num_lanes, self.memory_size)
+        actor = self.agent.start(k_actor, self.bind(self.env_params), cfg.num_lanes, self.memory_size)
         return RunnerState(
             params, self.optimizer.init(params), w_params, buffers, actor, key, jnp.zeros((), jnp.int32)
         )
@@ -134,18 +139,16 @@ class Trainer:
         )  # fmt: skip
         return loss, (critic.alpha, key_states, metrics)
 
-    def act(self, params, w_params, env_params, actor: ActorState, key) -> tuple[ActorState, Trajectory]:
+    def act(self, acting: AgentParams, env: BoundEnv, actor: ActorState, key) -> tuple[ActorState, Trajectory]:
         """One window of every lane (inputs recorded, for the replay and the buffers)."""
-        return self.agent.act(
-            params, w_params, self.env, env_params, actor, key, self.config.num_steps,
-            whole_episodes=not self.packed, record_inputs=True,
-        )  # fmt: skip
+        options = ActOptions(whole_episodes=not self.packed, record_inputs=True)
+        return self.agent.act(acting, env, actor, key, self.config.num_steps, options)
 
-    def loss_and_grad(self, params, w_params, env_params, actor: ActorState, key):
-        """((loss, WindowResult), grads) of one window, by the config's gradient path (see
-        `Config.gradient`; both give the same gradient)."""
+    def loss_and_grad(self, params, w_params, env: BoundEnv, actor: ActorState, key):
+        """((loss, WindowResult), grads) of one window with respect to `params`, by the
+        config's gradient path (see `Config.gradient`; both give the same gradient)."""
         if self.config.gradient == "replay":
-            next_actor, traj = self.act(params, w_params, env_params, actor, key)
+            next_actor, traj = self.act(AgentParams(params, w_params), env, actor, key)
 
             def loss_fn(p):
                 replay_traj = replayed(self.agent, p, traj, actor.lstm)
@@ -155,25 +158,25 @@ class Trainer:
         else:
 
             def loss_fn(p):
-                next_actor, traj = self.act(p, w_params, env_params, actor, key)
+                next_actor, traj = self.act(AgentParams(p, w_params), env, actor, key)
                 loss, aux = self.window_loss(p, traj, actor.memory)
                 return loss, WindowResult(next_actor, traj, *aux)
 
         return jax.value_and_grad(loss_fn, has_aux=True)(params)
 
     # ------------------------------------------------------------------ one update
-    def begin_window(self, actor: ActorState, key, env_params) -> tuple[ActorState, chex.PRNGKey, chex.PRNGKey]:
+    def begin_window(self, actor: ActorState, key, env: BoundEnv) -> tuple[ActorState, chex.PRNGKey, chex.PRNGKey]:
         """(the lanes at the window's start, the next key, the window's acting key)."""
         key, k_act, k_start = jax.random.split(key, 3)
         if not self.packed:  # SAVN's layout: every lane starts a fresh episode
-            actor = self.agent.start(k_start, self.env, env_params, self.config.num_lanes, 0, tracker=actor.tracker)
+            actor = self.agent.start(k_start, env, self.config.num_lanes, 0, tracker=actor.tracker)
         return actor, key, k_act
 
     def update(self, state: RunnerState, env_params) -> tuple[RunnerState, dict]:
-        cfg, variant = self.config, self.agent.imagination  # the Imagination piece
-        actor, key, k_act = self.begin_window(state.actor, state.key, env_params)
+        cfg, variant, env = self.config, self.agent.imagination, self.bind(env_params)  # the Imagination piece
+        actor, key, k_act = self.begin_window(state.actor, state.key, env)
         rho = jax.vmap(imagination.success_rate)(actor.tracker)  # [B] at the window's start
-        (loss, window), grads = self.loss_and_grad(state.params, state.imagination_params, env_params, actor, k_act)
+        (loss, window), grads = self.loss_and_grad(state.params, state.imagination_params, env, actor, k_act)
         next_actor, traj, alpha, key_states, metrics = window
         updates, opt_state = self.optimizer.update(grads, state.opt_state, state.params)
         params = optax.apply_updates(state.params, updates)
@@ -244,9 +247,11 @@ class Trainer:
         of each step's sub-goal in its episode (`subgoal_steps`) and the step's own
         position (at an `add` step, the Done step's: the episode's length - 1)."""
 
+        env = self.bind(env_params)
+
         def window(carry, _):
-            actor, key, k_act = self.begin_window(*carry, env_params)
-            next_actor, traj = self.act(state.params, state.imagination_params, env_params, actor, k_act)
+            actor, key, k_act = self.begin_window(*carry, env)
+            next_actor, traj = self.act(AgentParams(state.params, state.imagination_params), env, actor, k_act)
             _, (alpha, key_states, _) = self.window_loss(state.params, traj, actor.memory)  # the critic's alpha
             _, stats = ended_episodes(traj)
             items = self.subgoal_items(traj, alpha, key_states, stats.success)
@@ -263,29 +268,16 @@ class Trainer:
         cfg = self.config
 
         def step(carry, item):
-            w_params, buffers, trained, loss_sum, first_sum, last_sum = carry
+            w_params, buffers, losses = carry
             buffers = jax.vmap(imagination.buffer_add)(buffers, *item)
-            w_params, buffers, m = imagination.train_full_buffers(
+            w_params, buffers, trained = imagination.train_on_full_buffers(
                 w_params, buffers, self.agent.imagine, self.imagination_optimizer, cfg.imagination_epochs
             )
-            n = m["imagination/num_trained_lanes"].astype(jnp.float32)
-            return (
-                w_params, buffers, trained + n, loss_sum + n * m["imagination/loss"],
-                first_sum + n * m["imagination/first_epoch_loss"], last_sum + n * m["imagination/last_epoch_loss"],
-            ), None  # fmt: skip
+            return (w_params, buffers, losses.plus(trained)), None
 
-        zero = jnp.zeros((), jnp.float32)
-        (w_params, buffers, trained, loss_sum, first_sum, last_sum), _ = jax.lax.scan(
-            step, (w_params, buffers, zero, zero, zero, zero), items
-        )
-        denominator = jnp.maximum(trained, 1.0)
-        metrics = {
-            "imagination/num_trained_lanes": trained,
-            "imagination/loss": loss_sum / denominator,
-            "imagination/first_epoch_loss": first_sum / denominator,
-            "imagination/last_epoch_loss": last_sum / denominator,
-        }
-        return w_params, buffers, metrics
+        carry = (w_params, buffers, imagination.ImaginationLosses.zeros())
+        (w_params, buffers, losses), _ = jax.lax.scan(step, carry, items)
+        return w_params, buffers, losses.metrics()
 
     def run(self, state: RunnerState, env_params, num_updates: int, on_update: Callable | None = None
             ) -> tuple[RunnerState, dict]:  # fmt: skip

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import train_helpers as H
-from foresit_jax.agent import Agent, EpisodeStats, Trajectory, ended_episodes, episode_stats
+from foresit_jax.agent import Agent, AgentParams, BoundEnv, EpisodeStats, Trajectory, ended_episodes, episode_stats
 from foresit_jax.lstm import initial_carry
 from foresit_jax.replay import replay
 
@@ -93,7 +93,8 @@ def _rollout(greedy: bool):
     agent, (env, _) = Agent(FORESIT), H.bathroom_env()
 
     def run(params, w_params, env_params, key, sigma2):
-        traj = agent.rollout(params, w_params, env, env_params, key, sigma2, FORESIT.num_steps, greedy, record_inputs=not greedy)
+        traj = agent.rollout(AgentParams(params, w_params, sigma2), BoundEnv(env, env_params), key, FORESIT.num_steps, greedy,
+                             record_inputs=not greedy)  # fmt: skip
         replayed = None if greedy else replay(agent, params, traj, initial_carry((LANES,), FORESIT.hidden_size))
         memory = jnp.zeros((LANES, 0, FORESIT.hidden_size))
         return traj, replayed, agent.critic(params, traj, memory)[0]

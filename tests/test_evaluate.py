@@ -13,9 +13,9 @@ import pytest
 import train_helpers as H
 from experiments.presets import preset
 from foresit_jax import imagination
+from foresit_jax.agent import EpisodeStats
 from envs import metrics
 from foresit_jax.evaluate import (
-    EpisodeOutcomes,
     Evaluator,
     agent_params,
     evaluate,
@@ -107,7 +107,7 @@ def test_evaluate_rejects_bad_arguments(tiny_agent):
 
 def test_summarize_is_the_one_in_envs_metrics():
     assert summarize is metrics.summarize
-    outcomes = EpisodeOutcomes(np.array([1, 0, 1, 1, 0], bool), np.array([4, 30, 5, 3, 12]), np.array([2, 6, 5, 3, 9]),
+    outcomes = EpisodeStats(np.array([1, 0, 1, 1, 0], bool), np.array([4, 30, 5, 3, 12]), np.array([2, 6, 5, 3, 9]),
                                np.ones(5, bool))  # fmt: skip
     assert outcome_metrics(outcomes) == pytest.approx(summarize(outcomes.success, [0.5, 0, 1, 1, 0], outcomes.optimal_length))
 

@@ -83,9 +83,9 @@ def test_the_example_initialises_the_trainers_parameters(pair):
 def test_the_examples_window_loss_and_gradient_are_the_trainers(pair):
     ex, config, trainer, _, state = pair
     _, _, _, loss_and_grad = ex.make_train(config)
-    actor, _, k_act = trainer.begin_window(state.actor, state.key, trainer.env_params)
-    (loss, (_, traj, *_)), grads = jax.jit(trainer.loss_and_grad)(
-        state.params, state.imagination_params, trainer.env_params, actor, k_act)
+    env = trainer.bind(trainer.env_params)
+    actor, _, k_act = trainer.begin_window(state.actor, state.key, env)
+    (loss, (_, traj, *_)), grads = jax.jit(trainer.loss_and_grad)(state.params, state.imagination_params, env, actor, k_act)
     mine = as_example_state(ex, state)
     (my_loss, (_, my_traj, _, _)), my_grads = jax.jit(loss_and_grad)(mine.params, mine.w_params, mine.lanes, k_act)
     np.testing.assert_array_equal(my_traj.action, traj.actions)

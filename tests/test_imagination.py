@@ -211,6 +211,19 @@ class TrainTest(chex.TestCase):
         self.assertEqual(trained_at, [0, 0, 1, 0, 1, 1, 0, 0])
         np.testing.assert_array_equal(buffers.count, [2, 1])
 
+    def test_losses_add_up_over_calls_before_one_mean(self):
+        """A window's f_w metrics are the mean over every lane trained in any of its steps
+        (two lanes with mean losses 0.2 and 0.4 in one call, one with 0.6 in the next: 0.4),
+        not the mean of the calls' means (0.45)."""
+        first = imagination.ImaginationLosses(*map(jnp.float32, (2.0, 0.2 + 0.4, 1.0, 0.5)))
+        second = imagination.ImaginationLosses(*map(jnp.float32, (1.0, 0.6, 0.7, 0.4)))
+        m = first.plus(second).metrics()
+        np.testing.assert_allclose([m["imagination/num_trained_lanes"], m["imagination/loss"],
+                                    m["imagination/first_epoch_loss"], m["imagination/last_epoch_loss"]],
+                                   [3.0, 0.4, 1.7 / 3, 0.3], rtol=1e-6)  # fmt: skip
+        none = imagination.ImaginationLosses.zeros().metrics()  # no lane trained: zeros, not NaN
+        self.assertEqual([float(v) for v in none.values()], [0.0, 0.0, 0.0, 0.0])
+
     def test_unknown_optimizer(self):
         with self.assertRaisesRegex(ValueError, "sgd"):
             imagination.make_imagination_optimizer("rmsprop", 0.1)

@@ -13,8 +13,10 @@ from flax import traverse_util
 
 import train_helpers as H
 from foresit_jax import maml
-from foresit_jax.agent import Agent
+from foresit_jax.agent import ActOptions, Agent, AgentParams, BoundEnv
 from foresit_jax.networks import ActorCritic
+
+WHOLE = ActOptions(whole_episodes=True)  # the maml base acts in whole episodes
 
 
 # ---------------------------------------------------------------------- the learned loss
@@ -92,14 +94,14 @@ def _setup(lr=0.05, lanes=16, training=True, never_done=False, **overrides):
     if never_done:  # the Done action never sampled: every episode runs to the time limit
         params = jax.tree.map(lambda x: x, params)
         params["params"]["policy"]["actor"]["bias"] = params["params"]["policy"]["actor"]["bias"].at[5].set(-30.0)
-    actor = agent.start(jax.random.PRNGKey(4), env, env_params, lanes)
+    actor = agent.start(jax.random.PRNGKey(4), BoundEnv(env, env_params), lanes)
     return config, agent, env, env_params, params, w_params, actor
 
 
 @pytest.fixture(scope="module")
 def adapted_rollout():
     config, agent, env, env_params, params, w_params, actor = _setup()
-    run = jax.jit(lambda p, a, k: maml.adaptive_act(agent, p, w_params, env, env_params, a, k, 30),
+    run = jax.jit(lambda p, a, k: maml.adaptive_act(agent, AgentParams(p, w_params), BoundEnv(env, env_params), a, k, 30, WHOLE),
                   compiler_options=H.FAST_COMPILE)  # fmt: skip
     _, traj, thetas = run(params, actor, jax.random.PRNGKey(5))
     return config, params, traj, thetas
@@ -134,7 +136,7 @@ def test_evaluation_step_13_runs_under_theta_2_recomputed_independently():
     modules over the recorded observations, then step 13's logits under
     theta_2; they match the rollout's and differ from theta_0's."""
     config, agent, env, env_params, params, w_params, actor = _setup(lr=5.0, lanes=4, training=False, never_done=True)
-    run = jax.jit(lambda p, a, k: maml.adaptive_act(agent, p, w_params, env, env_params, a, k, 14),
+    run = jax.jit(lambda p, a, k: maml.adaptive_act(agent, AgentParams(p, w_params), BoundEnv(env, env_params), a, k, 14, WHOLE),
                   compiler_options=H.FAST_COMPILE)  # fmt: skip
     _, traj, thetas = run(params, actor, jax.random.PRNGKey(6))
     assert bool(np.all(np.asarray(traj.valid)[:14]))  # every lane still in its episode at step 13
@@ -179,21 +181,21 @@ def test_agent_rollout_adapts_through_the_same_code_path(monkeypatch):
     """Evaluation (`Agent.rollout`) and training (`Agent.act`) both run adaptive_act (traced
     only: what is compiled is what is traced); packed windows are refused."""
     config, agent, env, env_params, params, w_params, actor = _setup(lanes=4, training=False)
-    calls = []
+    calls, bound = [], BoundEnv(env, env_params)
     real = maml.adaptive_act
 
     def spy(*args, **kwargs):
-        calls.append(args[7])  # num_steps
+        calls.append(args[5])  # num_steps
         return real(*args, **kwargs)
 
     monkeypatch.setattr(maml, "adaptive_act", spy)
     key = jax.random.PRNGKey(7)
-    traj = jax.eval_shape(lambda p: agent.rollout(p, w_params, env, env_params, key, 0.0, 20, num_lanes=4), params)
+    traj = jax.eval_shape(lambda p: agent.rollout(AgentParams(p, w_params, 0.0), bound, key, 20, num_lanes=4), params)
     assert calls == [20] and traj.logits.shape == (20, 4, 6)
-    jax.eval_shape(lambda p: agent.act(p, w_params, env, env_params, actor, key, 30, whole_episodes=True), params)
+    jax.eval_shape(lambda p: agent.act(AgentParams(p, w_params), bound, actor, key, 30, WHOLE), params)
     assert calls == [20, 30]
     with pytest.raises(ValueError, match="whole episodes"):
-        agent.act(params, w_params, env, env_params, actor, key, 5)  # packed windows: refused
+        agent.act(AgentParams(params, w_params), bound, actor, key, 5)  # packed windows: refused
 
 
 # ---------------------------------------------------------------------- the meta-gradient
@@ -212,7 +214,7 @@ def _meta_objective(first_order: bool):
     # derivative, and central differences would see half its slope.
     rng = np.random.default_rng(1)
     params = jax.tree.map(lambda x: x.astype(jnp.float64) + 0.05 * rng.standard_normal(x.shape), params)
-    actor = agent.start(jax.random.PRNGKey(3), env, env_params, config.num_lanes)
+    actor = agent.start(jax.random.PRNGKey(3), BoundEnv(env, env_params), config.num_lanes)
     f64 = lambda x: x.astype(jnp.float64)  # noqa: E731  the agent's own carries, in float64
     actor = actor._replace(lstm=jax.tree.map(f64, actor.lstm), prev_probs=f64(actor.prev_probs),
                            imagined=f64(actor.imagined), s_0=f64(actor.s_0))  # fmt: skip
@@ -221,8 +223,8 @@ def _meta_objective(first_order: bool):
     w_states = jnp.asarray(rng.standard_normal((steps, 3, config.hidden_size)))
 
     def objective(p):
-        _, traj, _ = maml.adaptive_act(agent, p, w_params, env, env_params, actor, jax.random.PRNGKey(11), steps,
-                                       record_inputs=False)  # fmt: skip
+        _, traj, _ = maml.adaptive_act(agent, AgentParams(p, w_params), BoundEnv(env, env_params), actor,
+                                       jax.random.PRNGKey(11), steps, WHOLE._replace(record_inputs=False))  # fmt: skip
         valid = traj.valid[..., None]
         return jnp.sum(jnp.where(valid, traj.logits * w_logits, 0.0)) + jnp.sum(jnp.where(valid, traj.states * w_states, 0.0))
 
@@ -327,8 +329,8 @@ def test_maml_evaluation_runs_its_episodes_in_groups(monkeypatch):
     # Group g: one rollout of its lanes' reset keys, acting with the g-th split of the key.
     k_start, k_act = jax.random.split(key)
     reset = jax.random.split(k_start, 5)
-    group = jax.jit(lambda k, r: ev.episode_stats(agent.rollout(params, w_params, evaluator.env, room, k, 0.0, 8,
-                                                                num_lanes=r.shape[0], reset_keys=r)),
+    group = jax.jit(lambda k, r: ev.episode_stats(agent.rollout(AgentParams(params, w_params, 0.0), BoundEnv(evaluator.env, room), k,
+                                                                8, num_lanes=r.shape[0], reset_keys=r)),
                     compiler_options=H.FAST_COMPILE)  # fmt: skip
     for g, k in enumerate(jax.random.split(k_act, 3)):
         lanes = slice(2 * g, min(2 * g + 2, 5))

@@ -11,7 +11,7 @@ import pytest
 
 import train_helpers as H
 from foresit_jax import probes
-from foresit_jax.agent import Agent
+from foresit_jax.agent import Agent, AgentParams, BoundEnv
 from foresit_jax.config import Config
 from foresit_jax.evaluate import agent_params
 from test_networks import np_attention_critic, np_dense
@@ -98,8 +98,9 @@ def test_i_tau_while_acting_is_f_w_of_the_episode_state_it_was_renewed_at(method
 
     @jax.jit
     def act(variance, key):
-        actor = agent.start(jax.random.PRNGKey(5), env, env_params, lanes)
-        return agent.act(params, w_params, env, env_params, actor, key, 30, noise_variance=variance)[1]
+        bound = BoundEnv(env, env_params)
+        actor = agent.start(jax.random.PRNGKey(5), bound, lanes)
+        return agent.act(AgentParams(params, w_params, variance), bound, actor, key, 30)[1]
 
     traj = jax.tree.map(np.asarray, act(jnp.zeros(lanes), jax.random.PRNGKey(6)))
     seen = traj.inputs
@@ -142,9 +143,10 @@ def _two_windows(method, seed=0):
 
     @jax.jit
     def window(actor, key):
-        actor, key, k_act = trainer.begin_window(actor, key, trainer.env_params)
+        env = trainer.bind(trainer.env_params)
+        actor, key, k_act = trainer.begin_window(actor, key, env)
         memory = actor.memory
-        next_actor, traj = trainer.act(state.params, state.imagination_params, trainer.env_params, actor, k_act)
+        next_actor, traj = trainer.act(AgentParams(state.params, state.imagination_params), env, actor, k_act)
         _, (alpha, keys, _) = trainer.window_loss(state.params, traj, memory)
         items = trainer.subgoal_items(traj, alpha, keys, traj.success)
         return next_actor, key, (traj, items, trainer.subgoal_steps(traj, alpha))

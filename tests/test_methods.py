@@ -129,14 +129,14 @@ def test_the_agent_acts_through_its_bases_act():
     import jax
 
     from foresit_jax import methods
-    from foresit_jax.agent import Agent
+    from foresit_jax.agent import ActOptions, Agent, AgentParams, BoundEnv
     from foresit_jax.train import make_env
 
     calls = []
 
-    def counting(*args, **options):
-        calls.append(options)
-        return methods.act_in_windows(*args, **options)
+    def counting(*args):
+        calls.append(args[-1])  # the ActOptions
+        return methods.act_in_windows(*args)
 
     config = Config(method="a3c", room_types=("bathroom",), num_lanes=2, num_steps=3, hidden_size=8,
                     attention_size=8, value_hidden=8, imagination_layer_sizes=(8, 8))  # fmt: skip
@@ -148,8 +148,9 @@ def test_the_agent_acts_through_its_bases_act():
         env, env_params = make_env(config)
         obs, _ = env.reset(jax.random.key(0), env_params)
         params, w_params = agent.init(jax.random.key(1), obs)
-        actor = agent.start(jax.random.key(2), env, env_params, 2)
-        _, traj = agent.act(params, w_params, env, env_params, actor, jax.random.key(3), 3, greedy=True)
+        env = BoundEnv(env, env_params)
+        actor = agent.start(jax.random.key(2), env, 2)
+        _, traj = agent.act(AgentParams(params, w_params), env, actor, jax.random.key(3), 3, ActOptions(greedy=True))
     finally:
         methods.BASE_PIECES = original
-    assert len(calls) == 1 and calls[0]["greedy"] is True and traj.actions.shape == (3, 2)
+    assert len(calls) == 1 and calls[0].greedy is True and traj.actions.shape == (3, 2)

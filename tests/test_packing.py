@@ -20,6 +20,7 @@ import pytest
 
 import train_helpers as H
 from foresit_jax import losses
+from foresit_jax.agent import ActOptions, AgentParams
 from foresit_jax.networks import window_attention_mask
 from foresit_jax.replay import replayed
 from foresit_jax.train import Trainer
@@ -61,9 +62,8 @@ def _act(num_steps):
     trainer = H.trainer(PACKED)
 
     def act(params, w_params, env_params, actor, step_keys):
-        return trainer.agent.act(
-            params, w_params, trainer.env, env_params, actor, step_keys[0], num_steps, step_keys=step_keys
-        )
+        return trainer.agent.act(AgentParams(params, w_params), trainer.bind(env_params), actor, step_keys[0], num_steps,
+                                 ActOptions(step_keys=step_keys))  # fmt: skip
 
     return jax.jit(act, compiler_options=H.FAST_COMPILE)
 
@@ -220,7 +220,7 @@ def test_foresit_bookkeeping_fires_once_per_ended_episode_never_for_a_cut_one():
     # The same window again, outside the update (same key, same parameters).
     _, k_act, _ = jax.random.split(state.key, 3)
     _, traj = jax.jit(trainer.act, compiler_options=H.FAST_COMPILE)(
-        state.params, state.imagination_params, trainer.env_params, state.actor, k_act
+        AgentParams(state.params, state.imagination_params), trainer.bind(trainer.env_params), state.actor, k_act
     )
     done = np.asarray(traj.terminated | traj.truncated)
     success = np.asarray(traj.success)
@@ -247,7 +247,7 @@ def test_foresit_bookkeeping_fires_once_per_ended_episode_never_for_a_cut_one():
     newer, _ = jax.jit(trainer.update, compiler_options=H.FAST_COMPILE)(new, trainer.env_params)
     _, k_act, _ = jax.random.split(new.key, 3)
     _, traj2 = jax.jit(trainer.act, compiler_options=H.FAST_COMPILE)(
-        new.params, new.imagination_params, trainer.env_params, new.actor, k_act
+        AgentParams(new.params, new.imagination_params), trainer.bind(trainer.env_params), new.actor, k_act
     )
     ended_2 = np.asarray(traj2.terminated | traj2.truncated).sum(0)
     np.testing.assert_array_equal(newer.actor.tracker.count, np.minimum(ended_per_lane + ended_2, config.success_window))

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 import train_helpers as H
+from foresit_jax.agent import AgentParams
 from foresit_jax.replay import replay
 from foresit_jax.train import Trainer
 
@@ -25,7 +26,7 @@ def _grads(config):
 
     def grads(state):
         (loss, aux), g = trainer.loss_and_grad(
-            state.params, state.imagination_params, trainer.env_params, state.actor, state.key
+            state.params, state.imagination_params, trainer.bind(trainer.env_params), state.actor, state.key
         )
         return loss, aux[1], g
 
@@ -68,7 +69,8 @@ def test_replay_recomputes_the_acting_values(mid_episode_state):
     state = mid_episode_state
     trainer = H.trainer(REPLAY)
     act = jax.jit(trainer.act, compiler_options=H.FAST_COMPILE)
-    _, traj = act(state.params, state.imagination_params, trainer.env_params, state.actor, state.key)
+    _, traj = act(AgentParams(state.params, state.imagination_params), trainer.bind(trainer.env_params), state.actor,
+                  state.key)  # fmt: skip
     states, logits = jax.jit(functools.partial(replay, trainer.agent), compiler_options=H.FAST_COMPILE)(
         state.params, traj, state.actor.lstm
     )
@@ -80,7 +82,7 @@ def test_replay_needs_recorded_inputs(mid_episode_state):
     trainer = H.trainer(REPLAY)
     state = mid_episode_state
     _, traj = jax.jit(trainer.act, compiler_options=H.FAST_COMPILE)(
-        state.params, state.imagination_params, trainer.env_params, state.actor, state.key
+        AgentParams(state.params, state.imagination_params), trainer.bind(trainer.env_params), state.actor, state.key
     )
     with pytest.raises(ValueError, match="record_inputs"):
         replay(trainer.agent, state.params, traj._replace(inputs=None), state.actor.lstm)

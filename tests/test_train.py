@@ -16,6 +16,7 @@ import pytest
 import train_helpers as H
 from foresit_jax import imagination
 from foresit_jax import train as train_module
+from foresit_jax.agent import AgentParams
 
 FORESIT = H.tiny_config("a3c+foresit")
 
@@ -63,7 +64,7 @@ def _loss_term_grads(config):
     trainer = H.trainer(dataclasses.replace(config, gradient="through_rollout"))
 
     def terms(params, w_params, actor, key):
-        _, traj = trainer.act(params, w_params, trainer.env_params, actor, key)
+        _, traj = trainer.act(AgentParams(params, w_params), trainer.bind(trainer.env_params), actor, key)
         _, (_, _, metrics) = trainer.window_loss(params, traj, actor.memory)
         return jnp.stack([metrics["losses/policy_gradient_loss"], metrics["losses/value_loss"], metrics["losses/entropy"]])
 
