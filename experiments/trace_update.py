@@ -1,0 +1,119 @@
+"""What one training update is, for a reader and for a refactor:
+`python -m experiments.trace_update --methods a3c+foresit a3c+maml+foresit`.
+
+For each method (at a preset's sizes, tiny by default):
+
+* the functions of `foresit_jax` that lowering one `Trainer.update` runs through, per file,
+  counted in lines (each outermost function once; nested ones are inside it): what a reader
+  crosses to follow one update;
+* a short sha256 of each lowered program: a chunk of training (`Trainer.run`), the
+  evaluation rollout (`Evaluator.agent_rollout`) and the sub-goal collection
+  (`Trainer.collect_subgoal_items`). Equal hashes before and after a refactor mean the
+  same compiled program (the lowered text carries no source locations), so no speed or
+  numbers can have changed; run it at both commits (`PYTHONPATH=<checkout>`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import inspect
+import os
+import sys
+
+import jax
+import jax.numpy as jnp
+import tyro
+
+from experiments.presets import preset
+
+
+@dataclasses.dataclass(frozen=True)
+class Args:
+    """The training path of methods, and their lowered programs' hashes."""
+
+    methods: tuple[str, ...] = ("a3c", "a3c+foresit")
+    """methods (see foresit_jax.methods); the object-graph ones run on the org setup"""
+    preset: str = "tiny"
+    """preset giving the sizes (the path and the hashes depend on the sizes only through shapes)"""
+
+
+def _short(text: str) -> str:
+    return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
+def functions_crossed(fn, *args) -> dict[str, tuple[int, int]]:
+    """{file name: (functions, lines)} of `foresit_jax`'s functions that lowering
+    `jax.jit(fn)(*args)` calls, each outermost function counted once."""
+    import foresit_jax
+
+    root = os.path.dirname(foresit_jax.__file__)
+    seen = {}
+
+    def tracer(frame, event, arg):
+        if event == "call" and frame.f_code.co_filename.startswith(root):
+            seen[(frame.f_code.co_filename, frame.f_code.co_firstlineno)] = frame.f_code
+        return None
+
+    sys.settrace(tracer)
+    try:
+        jax.jit(fn).lower(*args)
+    finally:
+        sys.settrace(None)
+    spans = {}
+    for (path, _), code in seen.items():
+        try:
+            lines, start = inspect.getsourcelines(code)
+        except OSError:  # generated code (dataclass methods): no source to read
+            continue
+        spans.setdefault(os.path.basename(path), []).append((start, start + len(lines) - 1))
+    out = {}
+    for name, found in sorted(spans.items()):
+        outer = []
+        for a, b in sorted(found):
+            if outer and b <= outer[-1][1]:
+                continue  # inside the previous one
+            outer.append((a, b))
+        out[name] = (len(outer), sum(b - a + 1 for a, b in outer))
+    return out
+
+
+def program_hashes(trainer, state) -> dict[str, str]:
+    """Short hashes of the lowered training chunk (2 updates), evaluation rollout and
+    sub-goal collection (2 windows) of `trainer` from `state`."""
+    from foresit_jax.evaluate import Evaluator
+
+    config = trainer.config
+    train = jax.jit(trainer.run, static_argnums=2).lower(state, trainer.env_params, 2).as_text()
+    evaluator = Evaluator(config.setup)
+    rollout = evaluator.agent_rollout(config, 30, config.pieces.greedy_evaluation)
+    room = evaluator.room_params("val", (config.room_types or ("bathroom",))[0])
+    evaluate = rollout.lower(state.params, state.imagination_params, room, jax.random.PRNGKey(1), jnp.zeros(8)).as_text()
+    subgoals = jax.jit(trainer.collect_subgoal_items, static_argnums=2).lower(state, trainer.env_params, 2).as_text()
+    return {"train": _short(train), "evaluate": _short(evaluate), "subgoals": _short(subgoals)}
+
+
+def main(args: Args) -> dict:
+    from foresit_jax.methods import parse_method
+    from foresit_jax.train import make_trainer
+
+    report = {}
+    for method in args.methods:
+        setup = parse_method(method).encoder_piece.required_setup or "savn"
+        config, _ = preset(args.preset, method, setup=setup)
+        trainer = make_trainer(config)
+        state = trainer.init(jax.random.PRNGKey(0))
+        crossed = functions_crossed(trainer.update, state, trainer.env_params)
+        report[method] = {"files": crossed, "hashes": program_hashes(trainer, state)}
+        functions = sum(f for f, _ in crossed.values())
+        lines = sum(n for _, n in crossed.values())
+        print(f"{method} ({args.preset}): one update crosses {functions} functions, {lines} lines, "
+              f"in {len(crossed)} files of foresit_jax")  # fmt: skip
+        for name, (f, n) in crossed.items():
+            print(f"  {name:18s} {f:3d} functions {n:5d} lines")
+        print("  lowered programs: " + ", ".join(f"{k} {v}" for k, v in report[method]["hashes"].items()))
+    return report
+
+
+if __name__ == "__main__":
+    main(tyro.cli(Args))
