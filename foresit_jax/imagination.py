@@ -152,7 +152,7 @@ def train_on_buffer(
 
 class ImaginationLosses(NamedTuple):
     """f_w's training losses summed over the lanes it trained on, so that any number of
-    `train_full_buffers` calls (one per step of a window) add up before one mean."""
+    `train_on_full_buffers` calls (one per step of a window) add up before one mean."""
 
     trained: chex.Array  # [] float32, lanes whose full buffer f_w trained on
     loss: chex.Array  # [] the sum over them of each lane's mean loss (all epochs)

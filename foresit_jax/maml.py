@@ -218,7 +218,9 @@ def _unlane(tree):
     return jax.tree.map(lambda x: x[:, 0], tree)  # [B, 1, ...] -> [B, ...]
 
 
-def adaptive_act(agent, acting, env, actor, key: chex.PRNGKey, num_steps: int, options) -> tuple[Any, Any, list[AdaptedParams]]:
+def adaptive_act(
+    agent, acting, env, actor, key: chex.PRNGKey, num_steps: int, options
+) -> tuple[Any, Any, list[AdaptedParams]]:
     """One whole episode per lane (from `actor`, every lane at an episode start) with
     SAVN's inner loop, acting as `acting` (`AgentParams`: theta_0, w, the noise variance)
     in `env` (`BoundEnv`) with `options` (`ActOptions`: greedy, record_inputs; whole
