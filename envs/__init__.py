@@ -34,12 +34,14 @@ def make(env_id: str = "GridNav-v0", setup: str = "savn", split: str = "train", 
     Args:
       env_id: "GridNav-v0".
       setup: "savn" or "org" (see docs/design.md).
-      split: "train" (layouts 1-20), "val" (21, 23, ..., 29) or "test" (22, 24, ..., 30).
+      split: "train" (layouts 1-20), "val" (21, 23, ..., 29) or "test" (22, 24, ..., 30);
+        houses split by their number the same way.
       room_types: None for all four, or some of "kitchen", "living_room", "bedroom",
-        "bathroom" (names or indices).
+        "bathroom" (names or indices); in houses, the targets standing in such rooms.
       training: time limits of training (30 steps) or evaluation (100, 200 in living
         rooms); by default training limits on "train" and evaluation limits otherwise.
-      env_kwargs: static constructor arguments of GridNav (grid_size, view_width,
+      env_kwargs: static constructor arguments of GridNav (layout="house" for houses of
+        2-4 rooms, envs.houses; grid_size, view_width,
         precomputed_views, final_observation=False to leave ``info["final_observation"]``
         out of every step).
     Returns:

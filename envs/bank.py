@@ -7,7 +7,10 @@ for every (scene, target) the shortest number of actions to success from every p
 counting Done (SAVN's node count), by breadth-first relaxation over the pose graph
 (cell x heading x horizon), jitted.  It also lists each scene's valid targets and, for
 each (scene, target), the start poses (free cell, any heading, horizon 0) from which the
-target is reachable but not already solved.
+target is reachable but not already solved.  In a house (envs.houses) the start list is
+weighted so that ``AWAY_SHARE`` of a uniform draw from it (or more, where the target's
+room has few valid starts) starts in another room than the target's (all such poses, then
+a fixed random subset of the rest); a single room's is every such pose.
 
 Caching: a built bank is kept in memory (``build_bank`` is lru-cached) and on disk
 (``envs.bank_cache``).
@@ -16,6 +19,7 @@ Caching: a built bank is kept in memory (``build_bank`` is lru-cached) and on di
 from __future__ import annotations
 
 import functools
+import zlib
 
 import jax
 import jax.numpy as jnp
@@ -28,20 +32,27 @@ from envs.dynamics import pose_from_index, pose_index, transition
 from envs.raycast import (
     DEPTH_RESOLUTION, NUM_ROWS, ROW_BANDS, ROW_MAX_DIST, ROW_MIN_DIST, _first_hit, column_angles_deg, ray_cells,
 )  # fmt: skip
+from envs.houses import generate_house
 from envs.scenes import generate_layout
 
 UNREACHABLE = np.iinfo(np.int16).max
+AWAY_SHARE = 0.8  # houses: the share of start poses in another room than the target's
+MAX_ROOMS = max(C.HOUSE_SIZES)
+ALL_ROOM_TYPES = tuple(range(len(C.ROOM_TYPES)))
 
 
 @struct.dataclass
 class SceneBank:
     """All scenes of a split, padded to one grid size.  S scenes, P = G*G*8*2 poses."""
 
-    numbers: jax.Array  # int32 [S] AI2-THOR scene numbers
-    room_type: jax.Array  # int32 [S]
+    numbers: jax.Array  # int32 [S] AI2-THOR scene numbers or house numbers
+    room_type: jax.Array  # int32 [S] a single room's type; -1 for a house (see room_types)
     cell_type: jax.Array  # int8 [S, G, G] catalog.CELL_*
     obj_cat: jax.Array  # int8 [S, G, G] category index, -1 for none
     obj_band: jax.Array  # int8 [S, G, G] catalog.BAND_*, -1 for none
+    cell_room: jax.Array  # int8 [S, G, G] the room index of each cell (0 in a single room), -1 for none
+    room_types: jax.Array  # int32 [S, MAX_ROOMS] the room type of each room index, -1 padded
+    target_room: jax.Array  # int32 [S, K] the room index holding each target, -1 padded
     targets: jax.Array  # int32 [S, K] the scene's valid target categories, -1 padded
     num_targets: jax.Array  # int32 [S]
     view_sem: jax.Array  # int8 [S, P, 3, W] semantic class of each view pixel of each pose
@@ -125,14 +136,15 @@ def _distances(goal, next_poses):
     return dist
 
 
-def _expected_arrays(setup: str, num_scenes: int, grid_size: int, view_width: int) -> dict:
+def _expected_arrays(setup: str, scene_numbers, grid_size: int, view_width: int) -> dict:
     """name -> (shape, dtype) of every array of a bank."""
-    s, g, k = num_scenes, grid_size, _max_targets(setup)
+    s, g, k = len(scene_numbers), grid_size, _max_targets(setup, scene_numbers)
     p = g * g * C.NUM_HEADINGS * C.NUM_HORIZONS
     i8, i32 = np.dtype(np.int8), np.dtype(np.int32)
     return {
         "numbers": ((s,), i32), "room_type": ((s,), i32), "cell_type": ((s, g, g), i8),
-        "obj_cat": ((s, g, g), i8), "obj_band": ((s, g, g), i8), "targets": ((s, k), i32),
+        "obj_cat": ((s, g, g), i8), "obj_band": ((s, g, g), i8), "cell_room": ((s, g, g), i8),
+        "room_types": ((s, MAX_ROOMS), i32), "target_room": ((s, k), i32), "targets": ((s, k), i32),
         "num_targets": ((s,), i32), "view_sem": ((s, p, NUM_ROWS, view_width), i8),
         "view_depth": ((s, p, NUM_ROWS, view_width), np.dtype(np.uint8)),
         "distance": ((s, k, p), np.dtype(np.int16)), "starts": ((s, k, p // 2), i32),
@@ -141,39 +153,50 @@ def _expected_arrays(setup: str, num_scenes: int, grid_size: int, view_width: in
     }  # fmt: skip
 
 
-def _max_targets(setup: str) -> int:
+def _max_targets(setup: str, scene_numbers) -> int:
+    """K: a single room's most targets, or (with a house among the scenes) every category."""
+    if any(C.is_house(n) for n in scene_numbers):
+        return len(C.categories(setup))
     return max(len(C.SETUPS[setup][1][r]) for r in range(4))
 
 
 @functools.lru_cache(maxsize=16)
-def build_bank(setup: str, scene_numbers: tuple[int, ...], grid_size: int, view_width: int) -> dict:
+def build_bank(setup: str, scene_numbers: tuple[int, ...], grid_size: int, view_width: int,
+               target_rooms: tuple[int, ...] = ALL_ROOM_TYPES) -> dict:  # fmt: skip
     """Numpy arrays of a SceneBank, cached in memory and on disk (see the module doc).
 
     The first build of a split takes seconds (all four room types of the train split: about
     10 s on one CPU core); loading it from the disk cache takes a fraction of a second."""
-    path = cache.bank_cache_path(setup, scene_numbers, grid_size, view_width)
+    args = (setup, scene_numbers, grid_size, view_width, target_rooms)
+    path = cache.bank_cache_path(*args)
     if path is None:
-        return compute_bank(setup, scene_numbers, grid_size, view_width)
-    key = cache.bank_cache_key(setup, scene_numbers, grid_size, view_width)
-    arrays = cache.load(path, key, _expected_arrays(setup, len(scene_numbers), grid_size, view_width))
+        return compute_bank(*args)
+    key = cache.bank_cache_key(*args)
+    arrays = cache.load(path, key, _expected_arrays(setup, scene_numbers, grid_size, view_width))
     if arrays is None:
-        arrays = compute_bank(setup, scene_numbers, grid_size, view_width)
+        arrays = compute_bank(*args)
         cache.save(path, key, arrays)
     return arrays
 
 
-def compute_bank(setup: str, scene_numbers: tuple[int, ...], grid_size: int, view_width: int) -> dict:
-    """Numpy arrays of a SceneBank, built from scratch (no cache)."""
+def generate_scene(number: int, setup: str, grid_size: int):
+    """The layout of a single room (an AI2-THOR number) or of a house (envs.houses)."""
+    return (generate_house if C.is_house(number) else generate_layout)(number, setup, grid_size)
+
+
+def compute_bank(setup: str, scene_numbers: tuple[int, ...], grid_size: int, view_width: int,
+                 target_rooms: tuple[int, ...] = ALL_ROOM_TYPES) -> dict:  # fmt: skip
+    """Numpy arrays of a SceneBank, built from scratch (no cache).  A scene's targets are the
+    categories present in it whose room has a type in ``target_rooms``."""
     categories = C.categories(setup)
     radius_cells = C.SETUPS[setup][2] / C.CELL_SIZE_M
-    layouts = [generate_layout(n, setup, grid_size) for n in scene_numbers]
-    max_targets = _max_targets(setup)
-    num_poses = grid_size * grid_size * C.NUM_HEADINGS * C.NUM_HORIZONS
+    max_targets = _max_targets(setup, scene_numbers)
     out = {k: [] for k in SceneBank.__dataclass_fields__ if k != "target_vectors"}
-    for layout in layouts:
+    for number in scene_numbers:
+        layout = generate_scene(number, setup, grid_size)
         sem, depth_code = _scene_views(layout.cell_type, layout.obj_cat, layout.obj_band, view_width)
         sem, depth_code = np.asarray(sem), np.asarray(depth_code)
-        present = sorted({int(c) for c in layout.obj_cat[layout.obj_cat >= 0]})
+        present = sorted(c for c, room in layout.target_room.items() if layout.room_types[room] in target_rooms)
         in_range = depth_code <= radius_cells * DEPTH_RESOLUTION  # [P, 3, W]
         goal = np.stack([((sem == C.NUM_STRUCTURAL + c) & in_range).any((1, 2)) for c in present])
         dist = np.asarray(_distances(goal, _scene_next_poses(layout.cell_type)))  # [K', P]
@@ -182,22 +205,28 @@ def compute_bank(setup: str, scene_numbers: tuple[int, ...], grid_size: int, vie
         level = dist[:, 0::2]  # [K', G*G*8] horizon-0 poses
         ok = (level > 1) & (level < UNREACHABLE) & np.repeat(free, C.NUM_HEADINGS)[None, :]
         keep = [i for i in range(len(present)) if ok[i].any()]
+        if not keep:
+            raise RuntimeError(f"scene {layout.number} has no reachable target under setup {setup!r}")
         k = len(keep)
         targets = np.full(max_targets, -1, np.int32)
         targets[:k] = [present[i] for i in keep]
-        distance = np.full((max_targets, num_poses), UNREACHABLE, np.int16)
+        target_room = np.full(max_targets, -1, np.int32)
+        target_room[:k] = [layout.target_room[present[i]] for i in keep]
+        distance = np.full((max_targets, num_poses := dist.shape[1]), UNREACHABLE, np.int16)
         distance[:k] = dist[keep]
         starts = np.zeros((max_targets, num_poses // 2), np.int32)
         num_starts = np.zeros(max_targets, np.int32)
+        room_of_start = np.repeat(layout.cell_room.reshape(-1), C.NUM_HEADINGS)
         for j, i in enumerate(keep):
-            valid = np.flatnonzero(ok[i])
+            valid = _start_poses(ok[i], room_of_start, target_room[j], (setup, layout.number, j))
             starts[j, : len(valid)] = valid
             num_starts[j] = len(valid)
-        if k == 0:
-            raise RuntimeError(f"scene {layout.number} has no reachable target under setup {setup!r}")
+        room_types = np.full(MAX_ROOMS, -1, np.int32)
+        room_types[: len(layout.room_types)] = layout.room_types
         for name, value in (
             ("numbers", layout.number), ("room_type", layout.room_type), ("cell_type", layout.cell_type),
-            ("obj_cat", layout.obj_cat), ("obj_band", layout.obj_band), ("targets", targets),
+            ("obj_cat", layout.obj_cat), ("obj_band", layout.obj_band), ("cell_room", layout.cell_room),
+            ("room_types", room_types), ("target_room", target_room), ("targets", targets),
             ("num_targets", k), ("view_sem", sem), ("view_depth", depth_code), ("distance", distance),
             ("starts", starts), ("num_starts", num_starts),
         ):  # fmt: skip
@@ -211,9 +240,27 @@ def compute_bank(setup: str, scene_numbers: tuple[int, ...], grid_size: int, vie
     return arrays
 
 
-def make_bank(setup: str, scene_numbers, grid_size: int, view_width: int) -> SceneBank:
-    arrays = build_bank(setup, tuple(int(n) for n in scene_numbers), grid_size, view_width)
+def _start_poses(ok, room_of_start, target_room: int, seed) -> np.ndarray:
+    """The start list of one (scene, target) from the valid start poses ``ok`` [G*G*8]: the
+    poses in another room than the target's (``room_of_start`` >= 0, != ``target_room``),
+    then as many of the others, a fixed random subset, as make them ``1 - AWAY_SHARE`` of
+    the list (all of them where there are fewer); every valid pose, in order, when none
+    is away (a single room)."""
+    away = ok & (room_of_start >= 0) & (room_of_start != target_room)
+    if not away.any():
+        return np.flatnonzero(ok)
+    near = np.flatnonzero(ok & ~away)
+    wanted = int(round(away.sum() * (1 - AWAY_SHARE) / AWAY_SHARE))
+    if len(near) > wanted:
+        rng = np.random.default_rng(zlib.crc32(repr(seed).encode()))
+        near = np.sort(rng.choice(near, wanted, replace=False))
+    return np.concatenate([np.flatnonzero(away), near])
+
+
+def make_bank(setup: str, scene_numbers, grid_size: int, view_width: int, target_rooms=ALL_ROOM_TYPES) -> SceneBank:
+    scene_numbers = tuple(int(n) for n in scene_numbers)
+    arrays = build_bank(setup, scene_numbers, grid_size, view_width, tuple(int(r) for r in target_rooms))
     return SceneBank(**{k: jnp.asarray(v) for k, v in arrays.items()})
 
 
-__all__ = ["SceneBank", "NUM_ROWS", "build_bank", "compute_bank", "make_bank"]
+__all__ = ["AWAY_SHARE", "SceneBank", "NUM_ROWS", "build_bank", "compute_bank", "generate_scene", "make_bank"]

@@ -4,10 +4,11 @@ A built bank is kept in memory (``build_bank`` is lru-cached) and on disk, as a
 compressed ``.npz`` (a few MB) under ``$FORESIT_CACHE_DIR/banks/`` (default
 ``~/.cache/foresit_jax/banks/``, or ``$XDG_CACHE_HOME/foresit_jax/banks/``).  The file
 name carries a hash of everything that determines the arrays (``bank_cache_key``): the
-setup, scene numbers, grid size, view width, the source of envs/scenes.py, bank.py,
-dynamics.py, raycast.py and catalog.py, and the numpy, jax and jaxlib versions and the jax backend that
-build it.  So editing the generator or upgrading jax selects a new file; stale files are
-never read (delete the folder to reclaim the space).  Files are written atomically (a
+setup, scene numbers, grid size, view width, the room types whose targets are kept, the
+source of envs/scenes.py, houses.py, bank.py, dynamics.py, raycast.py and catalog.py, and
+the numpy, jax and jaxlib versions and the jax backend that build it.  So editing the
+generator or upgrading jax selects a new file; stale files are never read (delete the
+folder to reclaim the space).  Files are written atomically (a
 temporary file, then ``os.replace``), so concurrent processes are safe; a file that cannot
 be read, or whose arrays do not match the expected names, shapes and dtypes, is rebuilt.
 ``FORESIT_NO_CACHE=1`` turns the disk cache off (neither read nor written); a cache
@@ -31,7 +32,7 @@ BANK_CACHE_FORMAT = 1  # bump when the file layout (not the arrays) changes
 CACHE_DIR_ENV = "FORESIT_CACHE_DIR"  # root of the disk cache; banks go to its "banks" folder
 NO_CACHE_ENV = "FORESIT_NO_CACHE"  # "1" (anything but "", "0", "false", "no"): no disk cache
 # The modules whose source determines a bank's arrays (hashed into the cache key).
-_GENERATOR_SOURCES = ("scenes.py", "bank.py", "dynamics.py", "raycast.py", "catalog.py")
+_GENERATOR_SOURCES = ("scenes.py", "houses.py", "bank.py", "dynamics.py", "raycast.py", "catalog.py")
 
 
 def bank_cache_dir() -> Path | None:
@@ -58,7 +59,7 @@ def _generator_digest() -> str:
     return digest.hexdigest()
 
 
-def bank_cache_key(setup: str, scene_numbers, grid_size: int, view_width: int) -> str:
+def bank_cache_key(setup: str, scene_numbers, grid_size: int, view_width: int, target_rooms=(0, 1, 2, 3)) -> str:
     """Hex sha256 of every input that determines the arrays of a bank (see the module doc)."""
     inputs = {
         "format": BANK_CACHE_FORMAT,
@@ -66,17 +67,19 @@ def bank_cache_key(setup: str, scene_numbers, grid_size: int, view_width: int) -
         "scene_numbers": [int(n) for n in scene_numbers],
         "grid_size": int(grid_size),
         "view_width": int(view_width),
+        "target_rooms": [int(r) for r in target_rooms],
         "generator": _generator_digest(),
     }
     return hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()
 
 
-def bank_cache_path(setup: str, scene_numbers, grid_size: int, view_width: int) -> Path | None:
+def bank_cache_path(setup: str, scene_numbers, grid_size: int, view_width: int,
+                    target_rooms=(0, 1, 2, 3)) -> Path | None:  # fmt: skip
     """Where the bank of these inputs is (or would be) cached; None when caching is off."""
     folder = bank_cache_dir()
     if folder is None:
         return None
-    key = bank_cache_key(setup, scene_numbers, grid_size, view_width)
+    key = bank_cache_key(setup, scene_numbers, grid_size, view_width, target_rooms)
     return folder / f"{setup}-{len(scene_numbers)}scenes-g{grid_size}-w{view_width}-{key[:32]}.npz"
 
 

@@ -3,7 +3,9 @@
 Everything here is plain Python/numpy data; nothing is traced.  Scene numbers follow
 AI2-THOR (kitchens 1-30, living rooms 201-230, bedrooms 301-330, bathrooms 401-430) and
 the splits follow SAVN (train 1-20, validation the odd layouts 21-29, test the even
-layouts 22-30, with the same offsets for every room type).
+layouts 22-30, with the same offsets for every room type).  Houses (``layout="house"``,
+envs.houses) are numbered by their number of rooms: 2-room houses 2001-2030, 3-room
+houses 3001-3030, 4-room houses 4001-4030, split by ``number % 1000`` the same way.
 """
 
 from __future__ import annotations
@@ -19,6 +21,8 @@ KITCHEN, LIVING_ROOM, BEDROOM, BATHROOM = range(4)
 ROOM_OFFSETS = (0, 200, 300, 400)
 
 SPLITS = ("train", "val", "test")
+LAYOUTS = ("room", "house")  # single AI2-THOR-like rooms, or multi-room houses (envs.houses)
+HOUSE_SIZES = (2, 3, 4)  # rooms per house; house numbers are 1000 * rooms + layout
 SPLIT_LAYOUTS = {
     "train": tuple(range(1, 21)),
     "val": (21, 23, 25, 27, 29),
@@ -108,6 +112,11 @@ def check_split(split: str) -> None:
         raise ValueError(f"unknown split {split!r}; choose one of {list(SPLITS)}")
 
 
+def check_layout(layout: str) -> None:
+    if layout not in LAYOUTS:
+        raise ValueError(f"unknown layout {layout!r}; choose one of {list(LAYOUTS)}")
+
+
 def categories(setup: str) -> tuple[str, ...]:
     check_setup(setup)
     return SETUPS[setup][0]
@@ -117,6 +126,25 @@ def scene_numbers(split: str, room_types=range(4)) -> list[int]:
     """AI2-THOR scene numbers of a split, room type by room type."""
     check_split(split)
     return [ROOM_OFFSETS[r] + n for r in room_types for n in SPLIT_LAYOUTS[split]]
+
+
+def house_numbers(split: str, sizes=HOUSE_SIZES) -> list[int]:
+    """House numbers of a split, house size by house size."""
+    check_split(split)
+    return [1000 * size + n for size in sizes for n in SPLIT_LAYOUTS[split]]
+
+
+def is_house(scene_number: int) -> bool:
+    return int(scene_number) >= 1000
+
+
+def house_size_of(number: int) -> int:
+    """The number of rooms of house ``number`` (2001-2030: 2, ... 4001-4030: 4)."""
+    size, layout = divmod(int(number), 1000)
+    if size not in HOUSE_SIZES or not 1 <= layout <= 30:
+        raise ValueError(f"{number} is not a house number (2-room houses 2001-2030, 3-room 3001-3030, "
+                         "4-room 4001-4030)")  # fmt: skip
+    return size
 
 
 def room_type_of(scene_number: int) -> int:

@@ -22,11 +22,18 @@ from envs import catalog as C
 from envs import spaces
 from envs.bank import UNREACHABLE, SceneBank, make_bank
 from envs.dynamics import pose_index, transition
+from envs.houses import house_room_types
 from envs.raycast import DEPTH_RESOLUTION, NUM_ROWS, cast_view
 
 TRAIN_TIME_LIMIT = 30  # SAVN's training episode length
 EVAL_TIME_LIMIT = 100
 EVAL_TIME_LIMIT_LIVING_ROOM = 200
+# Houses (layout="house"): the paths are about 3x a single room's (savn test split: median
+# L^g 19 against 6, 95th percentile 46 against 19): the limits are scaled by 2x (training:
+# longer than the shortest path of every training start, 99th percentile 48) and 3x (evaluation).
+HOUSE_TRAIN_TIME_LIMIT = 60
+HOUSE_EVAL_TIME_LIMIT = 300
+GRID_SIZES = {"room": 20, "house": 30}  # the default grid_size of each layout
 NUM_DETECTION_FEATURES = 7  # visible, col min/max, row min/max, confidence, is target
 
 
@@ -36,7 +43,7 @@ class EnvState:
     heading: jax.Array  # int32 [] 0..7, 45 degree steps clockwise from north
     horizon: jax.Array  # int32 [] 0 = level, 1 = 30 degrees down
     scene: jax.Array  # int32 [] index into the scene bank
-    room_type: jax.Array  # int32 [] catalog.KITCHEN, LIVING_ROOM, BEDROOM, BATHROOM
+    room_type: jax.Array  # int32 [] catalog.KITCHEN ...: the type of the room holding the target
     target: jax.Array  # int32 [] category index in the setup's category list
     target_slot: jax.Array  # int32 [] index of the target in bank.targets[scene]
     time: jax.Array  # int32 [] steps taken in this episode
@@ -51,8 +58,12 @@ class EnvParams:
     step_penalty: float = -0.01
 
 
-def time_limits(training: bool) -> jax.Array:
-    """Episode limits by room type: 30 for training; 100 (200 in living rooms) for evaluation."""
+def time_limits(training: bool, layout: str = "room") -> jax.Array:
+    """Episode limits by room type: 30 for training; 100 (200 in living rooms) for evaluation;
+    in houses 60 and 300 whatever the room type."""
+    C.check_layout(layout)
+    if layout == "house":
+        return jnp.full(4, HOUSE_TRAIN_TIME_LIMIT if training else HOUSE_EVAL_TIME_LIMIT, jnp.int32)
     if training:
         return jnp.full(4, TRAIN_TIME_LIMIT, jnp.int32)
     limits = [EVAL_TIME_LIMIT] * 4
@@ -111,7 +122,13 @@ class GridNav:
     Args:
       setup: "savn" (18 categories, 1.0 m, 300-d word-vector targets) or "org"
         (22 categories, 1.5 m, one-hot targets, detector features in the observation).
-      grid_size: side of the padded scene grid, in 0.25 m cells.
+      layout: "room" (single AI2-THOR-like rooms, the default) or "house" (houses of 2-4
+        rooms joined by doorways, envs.houses: longer paths, the target mostly in another
+        room at the start, time limits 60 / 300).  In a house, ``room_types`` (of
+        ``make_params``) selects the targets by the type of the room that holds them,
+        and ``info["room_type"]`` is that room's type.
+      grid_size: side of the padded scene grid, in 0.25 m cells (default 20 for rooms,
+        30 for houses).
       view_width: number of view columns (rays) across the 100 degree field of view.
       precomputed_views: gather each pose's view from the scene bank's table (fast) or
         ray cast it at every step (same pixels; for checking and benchmarking).
@@ -122,13 +139,17 @@ class GridNav:
     def __init__(
         self,
         setup: str = "savn",
-        grid_size: int = 20,
+        grid_size: int | None = None,
         view_width: int = 16,
         precomputed_views: bool = True,
         final_observation: bool = True,
         check_actions: bool = False,
+        layout: str = "room",
     ):
         C.check_setup(setup)
+        C.check_layout(layout)
+        self.layout = layout
+        grid_size = GRID_SIZES[layout] if grid_size is None else int(grid_size)
         if view_width < 1:
             raise ValueError(f"view_width must be positive, got {view_width}")
         self.setup = setup
@@ -156,11 +177,17 @@ class GridNav:
         return C.NUM_ACTIONS
 
     def make_params(self, split: str = "train", room_types=None, training: bool | None = None) -> EnvParams:
-        """Params holding the scene bank of ``split`` (optionally some room types only)."""
+        """Params holding the scene bank of ``split`` (optionally some room types only: in a
+        house, the targets that stand in a room of those types)."""
         C.check_split(split)
         rooms = tuple(range(4)) if room_types is None else _room_indices(room_types)
-        bank = make_bank(self.setup, C.scene_numbers(split, rooms), self.grid_size, self.view_width)
-        return EnvParams(bank=bank, max_steps=time_limits(split == "train" if training is None else training))
+        if self.layout == "house":  # the houses with such rooms, their targets in such rooms
+            numbers, target_rooms = [n for n in C.house_numbers(split) if set(house_room_types(n)) & set(rooms)], rooms
+        else:  # the rooms of those types, all their targets
+            numbers, target_rooms = C.scene_numbers(split, rooms), tuple(range(4))
+        bank = make_bank(self.setup, numbers, self.grid_size, self.view_width, target_rooms)
+        limits = time_limits(split == "train" if training is None else training, self.layout)
+        return EnvParams(bank=bank, max_steps=limits)
 
     @functools.cached_property
     def default_params(self) -> EnvParams:
@@ -226,7 +253,7 @@ class GridNav:
             heading=heading.astype(jnp.int32),
             horizon=jnp.zeros((), jnp.int32),
             scene=scene.astype(jnp.int32),
-            room_type=bank.room_type[scene],
+            room_type=bank.room_types[scene, bank.target_room[scene, slot]],
             target=bank.targets[scene, slot],
             target_slot=slot.astype(jnp.int32),
             time=jnp.zeros((), jnp.int32),
@@ -373,4 +400,4 @@ def _room_index(room) -> int:
     return int(room)
 
 
-__all__ = ["EnvParams", "EnvState", "GridNav", "time_limits", "UNREACHABLE"]
+__all__ = ["EnvParams", "EnvState", "GridNav", "GRID_SIZES", "time_limits", "UNREACHABLE"]

@@ -2,7 +2,9 @@
 
 SPL_i = s_i * L^g_i / max(L_i, L^g_i), where L^g is the oracle's shortest number of actions
 to success (Done counted) and L the number of actions taken; the L >= 5 bucket of Table 1
-holds the episodes with L^g >= `LONG_PATH_MIN`.
+holds the episodes with L^g >= `LONG_PATH_MIN`.  Houses (``layout="house"``), whose paths
+are about 3x longer, add the L >= 10 and L >= 20 buckets (`LONG_PATH_MINS`) and buckets of
+L^g up to 40+ (`LENGTH_BUCKETS_OF`).
 """
 
 from __future__ import annotations
@@ -16,6 +18,10 @@ LONG_PATH_MIN = 5  # Table 1's "L >= 5" bucket: episodes whose L^g is at least t
 # edges keep every bucket populated at the test split's lengths (mean L^g 4.5 to 11.8 by
 # room type, see experiments.demo) and put LONG_PATH_MIN on an edge.
 LENGTH_BUCKETS = ((1, 2), (3, 4), (5, 6), (7, 9), (10, 14), (15, None))
+# Houses: median L^g 19 on the test houses, 95th percentile 46.
+HOUSE_LENGTH_BUCKETS = ((1, 4), (5, 9), (10, 14), (15, 19), (20, 29), (30, 39), (40, None))
+LENGTH_BUCKETS_OF = {"room": LENGTH_BUCKETS, "house": HOUSE_LENGTH_BUCKETS}
+LONG_PATH_MINS = {"room": (LONG_PATH_MIN,), "house": (LONG_PATH_MIN, 10, 20)}  # the L >= m buckets
 
 
 def spl(success, length, optimal_length):
@@ -25,26 +31,25 @@ def spl(success, length, optimal_length):
     return success * optimal / jnp.maximum(jnp.asarray(length).astype(jnp.float32), optimal)
 
 
-def summarize(success, spl_terms, optimal_length) -> dict:
-    """SR, SPL, SR>=5, SPL>=5 (in %) and episode counts from per-episode arrays (host side).
+def summarize(success, spl_terms, optimal_length, long_path_mins=(LONG_PATH_MIN,)) -> dict:
+    """SR, SPL, SR>=m, SPL>=m (in %) for each m of `long_path_mins` (a layout's:
+    `LONG_PATH_MINS`) and the episode counts, from per-episode arrays (host side).
 
-    An empty L>=5 bucket gives NaN for its two rates (write it as null in JSON)."""
+    An empty L>=m bucket gives NaN for its two rates (write it as null in JSON)."""
     success = np.asarray(success, np.float64).reshape(-1)
     spl_terms = np.asarray(spl_terms, np.float64).reshape(-1)
-    long = np.asarray(optimal_length).reshape(-1) >= LONG_PATH_MIN
-    every = np.ones_like(long)
+    optimal = np.asarray(optimal_length).reshape(-1)
 
     def pct(x, mask):
         return float(100.0 * x[mask].mean()) if mask.any() else float("nan")
 
-    return {
-        "SR": pct(success, every),
-        "SPL": pct(spl_terms, every),
-        "SR>=5": pct(success, long),
-        "SPL>=5": pct(spl_terms, long),
-        "episodes": int(success.shape[0]),
-        "episodes>=5": int(long.sum()),
-    }
+    out = {"SR": pct(success, np.ones(success.shape, bool)), "SPL": pct(spl_terms, np.ones(success.shape, bool))}
+    for m in long_path_mins:
+        out[f"SR>={m}"], out[f"SPL>={m}"] = pct(success, optimal >= m), pct(spl_terms, optimal >= m)
+    out["episodes"] = int(success.shape[0])
+    for m in long_path_mins:
+        out[f"episodes>={m}"] = int((optimal >= m).sum())
+    return out
 
 
 def bucket_label(bucket) -> str:

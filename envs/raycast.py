@@ -20,7 +20,9 @@ So objects on the floor close to the agent are seen only looking down, and objec
 on walls only looking level.  Occlusion: walls stop every row; furniture stops the mid and
 floor rows; a floor object stops a floor row inside its window; a floor row that meets
 nothing inside its window sees floor at its far edge.  Depths are in cells, rounded to
-1/8 cell (the resolution of the precomputed view table).
+1/8 cell (the resolution of the precomputed view table) and at most ``MAX_DEPTH``
+(255/8 = 31.9 cells, 8 m: the range of the depth camera; only a house's longest rays reach
+it).
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from envs import catalog as C
 FIELD_OF_VIEW_DEG = 100.0
 NUM_ROWS = 3
 DEPTH_RESOLUTION = 8  # depth steps per cell
+MAX_DEPTH = 255 / DEPTH_RESOLUTION  # cells: the depth camera's range (the table stores uint8 codes)
 INF = 1e6
 # [horizon, row] -> (height band, min distance, max distance), in cells.
 ROW_BANDS = np.array([C.BAND_HIGH, C.BAND_MID, C.BAND_FLOOR, C.BAND_MID, C.BAND_FLOOR, C.BAND_FLOOR]).reshape(2, 3)
@@ -122,5 +125,5 @@ def cast_view(cell_type, obj_cat, obj_band, pos, heading, horizon, view_width: i
     per_row = jax.vmap(_first_hit, in_axes=(None, None, None, None, 0, 0, 0))  # rows
     per_col = jax.vmap(per_row, in_axes=(0, 0, 0, 0, None, None, None))  # columns
     sem, depth = per_col(cell_t, cat, band, entry, row_band, lo, hi)  # [W, 3]
-    depth = jnp.round(depth * DEPTH_RESOLUTION) / DEPTH_RESOLUTION
+    depth = jnp.minimum(jnp.round(depth * DEPTH_RESOLUTION), 255) / DEPTH_RESOLUTION
     return sem.T.astype(jnp.int32), depth.T.astype(jnp.float32)

@@ -232,9 +232,8 @@ def render_topdown(
 
     if decorations:
         number = int(np.asarray(bank.numbers[scene_index]))
-        room = C.ROOM_TYPES[int(np.asarray(bank.room_type[scene_index]))].replace("_", " ")
         if title is None:
-            title = f"FloorPlan{number} ({room})"
+            title = scene_name(number, np.asarray(bank.room_types[scene_index]))
             if target is not None:
                 title += f", target {categories[int(target)]}"
             if state is not None:
@@ -264,6 +263,12 @@ def render_topdown(
         fig.legend(handles=handles, loc="upper left", fontsize=7, frameon=False,
                    bbox_to_anchor=((left + grid_w + 10) / width, 1 - top / height))  # fmt: skip
     return _finish(fig, canvas, path)
+
+
+def scene_name(number: int, room_types) -> str:
+    """"FloorPlan201 (living room)" or "House3004 (kitchen, bedroom, bathroom)"."""
+    rooms = ", ".join(C.ROOM_TYPES[int(t)].replace("_", " ") for t in room_types if t >= 0)
+    return f"{'House' if C.is_house(number) else 'FloorPlan'}{number} ({rooms})"
 
 
 def _sem_depth(obs_or_view, max_depth):

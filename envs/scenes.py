@@ -41,13 +41,16 @@ FURNITURE = {
 
 @dataclass(frozen=True)
 class Layout:
-    """One generated scene (numpy arrays, row-major ``[row, col]``)."""
+    """One generated scene (numpy arrays, row-major ``[row, col]``): a single room or a house."""
 
-    number: int  # AI2-THOR scene number
-    room_type: int  # catalog.KITCHEN ...
+    number: int  # AI2-THOR scene number (rooms) or house number (envs.houses)
+    room_type: int  # catalog.KITCHEN ... of a single room; -1 for a house (see room_types)
     cell_type: np.ndarray  # int8 [G, G], catalog.CELL_*
     obj_cat: np.ndarray  # int8 [G, G], category index in the setup's list, -1 for none
     obj_band: np.ndarray  # int8 [G, G], catalog.BAND_*, -1 for none
+    cell_room: np.ndarray  # int8 [G, G], index of the room a cell lies in (0 in a single room), -1 for none
+    room_types: tuple[int, ...]  # the room type of each room index
+    target_room: dict  # category index -> index of the room its (one) instance belongs to
 
 
 def _rng(*parts) -> np.random.Generator:
@@ -73,14 +76,13 @@ def _walkable_connected(cell_type: np.ndarray) -> bool:
     return count == len(free)
 
 
-def _next_to(mask: np.ndarray, cell_type: np.ndarray, kind: int) -> np.ndarray:
-    """Cells of ``mask`` with a 4-neighbour of cell type ``kind``."""
+def _next_to(mask: np.ndarray, other: np.ndarray) -> np.ndarray:
+    """Cells of ``mask`` with a 4-neighbour in the boolean grid ``other``."""
     near = np.zeros_like(mask)
-    is_kind = cell_type == kind
-    near[1:, :] |= is_kind[:-1, :]
-    near[:-1, :] |= is_kind[1:, :]
-    near[:, 1:] |= is_kind[:, :-1]
-    near[:, :-1] |= is_kind[:, 1:]
+    near[1:, :] |= other[:-1, :]
+    near[:-1, :] |= other[1:, :]
+    near[:, 1:] |= other[:, :-1]
+    near[:, :-1] |= other[:, 1:]
     return mask & near
 
 
@@ -113,6 +115,30 @@ def generate_layout(number: int, setup: str, grid_size: int = MIN_GRID_SIZE) -> 
             cell[top : top + rows, c] = C.CELL_WALL
             cell[door : door + 3, c] = C.CELL_FLOOR
 
+    cell = furnish(cell, room, rng, (top, left, rows, cols))
+    obj_cat = np.full(cell.shape, -1, np.int8)
+    obj_band = np.full(cell.shape, -1, np.int8)
+    interior = np.zeros(cell.shape, bool)
+    interior[1:-1, 1:-1] = True
+    rng = _rng("objects", setup, number)
+    cell, placed = place_objects(cell, obj_cat, obj_band, setup, C.SETUPS[setup][1][room], rng, interior)
+    cell_room = np.where(_rect_mask(cell.shape, (top, left, rows, cols)) & (cell != C.CELL_WALL), 0, -1)
+    return Layout(number, room, cell, obj_cat, obj_band, cell_room.astype(np.int8), (room,), dict.fromkeys(placed, 0))
+
+
+def _rect_mask(shape, rect) -> np.ndarray:
+    top, left, rows, cols = rect
+    mask = np.zeros(shape, bool)
+    mask[top : top + rows, left : left + cols] = True
+    return mask
+
+
+def furnish(cell: np.ndarray, room: int, rng: np.random.Generator, rect, keep_free=None) -> np.ndarray:
+    """``cell`` with room type ``room``'s furniture placed inside ``rect`` = (top, left, rows,
+    cols): each piece tried in turn, at random orientations and places, skipped when it
+    would cut the walkable floor (of the whole grid) in two or cover a cell of
+    ``keep_free`` (bool [G, G], optional)."""
+    top, left, rows, cols = rect
     for h, w, against_wall in FURNITURE[room]:
         if rng.random() < 0.5:
             h, w = w, h
@@ -120,7 +146,7 @@ def generate_layout(number: int, setup: str, grid_size: int = MIN_GRID_SIZE) -> 
             r = rng.integers(top, top + rows - h + 1)
             c = rng.integers(left, left + cols - w + 1)
             block = cell[r : r + h, c : c + w]
-            if (block != C.CELL_FLOOR).any():
+            if (block != C.CELL_FLOOR).any() or (keep_free is not None and keep_free[r : r + h, c : c + w].any()):
                 continue
             ring = cell[r - 1 : r + h + 1, c - 1 : c + w + 1]
             if against_wall and not (ring == C.CELL_WALL).any():
@@ -130,22 +156,30 @@ def generate_layout(number: int, setup: str, grid_size: int = MIN_GRID_SIZE) -> 
             if _walkable_connected(trial):
                 cell = trial
                 break
+    return cell
 
-    obj_cat = np.full(cell.shape, -1, np.int8)
-    obj_band = np.full(cell.shape, -1, np.int8)
-    names = C.categories(setup)
-    targets = C.SETUPS[setup][1][room]
-    rng = _rng("objects", setup, number)
-    interior = np.zeros(cell.shape, bool)
-    interior[1:-1, 1:-1] = True
-    for name in targets:
+
+def place_objects(cell, obj_cat, obj_band, setup, names, rng, region, elsewhere=None, keep_free=None):
+    """Place one instance of each category in ``names`` inside ``region`` (bool [G, G]):
+    floor objects on free floor of the region (never cutting the walkable floor in two),
+    mid objects on the region's furniture next to floor, high objects on walls next to the
+    region's floor and, when ``elsewhere`` (the floor of other rooms) is given, not next to
+    it (an object hangs on one face of a wall: seen from one room only); no floor object on
+    a cell of ``keep_free``.  ``obj_cat`` and
+    ``obj_band`` are written in place.  Returns (cell, the category indices placed)."""
+    categories = C.categories(setup)
+    placed = []
+    for name in names:
         band = C.category_band(name)
+        floor = cell == C.CELL_FLOOR
         if band == C.BAND_MID:
-            candidates = _next_to((cell == C.CELL_FURNITURE) & (obj_cat < 0), cell, C.CELL_FLOOR)
+            candidates = _next_to((cell == C.CELL_FURNITURE) & (obj_cat < 0) & region, floor)
         elif band == C.BAND_HIGH:
-            candidates = _next_to((cell == C.CELL_WALL) & (obj_cat < 0), cell, C.CELL_FLOOR)
+            candidates = _next_to((cell == C.CELL_WALL) & (obj_cat < 0), floor & region)
+            if elsewhere is not None:
+                candidates &= ~_next_to(candidates, elsewhere)
         else:
-            candidates = (cell == C.CELL_FLOOR) & interior
+            candidates = floor & region if keep_free is None else floor & region & ~keep_free
         for r, c in rng.permutation(np.argwhere(candidates)):
             if band == C.BAND_FLOOR:
                 trial = cell.copy()
@@ -153,7 +187,8 @@ def generate_layout(number: int, setup: str, grid_size: int = MIN_GRID_SIZE) -> 
                 if not _walkable_connected(trial):
                     continue
                 cell = trial
-            obj_cat[r, c] = names.index(name)
+            obj_cat[r, c] = categories.index(name)
             obj_band[r, c] = band
+            placed.append(categories.index(name))
             break
-    return Layout(number, room, cell, obj_cat, obj_band)
+    return cell, placed

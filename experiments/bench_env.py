@@ -16,6 +16,8 @@ Modes: ``precomputed`` gathers each pose's view from the scene bank's table (the
 env); ``raycast`` casts the view at every step (``precomputed_views=False``; timed over
 ``--raycast-steps`` steps per call, since it is about a hundred times slower).  Timings on
 a shared machine are noisy: compare the best column of one run.
+``--layouts room house`` times single rooms and houses (``layout="house"``) in the same
+rounds and prints the ratio houses / rooms per batch size.
 ``--compare xminigrid`` measures XLand-MiniGrid's ``MiniGrid-DoorKey-8x8`` the same way
 (its ``GymAutoResetWrapper``, random actions, observation carried) and prints the ratio
 ours / DoorKey per batch size.
@@ -59,7 +61,9 @@ class BenchConfig:
     setup: Literal["savn", "org"] = "savn"
     """GridNav target setup"""
     split: Literal["train", "val", "test"] = "train"
-    """GridNav scene split (train: 80 scenes)"""
+    """GridNav scene split (train: 80 rooms, 60 houses)"""
+    layouts: tuple[Literal["room", "house"], ...] = ("room",)
+    """GridNav layouts to time: single rooms, houses (envs.houses) or both (then their ratio)"""
     seed: int = 0
     """PRNG seed"""
 
@@ -90,11 +94,11 @@ def time_once(compiled, args: tuple, key, batch_size: int, steps: int) -> float:
     return batch_size * steps / (time.perf_counter() - start)
 
 
-def gridnav_rollout(precomputed_views: bool, setup: str, split: str, batch_size: int, steps: int):
+def gridnav_rollout(precomputed_views: bool, setup: str, split: str, batch_size: int, steps: int, layout: str = "room"):
     """(jitted rollout(params, carry, key) -> carry, (params, carry)) for GridNav-v0.
 
     The scene bank is an argument, not a constant folded into the program."""
-    env, params = envs.make("GridNav-v0", setup=setup, split=split, precomputed_views=precomputed_views)
+    env, params = envs.make("GridNav-v0", setup=setup, split=split, precomputed_views=precomputed_views, layout=layout)
     vstep = jax.vmap(env.step, in_axes=(0, 0, 0, None))
 
     @jax.jit
@@ -159,17 +163,19 @@ def main(config: BenchConfig) -> int:
     modes = {"precomputed": (True,), "raycast": (False,), "both": (True, False)}[config.mode]
     print(
         f"jax {jax.__version__} on {jax.devices()[0].platform} ({jax.device_count()} device(s), {os.cpu_count()} CPU cores); "
-        f"repeats {config.repeats}; GridNav-v0 setup={config.setup} split={config.split}"
+        f"repeats {config.repeats}; GridNav-v0 setup={config.setup} split={config.split} layouts={list(config.layouts)}"
     )
     key = jax.random.key(config.seed)
     results: list[tuple[Measurement, int]] = []
     for batch_size in config.batch_sizes:
         jobs = []
-        for precomputed in modes:
-            steps = config.steps if precomputed else config.raycast_steps
-            name = f"GridNav {'precomputed' if precomputed else 'raycast'}"
-            build = lambda p=precomputed, n=steps: gridnav_rollout(p, config.setup, config.split, batch_size, n)  # noqa: E731
-            jobs.append((name, steps, build))
+        for layout in config.layouts:
+            for precomputed in modes:
+                steps = config.steps if precomputed else config.raycast_steps
+                name = f"GridNav {'precomputed' if precomputed else 'raycast'}" + ("" if layout == "room" else " house")
+                build = lambda p=precomputed, n=steps, lay=layout: gridnav_rollout(  # noqa: E731
+                    p, config.setup, config.split, batch_size, n, lay)
+                jobs.append((name, steps, build))
         if config.compare == "xminigrid":
             jobs.append((f"xminigrid {XMINIGRID_ENV}", config.steps, lambda: xminigrid_rollout(batch_size, config.steps)))
         # Compile everything of this batch size first, then time round-robin: on a shared
@@ -198,6 +204,14 @@ def main(config: BenchConfig) -> int:
         for m, _ in results:
             if m.name.startswith("GridNav"):
                 print(f"  {m.name:20s} B={m.batch_size:<5d} {m.best_sps / reference[m.batch_size]:6.2f}x")
+    if set(config.layouts) == {"room", "house"}:
+        print()
+        print("ratio houses / rooms (best steps/s)")
+        best = {(m.name, m.batch_size): m.best_sps for m, _ in results}
+        for m, _ in results:
+            if m.name.endswith(" house"):
+                room = best[(m.name.removesuffix(" house"), m.batch_size)]
+                print(f"  {m.name.removesuffix(' house'):20s} B={m.batch_size:<5d} {m.best_sps / room:6.2f}x")
     print(f"\ntotal time {time.perf_counter() - start:.0f} s")
     return 0
 

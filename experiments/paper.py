@@ -51,7 +51,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from envs.catalog import ROOM_TYPES
-from envs.metrics import LENGTH_BUCKETS, bucket_label
 from experiments import cvae_compare, devices, numerics, runs, selection, stats, sweep
 from experiments.tables import markdown_table, write_csv
 
@@ -256,10 +255,11 @@ def table3(results: dict) -> tuple[str, list[dict]]:
 # ---------------------------------------------------------------------- L^g buckets
 def by_length_rows(results: dict) -> list[dict]:
     """Per method present and bucket of L^g: SR and SPL over seeds (mean, 95% interval),
-    the test episodes in the bucket (summed over seeds)."""
+    the test episodes in the bucket (summed over seeds). The buckets are the results'
+    own (`envs.metrics.LENGTH_BUCKETS_OF` their layout), in their order."""
     rows = []
     for method, per_seed in results.items():
-        for bucket in map(bucket_label, LENGTH_BUCKETS):
+        for bucket in per_seed[0]["selected"]["by_length"]:
             cells = [r["selected"]["by_length"][bucket] for r in per_seed]
             row = {"method": method, "bucket": bucket, "episodes": sum(c["episodes"] for c in cells)}
             for col in ("SR", "SPL"):
@@ -300,7 +300,7 @@ def by_length_section(args: Args, results: dict) -> str:
         name = f"by_length_{base}_vs_{other}.png".replace("+", "_")
         _by_length_png(args.out / name, [r for r in rows if r["method"] in (base, other)])
         cells = []
-        for bucket in map(bucket_label, LENGTH_BUCKETS):
+        for bucket in dict.fromkeys(r["bucket"] for r in rows):
             episodes = next(r["episodes"] for r in rows if r["method"] == base and r["bucket"] == bucket)
             pairs = [_paired_col(results, base, other, lambda r, c=c: _num(r["by_length"][bucket][c])) for c in ("SR", "SPL")]
             cells.append([bucket, episodes, *(f"{_fmt_pair(p)} ({stats.verdict(p)})" for p in pairs)])
@@ -316,7 +316,7 @@ def _by_length_png(path: Path, rows: list[dict]) -> None:
 
     fig = Figure(figsize=(9, 3.6))
     FigureCanvasAgg(fig)
-    buckets = [bucket_label(b) for b in LENGTH_BUCKETS]
+    buckets = list(dict.fromkeys(r["bucket"] for r in rows))
     x = np.arange(len(buckets))
     for i, col in enumerate(("SR", "SPL")):
         ax = fig.add_subplot(1, 2, i + 1)
@@ -401,7 +401,7 @@ def trajectories_figure(args: Args, base: str, other: str, path: Path) -> str:
     from matplotlib.figure import Figure
 
     loaded = {m: _first_seed(args, m)[::3] for m in (base, other)}  # (config, selected params)
-    evaluator = Evaluator(SETUP_OF[base])
+    evaluator = Evaluator(SETUP_OF[base], next(iter(loaded.values()))[0].layout)
     env, n = evaluator.env, args.trajectory_candidates
     key = selection.test_key(args.seed)
     rooms = next(iter(loaded.values()))[0].room_types or ROOM_TYPES

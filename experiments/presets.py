@@ -4,6 +4,8 @@
 four room types: 32 lanes stepping packed windows of 16 steps, Adam 1e-3, a 128-unit
 network (measured: test SR ~50-60% after 3000 updates, about 7 minutes; the settings were
 chosen by `experiments.search_learner`, see docs/learner.md).
+`house` is quick's learner in houses (`layout="house"`) for 12,000 updates: measured, a3c
+seed 0 at 25% test SR after about 20 minutes here (docs/houses.md).
 `paper` is the paper's sizes and schedule (512-unit LSTM, Adam 1e-4), for long runs on
 accelerators.  `tiny` is for tests and smoke runs (bathrooms only, tiny networks).
 A method's own requirements (`Method.required_config`: the maml base runs whole
@@ -21,7 +23,7 @@ from typing import Annotated, Optional
 
 import tyro
 
-from envs.gridnav import TRAIN_TIME_LIMIT
+from envs.gridnav import time_limits
 from foresit_jax.config import Config
 from foresit_jax.methods import IMPLEMENTED_METHODS, parse_method
 
@@ -56,6 +58,10 @@ PRESETS: dict[str, tuple[dict, Schedule]] = {
         # here, ~5% of a 500-update chunk.
         Schedule(chunk_updates=500, val_episodes_per_room=100, test_episodes_per_room=250),
     ),
+    "house": (  # quick's learner in houses (envs.houses), for longer
+        dict(layout="house", num_lanes=32, num_steps=16, num_updates=12000, learning_rate=1e-3, **_SMALL_NET),
+        Schedule(chunk_updates=1000, val_episodes_per_room=100, test_episodes_per_room=250),
+    ),
     "paper": (
         dict(num_lanes=64, num_updates=50_000),
         Schedule(chunk_updates=500, val_episodes_per_room=250, test_episodes_per_room=250, keep_checkpoints=3),
@@ -87,7 +93,7 @@ def split_arm(arm: str) -> tuple[str, dict]:
         field, eq, text = (x.strip() for x in item.partition("="))
         if not eq or not text:
             raise ValueError(f"arm {arm!r}: {item!r} is not field=value")
-        if field not in defaults or field in ("method", "setup"):
+        if field not in defaults or field in ("method", "setup", "layout"):
             raise ValueError(f"arm {arm!r}: {field!r} is not a Config field an arm can set")
         kind = type(defaults[field])
         try:
@@ -120,7 +126,8 @@ def preset(name: str, method: str, **overrides) -> tuple[Config, Schedule]:
         raise ValueError(f"unknown config fields {sorted(unknown)}")
     required = parse_method(method).required_config
     if required.get("rollout") == "episodes":  # whole training episodes per update
-        required = {**required, "num_steps": max(fields.get("num_steps", Config.num_steps), TRAIN_TIME_LIMIT)}
+        limit = int(max(time_limits(True, given.get("layout", fields.get("layout", Config.layout)))))
+        required = {**required, "num_steps": max(fields.get("num_steps", Config.num_steps), limit)}
     config = Config(method=method, **{**fields, **required, **given})
     return config, schedule
 

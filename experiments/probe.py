@@ -210,7 +210,8 @@ def probe(models: dict[str, list[Model]], episodes: int, windows: int) -> dict:
         report[method] = []
         shuffled = ShuffledImagination(seeds[0].config)
         for model in seeds:
-            evaluator = evaluators.setdefault(model.config.setup, Evaluator(model.config.setup))
+            where = (model.config.setup, model.config.layout)
+            evaluator = evaluators.setdefault(where, Evaluator(*where))
             sr = sr_conditions(model, evaluator, episodes, shuffled)
             report[method].append({"seed": model.seed, "sr": sr, "items": imagination_items(model, windows)})
             print(f"probe {method} seed {model.seed}: {sr} ({time.time() - t0:.0f} s)", flush=True)

@@ -459,8 +459,14 @@ def restore(manager, step: int, like):
 
 
 # ---------------------------------------------------------------------- reports
+RESULT_COLUMNS = ("SPL", "SR", "SPL>=5", "SR>=5")  # Table 1's columns
+HOUSE_COLUMNS = ("SPL>=10", "SR>=10", "SPL>=20", "SR>=20")  # and the houses' longer buckets (envs.metrics)
+
+
 def results_markdown(results: dict, title: str, level: int = 1) -> str:
-    cols = ("SPL", "SR", "SPL>=5", "SR>=5")
+    """One row per room type (and overall); houses' results add their L >= 10, 20 columns."""
+    first = next(iter(results.values()))
+    cols = RESULT_COLUMNS + tuple(c for c in HOUSE_COLUMNS if c in first)
     rows = [[room, *(_fmt(m[c]) for c in cols), m["episodes"]] for room, m in results.items()]
     return "#" * level + f" {title}\n\n" + markdown_table(rows, ["rooms", *cols, "episodes"]) + "\n"
 

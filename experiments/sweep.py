@@ -41,7 +41,7 @@ from experiments.presets import SweepConfigFields, config_flag, given, preset
 from experiments.progress import progress_bar
 from experiments.tables import markdown_table, write_csv
 
-COLUMNS = ("SPL", "SR", "SPL>=5", "SR>=5")
+COLUMNS, HOUSE_COLUMNS = runs.RESULT_COLUMNS, runs.HOUSE_COLUMNS  # houses' results have both
 
 
 @dataclasses.dataclass(frozen=True)
@@ -420,7 +420,7 @@ def table(results_by_method: dict[str, list[dict]], room: str = "overall") -> li
     rows = []
     for method, per_seed in results_by_method.items():
         row = {"method": method, "seeds": len(per_seed)}
-        for col in COLUMNS:
+        for col in COLUMNS + tuple(c for c in HOUSE_COLUMNS if c in per_seed[0][room]):
             s = stats.summary([np.nan if r[room][col] is None else r[room][col] for r in per_seed])
             row.update({f"{col} {k}": s[k] for k in ("mean", "std", "ci_low", "ci_high")})
         rows.append(row)
@@ -436,9 +436,10 @@ def mean_std_ci(row: dict, col: str) -> str:
 
 
 def table_markdown(rows: list[dict], title: str) -> str:
-    cells = [[row["method"], *(mean_std_ci(row, c) for c in COLUMNS)] for row in rows]
+    columns = [c for c in COLUMNS + HOUSE_COLUMNS if rows and f"{c} mean" in rows[0]]
+    cells = [[row["method"], *(mean_std_ci(row, c) for c in columns)] for row in rows]
     note = "mean ± sample std [95% confidence interval, Student t] over seeds"
-    return f"# {title}\n\n" + markdown_table(cells, ["Method", *COLUMNS]) + f"\n({note})\n"
+    return f"# {title}\n\n" + markdown_table(cells, ["Method", *columns]) + f"\n({note})\n"
 
 
 def paired_markdown(results_by_method: dict[str, list[dict]], room: str = "overall") -> str:
@@ -523,7 +524,7 @@ def main(args: Args) -> list[dict] | None:
     print(f"{len(args.methods)} method(s) x {args.seeds} seed(s), the seeds spread over {used} of the "
           f"{jax.device_count()} local device(s)", flush=True)  # fmt: skip
     config, _ = method_schedule(args.methods[0], args)
-    evaluator = Evaluator(args.setup)  # one for the sweep: each method's evaluation compiles once
+    evaluator = Evaluator(args.setup, config.layout)  # one for the sweep: each method's evaluation compiles once
     bar = progress_bar(config.num_updates * len(args.methods), 0, args.progress)
     t0 = time.time()
     results, curves, budget = {}, {}, [args.stop_after_chunks]

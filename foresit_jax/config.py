@@ -13,6 +13,7 @@ import math
 from foresit_jax.methods import GRADIENTS, ROLLOUTS, Method, parse_method
 
 SETUPS: tuple[str, ...] = ("savn", "org")
+LAYOUTS: tuple[str, ...] = ("room", "house")
 IMAGINATION_OPTIMIZERS: tuple[str, ...] = ("sgd", "adam")
 IMAGINATION_INPUTS: tuple[str, ...] = ("head", "encoder", "mlp")
 EVALUATION_NOISES: tuple[str, ...] = ("training_end", "off")
@@ -30,7 +31,12 @@ class Config:
     (second setup, one-hot targets + detector features)."""
 
     room_types: tuple[str, ...] = ()
-    """Room types to train on (e.g. ('bathroom',) for an easy setting); () for all four."""
+    """Room types to train on (e.g. ('bathroom',) for an easy setting); () for all four.
+    In houses: the targets that stand in rooms of these types."""
+    layout: str = "room"
+    """Scenes: 'room' (single AI2-THOR-like rooms, as the paper's) or 'house' (houses of 2-4
+    rooms joined by doorways, `envs.houses`: paths about 3x longer, the target in another
+    room than the start in 80% of the episodes, time limits 60 / 300)."""
 
     # Training loop (synchronous batched A3C).
     rollout: str = "packed"
@@ -146,6 +152,8 @@ class Config:
         pieces = parse_method(self.method)
         if self.setup not in SETUPS:
             raise ValueError(f"setup must be one of {SETUPS}, got {self.setup!r}.")
+        if self.layout not in LAYOUTS:
+            raise ValueError(f"layout must be one of {LAYOUTS}, got {self.layout!r}.")
         if pieces.required_setup not in (None, self.setup):
             raise ValueError(
                 f"method {self.method!r} needs setup {pieces.required_setup!r} (its {pieces.encoder!r} "

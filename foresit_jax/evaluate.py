@@ -2,10 +2,10 @@
 
 SPL = (1/N) sum_i s_i L^g_i / max(L_i, L^g_i), where L^g is the oracle's shortest number of
 actions to success (Done included) and L the number of actions taken (`envs.metrics`).
-Episodes use the evaluation time limits (100 steps, 200 in living rooms); by default 250 per
-room type. Actions are sampled from the policy, as SAVN does, except for methods on ORG's
-encoder, which take the argmax as ORG's own evaluation does (`Method.greedy_evaluation`);
-``greedy`` overrides.
+Episodes use the evaluation time limits (100 steps, 200 in living rooms; 300 in houses); by
+default 250 per room type (in houses: per type of the room holding the target). Actions are
+sampled from the policy, as SAVN does, except for methods on ORG's encoder, which take the
+argmax as ORG's own evaluation does (`Method.greedy_evaluation`); ``greedy`` overrides.
 
 An `Evaluator` holds the environments and the compiled rollouts of one setup: hold one for
 a run (validation after every chunk then reuses them) and drop it to free them. The
@@ -42,10 +42,12 @@ def agent_params(state, sigma2_max: float, evaluation_noise: str = "training_end
     return AgentParams(state.params, state.imagination_params, variance)
 
 
-def outcome_metrics(outcomes: EpisodeStats) -> dict[str, float]:
-    """SR, SPL, SR>=5, SPL>=5 (in %) and counts of per-episode outcomes (`envs.metrics`)."""
+def outcome_metrics(outcomes: EpisodeStats, layout: str = "room") -> dict[str, float]:
+    """SR, SPL, SR>=5, SPL>=5 (houses: also >=10 and >=20; in %) and counts of per-episode
+    outcomes (`envs.metrics`)."""
     success, length, optimal = (np.asarray(x) for x in outcomes[:3])
-    return summarize(success, np.asarray(envs.metrics.spl(success, length, optimal)), optimal)
+    spl = np.asarray(envs.metrics.spl(success, length, optimal))
+    return summarize(success, spl, optimal, envs.metrics.LONG_PATH_MINS[layout])
 
 
 def random_policy_rollout(env, env_params, key: chex.PRNGKey, episodes: int, num_steps: int) -> EpisodeStats:
@@ -100,9 +102,9 @@ class Evaluator:
     the same episode length. Attributes: `env`, `params` ({(split, room): EnvParams}) and
     `compiled` ({key: jitted rollout}, keyed by (policy, config, num_steps, greedy))."""
 
-    def __init__(self, setup: str = "savn"):
-        self.setup = setup
-        self.env = envs.GridNav(setup=setup)
+    def __init__(self, setup: str = "savn", layout: str = "room"):
+        self.setup, self.layout = setup, layout
+        self.env = envs.GridNav(setup=setup, layout=layout)
         self.params: dict[tuple[str, str], Any] = {}
         self.compiled: dict[tuple, Any] = {}
 
@@ -171,13 +173,14 @@ class Evaluator:
             env_params = self.room_params(split, room)
             num_steps = int(jnp.max(env_params.max_steps))
             outcomes = jax.tree.map(np.asarray, run_room(env_params, num_steps, k))
-            results[room] = outcome_metrics(outcomes)
+            results[room] = outcome_metrics(outcomes, self.layout)
             pooled.append(outcomes)
         pooled = jax.tree.map(lambda *parts: np.concatenate(parts), *pooled)
-        results["overall"] = outcome_metrics(pooled)
+        results["overall"] = outcome_metrics(pooled, self.layout)
         if by_length:
             spl = np.asarray(envs.metrics.spl(pooled.success, pooled.length, pooled.optimal_length))
-            results["by_length"] = envs.metrics.by_length(pooled.success, spl, pooled.optimal_length)
+            buckets = envs.metrics.LENGTH_BUCKETS_OF[self.layout]
+            results["by_length"] = envs.metrics.by_length(pooled.success, spl, pooled.optimal_length, buckets)
         return results
 
     def _check(self, config: Config, split: str, episodes_per_room: int) -> None:
@@ -187,6 +190,9 @@ class Evaluator:
             raise ValueError(f"episodes_per_room must be >= 1, got {episodes_per_room}")
         if config.setup != self.setup:
             raise ValueError(f"this Evaluator is for setup {self.setup!r}, the config's is {config.setup!r}")
+        if config.layout != self.layout:
+            raise ValueError(f"this Evaluator is for layout {self.layout!r}, the config's is {config.layout!r}; "
+                             f"make one with Evaluator(setup, layout={config.layout!r})")  # fmt: skip
 
     def evaluate(
         self, agent_params: AgentParams, config: Config, split: str = "test", key: chex.PRNGKey | None = None,
@@ -232,7 +238,7 @@ def evaluate(
     evaluator: Evaluator | None = None,
 ) -> dict[str, dict[str, float]]:  # fmt: skip
     """`Evaluator.evaluate` (with a new Evaluator unless one is given)."""
-    evaluator = Evaluator(config.setup) if evaluator is None else evaluator
+    evaluator = Evaluator(config.setup, config.layout) if evaluator is None else evaluator
     return evaluator.evaluate(agent_params, config, split, key, episodes_per_room, greedy, room_types)
 
 
@@ -241,5 +247,5 @@ def evaluate_random_policy(
     evaluator: Evaluator | None = None,
 ) -> dict[str, dict[str, float]]:  # fmt: skip
     """`Evaluator.evaluate_random_policy` (with a new Evaluator unless one is given)."""
-    evaluator = Evaluator(config.setup) if evaluator is None else evaluator
+    evaluator = Evaluator(config.setup, config.layout) if evaluator is None else evaluator
     return evaluator.evaluate_random_policy(config, split, key, episodes_per_room)

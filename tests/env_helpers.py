@@ -104,7 +104,8 @@ def make_states(bank_np, scene, slot, pos, heading, horizon, time=None):
     i32 = lambda x: jnp.asarray(x, jnp.int32)
     return EnvState(
         agent_pos=i32(pos), heading=i32(heading), horizon=i32(horizon), scene=i32(scene),
-        room_type=i32(bank_np["room_type"][scene]), target=i32(bank_np["targets"][scene, slot]),
+        room_type=i32(bank_np["room_types"][scene, bank_np["target_room"][scene, slot]]),
+        target=i32(bank_np["targets"][scene, slot]),
         target_slot=i32(slot), time=i32(time),
         optimal_length=i32(bank_np["distance"][scene, slot, pose]),
     )  # fmt: skip
@@ -125,8 +126,8 @@ class Kit:
     Batched functions take a leading axis of BATCH (use ``batched``) so that they compile once.
     """
 
-    def __init__(self, env, params):
-        self.env, self.params = env, params
+    def __init__(self, env, params, episode_steps: int = EPISODE_STEPS):
+        self.env, self.params, self.episode_steps = env, params, episode_steps
         self.bank = bank_numpy(params)
         self.step = jax.jit(env.step)
         self.step_env = jax.jit(env.step_env)
@@ -158,7 +159,7 @@ class Kit:
         return jax.tree.map(lambda *xs: np.concatenate([np.asarray(x) for x in xs])[:n], *outs)
 
     def first_episodes(self, keys, use_oracle):
-        """Run the first episode of each lane (reset by its key) for EPISODE_STEPS steps, acting
+        """Run the first episode of each lane (reset by its key) for ``episode_steps`` steps, acting
         with env.optimal_action where use_oracle [N] else uniformly at random.
 
         Returns numpy (success, length, optimal_length, still_running), each [N].  One
@@ -183,7 +184,7 @@ class Kit:
                     return (state, alive & ~(terminated | truncated), success, length, key), None
 
                 init = (state, jnp.array(True), jnp.array(False), jnp.array(0, jnp.int32), key)
-                (_, alive, success, length, _), _ = jax.lax.scan(body, init, None, EPISODE_STEPS)
+                (_, alive, success, length, _), _ = jax.lax.scan(body, init, None, self.episode_steps)
                 return success, length, state.optimal_length, alive
 
             self._episodes = jax.jit(jax.vmap(episode))

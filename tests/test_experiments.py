@@ -379,7 +379,7 @@ TRAIN_ERRORS = [
     (["--method", "a3c+maml+org"], ["needs setup 'org'"]),
     (["--method", "a3c+org+foresit"], ["needs setup 'org'"]),
     (["--setup", "thor"], ["setup must be one of"]),
-    (["--preset", "huge"], ["unknown preset 'huge'", "tiny, quick, paper"]),
+    (["--preset", "huge"], ["unknown preset 'huge'", "tiny, quick, house, paper"]),
     (["--num-lanes", "0"], ["num_lanes must be >= 1"]),
     (["--num-updates", "0"], ["num_updates must be >= 1"]),
     (["--learning-rate", "-0.001"], ["learning_rate must be > 0"]),
@@ -768,6 +768,8 @@ BENCH_ARGS = {  # commands whose flags are parsed here and which run in their ow
     "experiments.bench_learning": lambda: importlib.import_module("experiments.bench_learning").BenchLearning,
     "experiments.cvae_compare": lambda: importlib.import_module("experiments.cvae_compare").Args,
     "experiments.paper": lambda: importlib.import_module("experiments.paper").Args,  # tests/test_paper.py runs it
+    "experiments.demo": lambda: importlib.import_module("experiments.demo").DemoConfig,
+    "experiments.bench_env": lambda: importlib.import_module("experiments.bench_env").BenchConfig,
 }
 
 

@@ -197,10 +197,10 @@ def patch_for_experiments(mp) -> None:
     mp.setattr(train, "make_trainer", _make_trainer_cached)
     evaluators = {}  # dropped with the patch (and its compiled rollouts with it)
 
-    def cached_evaluator(setup: str = "savn"):
-        if setup not in evaluators:
-            evaluators[setup] = _REAL_EVALUATOR(setup)
-        return evaluators[setup]
+    def cached_evaluator(setup: str = "savn", layout: str = "room"):
+        if (setup, layout) not in evaluators:
+            evaluators[(setup, layout)] = _REAL_EVALUATOR(setup, layout)
+        return evaluators[(setup, layout)]
 
     mp.setattr(evaluate, "Evaluator", cached_evaluator)
     mp.setattr(jax, "jit", _fast_jit(jax.jit))
