@@ -253,13 +253,20 @@ class GridNav:
             heading=heading.astype(jnp.int32),
             horizon=jnp.zeros((), jnp.int32),
             scene=scene.astype(jnp.int32),
-            room_type=bank.room_types[scene, bank.target_room[scene, slot]],
+            room_type=self._room_type(bank, scene, slot),
             target=bank.targets[scene, slot],
             target_slot=slot.astype(jnp.int32),
             time=jnp.zeros((), jnp.int32),
             optimal_length=bank.distance[scene, slot, start * C.NUM_HORIZONS].astype(jnp.int32),
         )
         return state
+
+    def _room_type(self, bank: SceneBank, scene, slot) -> jax.Array:
+        """The type of the room holding the target: a single room's own type (one gather, the
+        rooms' program as before houses existed), or in a house the target's room's."""
+        if self.layout == "house":
+            return bank.room_types[scene, bank.target_room[scene, slot]]
+        return bank.room_type[scene]
 
     def step_env(self, key: jax.Array, state: EnvState, action, params: EnvParams):
         new_state, reward, terminated, truncated, info = self._step_state(key, state, action, params)
