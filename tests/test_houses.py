@@ -333,3 +333,15 @@ def test_reports_add_the_house_columns():
     lines = sweep.table_markdown(sweep.table({"a3c": [result] * 2}), "T").splitlines()
     assert lines[2] == "| Method | SPL | SR | SPL>=5 | SR>=5 | SPL>=10 | SR>=10 | SPL>=20 | SR>=20 |"
     assert lines[4].startswith("| a3c | 1.00 ± 0.00") and "| n/a | 8.00 ± 0.00" in lines[4]
+
+
+def test_the_demo_checks_the_houses_own_calibration():
+    from experiments import demo
+
+    def checks(random_sr, long10, oracle_spl):
+        results = {"random": {"overall": {"SR": random_sr}},
+                   "oracle": {"overall": {"SR": 100.0, "SPL": oracle_spl, "L^g>=10 %": long10}}}  # fmt: skip
+        return [ok for _, ok in demo.calibration(results, "house")]
+
+    assert checks(2.9, 70.0, 100.0) == [True, True, True]
+    assert checks(3.1, 69.9, 99.9) == [False, False, False]
