@@ -43,7 +43,8 @@ def summarize(success, spl_terms, optimal_length, long_path_mins=(LONG_PATH_MIN,
     def pct(x, mask):
         return float(100.0 * x[mask].mean()) if mask.any() else float("nan")
 
-    out = {"SR": pct(success, np.ones(success.shape, bool)), "SPL": pct(spl_terms, np.ones(success.shape, bool))}
+    every = np.ones(success.shape, bool)
+    out = {"SR": pct(success, every), "SPL": pct(spl_terms, every)}
     for m in long_path_mins:
         out[f"SR>={m}"], out[f"SPL>={m}"] = pct(success, optimal >= m), pct(spl_terms, optimal >= m)
     out["episodes"] = int(success.shape[0])
