@@ -192,6 +192,7 @@ class Agent:
             value_hidden=config.value_hidden,
             imagination_input=config.imagination_input,
             zero_value_init=config.attention_value_init == "zeros",
+            key_gradient=config.attention_key_gradient == "full",
         )
         self.imagination_net = ImaginationNet(config.imagination_layer_sizes)
         # Where i_tau enters (Config.imagination_input), as the network decides it.

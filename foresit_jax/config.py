@@ -18,6 +18,7 @@ IMAGINATION_OPTIMIZERS: tuple[str, ...] = ("sgd", "adam")
 IMAGINATION_INPUTS: tuple[str, ...] = ("head", "encoder", "mlp")
 EVALUATION_NOISES: tuple[str, ...] = ("training_end", "off")
 ATTENTION_VALUE_INITS: tuple[str, ...] = ("lecun", "zeros")
+ATTENTION_KEY_GRADIENTS: tuple[str, ...] = ("full", "stopped")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -87,6 +88,14 @@ class Config:
     'zeros' (s*_t = s_t at initialisation: the critic starts as the plain one and learns
     what to add). Measured (docs/mechanism.md, Study 3): 'zeros' does not recover the
     attention critic's cost against the plain one."""
+    attention_key_gradient: str = "full"
+    """Which of the attention critic's inputs carry the value loss's gradient into the
+    encoder (the paper trains omega and theta on one loss, Eq. 9, and says no more): 'full'
+    (every state it reads: the query s_t, and the keys and values k(s_j), v(s_j) of the
+    episode's earlier states), or 'stopped' (a deviation: the keys and values read the
+    states without gradient, so the critic's gradient reaches the encoder through s_t alone,
+    its query and residual, as the plain critic's does through its MLP). A candidate cause
+    of the attention critic's cost (docs/mechanism.md)."""
     imagination_layer_sizes: tuple[int, ...] = (512, 256, 64, 256, 512, 512)
     """Widths of f_w's 6 tanh layers (bottleneck 64); the last must equal hidden_size."""
 
@@ -167,7 +176,8 @@ class Config:
                 needs = ", ".join(f"{k}={v!r}" for k, v in pieces.required_config.items())
                 raise ValueError(f"method {self.method!r} supports {name} {supported}, not {value!r} (it needs {needs}).")
         for name, valid in (("imagination_input", IMAGINATION_INPUTS), ("evaluation_noise", EVALUATION_NOISES),
-                            ("attention_value_init", ATTENTION_VALUE_INITS)):  # fmt: skip
+                            ("attention_value_init", ATTENTION_VALUE_INITS),
+                            ("attention_key_gradient", ATTENTION_KEY_GRADIENTS)):  # fmt: skip
             if getattr(self, name) not in valid:
                 raise ValueError(f"{name} must be one of {valid}, got {getattr(self, name)!r}.")
         if self.imagination_optimizer not in IMAGINATION_OPTIMIZERS:

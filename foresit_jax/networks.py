@@ -205,7 +205,9 @@ class Critic(nn.Module):
     q, k: linear `attention_size`; v: linear to the state size (for the residual), its
     kernel lecun-normal like every other layer's, or zeros (`zero_value_init`,
     `Config.attention_value_init`): then s*_t = s_t at initialisation and the critic starts
-    as the plain one.
+    as the plain one. `key_gradient=False` (`Config.attention_key_gradient='stopped'`):
+    k and v read the states without gradient, so the value loss reaches the states through
+    the query and the residual alone (the memory of earlier windows never carries any).
 
     Call with `states [..., T, H]` whose index 0 is the episode's first state (t in
     sqrt(t+1) is the position), and `valid [..., T]` (1 on the episode's steps): the keys
@@ -219,6 +221,7 @@ class Critic(nn.Module):
     attention_size: int = 512
     value_hidden: int = 256
     zero_value_init: bool = False
+    key_gradient: bool = True
 
     @nn.compact
     def __call__(
@@ -237,6 +240,8 @@ class Critic(nn.Module):
         if positions is None:
             positions = jnp.arange(num_steps)
         query = Dense(self.attention_size, name="query")(states)  # [..., T, Q]
+        if not self.key_gradient:
+            keys = jax.lax.stop_gradient(keys)
         key = Dense(self.attention_size, name="key")(keys)  # [..., K, Q]
         init = nn.initializers.zeros_init() if self.zero_value_init else nn.initializers.lecun_normal()
         value = Dense(state_size, kernel_init=init, name="value")(keys)  # [..., K, H]
@@ -293,6 +298,7 @@ class ActorCritic(nn.Module):
     value_hidden: int = 256
     imagination_input: str = "head"
     zero_value_init: bool = False
+    key_gradient: bool = True
     object_graph: Optional[nn.Module] = None
     learned_loss: Optional[nn.Module] = None
 
@@ -306,7 +312,8 @@ class ActorCritic(nn.Module):
         self.encoder = Encoder(hidden_size=self.hidden_size, imagination_features=features, object_graph=self.object_graph)
         policy_hidden = self.value_hidden if self.imagination_input == "mlp" else 0
         self.policy = PolicyHead(self.num_actions, self.use_imagination and not self.imagination_in_encoder, policy_hidden)
-        self.value_critic = Critic(self.attention_critic, self.attention_size, self.value_hidden, self.zero_value_init)
+        self.value_critic = Critic(self.attention_critic, self.attention_size, self.value_hidden, self.zero_value_init,
+                                   self.key_gradient)  # fmt: skip
 
     def encode(
         self, carry: LSTMCarry, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array,

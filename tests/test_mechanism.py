@@ -268,6 +268,34 @@ def test_a_zero_initialised_attention_value_starts_as_the_plain_critic():
         Config(attention_value_init="ones")
 
 
+def test_stopped_key_gradient_leaves_the_values_and_cuts_the_earlier_states_gradient():
+    """Config.attention_key_gradient='stopped': the same values; d V(s*_t) / d s_j is zero
+    for every earlier state j < t (s_j enters V(s*_t) through k and v alone), where with
+    'full' it is not; d V(s*_t) / d s_t keeps the query's and the residual's part. The
+    reference: the Jacobian of the full critic with k and v fed a constant copy of the
+    states (so that only the query and the residual see the argument)."""
+    from foresit_jax import networks
+
+    rng = np.random.default_rng(0)
+    states = np.tanh(rng.normal(size=(5, 16))).astype(np.float32)
+    valid = np.ones(5, bool)
+    full, stopped = (networks.Critic(attention=True, attention_size=8, value_hidden=12, key_gradient=g) for g in (True, False))
+    params = full.init(jax.random.PRNGKey(1), states, valid)
+    mask = networks.causal_episode_mask(valid)
+    value = {name: (lambda x, c=c: c.apply(params, x, valid).value) for name, c in (("full", full), ("stopped", stopped))}
+    np.testing.assert_array_equal(value["full"](states), value["stopped"](states))
+    jac = {name: np.asarray(jax.jacrev(f)(states)) for name, f in value.items()}  # [T, T, H]: d V_t / d s_j
+    earlier = np.tril(np.ones((5, 5), bool), -1)
+    assert np.all(jac["stopped"][earlier] == 0)
+    assert np.all(np.abs(jac["full"][earlier]).max(-1) > 0)
+    reference = jax.jacrev(lambda x: full.apply(params, x, valid, keys=jnp.asarray(states), key_mask=mask).value)(states)
+    np.testing.assert_allclose(jac["stopped"], reference, atol=1e-6)
+    config = H.tiny_config("a3c+critic", attention_key_gradient="stopped")
+    assert Agent(config).model.key_gradient is False and Agent(H.tiny_config("a3c+critic")).model.key_gradient is True
+    with pytest.raises(ValueError, match="attention_key_gradient"):
+        Config(attention_key_gradient="none")
+
+
 def test_explained_variance_and_advantage_spread_against_numpy():
     from foresit_jax import losses
 
