@@ -16,6 +16,8 @@ seed's model selected on validation) over the methods of the paper's tables, the
   paired difference per bucket, for each +ForeSIT pair;
 - the paper's claims, each with a verdict ("holds", "does not hold", "cannot tell at this
   budget": a paired t interval over seeds, `experiments.stats`) and its numbers;
+- ORG's rows (greedy at evaluation, as ORG's code) with sampled actions too, on the same test
+  episodes, paired: greedy play can loop where sampling escapes;
 - the imagination probes (`experiments.probe`) of A3C+ForeSIT and A3C+ORG+ForeSIT, every seed:
   test SR with i_tau trained, noise-free, from an untrained f_w and shuffled; f_w's fit
   against the target category's mean; where the sub-goal falls in its episode;
@@ -494,6 +496,75 @@ def tsne_figure(args: Args, config, trainer, state, items, path: Path) -> int:
     return n
 
 
+# ---------------------------------------------------------------------- sampled actions
+def sampled_results(folder: Path, methods) -> dict[str, list[dict]]:
+    """{method: [per seed: {"seed", "overall"}]}: each finished seed's selected model of a
+    sweep's `methods` on its own test episodes (`selection.test_key`, the sweep's test
+    episodes per room type) with actions sampled from the policy. For a method evaluated
+    greedily (ORG's protocol) these are the episodes its report row played, with the other
+    action rule; for one evaluated sampled, its row's own numbers again."""
+    from experiments import probe
+    from foresit_jax.evaluate import Evaluator
+
+    args = runs.args_from_saved(sweep.Args, runs.read_json(folder / "sweep.json"), out=folder)
+    out, evaluators = {}, {}
+    for method, models in probe.models_of_sweep(folder, tuple(methods)).items():
+        episodes = sweep.method_schedule(method, args)[1].test_episodes_per_room
+        out[method] = []
+        for model in models:
+            where = (model.config.setup, model.config.layout)
+            evaluator = evaluators.setdefault(where, Evaluator(*where))
+            result = evaluator.evaluate(model.selected, model.config, "test", selection.test_key(model.seed), episodes,
+                                        greedy=False)  # fmt: skip
+            out[method].append({"seed": model.seed, "overall": runs.jsonable(result["overall"])})
+    return out
+
+
+def sampled_markdown(results: dict, sampled: dict[str, list[dict]], base: str = "a3c+org") -> tuple[str, list[dict]]:
+    """The greedily evaluated rows beside their sampled re-evaluation (`sampled_results`),
+    paired over seeds, and each against `base` with sampled actions; (Markdown, CSV rows)."""
+    cells, rows = [], []
+    for method, per_seed in sampled.items():
+        greedy = {r["seed"]: r["selected"]["overall"] for r in results[method]}
+        cell = [method]
+        for col in ("SR", "SPL"):
+            g, x = [greedy[r["seed"]][col] for r in per_seed], [r["overall"][col] for r in per_seed]
+            pair = stats.paired(g, x)
+            cell += [_cell(g), _cell(x), _fmt_pair(pair)]
+            rows.append({"method": method, "metric": col, "greedy mean": float(np.mean(g)), "sampled mean": float(np.mean(x)),
+                         "sampled - greedy": pair["diff"], "ci_low": pair["ci_low"], "ci_high": pair["ci_high"]})  # fmt: skip
+        cells.append(cell)
+    md = markdown_table(cells, ["Method", "SR greedy", "SR sampled", "sampled - greedy [95% CI], p",
+                                "SPL greedy", "SPL sampled", "sampled - greedy"]) + "\n"  # fmt: skip
+    if base in sampled and len(sampled) > 1:
+        against = []
+        for method in (m for m in sampled if m != base):
+            pairs = [stats.paired([r["overall"][c] for r in sampled[base]], [r["overall"][c] for r in sampled[method]])
+                     for c in ("SR", "SPL")]  # fmt: skip
+            against.append([method, *(f"{_fmt_pair(p)} ({stats.verdict(p)})" for p in pairs)])
+        md += (f"\nWith sampled actions, each against {base} (paired over seeds, the same test episodes):\n\n"
+               + markdown_table(against, ["Method", "SR difference [95% CI], p", "SPL difference"]) + "\n")  # fmt: skip
+    return md, rows
+
+
+def sampled_section(args: Args, results: dict) -> str:
+    """ORG's rows (evaluated greedily, as ORG's code does) evaluated with sampled actions
+    too, on the same test episodes (also written to sampled.csv)."""
+    greedy = [m for m in results if sweep.method_schedule(m, sweep_args(args, SETUP_OF[m], (m,)))[0].pieces.greedy_evaluation]
+    title = "## ORG's rows with sampled actions\n\n"
+    if not greedy:
+        return title + "Not run: no method evaluated greedily (ORG's rows) was trained.\n"
+    print(f"sampled actions: {', '.join(greedy)}", flush=True)
+    sampled = {}
+    for setup in dict.fromkeys(SETUP_OF[m] for m in greedy):
+        sampled.update(sampled_results(args.out / setup, [m for m in greedy if SETUP_OF[m] == setup]))
+    md, rows = sampled_markdown(results, sampled)
+    write_csv(args.out / "sampled.csv", rows)
+    return (title + "ORG's code acts greedily at evaluation (the argmax of the policy), SAVN's samples; greedy play can "
+            "loop where sampling escapes. Each seed's selected model on the same test episodes with each rule; mean "
+            "± sample std over seeds, the difference paired over seeds.\n\n" + md)  # fmt: skip
+
+
 # ---------------------------------------------------------------------- report.md
 def probe_section(args: Args, results: dict) -> str:
     """The imagination probes (`experiments.probe`) of the +ForeSIT methods of `PROBED`
@@ -536,6 +607,7 @@ def write_report(args: Args, results: dict) -> dict:
     lines = claims(results)
     write_csv(out / "claims.csv", [{"claim": c, "verdict": v, "numbers": n} for c, v, n in lines])
     md.append("## The paper's claims\n\n" + claims_markdown(lines))
+    md.append(sampled_section(args, results))
     md.append(probe_section(args, results))
 
     foresit = next((m for m in ("a3c+foresit", "a3c+org+foresit", "a3c+maml+foresit") if m in results), None)

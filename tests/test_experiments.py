@@ -465,6 +465,21 @@ def test_a_sweep_arm_trains_its_own_config_and_is_probed_from_its_checkpoints(tm
     assert config.imagination_input == "encoder" and "imagination_embed" in states.params["params"]["encoder"]
 
 
+def test_sampled_results_of_a_sweep_replay_its_sampled_test_evaluation(tiny_sweep):
+    """paper.sampled_results (the report's ORG rows with sampled actions): every finished
+    seed's selected model on its own test episodes, actions sampled. a3c is evaluated
+    sampled by its protocol, so these are the sweep's own test results again: the same
+    models, episodes and keys."""
+    from experiments import paper
+
+    sampled = paper.sampled_results(tiny_sweep, ["a3c"])
+    per_seed = json.loads((tiny_sweep / "methods" / "a3c" / "results.json").read_text())["results"]
+    assert [r["seed"] for r in sampled["a3c"]] == [r["seed"] for r in per_seed] == [SEED, SEED + 1]
+    for mine, theirs in zip(sampled["a3c"], per_seed):
+        for col in ("SR", "SPL"):
+            assert mine["overall"][col] == pytest.approx(theirs["selected"]["overall"][col], abs=1e-4), col
+
+
 def sweep_args(out: Path) -> sweep.Args:
     return sweep.Args(methods=("a3c", "a3c+foresit"), seeds=2, preset="tiny", seed=SEED, out=out, progress=False,
                       **SWEEP_EPISODES)  # fmt: skip

@@ -19,8 +19,8 @@ from test_experiments import cli_error
 RUN = ("a3c", "a3c+foresit")
 EXCLUDE = tuple(m for m in paper.SETUP_OF if m not in RUN)
 SECTIONS = ("## Platforms", "## Table 1", "### savn setup", "### org setup", "## Table 2", "## Table 3", "## Model selection",
-            "## SR and SPL by optimal path length", "## The paper's claims", "## Imagination probes", "## The C-VAE comparison",
-            "## Figure 4", "## Figure 3", "## Learning curves")  # fmt: skip
+            "## SR and SPL by optimal path length", "## The paper's claims", "## ORG's rows with sampled actions",
+            "## Imagination probes", "## The C-VAE comparison", "## Figure 4", "## Figure 3", "## Learning curves")  # fmt: skip
 
 
 # Cheap in-process CLI calls for every test of this module (tests/conftest.py).
@@ -85,6 +85,24 @@ def result(sr: float, sr5: float) -> dict:
     buckets = {bucket_label(b): {"SR": sr, "SPL": sr / 2, "episodes": 4} for b in LENGTH_BUCKETS}
     test = {"overall": {"SR": sr, "SPL": sr / 2, "SR>=5": sr5, "SPL>=5": sr5 / 2}, "by_length": buckets}
     return {"selected": test, "last": {**test, "overall": {**test["overall"], "SR": sr - 1.0}}}
+
+
+def test_sampled_section_pairs_greedy_with_sampled_and_each_method_with_the_base():
+    """The ORG rows' sampled table on hand-made numbers: sampled - greedy per method and
+    each method against the base with sampled actions, as mean paired differences."""
+    greedy = {"a3c+org": (60.0, 70.0, 65.0), "a3c+org+critic": (50.0, 52.0, 57.0)}
+    sampled = {"a3c+org": (64.0, 73.0, 70.0), "a3c+org+critic": (62.0, 66.0, 70.0)}
+    results = {m: [{"seed": s, "selected": {"overall": {"SR": v, "SPL": v / 2}}} for s, v in enumerate(vs)]
+               for m, vs in greedy.items()}  # fmt: skip
+    runs_ = {m: [{"seed": s, "overall": {"SR": v, "SPL": v / 2}} for s, v in enumerate(vs)] for m, vs in sampled.items()}
+    md, rows = paper.sampled_markdown(results, runs_)
+    by = {(r["method"], r["metric"]): r for r in rows}
+    assert by[("a3c+org", "SR")]["sampled - greedy"] == pytest.approx(4.0)  # (4 + 3 + 5) / 3
+    assert by[("a3c+org+critic", "SR")]["sampled - greedy"] == pytest.approx(13.0)  # (12 + 14 + 13) / 3
+    assert by[("a3c+org+critic", "SPL")]["greedy mean"] == pytest.approx(26.5)
+    critic_line = next(line for line in md.splitlines()[-2:] if line.startswith("| a3c+org+critic"))
+    assert "-3.0 [" in critic_line  # (-2 - 7 + 0) / 3 against a3c+org, sampled
+    assert "+13.0 [" in md and "+4.0 [" in md
 
 
 def test_claims_hold_fail_or_cannot_tell_by_the_paired_interval():
