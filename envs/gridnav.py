@@ -56,6 +56,10 @@ class EnvParams:
     max_steps: jax.Array  # int32 [4] time limit by room type (kitchen, living, bed, bath)
     success_reward: float = 5.0
     step_penalty: float = -0.01
+    # Reward per action of progress towards success, w (d_t - d_{t+1}) with d the oracle's
+    # actions to success (a deviation from the paper's reward: AllenAct's ObjectNav
+    # `shaping_weight`). Static: 0, the paper's reward, compiles without the two lookups.
+    progress_reward: float = struct.field(pytree_node=False, default=0.0)
 
 
 def time_limits(training: bool, layout: str = "room") -> jax.Array:
@@ -93,7 +97,11 @@ class GridNav:
       check inside a jitted step is free); construct with ``check_actions=True`` to have
       such an action raise instead (a host callback per step: for debugging, not training).
     - Reward: ``params.success_reward`` (+5) on a successful Done (the target visible within
-      the success radius), ``params.step_penalty`` (-0.01) on every other step.
+      the success radius), ``params.step_penalty`` (-0.01) on every other step; with
+      ``params.progress_reward`` w > 0 (default 0, the paper's reward), every step adds
+      w (d_t - d_{t+1}), d the oracle's shortest number of actions to success before and
+      after it (AllenAct's ObjectNav reward shaping, by the exact oracle; over an episode it
+      sums to w (L^g - d_end), so it cannot be farmed).
     - Termination: ``terminated`` when the agent takes Done (successful or not);
       ``truncated`` when the time limit of the room type (``params.max_steps``) is reached
       without Done.  ``step`` resets automatically when either is set: the returned
@@ -282,6 +290,9 @@ class GridNav:
         time = state.time + 1
         new_state = state.replace(agent_pos=pos, heading=heading, horizon=horizon, time=time)
         reward = jnp.where(success, params.success_reward, params.step_penalty).astype(jnp.float32)
+        if params.progress_reward:  # static
+            gained = self.shortest_path_length(state, params) - self.shortest_path_length(new_state, params)
+            reward = reward + jnp.float32(params.progress_reward) * gained.astype(jnp.float32)
         terminated = is_done
         truncated = ~terminated & (time >= params.max_steps[state.room_type])
         info = {
@@ -355,6 +366,13 @@ class GridNav:
     def target_in_view(self, state: EnvState, params: EnvParams) -> jax.Array:
         """Whether Done would succeed now: the target is visible within the success radius."""
         return self.shortest_path_length(state, params) == 1
+
+    def in_target_room(self, state: EnvState, params: EnvParams) -> jax.Array:
+        """Whether the agent stands in the room that holds the target (always, in a single
+        room; in a house, on the target room's cells, its doorways excluded)."""
+        bank = params.bank
+        room = bank.cell_room[state.scene, state.agent_pos[0], state.agent_pos[1]]
+        return room.astype(jnp.int32) == bank.target_room[state.scene, state.target_slot]
 
     # ----------------------------------------------------------------- oracle
     def shortest_path_length(self, state: EnvState, params: EnvParams) -> jax.Array:

@@ -38,6 +38,13 @@ class Config:
     """Scenes: 'room' (single AI2-THOR-like rooms, as the paper's) or 'house' (houses of 2-4
     rooms joined by doorways, `envs.houses`: paths about 3x longer, the target in another
     room than the start in 80% of the episodes, time limits 60 / 300)."""
+    progress_reward: float = 0.0
+    """Reward shaping (a deviation from the paper's reward, which is +5 on success and
+    -0.01 a step): each step also earns w (d_t - d_{t+1}), d the oracle's actions to
+    success (`envs.gridnav.EnvParams.progress_reward`; AllenAct's ObjectNav reward with its
+    `shaping_weight`). 0 is the paper's reward. In houses the paper's reward makes an early
+    Done the best-paying action while success is rare, and a3c learns to give up within
+    two steps in most episodes (docs/houses.md); the house preset measures w > 0."""
 
     # Training loop (synchronous batched A3C).
     rollout: str = "packed"
@@ -208,7 +215,7 @@ class Config:
             raise ValueError(f"gamma must be in (0, 1], got {self.gamma!r}.")
         if not 0.0 <= self.gae_lambda <= 1.0:
             raise ValueError(f"gae_lambda must be in [0, 1], got {self.gae_lambda!r}.")
-        for name in ("entropy_coef", "value_coef", "sigma2_max"):
+        for name in ("entropy_coef", "value_coef", "sigma2_max", "progress_reward"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}.")
         sizes = self.imagination_layer_sizes

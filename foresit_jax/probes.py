@@ -14,11 +14,17 @@ Three questions, each answerable from a finished run without training:
 * Where does the sub-goal fall in its episode? `subgoal_position_histogram`: t*/T over
   the successful episodes (T the Done step), and the share with t* = T (the Done step's
   own state).
+
+And one of any trained agent (the CLI is `experiments.failures`): how do its episodes end?
+`replay_oracle` replays episodes through the environment's oracle, `episode_endings`
+sorts them into successes, Dones that failed (when, how far from success, in which room)
+and time-outs, with the policy's probability of Done where it would succeed and where not.
 """
 
 from __future__ import annotations
 
 import chex
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -98,3 +104,78 @@ def subgoal_position_histogram(subgoal_step: np.ndarray, done_step: np.ndarray, 
     ratio = np.where(total > 0, t / np.maximum(total, 1), 1.0)
     counts, edges = np.histogram(ratio, bins=bins, range=(0.0, 1.0))
     return {"episodes": n, "edges": edges.tolist(), "shares": (counts / n).tolist(), "at_done": float(np.mean(t == total))}
+
+
+def replay_oracle(env, env_params, reset_keys: chex.Array, actions: chex.Array) -> tuple[chex.Array, chex.Array]:
+    """Episodes replayed from their reset keys `[B, ...]` and actions `[B, T]` (the dynamics
+    are deterministic): `d [B, T]`, the oracle's shortest number of actions to success
+    (Done counted) before each action, and `in_room [B, T]`, whether the agent then stands
+    in the target's room. Steps after an episode's end are the caller's to drop. Jittable."""
+
+    def one(reset_key, acts):
+        _, state = env.reset(reset_key, env_params)
+
+        def step(state, action):
+            facts = (env.shortest_path_length(state, env_params), env.in_target_room(state, env_params))
+            _, state, *_ = env.step_env(reset_key, state, action, env_params)
+            return state, facts
+
+        return jax.lax.scan(step, state, acts)[1]
+
+    return jax.vmap(one)(reset_keys, actions)
+
+
+EARLY_STEPS = 5  # `episode_endings`: a Done within this many actions of the start is "early"
+
+
+def episode_endings(valid, success, actions, p_done, d, in_room, done_action: int = 5) -> dict:
+    """How episodes end, from `[B, T]` arrays (batch-major): `valid` (the step belongs to the
+    episode), `success`, `actions`, `p_done` (the policy's probability of Done at the step),
+    and `replay_oracle`'s `d` and `in_room`. Returns the shares of successes, failed Dones
+    and time-outs (every episode is one of them); for the failed Dones, the actions taken
+    (median), the share said within `EARLY_STEPS` actions, the oracle's actions to success
+    at the Done (median) and the share said in the target's room; the mean probability of
+    Done at the steps where Done would succeed (d = 1) and where it would not, and at the
+    first `EARLY_STEPS` steps where it would not; and the shares again for the episodes
+    that start in the target's room and for those that start away."""
+    valid, success, in_room = (np.asarray(x, bool) for x in (valid, success, in_room))
+    actions, p_done, d = np.asarray(actions), np.asarray(p_done, np.float64), np.asarray(d)
+    steps = valid.sum(1)
+    if np.any(steps < 1):
+        raise ValueError("episode_endings: every episode has at least one step")
+    rows = np.arange(len(steps))
+    last = steps - 1
+    won = (success & valid).any(1)
+    failed_done = ~won & (actions[rows, last] == done_action)
+    kind = np.where(won, "success", np.where(failed_done, "failed Done", "time-out"))
+    if np.any(d[rows, last][failed_done] <= 1):
+        raise ValueError("episode_endings: a failed Done where the oracle says Done would succeed (d = 1)")
+
+    def shares(mask):
+        n = int(mask.sum())
+        return {"episodes": n, **{k: float(np.mean(kind[mask] == k)) if n else float("nan")
+                                  for k in ("success", "failed Done", "time-out")}}  # fmt: skip
+
+    def mean(x):
+        return float(np.mean(x)) if len(x) else float("nan")
+
+    early = np.arange(valid.shape[1])[None, :] < EARLY_STEPS
+    at = failed_done
+    out = {
+        "all": shares(np.ones(len(steps), bool)),
+        "failed Done": {
+            "episodes": int(at.sum()),
+            "median actions": float(np.median(steps[at])) if at.any() else float("nan"),
+            "early share": mean(steps[at] <= EARLY_STEPS),
+            "median d at Done": float(np.median(d[rows, last][at])) if at.any() else float("nan"),
+            "in target room share": mean(in_room[rows, last][at]),
+        },
+        "p_done": {
+            "would succeed": mean(p_done[valid & (d == 1)]),
+            "would fail": mean(p_done[valid & (d > 1)]),
+            "would fail, early": mean(p_done[valid & (d > 1) & early]),
+        },
+        "start in target room": shares(in_room[:, 0]),
+        "start away": shares(~in_room[:, 0]),
+    }
+    return out

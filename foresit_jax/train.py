@@ -71,8 +71,9 @@ def make_env(config: Config, split: str = "train", room_types=None, training: bo
     import envs
 
     rooms = room_types if room_types is not None else (config.room_types or None)
-    return envs.make("GridNav-v0", setup=config.setup, split=split, room_types=rooms, training=training,
-                     layout=config.layout)
+    env, params = envs.make("GridNav-v0", setup=config.setup, split=split, room_types=rooms, training=training,
+                            layout=config.layout)  # fmt: skip
+    return env, params.replace(progress_reward=config.progress_reward)
 
 
 class Trainer:

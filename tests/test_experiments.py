@@ -449,6 +449,23 @@ def test_probe_of_a_run_reproduces_its_test_sr_and_reports_every_probe(finished_
     assert "not a run folder" in cli_error(probe.cli, ["--run", tmp_path], capsys)
 
 
+def test_failures_of_a_run_replay_its_test_episodes(finished_run, tmp_path, capsys):
+    """experiments.failures: the selected model plays the run's own test episodes (its SR
+    again), every episode ends one way, and in single rooms every start is in the
+    target's room; nothing is replaced without --overwrite."""
+    from experiments import failures
+
+    report = failures.main(failures.Args(run=finished_run, out=tmp_path))
+    tested = json.loads((finished_run / "results_test.json").read_text())["results"]["overall"]["SR"]
+    every = report["all"]
+    assert 100 * every["success"] == pytest.approx(tested)
+    assert every["success"] + every["failed Done"] + every["time-out"] == pytest.approx(1.0)
+    assert report["start away"]["episodes"] == 0 and report["start in target room"]["episodes"] == every["episodes"]
+    assert (tmp_path / "failures.md").read_text().startswith("# How the episodes end")
+    assert json.loads((tmp_path / "failures.json").read_text())["all"] == every
+    assert "exists; pass --overwrite" in cli_error(failures.cli, ["--run", finished_run, "--out", tmp_path], capsys)
+
+
 def test_a_sweep_arm_trains_its_own_config_and_is_probed_from_its_checkpoints(tmp_path):
     """`sweep --methods 'a3c+foresit@imagination_input=encoder'`: the arm's seeds train with
     i_tau in the encoder (its parameters have the embedding), its folder's checkpoints
@@ -775,7 +792,8 @@ def test_evaluate_cli_reproduces_the_test_results_of_training(finished_run, tmp_
 README = (REPO / "README.md").read_text()
 BLOCKS = re.findall(r"```(\w+)\n(.*?)```", README, flags=re.S)
 CLI_MODULES = {"experiments.train": train_cli, "experiments.evaluate": evaluate_cli, "experiments.sweep": sweep,
-               "experiments.probe": importlib.import_module("experiments.probe")}  # fmt: skip
+               "experiments.probe": importlib.import_module("experiments.probe"),
+               "experiments.failures": importlib.import_module("experiments.failures")}  # fmt: skip
 # Benchmarks the README documents: their flags must parse (they run in their own tests or
 # take minutes by design).
 BENCH_ARGS = {  # commands whose flags are parsed here and which run in their own tests
@@ -915,7 +933,8 @@ def test_console_scripts_are_the_module_programs(monkeypatch, capsys):
     import tomllib
 
     scripts = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())["project"]["scripts"]
-    assert set(scripts) == {"foresit-train", "foresit-evaluate", "foresit-sweep", "foresit-paper", "foresit-probe"}
+    assert set(scripts) == {"foresit-train", "foresit-evaluate", "foresit-sweep", "foresit-paper", "foresit-probe",
+                            "foresit-failures"}
     for name, target in scripts.items():
         module, function = target.split(":")
         assert module == f"experiments.{name.removeprefix('foresit-')}"

@@ -200,6 +200,71 @@ def test_bank_distance_equals_reference_bfs(house_kit, scene):
         assert expected.max() < UNREACHABLE
 
 
+def test_progress_reward_adds_the_reference_distance_gained(house_kit):
+    """EnvParams.progress_reward w: each step's reward is the step penalty (the success
+    reward on a successful Done) plus w (d_t - d_{t+1}), d the reference BFS's actions to
+    success of the pose before and after the step (its dynamics the reference's too); with
+    w = 0, the paper's reward, the step penalty alone."""
+    from env_helpers import index_tree, make_states
+    from env_reference import reference_transition
+
+    kit, scene, slot, w = house_kit, 0, 1, 0.25
+    oracle, _ = reference_oracle(kit, scene)
+    dist, goal = oracle[slot]
+    cell_type = kit.bank["cell_type"][scene]
+    rng = np.random.default_rng(3)
+    free = np.argwhere(cell_type == C.CELL_FLOOR)
+    pose = (*(int(v) for v in free[rng.integers(len(free))]), 0, 0)
+    state = index_tree(make_states(kit.bank, [scene], [slot], [pose[:2]], [0], [0]), 0)
+    step = jax.jit(kit.env.step_env)
+    shaped, plain = kit.params.replace(progress_reward=w), kit.params
+    key = jax.random.key(0)
+    gains = []
+    for action in [*rng.integers(0, 5, 80), C.DONE]:
+        _, new, reward, terminated, _, info = step(key, state, jnp.int32(action), shaped)
+        after = pose if action == C.DONE else reference_transition(cell_type, pose, int(action))
+        gains.append(dist[pose] - dist[after])
+        base = 5.0 if action == C.DONE and pose in goal else -0.01
+        assert float(reward) == pytest.approx(base + w * gains[-1], abs=1e-5), (pose, action)
+        assert float(step(key, state, jnp.int32(action), plain)[2]) == pytest.approx(base, abs=1e-7)
+        assert (*np.asarray(new.agent_pos).tolist(), int(new.heading), int(new.horizon)) == after
+        pose, state = after, new
+    assert bool(terminated) and any(g > 0 for g in gains) and any(g < 0 for g in gains)
+
+
+def test_replay_oracle_follows_the_reference_bfs_and_rooms(house_kit):
+    """probes.replay_oracle (experiments.failures): an episode replayed from its reset key
+    and actions gives, before each action, the reference BFS's actions to success and
+    whether the agent stands in the target's room (the layout's own room map)."""
+    from env_reference import reference_transition
+    from foresit_jax.probes import replay_oracle
+
+    kit, rng = house_kit, np.random.default_rng(5)
+    keys = jax.random.split(jax.random.key(11), 64)
+    _, states = kit.reset_batch(keys)
+    i = int(np.flatnonzero(np.asarray(states.scene) == 0)[0])  # an episode in the 2-room house 0
+    state = jax.tree.map(lambda x: np.asarray(x)[i], states)
+    dist, _ = reference_oracle(kit, 0)[0][int(state.target_slot)]
+    layout = H.generate_house(int(kit.bank["numbers"][0]), "savn")
+    target_room = layout.target_room[int(state.target)]
+    actions = rng.integers(0, 5, 40)
+    d, in_room = (np.asarray(x)[0] for x in replay_oracle(kit.env, kit.params, keys[i : i + 1], jnp.asarray(actions)[None]))
+    pose = (*np.asarray(state.agent_pos).tolist(), int(state.heading), int(state.horizon))
+    for t, action in enumerate(actions):
+        assert d[t] == dist[pose] and in_room[t] == (layout.cell_room[pose[:2]] == target_room), t
+        pose = reference_transition(kit.bank["cell_type"][0], pose, int(action))
+
+
+def test_config_progress_reward_reaches_the_training_env():
+    from foresit_jax.config import Config
+    from foresit_jax.train import make_env
+
+    assert make_env(Config(method="a3c", layout="house", progress_reward=0.1))[1].progress_reward == 0.1
+    assert make_env(Config(method="a3c"))[1].progress_reward == 0.0
+    with pytest.raises(ValueError, match="progress_reward"):
+        Config(progress_reward=-0.1)
+
+
 def test_oracle_policy_scores_sr_1_and_spl_1(house_kit):
     np.testing.assert_array_equal(house_kit.params.max_steps, [HOUSE_EVAL_TIME_LIMIT] * 4)
     success, length, optimal, alive = house_kit.first_episodes(jax.random.split(jax.random.key(5), 1024),
@@ -313,7 +378,8 @@ def test_the_house_preset_and_its_arms():
     from experiments.presets import preset, split_arm
 
     config, schedule = preset("house", "a3c")
-    assert config.layout == "house" and schedule.test_episodes_per_room == 250
+    assert config.layout == "house" and schedule.test_episodes_per_room == 250 and config.progress_reward == 0.1
+    assert preset("quick", "a3c")[0].progress_reward == 0.0  # the paper's reward in the single rooms
     assert preset("house", "a3c+maml")[0].num_steps == HOUSE_TRAIN_TIME_LIMIT  # whole house episodes
     assert preset("quick", "a3c+maml")[0].num_steps == 30
     with pytest.raises(ValueError, match="'layout' is not a Config field an arm can set"):

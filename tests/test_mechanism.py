@@ -296,6 +296,30 @@ def test_stopped_key_gradient_leaves_the_values_and_cuts_the_earlier_states_grad
         Config(attention_key_gradient="none")
 
 
+def test_episode_endings_on_hand_made_episodes():
+    """probes.episode_endings: a success at its third step, a Done that failed at its first
+    (4 actions from success, outside the target's room) and a time-out, counted by hand."""
+    from foresit_jax.probes import episode_endings
+
+    T, DONE = 4, 5
+    valid = np.array([[1, 1, 1, 0], [1, 0, 0, 0], [1, 1, 1, 1]], bool)
+    success = np.zeros((3, T), bool)
+    success[0, 2] = True
+    actions = np.array([[0, 1, DONE, 0], [DONE, 0, 0, 0], [0, 0, 1, 2]])
+    d = np.array([[3, 2, 1, 1], [4, 4, 4, 4], [9, 8, 7, 7]])
+    in_room = np.array([[1, 1, 1, 1], [0, 0, 0, 0], [0, 0, 1, 1]], bool)
+    p_done = np.array([[0.1, 0.2, 0.9, 0.5], [0.3, 0.5, 0.5, 0.5], [0.0, 0.1, 0.0, 0.2]])
+    out = episode_endings(valid, success, actions, p_done, d, in_room, DONE)
+    assert out["all"] == {"episodes": 3, "success": 1 / 3, "failed Done": 1 / 3, "time-out": 1 / 3}
+    assert out["failed Done"] == {"episodes": 1, "median actions": 1.0, "early share": 1.0, "median d at Done": 4.0,
+                                  "in target room share": 0.0}  # fmt: skip
+    assert out["p_done"]["would succeed"] == pytest.approx(0.9)
+    assert out["p_done"]["would fail"] == pytest.approx((0.1 + 0.2 + 0.3 + 0.0 + 0.1 + 0.0 + 0.2) / 7)
+    assert out["start in target room"]["success"] == 1.0 and out["start away"]["episodes"] == 2
+    with pytest.raises(ValueError, match="Done would succeed"):
+        episode_endings(valid, success, actions, p_done, np.ones_like(d), in_room, DONE)
+
+
 def test_explained_variance_and_advantage_spread_against_numpy():
     from foresit_jax import losses
 
