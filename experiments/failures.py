@@ -1,9 +1,11 @@
 """How a trained run's episodes end: `python -m experiments.failures --run runs/x`.
 
-The run's validation-selected model plays the episodes of its test evaluation (the same
-keys and actions rule, so its success share is the run's test SR) and every episode is
-replayed through the environment's oracle (`foresit_jax.probes.replay_oracle`). Printed
-and written to `failures.md` / `failures.json` in the run folder (or `--out`):
+`--run` is a run folder of `experiments.train` or a sweep folder of `experiments.sweep`
+(every finished method, or `--methods`; every seed). Each seed's validation-selected model
+plays the episodes of its test evaluation (the same keys and actions rule, so its success
+share is its test SR) and every episode is replayed through the environment's oracle
+(`foresit_jax.probes.replay_oracle`). Printed and written to `failures.md` /
+`failures.json` in the run folder (or `--out`):
 
 * how the episodes end: success, a Done that failed, or the time limit;
 * the failed Dones: after how many actions, how many said within the first 5, how far from
@@ -38,7 +40,10 @@ class Args:
     """How a trained run's episodes end, replayed through the environment's oracle."""
 
     run: Path
-    """A run folder of experiments.train (its validation-selected model is played)."""
+    """A run folder (experiments.train) or a sweep folder (experiments.sweep): each seed's
+    validation-selected model is played."""
+    methods: tuple[str, ...] = ()
+    """For a sweep: the methods (default: every finished one)."""
     split: str = "test"
     """Split: val or test (the episodes the run was validated or tested on)."""
     episodes_per_room: Optional[int] = None
@@ -49,29 +54,32 @@ class Args:
     """Replace an existing failures.md / failures.json."""
 
 
-def play(model, split: str, episodes: int) -> dict:
-    """The model's episodes of `split` as the run's evaluation plays them (its key, split
-    over the room types as `Evaluator` splits it, its actions rule): `[B, T]` arrays of
-    every room type's episodes, back to back, for `probes.episode_endings`."""
+def play(model, split: str, episodes: int, compiled: dict) -> dict:
+    """The model's episodes of `split` as its evaluation plays them (its key, split over the
+    room types as `Evaluator` splits it, its actions rule): `[B, T]` arrays of every room
+    type's episodes, back to back, for `probes.episode_endings`. `compiled` keeps the
+    Evaluator and the jitted functions of a config across calls (pass the same dict)."""
     from foresit_jax.agent import Agent, BoundEnv
     from foresit_jax.evaluate import Evaluator
     from foresit_jax.probes import replay_oracle
 
     config, params = model.config, model.selected
-    evaluator = Evaluator(config.setup, config.layout)
-    env = evaluator.env
+    if config not in compiled:
+        evaluator = compiled.get((config.setup, config.layout)) or Evaluator(config.setup, config.layout)
+        compiled[(config.setup, config.layout)] = evaluator
+        rollout = jax.jit(functools.partial(Agent(config).rollout, greedy=config.pieces.greedy_evaluation),
+                          static_argnames="num_steps")  # fmt: skip
+        compiled[config] = (evaluator, rollout, jax.jit(functools.partial(replay_oracle, evaluator.env)))
+    evaluator, rollout, replay = compiled[config]
     key = selection.test_key(model.seed) if split == "test" else selection.validation_key(model.seed)
     rooms = tuple(config.room_types or ROOM_TYPES)
-    rollout = jax.jit(functools.partial(Agent(config).rollout, greedy=config.pieces.greedy_evaluation),
-                      static_argnames="num_steps")  # fmt: skip
-    replay = jax.jit(functools.partial(replay_oracle, env))
     acting = params._replace(noise_variance=jnp.full((episodes,), params.noise_variance, jnp.float32))
     parts = []
     for room, k in zip(rooms, jax.random.split(key, len(rooms))):
         env_params = evaluator.room_params(split, room)
         num_steps = int(jnp.max(env_params.max_steps))
         reset_keys = jax.random.split(jax.random.split(k)[0], episodes)  # those Agent.rollout draws from k
-        traj = rollout(acting, BoundEnv(env, env_params), k, num_steps=num_steps, reset_keys=reset_keys)
+        traj = rollout(acting, BoundEnv(evaluator.env, env_params), k, num_steps=num_steps, reset_keys=reset_keys)
         d, in_room = replay(env_params, reset_keys, traj.actions.T)
         p_done = jax.nn.softmax(traj.logits, -1)[..., -1]
         batch = {"valid": traj.valid.T, "success": traj.success.T, "actions": traj.actions.T, "p_done": p_done.T,
@@ -83,29 +91,64 @@ def play(model, split: str, episodes: int) -> dict:
 
 
 def _pct(x) -> str:
-    return "n/a" if not np.isfinite(x) else f"{100 * x:.1f}"
+    return "n/a" if x is None or not np.isfinite(x) else f"{100 * x:.1f}"
 
 
-def markdown(report: dict, title: str) -> str:
+def _num(x, digits: int = 0) -> str:
+    return "n/a" if x is None or not np.isfinite(x) else f"{x:.{digits}f}"
+
+
+def markdown(report: dict[str, list[dict]], split: str, episodes: int) -> str:
+    """One row per method and seed: how its episodes end, its failed Dones, its P(Done)."""
     from foresit_jax.probes import EARLY_STEPS
 
-    groups = [("all", "all episodes"), ("start in target room", "start in the target's room"),
-              ("start away", "start in another room")]  # fmt: skip
-    cells = [[name, report[g]["episodes"], *(_pct(report[g][k]) for k in ("success", "failed Done", "time-out"))]
-             for g, name in groups if report[g]["episodes"]]  # fmt: skip
-    f, p = report["failed Done"], report["p_done"]
-    md = [f"# How the episodes end: {title}\n",
-          markdown_table(cells, ["episodes", "count", "success %", "failed Done %", "time-out %"]) + "\n",
-          f"Failed Dones ({f['episodes']}): median {f['median actions']:.0f} actions into the episode, "
-          f"{_pct(f['early share'])}% within the first {EARLY_STEPS}; the oracle's actions to success at the Done, "
-          f"median {f['median d at Done']:.0f}; {_pct(f['in target room share'])}% said in the target's room.\n",
-          f"The policy's mean probability of Done: {p['would succeed']:.3f} where Done would succeed, "
-          f"{p['would fail']:.3f} where it would not ({p['would fail, early']:.3f} at the first {EARLY_STEPS} steps).\n"]  # fmt: skip
+    ends, dones, starts = [], [], []
+    for method, per_seed in report.items():
+        for r in per_seed:
+            a, f, p = r["all"], r["failed Done"], r["p_done"]
+            ends.append([method, r["seed"], a["episodes"], *(_pct(a[k]) for k in ("success", "failed Done", "time-out"))])
+            dones.append([method, r["seed"], f["episodes"], _num(f["median actions"]), _pct(f["early share"]),
+                          _num(f["median d at Done"]), _pct(f["in target room share"]), _num(p["would succeed"], 3),
+                          _num(p["would fail"], 3), _num(p["would fail, early"], 3)])  # fmt: skip
+            for group in ("start in target room", "start away"):
+                g = r[group]
+                if g["episodes"]:
+                    starts.append([method, r["seed"], group.removeprefix("start "), g["episodes"],
+                                   *(_pct(g[k]) for k in ("success", "failed Done", "time-out"))])  # fmt: skip
+    md = [f"# How the episodes end ({split} split, {episodes} episodes per room type)\n",
+          markdown_table(ends, ["method", "seed", "episodes", "success %", "failed Done %", "time-out %"]) + "\n",
+          "The failed Dones (actions into the episode, median; the share within the first "
+          f"{EARLY_STEPS}; the oracle's actions to success at the Done, median; the share said in the target's room), "
+          f"and the policy's mean probability of Done where Done would succeed, where it would not, and at the first "
+          f"{EARLY_STEPS} steps where it would not:\n",
+          markdown_table(dones, ["method", "seed", "failed Dones", "actions", f"within {EARLY_STEPS} %", "to success",
+                                 "in target room %", "P(Done) would succeed", "would fail", "would fail, early"]) + "\n",
+          "By where the episode starts:\n",
+          markdown_table(starts, ["method", "seed", "start", "episodes", "success %", "failed Done %", "time-out %"]) + "\n"]  # fmt: skip
     return "\n".join(md)
 
 
+def models_of(args: Args) -> tuple[dict, int]:
+    """({method: [probe.Model per seed]}, episodes per room type) of a run or sweep folder."""
+    from experiments import probe, sweep
+
+    key = f"{args.split}_episodes_per_room"
+    if (args.run / "sweep.json").is_file():
+        saved = runs.args_from_saved(sweep.Args, runs.read_json(args.run / "sweep.json"), out=args.run)
+        finished = tuple(m for m in saved.methods if sweep.finished_seeds(args.run / "methods" / m))
+        if not finished:
+            raise runs.UserError(f"{args.run}: no finished method yet")
+        models = probe.models_of_sweep(args.run, args.methods or finished)
+        episodes = getattr(sweep.method_schedule(next(iter(models)), saved)[1], key)
+    else:
+        if args.methods:
+            raise runs.UserError("--methods is for a sweep folder; a run folder holds one method")
+        models = probe.models_of_run(args.run)
+        episodes = runs.read_run_info(args.run)["schedule"][key]
+    return models, episodes if args.episodes_per_room is None else args.episodes_per_room
+
+
 def main(args: Args) -> dict:
-    from experiments import probe
     from foresit_jax.probes import episode_endings
 
     if args.split not in ("val", "test"):
@@ -114,17 +157,16 @@ def main(args: Args) -> dict:
     out_md, out_json = folder / "failures.md", folder / "failures.json"
     if out_json.exists() and not args.overwrite:
         raise runs.UserError(f"{out_json} exists; pass --overwrite to replace it")
-    info = runs.read_run_info(args.run)
-    episodes = info["schedule"][f"{args.split}_episodes_per_room"] if args.episodes_per_room is None else args.episodes_per_room
+    models, episodes = models_of(args)
     if episodes < 1:
         raise runs.UserError(f"--episodes-per-room must be >= 1, got {episodes}")
-    ((model,),) = probe.models_of_run(args.run).values()
     runs.claim(folder)  # the one writer of the folder, and writable, before the work
-    report = episode_endings(**play(model, args.split, episodes))
-    title = f"{model.config.method}, seed {model.seed}, {args.split} split ({episodes} episodes per room type)"
-    md = markdown(report, title)
+    compiled = {}
+    report = {method: [{"seed": m.seed, **episode_endings(**play(m, args.split, episodes, compiled))} for m in seeds]
+              for method, seeds in models.items()}  # fmt: skip
+    md = markdown(report, args.split, episodes)
     folder.mkdir(parents=True, exist_ok=True)
-    runs.write_json(out_json, {"split": args.split, "episodes_per_room": episodes, **report})
+    runs.write_json(out_json, {"split": args.split, "episodes_per_room": episodes, "methods": report})
     out_md.write_text(md)
     print(md)
     print(f"wrote {out_md} and {out_json}")
