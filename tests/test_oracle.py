@@ -36,9 +36,15 @@ def reference_oracle(kit, scene):
 _ORACLES = {}
 
 
+def oracle_key(kit, scene):
+    return kit.env.setup, kit.env.view_width, int(kit.bank["numbers"][scene])
+
+
 def cached_oracle(kit, scene):
-    """reference_oracle(kit, scene)[0], computed once per session."""
-    key = (kit.env.setup, scene)
+    """reference_oracle(kit, scene)[0], computed once per session (keyed by the scene's own
+    number, not its index in the kit's bank, so that banks of other splits or layouts
+    never share an entry)."""
+    key = oracle_key(kit, scene)
     if key not in _ORACLES:
         _ORACLES[key] = reference_oracle(kit, scene)
     return _ORACLES[key][0]
@@ -55,7 +61,7 @@ def test_bank_distance_equals_reference_bfs(request, kit_name, scenes):
     grid = kit.bank["cell_type"].shape[1]
     for scene in scenes:
         cached_oracle(kit, scene)
-        oracle, poses = _ORACLES[(kit.env.setup, scene)]
+        oracle, poses = _ORACLES[oracle_key(kit, scene)]
         assert len(oracle) >= 3
         idx = bank_pose_index(poses, grid)
         for slot, (dist, goal) in oracle.items():
