@@ -84,10 +84,10 @@ def play(model, split: str, episodes: int, compiled: dict) -> dict:
         p_done = jax.nn.softmax(traj.logits, -1)[..., -1]
         batch = {"valid": traj.valid.T, "success": traj.success.T, "actions": traj.actions.T, "p_done": p_done.T,
                  "d": d, "in_room": in_room}  # fmt: skip
-        parts.append({k: np.asarray(v) for k, v in batch.items()})
+        parts.append({name: np.asarray(v) for name, v in batch.items()})
     width = max(p["valid"].shape[1] for p in parts)  # rooms' time limits differ: pad the shorter
     pad = lambda x: np.pad(x, ((0, 0), (0, width - x.shape[1])))
-    return {k: np.concatenate([pad(p[k]) for p in parts]) for k in parts[0]}
+    return {name: np.concatenate([pad(p[name]) for p in parts]) for name in parts[0]}
 
 
 def _pct(x) -> str:
