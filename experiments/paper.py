@@ -31,8 +31,9 @@ seed's model selected on validation) over the methods of the paper's tables, the
 `--resume`: finished sweeps and methods are kept, a started one continues from its last
 checkpoint (`experiments.sweep`), and the report is written again from the results.
 `--reuse RUN ...` combines runs: the methods RUN has finished (a paper run of the same
-preset and overrides, e.g. the MAML rows run on another machine with `--exclude`) are
-copied into --out instead of trained, and the report covers them all. They combine seed by
+preset and overrides, e.g. the MAML rows run on another machine with `--exclude`, or a
+sweep folder of `experiments.sweep`, which lends its setup's rows) are copied into --out
+instead of trained, and the report covers them all. They combine seed by
 seed (`experiments.sweep.copy_finished`): `--seeds 5 --reuse A B` with seeds 0-1 in A and
 2-4 (`--seed 2 --seeds 3`) in B trains nothing, so a 5-seed report can be made in blocks of
 seeds, on several machines or one after another.
@@ -102,9 +103,10 @@ class Args:
     overwrite: bool = False
     """Replace an existing run in --out."""
     reuse: tuple[Path, ...] = ()
-    """Paper runs whose finished methods are taken instead of trained (same preset and
-    overrides), seed by seed: e.g. the MAML rows run elsewhere with --exclude, or seeds 2-4
-    (--seed 2 --seeds 3) added to a run of seeds 0-1, combined into one report."""
+    """Paper runs, or sweep folders (`experiments.sweep`, each lending its setup's sweep),
+    whose finished methods are taken instead of trained (same preset and overrides), seed
+    by seed: e.g. the MAML rows run elsewhere with --exclude, seeds 2-4 (--seed 2 --seeds
+    3) added to a run of seeds 0-1, or a sweep's rows, combined into one report."""
     num_updates: Optional[int] = None
     """Override the preset's number of updates."""
     test_episodes_per_room: Optional[int] = None
@@ -131,9 +133,21 @@ def sweep_args(args: Args, setup: str, methods: tuple[str, ...]) -> sweep.Args:
     fields = ("seeds", "preset", "seed", "num_updates", "test_episodes_per_room", "val_episodes_per_room",
               "stop_after_chunks", "progress")  # fmt: skip
     folder = args.out / setup
-    reuse = tuple(Path(run) / setup for run in args.reuse if (Path(run) / setup / "sweep.json").is_file())
+    reuse = reuse_sweeps(args, setup)
     return sweep.Args(methods=methods, setup=setup, out=folder, resume=(folder / "sweep.json").exists(),
                       reuse=reuse, **{k: getattr(args, k) for k in fields})  # fmt: skip
+
+
+def reuse_sweeps(args: Args, setup: str) -> tuple[Path, ...]:
+    """The sweep folders --reuse lends `setup`'s sweep: a paper run's sweep of `setup`, or
+    a sweep folder (`experiments.sweep`) run on `setup` itself."""
+    folders = []
+    for run in map(Path, args.reuse):
+        if (run / setup / "sweep.json").is_file():
+            folders.append(run / setup)
+        elif not (run / "paper.json").is_file() and runs.read_json(run / "sweep.json").get("setup") == setup:
+            folders.append(run)
+    return tuple(folders)
 
 
 def check(args: Args) -> None:
@@ -146,8 +160,8 @@ def check(args: Args) -> None:
     if args.seeds < 1:
         raise runs.UserError(f"--seeds must be >= 1, got {args.seeds}")
     for run in map(Path, args.reuse):
-        if not (run / "paper.json").is_file():
-            raise runs.UserError(f"--reuse {run}: not a paper run folder (no paper.json)")
+        if not (run / "paper.json").is_file() and not (run / "sweep.json").is_file():
+            raise runs.UserError(f"--reuse {run}: neither a paper run (no paper.json) nor a sweep folder (no sweep.json)")
         if run.resolve() == Path(args.out).resolve():
             raise runs.UserError(f"--reuse {run}: the run being written (--out); to continue it use --resume")
     for setup, group in GROUPS.items():  # each setup's sweep checks its sources' protocol (and its own)

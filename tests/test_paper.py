@@ -157,6 +157,24 @@ def test_trajectory_replay_follows_the_environment_step_by_step():
     assert len({tuple(p) for p in want}) > 1  # the agent moved
 
 
+def test_reuse_lends_each_setup_its_own_sweeps(tmp_path):
+    """--reuse takes paper runs (one sweep per setup inside) and sweep folders (one setup
+    each): each setup's sweep is lent the folders of that setup only."""
+    def folder(path, setup=None):
+        path.mkdir(parents=True)
+        (path / "sweep.json").write_text(json.dumps({"setup": setup}))
+        return path
+
+    run = tmp_path / "run"
+    folder(run / "savn", "savn")  # a paper run with its savn sweep only
+    (run / "paper.json").write_text("{}")
+    org, savn = folder(tmp_path / "org_sweep", "org"), folder(tmp_path / "savn_sweep", "savn")
+    args = paper.Args(reuse=(run, org, savn))
+    assert paper.reuse_sweeps(args, "savn") == (run / "savn", savn)
+    assert paper.reuse_sweeps(args, "org") == (org,)
+    assert paper.sweep_args(args, "org", ("a3c+org",)).reuse == (org,)
+
+
 def test_paper_rejects_bad_input_in_one_line(tmp_path, capsys):
     base = ["--preset", "tiny", "--out", tmp_path / "p"]
     assert "not a method of the paper's tables" in cli_error(paper.cli, [*base, "--exclude", "bogus"], capsys)
@@ -164,13 +182,19 @@ def test_paper_rejects_bad_input_in_one_line(tmp_path, capsys):
     assert "--seeds must be >= 1" in cli_error(paper.cli, [*base, "--seeds", "0"], capsys)
     assert "--tsne-points must be >= 1" in cli_error(paper.cli, [*base, "--tsne-points", "0"], capsys)
     # --reuse: a folder that is no paper run, the run itself, a run of another protocol.
-    assert "not a paper run folder" in cli_error(paper.cli, [*base, "--reuse", tmp_path], capsys)
+    assert "neither a paper run" in cli_error(paper.cli, [*base, "--reuse", tmp_path], capsys)
     other = tmp_path / "other"
     (other / "savn").mkdir(parents=True)
     (other / "paper.json").write_text("{}")
     (other / "savn" / "sweep.json").write_text(json.dumps({"setup": "savn", "preset": "quick", "seeds": 3, "seed": 0}))
     line = cli_error(paper.cli, [*base, "--seeds", "2", "--reuse", other], capsys)
     assert "another protocol" in line and "--preset quick there, tiny here" in line
+    # A sweep folder is checked as its setup's source, the same way.
+    sweep_folder = tmp_path / "sweep"
+    sweep_folder.mkdir()
+    (sweep_folder / "sweep.json").write_text(json.dumps({"setup": "org", "preset": "tiny", "num_updates": 7}))
+    line = cli_error(paper.cli, [*base, "--reuse", sweep_folder], capsys)
+    assert f"--reuse {sweep_folder}: run with another protocol (--num-updates 7 there, None here)" in line
     assert not (tmp_path / "p").exists()
     (tmp_path / "p").mkdir()
     (tmp_path / "p" / "paper.json").write_text("{}")
