@@ -181,7 +181,7 @@ def test_paper_rejects_bad_input_in_one_line(tmp_path, capsys):
     assert "leaves no method" in cli_error(paper.cli, [*base, "--exclude", *paper.SETUP_OF], capsys)
     assert "--seeds must be >= 1" in cli_error(paper.cli, [*base, "--seeds", "0"], capsys)
     assert "--tsne-points must be >= 1" in cli_error(paper.cli, [*base, "--tsne-points", "0"], capsys)
-    # --reuse: a folder that is no paper run, the run itself, a run of another protocol.
+    # --reuse: a folder that is neither a paper run nor a sweep, the run itself, a run of another protocol.
     assert "neither a paper run" in cli_error(paper.cli, [*base, "--reuse", tmp_path], capsys)
     other = tmp_path / "other"
     (other / "savn").mkdir(parents=True)
