@@ -94,6 +94,19 @@ class Args:
 # policy's entropy (why a critic helps or costs, docs/mechanism.md).
 DIAGNOSTICS = ("losses/value_loss", "losses/explained_variance", "losses/advantage_std", "losses/grad_norm",
                "losses/entropy", "charts/noise_variance", "imagination/loss")  # fmt: skip
+# What each seed trained on, summed over its updates (results.json, `counts`): the frames
+# that entered the loss and the episodes that ended, so that arms of different rollout
+# layouts or budgets can be compared at equal experience (docs/mechanism.md, Study 8).
+COUNTS = ("frames/useful", "charts/episodes")
+
+
+def counts_of(progress: dict, i: int) -> dict:
+    """Seed i's `COUNTS` summed over its training; empty where some chunk went unrecorded
+    (a sweep begun before they were kept and resumed since), rather than an undercount."""
+    counts = progress.get("counts", {})
+    chunks = len(progress["curves"])
+    return {name: float(np.sum([chunk[i] for chunk in counts[name]]))
+            for name in COUNTS if len(counts.get(name, ())) == chunks}  # fmt: skip
 
 
 def seeds_of(args: Args) -> list[int]:
@@ -310,9 +323,10 @@ def rewind(progress: dict, step: int) -> dict:
     for b, seed_history in zip(best, history):
         for h in seed_history:
             b.offer(h["SR"], h["update"])
-    diagnostics = {name: chunks_[:chunks] for name, chunks_ in progress.get("diagnostics", {}).items()}
+    diagnostics, counts = ({name: chunks_[:chunks] for name, chunks_ in progress.get(kind, {}).items()}
+                           for kind in ("diagnostics", "counts"))  # fmt: skip
     return {**progress, "done": step, "history": history, "curves": progress["curves"][:chunks],
-            "diagnostics": diagnostics, "best_sr": [b.sr for b in best], "best_update": [b.update for b in best],
+            "diagnostics": diagnostics, "counts": counts, "best_sr": [b.sr for b in best], "best_update": [b.update for b in best],
             "numerics": numerics.rewind(progress.get("numerics"), step)}  # fmt: skip
 
 
@@ -377,6 +391,8 @@ def run_method(method: str, args: Args, bar, evaluator, folder: Path, budget: li
         progress["curves"].append(metrics["charts/success_rate"].tolist())
         for name in filter(metrics.__contains__, DIAGNOSTICS):  # each seed's mean over the chunk
             progress.setdefault("diagnostics", {}).setdefault(name, []).append(metrics[name].mean(axis=1).tolist())
+        for name in COUNTS:  # each seed's total over the chunk
+            progress.setdefault("counts", {}).setdefault(name, []).append(metrics[name].sum(axis=1).tolist())
         seed_params = seed_params_of(states)
         for i, seed in enumerate(seeds):
             params = devices.seed_slice(seed_params, i)
@@ -407,7 +423,7 @@ def run_method(method: str, args: Args, bar, evaluator, folder: Path, budget: li
                         "validation": history[i], "training_success_rate": curves[i].tolist(),
                         "diagnostics": {name: [chunk[i] for chunk in chunks]
                                         for name, chunks in progress.get("diagnostics", {}).items()},
-                        "numerics": progress["numerics"]})  # fmt: skip
+                        "numerics": progress["numerics"], "counts": counts_of(progress, i)})  # fmt: skip
     runs.write_json(folder / "results.json", {"updates": done, "results": results, "curves": curves.tolist(),
                                               "selection_protocol": selection.PROTOCOL_VERSION})  # fmt: skip
     return results, np.arange(1, done + 1), curves

@@ -542,8 +542,11 @@ def test_sweep_seed_i_is_the_run_train_makes_with_seed_i(tiny_sweep, tmp_path):
     for r, run in zip(per_seed, trained):
         mine = json.loads((run / "results_test.json").read_text())
         assert r["selected_update"] == mine["selected_update"]
-        curve = [row["charts/success_rate"] for row in runs.read_rows(run / "metrics")]
+        rows = list(runs.read_rows(run / "metrics"))
+        curve = [row["charts/success_rate"] for row in rows]
         np.testing.assert_allclose(r["training_success_rate"], curve, atol=1e-6)  # the same episodes were trained on
+        for name in sweep.COUNTS:  # the experience counted is train's, update by update
+            assert r["counts"][name] == pytest.approx(sum(row[name] for row in rows)) and r["counts"][name] > 0
         validation = runs.read_rows(run / "validation")
         assert [v["update"] for v in r["validation"]] == [v["update"] for v in validation] == [2, 4]
         np.testing.assert_allclose([v["SR"] for v in r["validation"]], [v["SR"] for v in validation])

@@ -447,10 +447,15 @@ def test_sweep_rewind_drops_the_chunks_after_a_step_and_reselects():
                 "history": [[{"update": 2, "SR": 10.0}, {"update": 4, "SR": 30.0}, {"update": 6, "SR": 50.0}],
                             [{"update": 2, "SR": 40.0}, {"update": 4, "SR": 40.0}, {"update": 6, "SR": 20.0}]],
                 "diagnostics": {"losses/entropy": [[1.0, 1.1], [0.9, 1.0], [0.8, 0.9]]},
+                "counts": {"charts/episodes": [[5.0, 6.0], [7.0, 8.0], [9.0, 10.0]]},
                 "best_sr": [50.0, 40.0], "best_update": [6, 4],
                 "numerics": [{"from_update": 0, "platform": "a"}, {"from_update": 6, "platform": "b"}]}  # fmt: skip
     back = sweep.rewind(progress, 2)
     assert back["done"] == 2 and len(back["curves"]) == 1 and back["diagnostics"]["losses/entropy"] == [[1.0, 1.1]]
+    assert back["counts"] == {"charts/episodes": [[5.0, 6.0]]}
+    assert sweep.counts_of(back, 1) == {"charts/episodes": 6.0}
+    assert sweep.counts_of({**back, "counts": {}}, 1) == {}  # recorded in no chunk: no count, not 0
+    assert sweep.counts_of({**progress, "counts": back["counts"]}, 0) == {}  # in some chunks only: no undercount
     assert back["best_sr"] == [10.0, 40.0] and back["best_update"] == [2, 2]
     assert [len(h) for h in back["history"]] == [1, 1] and back["numerics"] == [{"from_update": 0, "platform": "a"}]
     back = sweep.rewind(progress, 4)
