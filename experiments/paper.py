@@ -285,9 +285,7 @@ def by_length_rows(results: dict) -> list[dict]:
     return rows
 
 
-def _num(x) -> float:
-    """A rate read back from JSON: None (an empty bucket, written as null) is NaN."""
-    return np.nan if x is None else float(x)
+_num = sweep.rate
 
 
 def _paired_col(results: dict, base: str, other: str, get) -> dict:
@@ -315,11 +313,8 @@ def by_length_section(args: Args, results: dict) -> str:
             continue
         name = f"by_length_{base}_vs_{other}.png".replace("+", "_")
         _by_length_png(args.out / name, [r for r in rows if r["method"] in (base, other)])
-        cells = []
-        for bucket in dict.fromkeys(r["bucket"] for r in rows):
-            episodes = next(r["episodes"] for r in rows if r["method"] == base and r["bucket"] == bucket)
-            pairs = [_paired_col(results, base, other, lambda r, c=c: _num(r["by_length"][bucket][c])) for c in ("SR", "SPL")]
-            cells.append([bucket, episodes, *(f"{_fmt_pair(p)} ({stats.verdict(p)})" for p in pairs)])
+        cells = [[bucket, episodes, *(f"{_fmt_pair(p)} ({stats.verdict(p)})" for p in pairs)]
+                 for bucket, episodes, *pairs in sweep.paired_by_length(results, base, other)]  # fmt: skip
         md += (f"### {other} against {base}\n\n![SR and SPL by L^g]({name})\n\n"
                + markdown_table(cells, ["L^g", "episodes (all seeds)", "SR difference [95% CI], p", "SPL difference"])
                + "\n\n")  # fmt: skip

@@ -476,6 +476,50 @@ def paired_markdown(results_by_method: dict[str, list[dict]], room: str = "overa
     return "## Paired over seeds (same seeds, same test episodes)\n\n" + markdown_table(cells, header) + "\n"
 
 
+def rate(x) -> float:
+    """A rate read back from JSON: None (an empty bucket, written as null) is NaN."""
+    return np.nan if x is None else float(x)
+
+
+def paired_by_length(results: dict[str, list[dict]], base: str, other: str) -> list[tuple[str, int, dict, dict]]:
+    """Per bucket of L^g (`envs.metrics.LENGTH_BUCKETS_OF` the layout, in order), `other`
+    against `base` seed by seed on each seed's selected model: (bucket, the test episodes
+    in it summed over `base`'s seeds, `stats.paired` of SR, of SPL)."""
+    buckets = results[base][0]["selected"]["by_length"]
+    return [(bucket, sum(r["selected"]["by_length"][bucket]["episodes"] for r in results[base]),
+             *(stats.paired(*([rate(r["selected"]["by_length"][bucket][col]) for r in results[m]]
+                              for m in (base, other))) for col in ("SR", "SPL")))
+            for bucket in buckets]  # fmt: skip
+
+
+def by_length_markdown(results: dict[str, list[dict]]) -> str:
+    """SR and SPL by L^g bucket of each seed's selected model (mean ± std over seeds), and
+    each method against the first per bucket, paired; '' without a second method and seed."""
+    methods = list(results)
+    if len(methods) < 2 or len(results[methods[0]]) < 2:
+        return ""
+
+    def mean_std(method, bucket, col):  # over the seeds with episodes in the bucket
+        x = np.array([rate(r["selected"]["by_length"][bucket][col]) for r in results[method]])
+        x = x[~np.isnan(x)]
+        return "n/a" if not len(x) else f"{x.mean():.1f}" + (f" ± {x.std(ddof=1):.1f}" if len(x) > 1 else "")
+
+    def pair(p):
+        return "n/a" if not np.isfinite(p["diff"]) else f"{p['diff']:+.1f} [{p['ci_low']:+.1f}, {p['ci_high']:+.1f}]"
+
+    buckets = list(results[methods[0]][0]["selected"]["by_length"])
+    cells = [[bucket, *(f"{mean_std(m, bucket, 'SR')} / {mean_std(m, bucket, 'SPL')}" for m in methods)]
+             for bucket in buckets]  # fmt: skip
+    md = ("## By optimal path length L^g: SR / SPL (mean ± sample std over seeds)\n\n"
+          + markdown_table(cells, ["L^g", *methods]) + "\n")  # fmt: skip
+    for other in methods[1:]:
+        rows = [[bucket, episodes, pair(sr), stats.verdict(sr), pair(spl), stats.verdict(spl)]
+                for bucket, episodes, sr, spl in paired_by_length(results, methods[0], other)]  # fmt: skip
+        header = ["L^g", "episodes (all seeds)", "SR difference [95% CI]", "higher SR", "SPL difference", "higher SPL"]
+        md += f"\n### {other} - {methods[0]}, paired per bucket\n\n" + markdown_table(rows, header) + "\n"
+    return md
+
+
 def selection_markdown(results: dict[str, list[dict]]) -> str:
     """Test SR of the model selected on validation against the last model, per method
     (mean ± std over seeds) and per seed."""
@@ -560,6 +604,7 @@ def main(args: Args) -> list[dict] | None:
     md = table_markdown(rows, title) + "\n" + selection_markdown(results)
     if len(selected) > 1 and args.seeds > 1:
         md += "\n" + paired_markdown(selected)
+    md += "\n" + by_length_markdown(results)
     md += "\n" + diagnostics_markdown(results)
     md += "\n" + numerics.markdown(results, [(args.methods[0], m) for m in args.methods[1:]])
     md += assembled_markdown({method: out / "methods" / method for method in args.methods})

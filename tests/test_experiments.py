@@ -559,6 +559,35 @@ def test_sweep_seed_i_is_the_run_train_makes_with_seed_i(tiny_sweep, tmp_path):
     assert float(table["SR mean"]) == pytest.approx(np.mean([r["selected"]["overall"]["SR"] for r in per_seed]))
     md = (out / "table1.md").read_text()
     assert "Model selection" in md and f"{SEED}: " in md and f"(update {per_seed[0]['selected_update']})" in md
+    assert "### a3c+foresit - a3c, paired per bucket" in md
+
+
+def test_a_sweeps_table_pairs_each_path_length_bucket_over_seeds():
+    """table1.md's section by L^g, against a hand computation: per bucket the mean ± std
+    of each method, the mean seed-by-seed difference with its Student-t interval (scipy),
+    the test episodes of the first method's seeds; an empty bucket (null) is n/a."""
+    from scipy import stats as scipy_stats
+
+    sr = {"a3c": [[60.0, 20.0], [50.0, 30.0], [70.0, 10.0]], "a3c+critic": [[55.0, 30.0], [51.0, 33.0], [60.0, 18.0]]}
+
+    def seed(rates):
+        by_length = {"1-4": {"SR": rates[0], "SPL": rates[0] / 2, "episodes": 40},
+                     ">=5": {"SR": rates[1], "SPL": rates[1] / 4, "episodes": 60},
+                     ">=20": {"SR": None, "SPL": None, "episodes": 0}}  # fmt: skip
+        return {"selected": {"by_length": by_length}}
+
+    results = {m: [seed(r) for r in per_seed] for m, per_seed in sr.items()}
+    md = sweep.by_length_markdown(results)
+    row = {line.split("|")[1].strip(): [c.strip() for c in line.split("|")[2:-1]]
+           for line in md.split("### a3c+critic - a3c")[1].splitlines() if line.startswith("| ")}  # fmt: skip
+    for i, bucket in enumerate(("1-4", ">=5")):
+        d = np.array(sr["a3c+critic"])[:, i] - np.array(sr["a3c"])[:, i]
+        half = scipy_stats.t.ppf(0.975, 2) * d.std(ddof=1) / np.sqrt(3)
+        assert row[bucket][:2] == ["120" if i == 0 else "180", f"{d.mean():+.1f} [{d.mean() - half:+.1f}, {d.mean() + half:+.1f}]"]
+        x = np.array(sr["a3c"])[:, i]
+        assert f"| {bucket} | {x.mean():.1f} ± {x.std(ddof=1):.1f} / {x.mean() / (2 if i == 0 else 4):.1f}" in md
+    assert row[">=20"][:2] == ["0", "n/a"] and "| >=20 | n/a / n/a | n/a / n/a |" in md
+    assert sweep.by_length_markdown({"a3c": results["a3c"]}) == ""  # nothing to pair
 
 
 def test_sweep_rejects_bad_input_in_one_line(tmp_path, capsys):
