@@ -851,6 +851,7 @@ BENCH_ARGS = {  # commands whose flags are parsed here and which run in their ow
     "experiments.paper": lambda: importlib.import_module("experiments.paper").Args,  # tests/test_paper.py runs it
     "experiments.demo": lambda: importlib.import_module("experiments.demo").DemoConfig,
     "experiments.bench_env": lambda: importlib.import_module("experiments.bench_env").BenchConfig,
+    "experiments.compare": lambda: importlib.import_module("experiments.compare").Args,  # tests/test_compare.py
 }
 
 

@@ -1,0 +1,77 @@
+"""experiments.compare against a hand computation (numpy and scipy's paired t-test) on a
+sweep folder written by hand."""
+
+import json
+
+import numpy as np
+import pytest
+from scipy import stats as sp
+
+from experiments import compare, runs
+
+SEEDS = (3, 4, 5, 6)
+
+
+def write_sweep(root, rng, methods=("a", "b", "c", "d"), seeds=SEEDS):
+    """A sweep folder as experiments.sweep writes it, with random numbers; returns them."""
+    truth = {}
+    for method in methods:
+        per_seed = []
+        for seed in seeds:
+            overall = {"SR": rng.uniform(30, 80), "SPL": rng.uniform(10, 40), "SR>=5": rng.uniform(20, 60)}
+            per_seed.append({
+                "seed": seed, "selected": {"overall": overall},
+                "training_success_rate": rng.uniform(0, 1, 300).tolist(),
+                "diagnostics": {"losses/entropy": rng.uniform(0.2, 1, 6).tolist()},
+                "counts": {"frames/useful": 1.5e6 + seed, "charts/episodes": 1000 + seed},
+            })  # fmt: skip
+        truth[method] = per_seed
+        folder = root / "methods" / method
+        folder.mkdir(parents=True)
+        (folder / "results.json").write_text(json.dumps({"results": per_seed}))
+    return truth
+
+
+def hand_paired(x, y):
+    d = np.asarray(y) - np.asarray(x)
+    half = sp.t.ppf(0.975, len(d) - 1) * d.std(ddof=1) / np.sqrt(len(d))
+    return d.mean(), d.mean() - half, d.mean() + half, sp.ttest_rel(y, x).pvalue
+
+
+def test_pairs_and_difference_of_differences_match_a_hand_computation(tmp_path, capsys):
+    truth = write_sweep(tmp_path, np.random.default_rng(0))
+    out = compare.main(compare.Args(run=tmp_path, pairs=("a:b",), did=("a:b:c:d",), last=100))
+    printed = capsys.readouterr().out
+
+    def col(method, name):
+        if name == "training SR":
+            return [100 * np.mean(r["training_success_rate"][-100:]) for r in truth[method]]
+        if name == "losses/entropy":
+            return [r["diagnostics"][name][-1] for r in truth[method]]
+        return [r["selected"]["overall"][name] for r in truth[method]]
+
+    for name in ("SR", "SPL", "SR>=5", "training SR", "losses/entropy"):
+        got = out["pairs"]["b - a"][name]
+        np.testing.assert_allclose([got["diff"], got["ci_low"], got["ci_high"], got["p"]],
+                                   hand_paired(col("a", name), col("b", name)), rtol=1e-9)  # fmt: skip
+    for name in ("SR", "SPL", "SR>=5"):
+        got = out["did"]["(d - c) - (b - a)"][name]
+        first = np.subtract(col("b", name), col("a", name))
+        second = np.subtract(col("d", name), col("c", name))
+        np.testing.assert_allclose([got["diff"], got["ci_low"], got["ci_high"], got["p"]],
+                                   hand_paired(first, second), rtol=1e-9)  # fmt: skip
+    sr_a = col("a", "SR")
+    assert " / ".join(f"{x:.1f}" for x in sr_a) in printed
+    assert f"{out['pairs']['b - a']['SR']['diff']:+.2f}" in printed
+    assert "1.50M / 1003" in printed  # the experience of seed 3
+
+
+def test_bad_input_says_what_is_wrong(tmp_path):
+    with pytest.raises(runs.UserError, match="not a sweep folder"):
+        compare.main(compare.Args(run=tmp_path))
+    write_sweep(tmp_path / "one", np.random.default_rng(1), methods=("a", "b"))
+    write_sweep(tmp_path / "one", np.random.default_rng(2), methods=("c",), seeds=(0, 1, 2, 3))
+    for pairs, says in ((("a:x",), "'x' is not a finished method of this sweep; it has a, b, c"),
+                        (("a-b",), "give 2 method names"), (("a:c",), "different seeds")):  # fmt: skip
+        with pytest.raises(runs.UserError, match=says):
+            compare.main(compare.Args(run=tmp_path / "one", pairs=pairs))
