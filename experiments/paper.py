@@ -89,7 +89,7 @@ class Args:
     """Train the paper's methods over seeds and write its tables, figures and verdicts."""
 
     preset: str = "quick"
-    """Preset: tiny, quick or paper."""
+    """Preset: tiny, quick, house or paper."""
     seeds: int = 5
     """Seeds per method."""
     seed: int = 0

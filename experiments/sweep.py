@@ -57,7 +57,7 @@ class Args:
     seeds: int = 5
     """Seeds per method (vmapped in one program)."""
     preset: str = "quick"
-    """Preset: tiny, quick or paper."""
+    """Preset: tiny, quick, house or paper."""
     seed: int = 0
     """Base seed: seed i of a method is the run `train --seed <seed + i>` would make."""
     out: Path = Path("runs/sweep")

@@ -48,7 +48,8 @@ class Args:
     setup: str = "savn"
     """Environment setup: savn (first setup, word-vector targets) or org (second setup, detector features)."""
     preset: str = "quick"
-    """Preset: tiny (seconds), quick (minutes on a laptop CPU), paper (the paper's sizes)."""
+    """Preset: tiny (seconds), quick (minutes on a laptop CPU), house (quick's learner in houses),
+    paper (the paper's sizes)."""
     seed: int = 0
     """Random seed (same seed, same result, bit for bit, on the same machine)."""
     out: Path = Path("runs/x")
