@@ -3,9 +3,15 @@
 It moves at the end of each chunk (with the chunk's postfix: frames/s, SR, validation SR)
 and, through `advance.at`, inside a chunk: the jitted chunk calls it every 10th update
 (`Trainer.run`'s `on_update`), so a 500-update chunk no longer sits still for half a minute.
+Without the bar (`--no-progress`, e.g. a run logged to a file for hours), each chunk's end
+is one line on stderr instead: the clock, updates done of the total, the minutes since the
+start and the postfix.
 """
 
 from __future__ import annotations
+
+import sys
+import time
 
 import numpy as np
 
@@ -20,6 +26,7 @@ def progress_bar(total: int, initial: int, enabled: bool):
     bar = tqdm(total=total, initial=initial, unit="upd", disable=not enabled, dynamic_ncols=True,
                bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} updates [{elapsed}<{remaining}{postfix}]")  # fmt: skip
     chunk_end = [initial]
+    started = time.time()
 
     def advance(n: int, postfix: dict | None) -> None:
         if postfix is None:
@@ -28,6 +35,8 @@ def progress_bar(total: int, initial: int, enabled: bool):
         chunk_end[0] += n
         bar.set_postfix(postfix, refresh=False)
         bar.update(chunk_end[0] - bar.n)
+        if not enabled and n:
+            print(log_line(chunk_end[0], total, time.time() - started, postfix), file=sys.stderr, flush=True)
 
     def at(position) -> None:
         position = int(np.max(position))
@@ -38,3 +47,11 @@ def progress_bar(total: int, initial: int, enabled: bool):
     advance.position = lambda: chunk_end[0]  # where the last chunk ended
     advance.enabled = enabled
     return advance
+
+
+def log_line(done: int, total: int, seconds: float, postfix: dict) -> str:
+    """A chunk's end as one line of a log: '[HH:MM:SS] 2000/36000 updates, 26.0 min: method
+    a3c, SR 0.123'."""
+    fields = ", ".join(f"{name} {value}" for name, value in postfix.items())
+    line = f"[{time.strftime('%H:%M:%S')}] {done}/{total} updates, {seconds / 60:.1f} min"
+    return line + (f": {fields}" if fields else "")

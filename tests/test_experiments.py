@@ -351,10 +351,16 @@ def test_learning_curve_png_leaves_matplotlib_global_state_alone(tmp_path, monke
     assert ("matplotlib.pyplot" in sys.modules) == had_pyplot
 
 
-def test_progress_bar_is_shared():
-    advance = progress.progress_bar(total=3, initial=1, enabled=False)
-    advance(2, {"SR": "0.1"})
+def test_progress_bar_is_shared_and_without_the_bar_logs_a_line_per_chunk(capsys):
+    advance = progress.progress_bar(total=5, initial=1, enabled=False)
+    advance(2, {"method": "a3c", "SR": "0.1"})
+    advance.at(4)  # inside a chunk: no line
+    advance(2, {"method": "a3c", "val SR": "12.5%"})
     advance(0, None)
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 2, lines
+    assert re.fullmatch(r"\[\d\d:\d\d:\d\d\] 3/5 updates, 0\.0 min: method a3c, SR 0\.1", lines[0]), lines[0]
+    assert re.fullmatch(r"\[\d\d:\d\d:\d\d\] 5/5 updates, 0\.0 min: method a3c, val SR 12\.5%", lines[1]), lines[1]
     assert not hasattr(train_cli, "_progress")
     assert train_cli.progress_bar is sweep.progress_bar is progress.progress_bar
 
@@ -983,7 +989,7 @@ def test_console_scripts_are_the_module_programs(monkeypatch, capsys):
 
     scripts = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())["project"]["scripts"]
     assert set(scripts) == {"foresit-train", "foresit-evaluate", "foresit-sweep", "foresit-paper", "foresit-probe",
-                            "foresit-failures"}
+                            "foresit-failures", "foresit-compare"}
     for name, target in scripts.items():
         module, function = target.split(":")
         assert module == f"experiments.{name.removeprefix('foresit-')}"
