@@ -7,7 +7,8 @@ finished methods (`methods/<method>/results.json`) this prints, as Markdown:
 
 * per method: test SR of each seed's selected model, mean ± sample std of SR, SPL, SR>=5,
   the training success rate over the last `--last` updates, the last chunk's training
-  diagnostics, and the experience each seed had where the sweep counted it;
+  diagnostics (`sweep.DIAGNOSTICS`, those recorded), and the experience each seed had
+  where the sweep counted it;
 * per `--pairs A:B`: B - A seed by seed (`experiments.stats.paired`: mean difference, 95%
   t interval, p, verdict) on each of those columns;
 * per `--did A:B:C:D`: (D - C) - (B - A) seed by seed on test SR, SPL and SR>=5, e.g. the
@@ -25,12 +26,11 @@ from pathlib import Path
 import numpy as np
 
 from experiments import runs, stats
+from experiments.sweep import DIAGNOSTICS
 from experiments.tables import markdown_table
 
 TEST = ("SR", "SPL", "SR>=5")
 TRAINING = "training SR"
-DIAGNOSTICS = ("losses/explained_variance", "losses/entropy", "losses/grad_norm", "losses/value_loss",
-               "losses/advantage_std")  # fmt: skip
 
 
 @dataclasses.dataclass(frozen=True)
@@ -117,7 +117,7 @@ def main(args: Args) -> dict:
                       ", ".join(f"{c['frames/useful'] / 1e6:.2f}M / {int(c['charts/episodes'])}" for c in counts))  # fmt: skip
         rows.append([method, ", ".join(str(r["seed"]) for r in per_seed), per,
                      *(_mean_std(values(per_seed, c, args.last)) for c in shown), experience])  # fmt: skip
-    names = [c.split("/")[-1] for c in shown]
+    names = ["f_w loss" if c == "imagination/loss" else c.split("/")[-1] for c in shown]
     md = (f"# {args.run}: per method (mean ± sample std over seeds)\n\n"
           + markdown_table(rows, ["method", "seeds", "SR per seed", *names, "frames / episodes per seed"]) + "\n"
           + f"(training SR: the last {args.last} updates; diagnostics: the last chunk's mean)\n")  # fmt: skip
