@@ -20,13 +20,12 @@ Pairs need the same seeds in both methods (a sweep's methods have them).
 from __future__ import annotations
 
 import dataclasses
-import json
 from pathlib import Path
 
 import numpy as np
 
 from experiments import runs, stats
-from experiments.sweep import DIAGNOSTICS
+from experiments.sweep import DIAGNOSTICS, rate
 from experiments.tables import markdown_table
 
 TEST = ("SR", "SPL", "SR>=5")
@@ -52,7 +51,7 @@ def load(run: Path) -> dict[str, list[dict]]:
     folder = Path(run) / "methods"
     if not folder.is_dir():
         raise runs.UserError(f"{run} is not a sweep folder (it has no methods/): give --run the folder a sweep wrote")
-    found = {m.name: json.loads((m / "results.json").read_text())["results"]
+    found = {m.name: runs.read_json(m / "results.json")["results"]
              for m in sorted(folder.iterdir()) if (m / "results.json").is_file()}  # fmt: skip
     if not found:
         raise runs.UserError(f"{run} has no finished method yet (no methods/*/results.json)")
@@ -63,8 +62,7 @@ def values(per_seed: list[dict], column: str, last: int = 250) -> np.ndarray:
     """One value per seed: a test column of the selected model, the training success rate
     (%) over the `last` updates, or the last chunk's mean of a diagnostic (NaN if unrecorded)."""
     if column in TEST:
-        return np.array([np.nan if r["selected"]["overall"][column] is None else r["selected"]["overall"][column]
-                         for r in per_seed], float)  # fmt: skip
+        return np.array([rate(r["selected"]["overall"][column]) for r in per_seed])
     if column == TRAINING:
         return np.array([100 * np.mean(r["training_success_rate"][-last:]) for r in per_seed])
     return np.array([(r.get("diagnostics") or {}).get(column, [np.nan])[-1] for r in per_seed], float)
