@@ -1,0 +1,69 @@
+"""The house study's figures in the README and docs/houses.md are those of its files.
+
+The study (three arms, seeds 0-4, `--preset house`) trained on a lent GPU; its sweep folder,
+without checkpoints, is kept as docs/data/house_study.tar.xz. This reads it back as
+`experiments.compare` and the sweep's tables do, recomputes the quoted means and paired
+intervals with `experiments.stats`, and checks that the README and houses.md print them.
+"""
+
+from __future__ import annotations
+
+import json
+import tarfile
+from pathlib import Path
+
+import pytest
+
+from experiments import stats, sweep
+
+REPO = Path(__file__).resolve().parents[1]
+ARCHIVE = REPO / "docs" / "data" / "house_study.tar.xz"
+METHODS = ("a3c", "a3c+critic", "a3c+foresit")
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory) -> dict[str, list[dict]]:
+    """Each method's per-seed results (results.json's), read from the unpacked archive."""
+    folder = tmp_path_factory.mktemp("house")
+    with tarfile.open(ARCHIVE) as tar:
+        tar.extractall(folder, filter="data")
+    root = folder / "house_study"
+    assert json.loads((root / "sweep.json").read_text())["methods"] == list(METHODS)
+    return {m: json.loads((root / "methods" / m / "results.json").read_text())["results"] for m in METHODS}
+
+
+def sr(results: list[dict], col: str = "SR") -> list[float]:
+    return [r["selected"]["overall"][col] for r in results]
+
+
+def interval(p: dict) -> str:
+    return f"{p['diff']:+.1f} [{p['ci_low']:+.1f}, {p['ci_high']:+.1f}]".replace("+-", "-")
+
+
+def test_the_archive_holds_five_paired_seeds_of_each_arm(study):
+    for results in study.values():
+        assert [r["seed"] for r in results] == [0, 1, 2, 3, 4]
+        assert all(r["selected"]["overall"]["episodes"] == 1000 for r in results)
+
+
+def test_the_readme_and_houses_md_quote_the_study(study):
+    readme = (REPO / "README.md").read_text()
+    houses = (REPO / "docs" / "houses.md").read_text()
+    for method in METHODS:
+        s = stats.summary(sr(study[method]))
+        assert f"{s['mean']:.1f} ± {s['std']:.1f}" in readme, method
+        assert f"| {method} | {s['mean']:.1f} ± {s['std']:.1f} |" in houses, method
+    for base, other in (("a3c", "a3c+critic"), ("a3c", "a3c+foresit"), ("a3c+critic", "a3c+foresit")):
+        pair = interval(stats.paired(sr(study[base]), sr(study[other])))
+        assert pair in readme and pair in houses, (other, base, pair)
+
+
+def test_houses_md_by_length_pairs_are_the_sweeps(study):
+    """Each bucket's row of houses.md's by-length table ends with the pairs the sweep's
+    table1.md computes (`sweep.paired_by_length`): against the critic, then against a3c."""
+    houses = (REPO / "docs" / "houses.md").read_text()
+    against_critic = sweep.paired_by_length(study, "a3c+critic", "a3c+foresit")
+    against_a3c = sweep.paired_by_length(study, "a3c", "a3c+foresit")
+    for (bucket, episodes, critic, _), (_, _, a3c, _) in zip(against_critic, against_a3c):
+        assert f"| {bucket} | {episodes} |" in houses, bucket
+        assert f"| {interval(critic)} | {interval(a3c)} |" in houses, bucket
