@@ -7,7 +7,8 @@ chosen by `experiments.search_learner`, see docs/learner.md).
 `house` is quick's learner in houses (`layout="house"`) for 12,000 updates, with the
 reward shaped by the oracle's distance (`Config.progress_reward` 0.1, a deviation from the
 paper's reward: without it a3c learns to give up at the start): measured, a3c seed 0 at
-32% test SR after about 19 minutes here, 25% without the shaping (docs/houses.md).
+32% test SR after about 19 minutes on a 2-core EPYC (34% in 39 minutes on a slower one),
+25% without the shaping (docs/houses.md).
 `paper` is the paper's sizes and schedule (512-unit LSTM, Adam 1e-4), for long runs on
 accelerators.  `tiny` is for tests and smoke runs (bathrooms only, tiny networks).
 A method's own requirements (`Method.required_config`: the maml base runs whole
