@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from experiments import runs, stats
-from experiments.sweep import DIAGNOSTICS, rate
+from experiments.sweep import DIAGNOSTICS, diagnostic_label, rate
 from experiments.tables import markdown_table
 
 TEST = ("SR", "SPL", "SR>=5")
@@ -115,7 +115,7 @@ def main(args: Args) -> dict:
                       ", ".join(f"{c['frames/useful'] / 1e6:.2f}M / {int(c['charts/episodes'])}" for c in counts))  # fmt: skip
         rows.append([method, ", ".join(str(r["seed"]) for r in per_seed), per,
                      *(_mean_std(values(per_seed, c, args.last)) for c in shown), experience])  # fmt: skip
-    names = ["f_w loss" if c == "imagination/loss" else c.split("/")[-1] for c in shown]
+    names = [diagnostic_label(c) for c in shown]
     md = (f"# {args.run}: per method (mean ± sample std over seeds)\n\n"
           + markdown_table(rows, ["method", "seeds", "SR per seed", *names, "frames / episodes per seed"]) + "\n"
           + f"(training SR: the last {args.last} updates; diagnostics: the last chunk's mean)\n")  # fmt: skip

@@ -100,6 +100,11 @@ DIAGNOSTICS = ("losses/value_loss", "losses/explained_variance", "losses/advanta
 COUNTS = ("frames/useful", "charts/episodes")
 
 
+def diagnostic_label(name: str) -> str:
+    """A table's column name for a diagnostic of `DIAGNOSTICS`: 'value_loss', ..., 'f_w loss'."""
+    return "f_w loss" if name == "imagination/loss" else name.split("/")[-1]
+
+
 def counts_of(progress: dict, i: int) -> dict:
     """Seed i's `COUNTS` summed over its training; empty where some chunk went unrecorded
     (a sweep begun before they were kept and resumed since), rather than an undercount."""
@@ -551,7 +556,7 @@ def diagnostics_markdown(results: dict[str, list[dict]]) -> str:
             rows.append([method, f"{i + 1}/{chunks}", *cells])
     if not rows:
         return ""
-    header = ["Method", "chunk", *("f_w loss" if n == "imagination/loss" else n.split("/")[1] for n in DIAGNOSTICS)]
+    header = ["Method", "chunk", *map(diagnostic_label, DIAGNOSTICS)]
     return ("## Training diagnostics (mean over seeds of each chunk's mean)\n\n" + markdown_table(rows, header) + "\n")
 
 
