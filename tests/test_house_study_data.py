@@ -8,13 +8,12 @@ intervals with `experiments.stats`, and checks that the README and houses.md pri
 
 from __future__ import annotations
 
-import json
 import tarfile
 from pathlib import Path
 
 import pytest
 
-from experiments import stats, sweep
+from experiments import compare, runs, stats, sweep
 
 REPO = Path(__file__).resolve().parents[1]
 ARCHIVE = REPO / "docs" / "data" / "house_study.tar.xz"
@@ -23,18 +22,18 @@ METHODS = ("a3c", "a3c+critic", "a3c+foresit")
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory) -> dict[str, list[dict]]:
-    """Each method's per-seed results (results.json's), read from the unpacked archive."""
+    """Each method's per-seed results, read from the unpacked archive as `experiments.compare` reads a sweep."""
     folder = tmp_path_factory.mktemp("house")
     with tarfile.open(ARCHIVE) as tar:
         # The "data" filter (no links out, no absolute paths) is in Python 3.11.4 and later.
         tar.extractall(folder, **({"filter": "data"} if hasattr(tarfile, "data_filter") else {}))
     root = folder / "house_study"
-    assert json.loads((root / "sweep.json").read_text())["methods"] == list(METHODS)
-    return {m: json.loads((root / "methods" / m / "results.json").read_text())["results"] for m in METHODS}
+    assert runs.read_json(root / "sweep.json")["methods"] == list(METHODS)
+    return compare.load(root)
 
 
-def sr(results: list[dict], col: str = "SR") -> list[float]:
-    return [r["selected"]["overall"][col] for r in results]
+def sr(results: list[dict]):
+    return compare.values(results, "SR")
 
 
 def interval(p: dict) -> str:
