@@ -9,6 +9,7 @@ import train_helpers as H
 from experiments import bench_train as B
 
 
+@pytest.mark.slow
 def test_bench_train_runs_every_combination_and_counts_useful_frames(monkeypatch, capsys):
     H.patch_for_experiments(monkeypatch)
     bench = B.BenchConfig(

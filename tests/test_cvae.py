@@ -60,6 +60,7 @@ def test_the_cvae_learns_a_conditional_structure():
     assert float(step_losses[-20:].mean()) < 0.5 * float(step_losses[:20].mean())
 
 
+@pytest.mark.slow
 def test_the_comparison_trains_both_imaginations_and_beats_predicting_the_mean():
     items = synthetic_items(jax.random.PRNGKey(0), 768)
     train = jax.tree.map(lambda x: x[:512], items)

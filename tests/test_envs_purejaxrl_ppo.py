@@ -221,6 +221,7 @@ def ppo_run(request):
     return request.param.__name__.removesuffix("_stack"), env, env_params, jax.block_until_ready(out)
 
 
+@pytest.mark.slow
 def test_ppo_loop_shapes_and_finiteness(ppo_run):
     stack, env, env_params, out = ppo_run
     base = envs.GridNav()
@@ -247,6 +248,7 @@ def test_ppo_loop_shapes_and_finiteness(ppo_run):
     chex.assert_tree_all_finite(metrics)
 
 
+@pytest.mark.slow
 def test_ppo_loop_returns_the_log_wrapper_episode_statistics(ppo_run):
     stack, _, _, out = ppo_run
     m = jax.tree.map(np.asarray, out["metrics"])

@@ -83,6 +83,7 @@ def cli_error(cli, argv, capsys) -> str:
 
 
 # ---------------------------------------------------------------------- training runs
+@pytest.mark.slow
 def test_finished_run_folder(finished_run):
     info = runs.read_run_info(finished_run)
     assert (info["method"], info["preset"], info["seed"]) == ("a3c+foresit", "tiny", SEED)
@@ -106,6 +107,7 @@ def test_finished_run_folder(finished_run):
     H.assert_tree_finite(state)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("killed", ["before_a_checkpoint", "before_its_validation", "before_the_best_was_saved"])
 def test_resume_after_a_kill_ends_bit_identical_to_an_uninterrupted_run(finished_run, tmp_path, killed):
     out = tmp_path / "interrupted"
@@ -134,6 +136,7 @@ def test_resume_after_a_kill_ends_bit_identical_to_an_uninterrupted_run(finished
         H.assert_trees_bitwise_equal(resumed, reference)
 
 
+@pytest.mark.slow
 def test_a_run_resumed_on_another_platform_says_so_and_records_where_each_stretch_ran(finished_run, tmp_path, capsys):
     out = tmp_path / "moved"
     train_cli.main(tiny_args(out, stop_after_chunks=1))
@@ -150,6 +153,7 @@ def test_a_run_resumed_on_another_platform_says_so_and_records_where_each_stretc
     assert (out / "results_test.json").read_text() == (finished_run / "results_test.json").read_text()
 
 
+@pytest.mark.slow
 def test_overwrite_replaces_a_run_and_same_seed_gives_the_same_run(finished_run, tmp_path):
     out = tmp_path / "copy"
     shutil.copytree(finished_run, out)
@@ -160,6 +164,7 @@ def test_overwrite_replaces_a_run_and_same_seed_gives_the_same_run(finished_run,
     assert (out / "results_test.json").read_text() == (finished_run / "results_test.json").read_text()
 
 
+@pytest.mark.slow
 def test_existing_folders_are_never_overwritten_without_a_flag(finished_run, tmp_path, capsys):
     before = snapshot(finished_run)
     line = cli_error(train_cli.cli, ["--preset", "tiny", "--out", finished_run], capsys)
@@ -180,6 +185,7 @@ def test_existing_folders_are_never_overwritten_without_a_flag(finished_run, tmp
     assert snapshot(notes) == {"thesis.tex": b"months of work"}
 
 
+@pytest.mark.slow
 def test_a_run_validated_under_another_selection_protocol_is_not_resumed(finished_run, tmp_path, capsys):
     assert runs.read_run_info(finished_run)["selection_protocol"] == selection.PROTOCOL_VERSION
     out = tmp_path / "older"
@@ -192,6 +198,7 @@ def test_a_run_validated_under_another_selection_protocol_is_not_resumed(finishe
     assert snapshot(out) == before
 
 
+@pytest.mark.slow
 def test_non_finite_loss_stops_training_naming_the_update_and_keeps_the_last_good_checkpoint(tmp_path, capsys):
     out = tmp_path / "diverging"
     train_cli.main(tiny_args(out, stop_after_chunks=1))
@@ -225,6 +232,7 @@ def strict_json(text: str):
     return json.loads(text, parse_constant=refuse)
 
 
+@pytest.mark.slow
 def test_run_files_are_strict_json(finished_run):
     for path in [finished_run / "run.json", *finished_run.glob("results_*.json")]:
         strict_json(path.read_text())
@@ -365,6 +373,7 @@ def test_progress_bar_is_shared_and_without_the_bar_logs_a_line_per_chunk(capsys
     assert train_cli.progress_bar is sweep.progress_bar is progress.progress_bar
 
 
+@pytest.mark.slow
 def test_demo_oracle_plays_the_random_policys_episodes():
     from experiments import demo
     from foresit_jax.evaluate import random_policy_rollout
@@ -412,6 +421,7 @@ def test_buffer_size_below_one_is_refused():
         presets.preset("tiny", "a3c+foresit", buffer_size=0)
 
 
+@pytest.mark.slow
 def test_evaluate_rejects_bad_input_in_one_line(finished_run, tmp_path, capsys):
     nothing = tmp_path / "nothing"
     nothing.mkdir()
@@ -428,6 +438,7 @@ SWEEP_EPISODES = dict(val_episodes_per_room=12, test_episodes_per_room=24)  # en
 
 
 # ---------------------------------------------------------------------- probes
+@pytest.mark.slow
 def test_probe_of_a_run_reproduces_its_test_sr_and_reports_every_probe(finished_run, tmp_path, capsys):
     """`experiments.probe --run`: the `trained` condition is the run's own test evaluation
     (the same model, episodes and noise: the same SR as results_test.json); the other
@@ -455,6 +466,7 @@ def test_probe_of_a_run_reproduces_its_test_sr_and_reports_every_probe(finished_
     assert "not a run folder" in cli_error(probe.cli, ["--run", tmp_path], capsys)
 
 
+@pytest.mark.slow
 def test_failures_of_a_run_replay_its_test_episodes(finished_run, tmp_path, capsys):
     """experiments.failures: the selected model plays the run's own test episodes (its SR
     again), every episode ends one way, and in single rooms every start is in the
@@ -474,6 +486,7 @@ def test_failures_of_a_run_replay_its_test_episodes(finished_run, tmp_path, caps
     assert "--methods is for a sweep" in cli_error(failures.cli, ["--run", finished_run, "--methods", "a3c"], capsys)
 
 
+@pytest.mark.slow
 def test_failures_of_a_sweep_replay_every_seeds_test_episodes(tiny_sweep, tmp_path):
     """experiments.failures --run SWEEP: every finished method and seed, each success share
     the seed's own test SR (results.json)."""
@@ -488,6 +501,7 @@ def test_failures_of_a_sweep_replay_every_seeds_test_episodes(tiny_sweep, tmp_pa
             assert 100 * mine["all"]["success"] == pytest.approx(theirs["selected"]["overall"]["SR"], abs=1e-4)
 
 
+@pytest.mark.slow
 def test_a_sweep_arm_trains_its_own_config_and_is_probed_from_its_checkpoints(tmp_path):
     """`sweep --methods 'a3c+foresit@imagination_input=encoder'`: the arm's seeds train with
     i_tau in the encoder (its parameters have the embedding), its folder's checkpoints
@@ -504,6 +518,7 @@ def test_a_sweep_arm_trains_its_own_config_and_is_probed_from_its_checkpoints(tm
     assert config.imagination_input == "encoder" and "imagination_embed" in states.params["params"]["encoder"]
 
 
+@pytest.mark.slow
 def test_sampled_results_of_a_sweep_replay_its_sampled_test_evaluation(tiny_sweep):
     """paper.sampled_results (the report's ORG rows with sampled actions): every finished
     seed's selected model on its own test episodes, actions sampled. a3c is evaluated
@@ -532,6 +547,7 @@ def tiny_sweep(tmp_path_factory, cheap_experiments):
     return out
 
 
+@pytest.mark.slow
 def test_sweep_seed_i_is_the_run_train_makes_with_seed_i(tiny_sweep, tmp_path):
     """The same protocol in both: seed i of a sweep starts from train --seed i's key,
     validates on its episodes after each chunk, selects the same update and tests on the
@@ -625,6 +641,7 @@ def test_bad_method_from_the_shell_is_one_line_without_traceback(tmp_path):
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_a_sweep_spread_over_two_host_devices_equals_the_one_device_sweep(tiny_sweep, tmp_path):
     """The seed axis sharded over 2 forced host devices (a fresh interpreter: the flag
     must precede jax's start): the same selections, validation and test results, and
@@ -664,6 +681,7 @@ def test_a_sweep_spread_over_two_host_devices_equals_the_one_device_sweep(tiny_s
         assert [v["SR"] for v in a["validation"]] == pytest.approx([v["SR"] for v in b["validation"]])
 
 
+@pytest.mark.slow
 def test_a_killed_sweep_resumes_where_it_stopped_and_ends_with_the_same_numbers(tiny_sweep, tmp_path, capsys):
     out = tmp_path / "killed"
     # 2 chunks per method: a3c finishes, a3c+foresit stops after its first chunk.
@@ -691,6 +709,7 @@ def test_a_killed_sweep_resumes_where_it_stopped_and_ends_with_the_same_numbers(
         assert (out / name).read_text() == (tiny_sweep / name).read_text(), name
 
 
+@pytest.mark.slow
 def test_a_sweep_copies_the_methods_another_sweep_finished_instead_of_training_them(tiny_sweep, tmp_path, capsys):
     out = tmp_path / "combined"
     # A budget of 0 chunks: nothing may train, both methods must come from tiny_sweep.
@@ -731,6 +750,7 @@ def test_a_sweep_copies_the_methods_another_sweep_finished_instead_of_training_t
     assert f"Every method was trained on {numerics.describe(numerics.fingerprint())}." in (tiny_sweep / "table1.md").read_text()
 
 
+@pytest.mark.slow
 def test_a_sweep_assembles_a_method_from_the_seeds_other_sweeps_finished(tiny_sweep, tmp_path, capsys):
     """Seeds S and S+1 of tiny_sweep and seed S+2 of a one-seed sweep (`--seed S+2
     --seeds 1`) make a three-seed sweep with nothing trained: each seed's results are its
@@ -802,6 +822,7 @@ def test_seeds_go_to_the_most_devices_that_divide_them():
         ["d0"], ["d0", "d1", "d2"], ["d0", "d1", "d2", "d3"], ["d0", "d1", "d2"]]  # fmt: skip
 
 
+@pytest.mark.slow
 def test_cvae_comparison_on_a_run(finished_run, tmp_path, capsys):
     """The C-VAE comparison from a run folder: items of the run's successful episodes, both
     f_w trained, the files written once (never replaced without --overwrite)."""
@@ -819,6 +840,7 @@ def test_cvae_comparison_on_a_run(finished_run, tmp_path, capsys):
 
 
 # ---------------------------------------------------------------------- evaluate CLI
+@pytest.mark.slow
 def test_evaluate_cli_reproduces_the_test_results_of_training(finished_run, tmp_path):
     out = tmp_path / "run"
     shutil.copytree(finished_run, out)
@@ -923,6 +945,7 @@ def tiny_argv(module: str, argv: list[str], folder: Path) -> list[str]:
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_readme_commands_run_at_a_tiny_size(tmp_path, capsys):
     for module, *argv in readme_commands():
@@ -949,6 +972,7 @@ def csv_rows(path: Path):
         yield from csv.DictReader(f)
 
 
+@pytest.mark.slow
 def test_readme_python_blocks_run_at_a_tiny_size():
     """The README's Python examples, executed with smaller sizes substituted (bathrooms
     only, 2 lanes, 1 update, a small network): the API calls are the documented ones."""
@@ -1016,6 +1040,7 @@ def test_every_config_field_is_a_flag_of_train_and_sweep():
     assert config.entropy_coef == presets.preset("quick", "a3c+foresit")[0].entropy_coef  # the rest: the preset's
 
 
+@pytest.mark.slow
 def test_config_flags_reach_the_run_and_resume_refuses_other_values(tmp_path, capsys):
     out = tmp_path / "gamma"
     train_cli.main(dataclasses.replace(tiny_args(out, stop_after_chunks=1),
@@ -1027,6 +1052,7 @@ def test_config_flags_reach_the_run_and_resume_refuses_other_values(tmp_path, ca
     assert runs.read_json(out / "results_test.json")["results"]
 
 
+@pytest.mark.slow
 def test_sweep_config_flags_are_saved_resumed_and_part_of_the_protocol(tmp_path, capsys):
     base = sweep.Args(methods=("a3c",), seeds=1, preset="tiny", seed=SEED, progress=False, **SWEEP_EPISODES)
     first = dataclasses.replace(base, out=tmp_path / "lr", config=presets.SweepConfigFields(learning_rate=3e-4))

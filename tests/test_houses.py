@@ -255,6 +255,7 @@ def test_replay_oracle_follows_the_reference_bfs_and_rooms(house_kit):
         pose = reference_transition(kit.bank["cell_type"][0], pose, int(action))
 
 
+@pytest.mark.slow
 def test_config_progress_reward_reaches_the_training_env():
     from foresit_jax.config import Config
     from foresit_jax.train import make_env
@@ -349,6 +350,7 @@ def test_render_places_the_agent_in_its_cell_of_a_house(house_kit):
     assert jnp.asarray(rgb).dtype == jnp.uint8
 
 
+@pytest.mark.slow
 def test_agents_train_and_evaluate_in_houses():
     """A tiny a3c+foresit trains 2 updates on houses (their bathrooms' targets) and is
     evaluated there: the house buckets are reported, every episode's room type is the

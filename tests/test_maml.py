@@ -107,6 +107,7 @@ def adapted_rollout():
     return config, params, traj, thetas
 
 
+@pytest.mark.slow
 def test_inner_updates_only_after_steps_6_12_18_24_of_running_episodes(adapted_rollout):
     config, params, traj, thetas = adapted_rollout
     assert len(thetas) == 1 + 4  # theta_0, then one slot after each of steps 6, 12, 18, 24
@@ -130,6 +131,7 @@ def test_inner_updates_only_after_steps_6_12_18_24_of_running_episodes(adapted_r
     np.testing.assert_array_equal(np.asarray(traj.episode_step)[0], 0)
 
 
+@pytest.mark.slow
 def test_evaluation_step_13_runs_under_theta_2_recomputed_independently():
     """An evaluation episode (time limit 100; its first 14 steps): recompute theta_1 = theta_0 - lr grad L_phi
     (steps 0-5 under theta_0) and theta_2 (steps 6-11 under theta_1) with flax's own
@@ -177,6 +179,7 @@ def test_evaluation_step_13_runs_under_theta_2_recomputed_independently():
     jax.tree.map(lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-4, atol=1e-6), mine, theta_2)
 
 
+@pytest.mark.slow
 def test_agent_rollout_adapts_through_the_same_code_path(monkeypatch):
     """Evaluation (`Agent.rollout`) and training (`Agent.act`) both run adaptive_act (traced
     only: what is compiled is what is traced); packed windows are refused."""
@@ -237,6 +240,7 @@ def enable_x64():
     return jax.enable_x64(True) if hasattr(jax, "enable_x64") else jax.experimental.enable_x64()
 
 
+@pytest.mark.slow
 def test_meta_gradient_matches_finite_differences_and_has_its_second_order_term():
     with enable_x64():
         value_and_grad, params = _meta_objective(first_order=False)
@@ -279,6 +283,7 @@ def test_config_requires_whole_episodes_through_the_rollout():
 
 
 # ---------------------------------------------------------------------- training
+@pytest.mark.slow
 def test_maml_foresit_trains_without_nan_and_phi_learns():
     """a3c+maml+foresit (a3c+maml trains in the easy-setting test below)."""
     config = H.tiny_config("a3c+maml+foresit")
@@ -291,6 +296,7 @@ def test_maml_foresit_trains_without_nan_and_phi_learns():
     assert float(np.min(metrics["charts/useful_fraction"])) < 1.0  # whole, padded episodes
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(400)
 def test_maml_training_on_an_easy_setting_raises_the_success_rate():
     """As the a3c easy-setting test (one bathroom, starts within 3 actions), with SAVN's
@@ -303,6 +309,7 @@ def test_maml_training_on_an_easy_setting_raises_the_success_rate():
     assert not H.trees_bitwise_equal(final.params["params"]["learned_loss"], state.params["params"]["learned_loss"])
 
 
+@pytest.mark.slow
 def test_maml_evaluation_runs_its_episodes_in_groups(monkeypatch):
     """Groups of at most MAX_ADAPTIVE_LANES episodes (the last padded), playing the
     episodes one rollout of all lanes plays: those of every other method and of the

@@ -9,6 +9,7 @@ from foresit_jax.config import Config
 from foresit_jax.train import make_trainer
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(240)
 def test_sixteen_seeds_vmapped_in_one_jit_finish_and_differ():
     config = Config(

@@ -33,6 +33,7 @@ def scrambled(params, seed=1, scale=0.5):
 
 
 # ---------------------------------------------------------------------- where i_tau enters
+@pytest.mark.slow
 def test_the_encoder_reading_feeds_i_tau_beside_the_target():
     """imagination_input='encoder': the LSTM's input is the 1x1 conv of [view features :
     tile(g) : tile(action) : tile(i_tau embedded)], built here by hand in numpy; the head
@@ -62,6 +63,7 @@ def test_the_encoder_reading_feeds_i_tau_beside_the_target():
         agent.lstm_inputs(params, obs, probs)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["a3c+foresit", "a3c"])
 def test_the_mlp_reading_is_a_two_layer_head(method):
     """imagination_input='mlp': logits = Dense(ReLU(Dense([s_t : i_tau]))), and the base gets
@@ -81,6 +83,7 @@ def test_the_mlp_reading_is_a_two_layer_head(method):
 
 
 # ---------------------------------------------------------------------- i_tau while acting
+@pytest.mark.slow
 @pytest.mark.parametrize("method, reading", [("a3c+foresit", "head"), ("a3c+foresit", "encoder"), ("a3c+int", "head")])
 def test_i_tau_while_acting_is_f_w_of_the_episode_state_it_was_renewed_at(method, reading):
     """Without noise, every step's i_tau equals f_w([s_k : g]) with k the episode's first
@@ -179,6 +182,7 @@ def test_the_sub_goal_is_the_argmax_of_the_attention_row_over_the_whole_episode(
     assert checked == step.size and crossing > 10, "precondition: episodes that cross a window's edge"
 
 
+@pytest.mark.slow
 def test_without_the_attention_critic_the_sub_goal_is_the_done_step_state():
     _, (traj, items, t_star) = _two_windows("a3c+foresit+plaincritic")
     np.testing.assert_array_equal(items[2], traj.states)
@@ -199,6 +203,7 @@ def test_evaluation_noise_off_zeroes_the_variance():
 
 
 # ---------------------------------------------------------------------- probes
+@pytest.mark.slow
 def test_shuffled_imagination_imagines_from_another_episode():
     config = H.tiny_config("a3c+foresit")
     agent, shuffled = Agent(config), probes.ShuffledImagination(config)

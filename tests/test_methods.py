@@ -124,6 +124,7 @@ def test_no_code_outside_the_pieces_tests_a_base_or_encoder_name():
     assert not offenders, "\n".join(offenders)
 
 
+@pytest.mark.slow
 def test_the_agent_acts_through_its_bases_act():
     """`Agent.act` is the base piece's `act` (here a3c's, wrapped to count its calls)."""
     import jax

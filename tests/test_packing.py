@@ -207,6 +207,7 @@ def test_bootstrapped_return_at_a_cut_by_hand():
 
 
 # ---------------------------------------------------------------------- bookkeeping per episode
+@pytest.mark.slow
 def test_foresit_bookkeeping_fires_once_per_ended_episode_never_for_a_cut_one():
     """Easy bathrooms (random success ~15%), big buffers (no f_w flush): after one update,
     each lane's tracker counts its ended episodes and its buffer its successful ones; the

@@ -27,6 +27,7 @@ SECTIONS = ("## Platforms", "## Table 1", "### savn setup", "### org setup", "##
 pytestmark = pytest.mark.usefixtures("cheap_experiments")
 
 
+@pytest.mark.slow
 def test_tiny_report_has_every_table_figure_and_claim_after_a_kill_resume_and_reuse(tmp_path, capsys):
     # a3c alone first, killed and resumed; then the report run trains a3c+foresit and
     # copies a3c from the first run (--reuse), as MAML rows run elsewhere would be combined.

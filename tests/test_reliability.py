@@ -106,6 +106,7 @@ def test_two_processes_started_at_the_same_instant_on_one_folder_one_is_refused(
     assert "being written by another process (pid" in outputs[1] or "already exists" in outputs[1], outputs
 
 
+@pytest.mark.slow
 def test_a_run_held_by_another_process_is_refused_in_one_line_and_left_as_it_was(run6, tmp_path, capsys):
     out = tmp_path / "held"
     shutil.copytree(run6, out)
@@ -146,6 +147,7 @@ def test_prepare_run_dir_claims_the_folder_and_ignores_its_own_lock_file(tmp_pat
 
 
 # ---------------------------------------------------------------------- 2-3. non-finite and diverging
+@pytest.mark.slow
 def test_a_step_that_leaves_inf_weights_behind_a_finite_loss_is_not_reported(tmp_path, capsys):
     """lr 1e39 is finite as a Python float but inf in float32: the first Adam step makes
     the weights inf while the loss (computed before the step) is finite."""
@@ -156,6 +158,7 @@ def test_a_step_that_leaves_inf_weights_behind_a_finite_loss_is_not_reported(tmp
     assert not list((out / "checkpoints").glob("*")) and not (out / "results_test.json").exists()
 
 
+@pytest.mark.slow
 def test_a_sweep_names_the_seed_whose_weights_went_non_finite(tmp_path, capsys):
     """The same fault in a sweep (the loop train and sweep share, experiments.loop)."""
     out = tmp_path / "inf_sweep"
@@ -165,6 +168,7 @@ def test_a_sweep_names_the_seed_whose_weights_went_non_finite(tmp_path, capsys):
     assert "no checkpoint was written" in line and not (out / "methods" / "a3c" / "progress.json").exists(), line
 
 
+@pytest.mark.slow
 def test_nan_weights_in_a_later_chunk_stop_the_run_naming_a_checkpoint_that_exists(tmp_path, capsys, monkeypatch):
     out = tmp_path / "nan_later"
     train_cli.main(tiny(out, stop_after_chunks=1))
@@ -216,6 +220,7 @@ def corrupt(folder: Path, how: str) -> None:
     data.write_bytes(bytes(raw))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("how", ["flipped", "truncated"])
 def test_resume_skips_a_corrupt_checkpoint_and_ends_as_the_uninterrupted_run(run6, tmp_path, capsys, how):
     out = tmp_path / how
@@ -229,6 +234,7 @@ def test_resume_skips_a_corrupt_checkpoint_and_ends_as_the_uninterrupted_run(run
         assert (out / name).read_bytes() == (run6 / name).read_bytes(), name
 
 
+@pytest.mark.slow
 def test_a_sweep_resumes_past_a_corrupt_checkpoint_to_the_same_numbers(tmp_path, capsys):
     args = sweep.Args(methods=("a3c",), seeds=2, preset="tiny", seed=1, num_updates=6, progress=False,
                       val_episodes_per_room=4, test_episodes_per_room=4)  # fmt: skip
@@ -244,6 +250,7 @@ def test_a_sweep_resumes_past_a_corrupt_checkpoint_to_the_same_numbers(tmp_path,
         assert (killed / name).read_text() == (whole / name).read_text(), name
 
 
+@pytest.mark.slow
 def test_a_corrupt_best_model_is_one_line_and_the_good_results_stay(run6, tmp_path, capsys):
     out = tmp_path / "corrupt_best"
     shutil.copytree(run6, out)
@@ -256,6 +263,7 @@ def test_a_corrupt_best_model_is_one_line_and_the_good_results_stay(run6, tmp_pa
     assert (out / "results_test.json").read_bytes() == good
 
 
+@pytest.mark.slow
 def test_a_checkpoint_saved_before_checksums_still_restores(run6, tmp_path):
     manager = runs.checkpoint_manager(run6 / "checkpoints", 10)
     step = manager.latest_step()
@@ -269,6 +277,7 @@ def test_a_checkpoint_saved_before_checksums_still_restores(run6, tmp_path):
 
 
 # ---------------------------------------------------------------------- 5. resume and its flags
+@pytest.mark.slow
 def test_resume_refuses_flags_that_contradict_the_run_and_extends_with_num_updates(run6, tmp_path, capsys):
     out = tmp_path / "flags"
     train_cli.main(tiny(out, num_updates=4))
@@ -290,6 +299,7 @@ def test_resume_refuses_flags_that_contradict_the_run_and_extends_with_num_updat
     assert (out / "results_test.json").read_bytes() == (run6 / "results_test.json").read_bytes()
 
 
+@pytest.mark.slow
 def test_resume_of_a_finished_run_leaves_its_files_alone(run6, tmp_path, capsys):
     out = tmp_path / "finished"
     shutil.copytree(run6, out)
@@ -360,6 +370,7 @@ def test_make_refuses_bad_room_types(room_types, says):
 
 
 # ---------------------------------------------------------------------- 8. smaller ones
+@pytest.mark.slow
 def test_a_metrics_line_cut_by_a_kill_is_dropped_and_the_run_resumes_to_the_same_bytes(run6, tmp_path, capsys):
     out = tmp_path / "cut"
     train_cli.main(tiny(out, num_updates=6, stop_after_chunks=1))
@@ -372,6 +383,7 @@ def test_a_metrics_line_cut_by_a_kill_is_dropped_and_the_run_resumes_to_the_same
         assert (out / name).read_bytes() == (run6 / name).read_bytes(), name
 
 
+@pytest.mark.slow
 def test_a_broken_line_inside_a_metrics_file_or_a_broken_run_json_is_named(tmp_path, capsys):
     out = tmp_path / "broken"
     train_cli.main(tiny(out, stop_after_chunks=1))
@@ -402,6 +414,7 @@ def test_a_full_disk_is_one_line_that_says_how_to_continue(tmp_path, capsys, mon
     assert line == f"error: {tmp_path / 'full' / 'run.json'}: No space left on device (free some space, then continue with --resume)"
 
 
+@pytest.mark.slow
 def test_a_disk_too_full_for_a_checkpoint_is_one_line_before_orbax_writes(tmp_path, capsys, monkeypatch):
     """(A real full disk, a 20 MB tmpfs with a filler, gave this line, and the run resumed
     to the files of an uninterrupted one once the filler was deleted; orbax failing in the
@@ -414,6 +427,7 @@ def test_a_disk_too_full_for_a_checkpoint_is_one_line_before_orbax_writes(tmp_pa
     assert not list((out / "checkpoints").iterdir())
 
 
+@pytest.mark.slow
 def test_evaluate_on_a_read_only_run_folder_fails_before_evaluating(run6, tmp_path, capsys, monkeypatch):
     """A read-only folder, simulated (these tests may run as root, whom permissions do not
     stop): opening its lock file fails as on a read-only file system, before any work."""

@@ -44,7 +44,8 @@ def mid_episode_state():
 
 @pytest.mark.parametrize(
     "method, reading",
-    [("a3c+foresit", "head"), ("a3c", "head"), ("a3c+foresit", "encoder"), ("a3c+foresit", "mlp")],
+    [("a3c+foresit", "head"), *(pytest.param(*case, marks=pytest.mark.slow)
+                                for case in (("a3c", "head"), ("a3c+foresit", "encoder"), ("a3c+foresit", "mlp")))],
 )  # fmt: skip
 def test_replay_gradient_equals_differentiating_through_the_rollout(method, reading, mid_episode_state):
     replay_config = dataclasses.replace(REPLAY, method=method, imagination_input=reading)

@@ -4,12 +4,14 @@ hashes a refactor is checked with. Lowering only (nothing compiles or runs)."""
 import dataclasses
 
 import jax
+import pytest
 
 from experiments import trace_update
 from experiments.presets import preset
 from foresit_jax.train import make_trainer
 
 
+@pytest.mark.slow
 def test_the_path_of_an_update_and_hashes_that_tell_programs_apart(capsys):
     report = trace_update.main(trace_update.Args(methods=("a3c",)))["a3c"]
     files = report["files"]

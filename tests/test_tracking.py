@@ -40,6 +40,7 @@ def event_scalars(folder: Path) -> dict[str, dict[int, float]]:
     return scalars
 
 
+@pytest.mark.slow
 def test_tensorboard_gets_every_metric_and_validation_row_of_the_csv(tmp_path):
     pytest.importorskip("tensorboardX")
     out = tmp_path / "tb"
@@ -52,6 +53,7 @@ def test_tensorboard_gets_every_metric_and_validation_row_of_the_csv(tmp_path):
     assert scalars["validation/SR"] == pytest.approx({r["update"]: r["SR"] for r in validation})
 
 
+@pytest.mark.slow
 def test_wandb_gets_the_same_rows_under_one_run_id_across_a_resume(tmp_path, monkeypatch):
     calls = []
 

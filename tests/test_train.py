@@ -107,6 +107,7 @@ def test_imagination_loss_depends_on_fw_only():
     assert H.max_abs(d_s0) > 0 and H.max_abs(d_goal) > 0
 
 
+@pytest.mark.slow
 def test_full_buffer_trains_only_fw_and_is_emptied():
     """Force lane 0's buffer full before an update: f_w is trained on it (and nothing
     else changes: theta, Adam state, trackers, key are bit-identical to the same update
@@ -168,7 +169,8 @@ def test_buffer_of_one_trains_fw_on_every_success(foresit_run):
 
 
 # ---------------------------------------------------------------------- every method
-@pytest.mark.parametrize("method", H.METHODS)
+# The default tier keeps ForeSIT itself; the other methods are the slow tier's.
+@pytest.mark.parametrize("method", [m if m == "a3c+foresit" else pytest.param(m, marks=pytest.mark.slow) for m in H.METHODS])
 def test_every_method_trains_without_nan(method, foresit_run):
     config = H.tiny_config(method)
     if method == "a3c+foresit":
@@ -187,6 +189,7 @@ def test_every_method_trains_without_nan(method, foresit_run):
     assert ("query" in state.params["params"]["value_critic"]) == config.pieces.attention_critic
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", H.ORG_METHODS)
 def test_every_object_graph_method_trains_without_nan_on_the_org_setup(method):
     config = H.tiny_config(method, setup="org")
@@ -198,6 +201,7 @@ def test_every_object_graph_method_trains_without_nan_on_the_org_setup(method):
     assert config.pieces.greedy_evaluation  # ORG's evaluation takes the argmax
 
 
+@pytest.mark.slow
 def test_the_encoder_really_uses_the_detections():
     """ORG's graph reads the detector features: the policy logits have a non-zero gradient
     with respect to them, and blanking one visible category's detection changes them."""
@@ -226,6 +230,7 @@ def test_the_encoder_really_uses_the_detections():
     assert not np.allclose(logits(detections), logits(blanked))
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(400)
 def test_object_graph_training_on_an_easy_org_setting_raises_the_success_rate():
     """As the savn easy-setting test, on the org setup with ORG's encoder."""
@@ -238,6 +243,7 @@ def test_object_graph_training_on_an_easy_org_setting_raises_the_success_rate():
 
 
 # ---------------------------------------------------------------------- vmapped seed sweep
+@pytest.mark.slow
 def test_vmapped_sweep_matches_seeds_run_one_by_one():
     """What experiments.sweep runs: vmap(run) over seeds in one jit.  Compared with each
     seed's updates run alone (a different XLA program, so equal to float rounding: the
@@ -262,6 +268,7 @@ def test_vmapped_sweep_matches_seeds_run_one_by_one():
 
 
 # ---------------------------------------------------------------------- learning
+@pytest.mark.slow
 @pytest.mark.timeout(400)
 def test_training_on_an_easy_setting_raises_the_success_rate():
     """One bathroom, one target, starts at most 3 actions from success: a random policy
@@ -278,6 +285,7 @@ def test_training_on_an_easy_setting_raises_the_success_rate():
     assert last > 0.5 and last > first + 0.25, (first, last)
 
 
+@pytest.mark.slow
 def test_the_progress_callback_sees_every_update_and_changes_no_number():
     """`Trainer.run`'s on_update (the progress bar inside a chunk) is called after every
     PROGRESS_EVERY-th update with the update count (vmapped over seeds: after every update,
