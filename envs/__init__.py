@@ -18,6 +18,10 @@ and registers GridNav with gymnax's registry when gymnax has been imported befor
 
 import sys
 
+from envs.versions import check_jax_flax
+
+check_jax_flax()  # before flax is used: one line naming the upgrade, not an error deep in flax
+
 from envs import catalog, metrics, spaces, wrappers
 from envs.bank import SceneBank
 from envs.dynamics import pose_from_index, pose_index

@@ -26,7 +26,12 @@ What it returns is what ``gymnax.make`` returns for one of gymnax's own environm
   Either way ``info`` holds GridNav's facts about the step (``success``,
   ``episode_length``, ``optimal_length``, ``room_type``, ``scene``, ``target``,
   ``terminated``, ``truncated``: ``envs.gridnav.GridNav``).
-- ``default_params`` is computed once (the params of the split asked for).
+- ``default_params`` is computed once (the params of the split asked for), as a
+  ``GymnaxEnvParams``: GridNav's params with gymnax's ``max_steps_in_episode`` (the longest
+  time limit of those params: 30 steps for training), hashed and compared by identity, as
+  a static ``jit`` argument needs (GridNav's params hold the scene bank as device arrays,
+  which cannot be hashed), and copied as themselves (they are immutable: ``copy.deepcopy``
+  of a client's config shares the bank instead of copying it, and stays the same key).
 - ``name``, ``num_actions``, ``reset_env``, ``step_env`` (no automatic reset; the same
   number of values as ``step``) and ``get_obs``, as gymnax's ``Environment`` has them.
 
@@ -46,9 +51,11 @@ import importlib.util
 import re
 
 import jax
+import numpy as np
+from flax import struct
 
 from envs import spaces
-from envs.gridnav import GridNav
+from envs.gridnav import EnvParams, GridNav
 from envs.wrappers import FlattenObservationWrapper
 
 STEP_APIS = ("auto", "done", "terminated_truncated")
@@ -91,6 +98,45 @@ def _space_classes():
     return _import_gymnax("gymnax.environments.spaces")  # optional dependency
 
 
+@struct.dataclass
+class GymnaxEnvParams(EnvParams):
+    """GridNav's params as gymnax clients hold them (``make_gymnax`` returns them).
+
+    - ``max_steps_in_episode``: gymnax's name for the episode limit (rejax's evaluator and
+      others read it as a loop bound); here the longest of ``max_steps`` (each room type's
+      limit still truncates its own episodes). Static (part of the pytree's structure), so it
+      stays a Python int under ``jit``, as gymnax's is.
+    - Hashed and compared by identity: gymnax's params are scalars and hash by value, and
+      some clients pass them to ``jit`` as a static argument; these hold the scene bank, whose
+      arrays cannot be hashed. Identity is what a static argument needs: the same params
+      object finds the compiled program again, another one compiles its own.
+    - ``copy.copy`` and ``copy.deepcopy`` return the params themselves: they are immutable
+      (a frozen dataclass of immutable jax arrays), as copying a tuple returns it.
+    """
+
+    max_steps_in_episode: int = struct.field(pytree_node=False, default=30)
+
+    def __hash__(self) -> int:
+        return id(self)
+
+    def __eq__(self, other) -> bool:
+        return self is other
+
+    def __copy__(self):
+        return self
+
+    def __deepcopy__(self, memo):
+        return self
+
+    @classmethod
+    def of(cls, params: EnvParams) -> "GymnaxEnvParams":
+        """GridNav's params with gymnax's fields added."""
+        if isinstance(params, cls):
+            return params
+        fields = {f: getattr(params, f) for f in params.__dataclass_fields__}
+        return cls(**fields, max_steps_in_episode=int(np.max(np.asarray(params.max_steps))))
+
+
 class GymnaxGridNav:
     """GridNav behind the interface of a gymnax ``Environment`` (see the module docstring).
 
@@ -102,7 +148,7 @@ class GymnaxGridNav:
         self._flat = FlattenObservationWrapper(env)
         self.gridnav = env
         self.step_api = step_api
-        self._params = params
+        self._params = GymnaxEnvParams.of(params)
 
     # ----------------------------------------------------------------- gymnax API
     @property
@@ -206,5 +252,5 @@ def register_gymnax() -> bool:
     return True
 
 
-__all__ = ["STEP_APIS", "GymnaxGridNav", "default_step_api", "installed_gymnax_version", "make_gymnax",
+__all__ = ["STEP_APIS", "GymnaxEnvParams", "GymnaxGridNav", "default_step_api", "installed_gymnax_version", "make_gymnax",
            "register_gymnax"]

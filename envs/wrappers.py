@@ -32,6 +32,12 @@ class Wrapper:
         self._env = env
 
     def __getattr__(self, name):
+        # Python calls this only for names not found on the wrapper. `copy`, `pickle` and
+        # `copy.deepcopy` build a new wrapper without `__init__` and look up dunder names
+        # (`__setstate__`, `__deepcopy__`, ...) on it before `_env` exists: forwarding those,
+        # or `_env` itself, would recurse forever. They are the wrapper's own, never the env's.
+        if name == "_env" or (name.startswith("__") and name.endswith("__")):
+            raise AttributeError(name)
         return getattr(self._env, name)
 
 

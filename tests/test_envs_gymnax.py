@@ -178,3 +178,57 @@ def test_an_installed_gymnax_that_cannot_be_imported_is_one_clear_line(monkeypat
         env.observation_space(params)
     with pytest.raises(ImportError, match="pip install six"):
         envs.register_gymnax()
+
+
+# ------------------------------------------------------------- what gymnax clients do with the objects
+def test_env_and_params_survive_deepcopy_and_pickle_and_step_the_same():
+    """rejax deep-copies its config (the env inside it); others pickle an env to send it to a
+    worker. The copies step exactly as the original."""
+    import copy
+    import pickle
+
+    env, params = envs.make_gymnax(room_types=ROOMS, step_api="done")
+    key, action = jax.random.key(3), jnp.int32(0)
+    obs, state = env.reset(key, params)
+    expected = env.step(key, state, action, params)
+    for copied_env, copied_params in [(copy.deepcopy(env), copy.deepcopy(params)),
+                                      (pickle.loads(pickle.dumps(env)), pickle.loads(pickle.dumps(params)))]:
+        assert isinstance(copied_env, gymnax_compat.GymnaxGridNav) and copied_env.step_api == "done"
+        obs2, state2 = copied_env.reset(key, copied_params)
+        np.testing.assert_array_equal(np.asarray(obs2), np.asarray(obs))
+        got = copied_env.step(key, state2, action, copied_params)
+        for a, b in zip(jax.tree.leaves(got), jax.tree.leaves(expected)):
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    # deepcopy shares the immutable params (and so their scene bank) instead of copying them
+    assert copy.deepcopy(params) is params and copy.deepcopy(env).default_params is params
+
+
+def test_params_carry_gymnaxs_max_steps_in_episode_as_a_static_int():
+    train_env, train_params = envs.make_gymnax(room_types=ROOMS)
+    _, eval_params = envs.make_gymnax(room_types=ROOMS, split="test", training=False)
+    assert train_params.max_steps_in_episode == 30 and type(train_params.max_steps_in_episode) is int
+    assert eval_params.max_steps_in_episode == int(np.max(np.asarray(eval_params.max_steps))) == 200
+    # static: a Python int inside jit, as a loop bound needs (rejax's evaluator)
+    bound = jax.jit(lambda p: jnp.zeros(p.max_steps_in_episode))(train_params)
+    assert bound.shape == (30,)
+    # and the params are still GridNav's: the env steps with them unchanged
+    assert isinstance(train_params, envs.EnvParams)
+
+
+def test_params_hash_by_identity_so_they_can_be_a_static_jit_argument():
+    env, params = envs.make_gymnax(room_types=ROOMS)
+    assert hash(params) == hash(params) and params == params
+    other = gymnax_compat.GymnaxEnvParams.of(env.gridnav.make_params("train", room_types=ROOMS))
+    assert params != other  # equal contents, another object: another static key
+    traces = []
+
+    def first_obs(key, p):
+        traces.append(1)
+        return env.reset(key, p)[0]
+
+    jitted = jax.jit(first_obs, static_argnums=1)
+    a = jitted(jax.random.key(0), params)
+    b = jitted(jax.random.key(0), params)
+    assert len(traces) == 1  # the same params object finds its compiled program
+    np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    np.testing.assert_array_equal(np.asarray(a), np.asarray(env.reset(jax.random.key(0), params)[0]))

@@ -258,3 +258,23 @@ def test_flatten_wrapper_takes_a_five_value_step_and_box_observations():
     np.testing.assert_array_equal(obs, np.ones(6))
     assert obs.dtype == jnp.float32 and bool(done) and int(info["marker"]) == 7 and int(state) == 1
     assert env.num_actions == 6
+
+
+def test_wrappers_deepcopy_and_pickle_without_recursing_and_forward_the_rest():
+    """copy and pickle build a wrapper without __init__ and look up dunder names on it
+    before `_env` exists; the wrapper must answer those itself (it recursed forever before)."""
+    import copy
+    import pickle
+
+    env, params = envs.make("GridNav-v0", room_types=("bathroom",), view_width=2)
+    stack = LogWrapper(LegacyStepAPIWrapper(FlattenObservationWrapper(env)))
+    for copied in (copy.copy(stack), copy.deepcopy(stack), pickle.loads(pickle.dumps(stack))):
+        assert copied.name == "GridNav-v0" and copied.num_actions == 6  # forwarded to GridNav
+        assert copied.observation_space(params).shape == stack.observation_space(params).shape
+        obs, state = copied.reset(jax.random.key(0), params)
+        np.testing.assert_array_equal(np.asarray(obs), np.asarray(stack.reset(jax.random.key(0), params)[0]))
+    half_built = object.__new__(LogWrapper)  # what copy and pickle start from
+    with pytest.raises(AttributeError):
+        half_built.__setstate__
+    with pytest.raises(AttributeError):
+        half_built.name  # no _env yet: an AttributeError, not a RecursionError
