@@ -60,3 +60,98 @@ def verdict(pair: dict[str, float], claim_positive: bool = True) -> str:
     if high < 0:
         return "does not hold"
     return "cannot tell at this budget"
+
+
+# ------------------------------------------------------------------ robust statistics
+# What five seeds can tell (docs/results.md): the interquartile mean and the probability of
+# improvement with stratified-bootstrap intervals, as rliable defines them (Agarwal et al.,
+# "Deep RL at the Edge of the Statistical Precipice", 2021; checked against rliable 1.2.0 in
+# tests/test_robust_stats.py), Holm's correction over a declared family of comparisons, and
+# the smallest effect a paired t-test over n seeds detects with a given power.
+# Scores are [runs, tasks] arrays (a 1-D array is one task): runs are seeds, tasks are
+# whatever is scored separately (room types, setups).
+
+
+def _runs_by_tasks(scores) -> np.ndarray:
+    x = np.asarray(scores, float)
+    if x.ndim == 1:
+        x = x[:, None]
+    if x.ndim != 2 or x.shape[0] == 0:
+        raise ValueError(f"scores must be [runs] or [runs, tasks] with at least one run, got shape {x.shape}")
+    return x
+
+
+def iqm(scores) -> float:
+    """Interquartile mean: the mean of the middle 50% of all runs' scores pooled over tasks
+    (scipy's trim_mean with 25% cut from each end, as rliable's aggregate_iqm)."""
+    return float(_stats.trim_mean(_runs_by_tasks(scores), proportiontocut=0.25, axis=None))
+
+
+def probability_of_improvement(x, y) -> float:
+    """P(X > Y) + P(X = Y) / 2 for a run X of method x and a run Y of method y, each task
+    on its own (the Mann-Whitney U statistic over all pairs of runs), averaged over tasks:
+    rliable's probability_of_improvement. Unpaired: x and y may have different run counts."""
+    x, y = _runs_by_tasks(x), _runs_by_tasks(y)
+    if x.shape[1] != y.shape[1]:
+        raise ValueError(f"x and y must score the same tasks, got {x.shape[1]} and {y.shape[1]}")
+    per_task = [float(((a[:, None] > b[None, :]) + 0.5 * (a[:, None] == b[None, :])).mean())
+                for a, b in zip(x.T, y.T)]  # fmt: skip
+    return float(np.mean(per_task))
+
+
+def stratified_bootstrap_ci(statistic, *scores, reps: int = 2000, level: float = LEVEL, seed: int = 0):
+    """Percentile interval of `statistic(*scores)` under the stratified bootstrap: each
+    array's runs are resampled with replacement within each task, the arrays independently
+    (rliable's StratifiedBootstrap, and StratifiedIndependentBootstrap for several).
+    Returns (point, low, high)."""
+    arrays = [_runs_by_tasks(s) for s in scores]
+    rng = np.random.default_rng(seed)
+    point = float(statistic(*arrays))
+    values = np.empty(reps)
+    for r in range(reps):
+        resampled = []
+        for a in arrays:
+            rows = rng.integers(0, a.shape[0], size=a.shape)  # per task (column) its own draw
+            resampled.append(np.take_along_axis(a, rows, axis=0))
+        values[r] = statistic(*resampled)
+    tail = 100 * (1 - level) / 2
+    low, high = np.percentile(values, [tail, 100 - tail])
+    return point, float(low), float(high)
+
+
+def holm(p_values) -> np.ndarray:
+    """Holm's step-down adjusted p-values for a family of tests (NaN stays NaN and does not
+    count towards the family's size): reject a hypothesis at level alpha when its adjusted
+    p-value is at most alpha, with the family-wise error rate at most alpha."""
+    p = np.asarray(p_values, float)
+    adjusted = np.full(p.shape, math.nan)
+    finite = np.flatnonzero(np.isfinite(p))
+    m = len(finite)
+    order = finite[np.argsort(p[finite], kind="stable")]
+    running = 0.0
+    for rank, index in enumerate(order):
+        running = max(running, min(1.0, (m - rank) * p[index]))
+        adjusted[index] = running
+    return adjusted
+
+
+def minimum_detectable_effect(sd_diff: float, n: int, level: float = LEVEL, power: float = 0.8) -> float:
+    """The smallest true mean difference a two-sided paired t-test over n seeds (per-seed
+    differences with standard deviation sd_diff) detects at `level` with probability
+    `power`, solved exactly with the noncentral t distribution. NaN with fewer than two
+    seeds or no spread."""
+    if n < 2 or not math.isfinite(sd_diff) or sd_diff <= 0:
+        return math.nan
+    df = n - 1
+    critical = float(_stats.t.ppf(0.5 + level / 2, df))
+
+    def power_at(effect: float) -> float:
+        nc = effect * math.sqrt(n) / sd_diff
+        return float(_stats.nct.sf(critical, df, nc) + _stats.nct.cdf(-critical, df, nc))
+
+    from scipy.optimize import brentq
+
+    high = sd_diff
+    while power_at(high) < power:
+        high *= 2
+    return float(brentq(lambda e: power_at(e) - power, 0.0, high, xtol=1e-10))
