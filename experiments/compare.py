@@ -11,6 +11,12 @@ finished methods (`methods/<method>/results.json`) this prints, as Markdown:
   where the sweep counted it;
 * per `--pairs A:B`: B - A seed by seed (`experiments.stats.paired`: mean difference, 95%
   t interval, p, verdict) on each of those columns;
+* per pair, on SR and SPL, what five seeds can tell (`experiments.stats`): each arm's
+  interquartile mean with a 95% stratified-bootstrap interval, the probability that a seed
+  of B beats a seed of A (with its interval), the paired p-value Holm-corrected over the
+  pairs of this call (the declared family), and the minimum difference the paired t-test
+  over these seeds detects with 80% power (beside a "cannot tell", the effect it could
+  have seen);
 * per `--did A:B:C:D`: (D - C) - (B - A) seed by seed on test SR, SPL and SR>=5, e.g. the
   critic's cost in one layout against its cost in another.
 
@@ -96,6 +102,32 @@ def _mean_std(x: np.ndarray) -> str:
     return f"{x.mean():.3g}" + (f" ± {x.std(ddof=1):.2g}" if len(x) > 1 else "")
 
 
+def _interval(point: float, low: float, high: float, digits: int = 1) -> str:
+    return f"{point:.{digits}f} [{low:.{digits}f}, {high:.{digits}f}]"
+
+
+def _robust(results: dict, pairs: list, out: dict) -> str:
+    """The robust table of the pairs (see the module docstring); adds "robust" to out["pairs"]."""
+    rows = []
+    for column in ("SR", "SPL"):
+        family = [out["pairs"][f"{b} - {a}"][column]["p"] for a, b in pairs]
+        adjusted = stats.holm(family)
+        for (a, b), p_holm in zip(pairs, adjusted):
+            x, y = values(results[a], column), values(results[b], column)
+            iqm_a, iqm_b = (stats.stratified_bootstrap_ci(stats.iqm, v) for v in (x, y))
+            poi = stats.stratified_bootstrap_ci(stats.probability_of_improvement, y, x)
+            mde = stats.minimum_detectable_effect(float(np.std(y - x, ddof=1)) if len(x) > 1 else np.nan, len(x))
+            name = f"{b} - {a}"
+            out["pairs"][name].setdefault("robust", {})[column] = {
+                "iqm_a": iqm_a, "iqm_b": iqm_b, "probability_of_improvement": poi, "p_holm": float(p_holm), "mde": mde}
+            rows.append([name, column, _interval(*iqm_a), _interval(*iqm_b), _interval(*poi, digits=2),
+                         f"{p_holm:.3f}" if np.isfinite(p_holm) else "n/a",
+                         f"{mde:.1f}" if np.isfinite(mde) else "n/a"])  # fmt: skip
+    return ("\n## What these seeds can tell: IQM and P(B > A) [95% stratified bootstrap], Holm over the pairs, "
+            "the minimum detectable effect (80% power)\n\n"
+            + markdown_table(rows, ["B - A", "", "IQM of A", "IQM of B", "P(B > A)", "p (Holm)", "MDE"]) + "\n")
+
+
 def main(args: Args) -> dict:
     """Print the comparison; returns {"pairs": {"B - A": {column: stats.paired}},
     "did": {"(D - C) - (B - A)": {column: stats.paired}}}."""
@@ -131,6 +163,7 @@ def main(args: Args) -> dict:
                           stats.verdict(out["pairs"][name]["SR"])])  # fmt: skip
         md += ("\n## Paired seed by seed: difference [95% CI]\n\n"
                + markdown_table(cells, ["methods", *names, "higher SR"]) + "\n")  # fmt: skip
+        md += _robust(results, pairs, out)
     if dids:
         cells = []
         for a, b, c, d in dids:

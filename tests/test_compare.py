@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy import stats as sp
 
-from experiments import compare, runs
+from experiments import compare, runs, stats
 
 SEEDS = (3, 4, 5, 6)
 
@@ -75,3 +75,25 @@ def test_bad_input_says_what_is_wrong(tmp_path):
                         (("a-b",), "give 2 method names"), (("a:c",), "different seeds")):  # fmt: skip
         with pytest.raises(runs.UserError, match=says):
             compare.main(compare.Args(run=tmp_path / "one", pairs=pairs))
+
+
+def test_the_robust_table_of_the_pairs_matches_a_hand_computation(tmp_path, capsys):
+    truth = write_sweep(tmp_path, np.random.default_rng(1))
+    out = compare.main(compare.Args(run=tmp_path, pairs=("a:b", "a:c")))
+    printed = capsys.readouterr().out
+    sr = {m: np.array([r["selected"]["overall"]["SR"] for r in truth[m]]) for m in "abc"}
+    p_values = [sp.ttest_rel(sr[m], sr["a"]).pvalue for m in "bc"]
+    # Holm over the two pairs: the smaller p doubled, the larger kept (never below the first)
+    first = min(1.0, 2 * min(p_values))
+    adjusted = {m: first if p == min(p_values) else max(first, p) for m, p in zip("bc", p_values)}
+    for m, p_holm in adjusted.items():
+        robust = out["pairs"][f"{m} - a"]["robust"]["SR"]
+        middle = lambda x: np.sort(x)[1:3].mean()  # noqa: E731  4 seeds: the IQM is the middle two's mean
+        assert robust["iqm_a"][0] == pytest.approx(middle(sr["a"])) and robust["iqm_b"][0] == pytest.approx(middle(sr[m]))
+        wins = np.mean([(y > x) + 0.5 * (y == x) for y in sr[m] for x in sr["a"]])
+        assert robust["probability_of_improvement"][0] == pytest.approx(wins)
+        assert robust["p_holm"] == pytest.approx(p_holm)
+        d = sr[m] - sr["a"]
+        assert robust["mde"] == pytest.approx(stats.minimum_detectable_effect(d.std(ddof=1), len(d)))
+    assert "What these seeds can tell" in printed and "P(B > A)" in printed
+
