@@ -1,7 +1,7 @@
 """envs.make_gymnax: GridNav as gymnax.make returns an environment (flat float32
 observations, gymnax's spaces, the installed gymnax's step convention, cached default
 params), checked against GridNav itself; and the registration with gymnax's registry.  The
-tests that need gymnax are skipped with a reason without it (CI installs it: the dev extra).
+tests that need gymnax are skipped with a reason without it (CI installs it on both stacks: the dev extra on Python 3.11, without its jax cap on 3.13).
 The PPO loops over it are tests/test_envs_purejaxrl_ppo.py."""
 
 import subprocess
