@@ -46,9 +46,7 @@ here needs it.
 from __future__ import annotations
 
 import functools
-import importlib.metadata
 import importlib.util
-import re
 
 import jax
 import numpy as np
@@ -56,6 +54,7 @@ from flax import struct
 
 from envs import spaces
 from envs.gridnav import EnvParams, GridNav
+from envs.versions import installed_version
 from envs.wrappers import FlattenObservationWrapper
 
 STEP_APIS = ("auto", "done", "terminated_truncated")
@@ -65,11 +64,7 @@ def installed_gymnax_version() -> tuple[int, ...] | None:
     """(major, minor, patch) of the installed gymnax, or None when it is not installed."""
     if importlib.util.find_spec("gymnax") is None:
         return None
-    try:
-        text = importlib.metadata.version("gymnax")
-    except importlib.metadata.PackageNotFoundError:  # importable but without metadata
-        return None
-    return tuple(int(part) for part in re.findall(r"\d+", text)[:3])
+    return installed_version("gymnax")  # None when importable but without metadata
 
 
 def default_step_api() -> str:

@@ -10,7 +10,8 @@ import importlib.metadata
 import re
 
 
-def _version(package: str) -> tuple[int, ...] | None:
+def installed_version(package: str) -> tuple[int, ...] | None:
+    """(major, minor, patch) of an installed distribution, or None when it has no metadata."""
     try:
         text = importlib.metadata.version(package)
     except importlib.metadata.PackageNotFoundError:
@@ -31,6 +32,6 @@ def incompatible_pair(jax_version: tuple[int, ...] | None, flax_version: tuple[i
 
 def check_jax_flax() -> None:
     """Raise ImportError naming the upgrade when the installed jax and flax cannot pair."""
-    reason = incompatible_pair(_version("jax"), _version("flax"))
+    reason = incompatible_pair(installed_version("jax"), installed_version("flax"))
     if reason is not None:
         raise ImportError(reason)

@@ -8,28 +8,21 @@ intervals with `experiments.stats`, and checks that the README and houses.md pri
 
 from __future__ import annotations
 
-import tarfile
 from pathlib import Path
 
 import pytest
+import study_data
 
-from experiments import compare, runs, stats, sweep
+from experiments import compare, stats, sweep
 
 REPO = Path(__file__).resolve().parents[1]
-ARCHIVE = REPO / "docs" / "data" / "house_study.tar.xz"
 METHODS = ("a3c", "a3c+critic", "a3c+foresit")
 
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory) -> dict[str, list[dict]]:
     """Each method's per-seed results, read from the unpacked archive as `experiments.compare` reads a sweep."""
-    folder = tmp_path_factory.mktemp("house")
-    with tarfile.open(ARCHIVE) as tar:
-        # The "data" filter (no links out, no absolute paths) is in Python 3.11.4 and later.
-        tar.extractall(folder, **({"filter": "data"} if hasattr(tarfile, "data_filter") else {}))
-    root = folder / "house_study"
-    assert runs.read_json(root / "sweep.json")["methods"] == list(METHODS)
-    return compare.load(root)
+    return compare.load(study_data.unpack("house_study.tar.xz", tmp_path_factory.mktemp("house"), METHODS))
 
 
 def sr(results: list[dict]):

@@ -22,6 +22,6 @@ def test_incompatible_pair(jax_version, flax_version, refused):
 
 def test_the_installed_pair_imports_and_a_bad_one_is_an_import_error(monkeypatch):
     versions.check_jax_flax()  # the stack the suite runs on
-    monkeypatch.setattr(versions, "_version", lambda package: {"jax": (0, 12, 0), "flax": (0, 12, 3)}[package])
+    monkeypatch.setattr(versions, "installed_version", lambda package: {"jax": (0, 12, 0), "flax": (0, 12, 3)}[package])
     with pytest.raises(ImportError, match=r"flax 0\.12\.3 does not run on jax 0\.12\.0"):
         versions.check_jax_flax()
