@@ -106,7 +106,7 @@ def _interval(point: float, low: float, high: float, digits: int = 1) -> str:
     return f"{point:.{digits}f} [{low:.{digits}f}, {high:.{digits}f}]"
 
 
-def _robust(results: dict, pairs: list, out: dict) -> str:
+def _robust(results: dict, pairs: list, out: dict, level: str = "##") -> str:
     """The robust table of the pairs (see the module docstring); adds "robust" to out["pairs"]."""
     rows = []
     for column in ("SR", "SPL"):
@@ -123,9 +123,33 @@ def _robust(results: dict, pairs: list, out: dict) -> str:
             rows.append([name, column, _interval(*iqm_a), _interval(*iqm_b), _interval(*poi, digits=2),
                          f"{p_holm:.3f}" if np.isfinite(p_holm) else "n/a",
                          f"{mde:.1f}" if np.isfinite(mde) else "n/a"])  # fmt: skip
-    return ("\n## What these seeds can tell: IQM and P(B > A) [95% stratified bootstrap], Holm over the pairs, "
+    return (f"\n{level} What these seeds can tell: IQM and P(B > A) [95% stratified bootstrap], Holm over the pairs, "
             "the minimum detectable effect (80% power)\n\n"
             + markdown_table(rows, ["B - A", "", "IQM of A", "IQM of B", "P(B > A)", "p (Holm)", "MDE"]) + "\n")
+
+
+def shown_columns(results: dict, last: int = 250) -> list[str]:
+    """The columns of `TEST`, the training SR and `DIAGNOSTICS` that some seed recorded."""
+    columns = (*TEST, TRAINING, *DIAGNOSTICS)
+    return [c for c in columns if any(np.isfinite(values(rs, c, last)).any() for rs in results.values())]
+
+
+def paired_report(results: dict, pairs: list, columns: list[str], last: int = 250, level: str = "##") -> tuple[str, dict]:
+    """Markdown and numbers of `pairs` ([(A, B)] for B - A, the methods of `results`,
+    same seeds) on `columns`: the seed-by-seed table, then `_robust`'s. The pairs are one
+    family for Holm's correction. Returns (markdown, {"B - A": {column: stats.paired,
+    "robust": {...}}})."""
+    out: dict = {"pairs": {}}
+    cells = []
+    for a, b in pairs:
+        name = f"{b} - {a}"
+        out["pairs"][name] = {c: stats.paired(values(results[a], c, last), values(results[b], c, last)) for c in columns}
+        cells.append([name, *(_pair(out["pairs"][name][c]) for c in columns), stats.verdict(out["pairs"][name]["SR"])])
+    names = [diagnostic_label(c) for c in columns]
+    md = (f"\n{level} Paired seed by seed: difference [95% CI]\n\n"
+          + markdown_table(cells, ["methods", *names, "higher SR"]) + "\n")  # fmt: skip
+    md += _robust(results, pairs, out, level)
+    return md, out["pairs"]
 
 
 def main(args: Args) -> dict:
@@ -136,8 +160,7 @@ def main(args: Args) -> dict:
     results = load(args.run)
     pairs = [_split(s, 2, "--pairs", results) for s in args.pairs]
     dids = [_split(s, 4, "--did", results) for s in args.did]
-    columns = (*TEST, TRAINING, *DIAGNOSTICS)
-    shown = [c for c in columns if any(np.isfinite(values(rs, c, args.last)).any() for rs in results.values())]
+    shown = shown_columns(results, args.last)
 
     rows = []
     for method, per_seed in results.items():
@@ -154,16 +177,8 @@ def main(args: Args) -> dict:
 
     out: dict = {"pairs": {}, "did": {}}
     if pairs:
-        cells = []
-        for a, b in pairs:
-            name = f"{b} - {a}"
-            out["pairs"][name] = {c: stats.paired(values(results[a], c, args.last), values(results[b], c, args.last))
-                                  for c in shown}  # fmt: skip
-            cells.append([name, *(_pair(out["pairs"][name][c]) for c in shown),
-                          stats.verdict(out["pairs"][name]["SR"])])  # fmt: skip
-        md += ("\n## Paired seed by seed: difference [95% CI]\n\n"
-               + markdown_table(cells, ["methods", *names, "higher SR"]) + "\n")  # fmt: skip
-        md += _robust(results, pairs, out)
+        text, out["pairs"] = paired_report(results, pairs, shown, args.last)
+        md += text
     if dids:
         cells = []
         for a, b, c, d in dids:

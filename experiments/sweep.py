@@ -158,12 +158,32 @@ def reuse_sources(args: Args) -> list[Path]:
             raise runs.UserError(f"--reuse {folder}: run with another protocol ({'; '.join(clash)}); "
                                  "only sweeps of the same protocol can be combined")  # fmt: skip
         for method in args.methods:
-            made = method_protocol(folder / "methods" / method)
-            if (folder / "methods" / method / "results.json").is_file() and made != selection.PROTOCOL_VERSION:
+            found = method_folder(folder, method, args)
+            made = method_protocol(found)
+            if (found / "results.json").is_file() and made != selection.PROTOCOL_VERSION:
                 raise runs.UserError(f"--reuse {folder}: its {method} was selected by another protocol (version "
                                      f"{made}; this code's is {selection.PROTOCOL_VERSION}, experiments/selection.py)")  # fmt: skip
         sources.append(folder)
     return sources
+
+
+def method_folder(sweep_folder: Path, method: str, args: Args) -> Path:
+    """The folder of `method` (an arm) in the sweep `sweep_folder`: the one of that name,
+    else the first (in name order) of an arm that trains the same Config under `args`'s
+    protocol, e.g. `a3c` for `a3c@learning_rate=1e-3` at quick, whose learning rate that is
+    (so that a tuning grid reuses a sweep of the preset's own values); the folder of that
+    name, absent, when none does."""
+    own = sweep_folder / "methods" / method
+    if own.is_dir() or not (sweep_folder / "methods").is_dir():
+        return own
+    config, _ = method_schedule(method, args)
+    for other in sorted(p for p in (sweep_folder / "methods").iterdir() if p.is_dir()):
+        try:
+            if method_schedule(other.name, args)[0] == config:
+                return other
+        except ValueError:  # a folder name that is no arm of this code
+            continue
+    return own
 
 
 def method_protocol(folder: Path) -> int | None:
@@ -213,7 +233,7 @@ def copy_finished(args: Args, sources: list[Path]) -> None:
     wanted = seeds_of(args)
     for method in args.methods:
         target = args.out / "methods" / method
-        folders = [f / "methods" / method for f in sources]
+        folders = [method_folder(f, method, args) for f in sources]
         have = {folder: finished_seeds(folder) for folder in folders}
         if target.exists() or not any(have.values()):
             continue
@@ -227,7 +247,8 @@ def copy_finished(args: Args, sources: list[Path]) -> None:
         missing = [s for s in wanted if s not in where]
         if whole:
             shutil.copytree(whole[0], partial)
-            print(f"{method}: finished in {whole[0].parent.parent}, copied", flush=True)
+            alias = f" (as {whole[0].name}: the same Config)" if whole[0].name != method else ""
+            print(f"{method}: finished in {whole[0].parent.parent}{alias}, copied", flush=True)
         elif not missing:
             parts = {s: where[s] for s in wanted}
             assemble(method, args, parts, partial)

@@ -880,6 +880,7 @@ BENCH_ARGS = {  # commands whose flags are parsed here and which run in their ow
     "experiments.demo": lambda: importlib.import_module("experiments.demo").DemoConfig,
     "experiments.bench_env": lambda: importlib.import_module("experiments.bench_env").BenchConfig,
     "experiments.compare": lambda: importlib.import_module("experiments.compare").Args,  # tests/test_compare.py
+    "experiments.tune": lambda: importlib.import_module("experiments.tune").Args,  # tests/test_tune.py runs it
 }
 
 
@@ -1012,8 +1013,8 @@ def test_console_scripts_are_the_module_programs(monkeypatch, capsys):
     import tomllib
 
     scripts = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())["project"]["scripts"]
-    assert set(scripts) == {"foresit-train", "foresit-evaluate", "foresit-sweep", "foresit-paper", "foresit-probe",
-                            "foresit-failures", "foresit-compare"}
+    assert set(scripts) == {"foresit-train", "foresit-evaluate", "foresit-sweep", "foresit-tune", "foresit-paper",
+                            "foresit-probe", "foresit-failures", "foresit-compare"}
     for name, target in scripts.items():
         module, function = target.split(":")
         assert module == f"experiments.{name.removeprefix('foresit-')}"

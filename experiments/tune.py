@@ -1,0 +1,276 @@
+"""Tuning as part of a comparison: `python -m experiments.tune --methods a3c a3c+critic a3c+foresit
+--grid learning_rate=3e-4,1e-3 --seeds 5 --preset quick --out runs/tune`.
+
+Every method is trained at every value of the grid over the same seeds: each (method,
+value) is an arm `METHOD@field=value` of one seed sweep (`experiments.sweep`, in
+`--out/sweep`, a sweep folder that `compare`, `evaluate` and `probe` read as any other).
+Each method's value is then chosen by its mean validation SR over the seeds (each seed's
+selected model's validation SR, `selection_sr`): the test split never chooses. The report
+(`tune.md`, `tune.json`, `tune_curves.png` in --out) has:
+
+* the grid: per method and value, the validation SR that chose, the test SR and SPL, the
+  chosen value marked;
+* best vs best, the fair comparison: every pair of methods, each at its own chosen value,
+  paired seed by seed (`experiments.compare.paired_report`: difference and t interval,
+  IQM, P(B > A), Holm over these pairs, the minimum detectable effect);
+* the same pairs at each common value of the grid (one family per value);
+* the learning curves of every value, one panel per method.
+
+Several `--grid` fields make their product (`--grid learning_rate=3e-4,1e-3
+entropy_coef=0.01,0.02`). `--resume` continues a killed tune; `--reuse` takes arms that
+other sweeps or tunes of the same protocol finished (`experiments.sweep.copy_finished`), an
+arm at the preset's own value also from a sweep that ran it under its plain method name
+(`a3c` at quick is `a3c@learning_rate=1e-3`). The grid runs arm after arm, each arm's seeds
+vmapped in one program, so seed s at value v is the seed s of a sweep of that arm.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import sys
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+from experiments import compare, devices, runs, sweep
+from experiments.presets import split_arm
+from experiments.tables import markdown_table
+
+KEEP = ("stop_after_chunks", "progress")  # this invocation's own, not the tune's
+
+
+@dataclasses.dataclass(frozen=True)
+class Args:
+    """Train every method at every grid value over the same seeds, choose each method's value on validation, pair them."""
+
+    methods: tuple[str, ...] = ("a3c", "a3c+critic", "a3c+foresit")
+    """Methods (or arms, METHOD@field=value,...) to tune and compare; the first is the base."""
+    grid: tuple[str, ...] = ("learning_rate=3e-4,1e-3",)
+    """FIELD=V1,V2,...: a Config field and its values; several fields make their product."""
+    setup: str = "savn"
+    """Environment setup: savn or org."""
+    seeds: int = 5
+    """Seeds per arm (vmapped in one program)."""
+    preset: str = "quick"
+    """Preset: tiny, quick, house or paper."""
+    seed: int = 0
+    """Base seed: seed i is the run `train --seed <seed + i>` would make."""
+    out: Path = Path("runs/tune")
+    """Output folder (the sweep of the arms goes to its sweep/)."""
+    resume: bool = False
+    """Continue the tune in --out where it stopped, with the arguments it was started with."""
+    overwrite: bool = False
+    """Replace an existing tune in --out."""
+    reuse: tuple[Path, ...] = ()
+    """Sweep or tune folders whose finished arms are taken instead of trained (same setup,
+    preset and overrides; see experiments.sweep's --reuse)."""
+    num_updates: Optional[int] = None
+    """Override the preset's number of updates."""
+    test_episodes_per_room: Optional[int] = None
+    """Override the preset's test episodes per room type."""
+    val_episodes_per_room: Optional[int] = None
+    """Override the preset's validation episodes per room type."""
+    stop_after_chunks: Optional[int] = None
+    """Stop (as if killed) after this many chunks of this invocation; for testing --resume."""
+    progress: bool = True
+    """Show the progress bar."""
+
+
+def parse_grid(specs) -> list[tuple[str, list[str]]]:
+    """`--grid`'s FIELD=V1,V2,... items -> [(field, [value text, ...])]; one-line errors
+    for what does not parse (whether a field may be set and a value has its type is checked
+    on the arms, `arms`)."""
+    if not specs:
+        raise runs.UserError("--grid needs at least one FIELD=V1,V2,... (e.g. learning_rate=3e-4,1e-3)")
+    grid = []
+    for spec in specs:
+        field, eq, body = (x.strip() for x in spec.partition("="))
+        values = [v.strip() for v in body.split(",") if v.strip()]
+        if not eq or not field or not values:
+            raise runs.UserError(f"--grid {spec!r}: write FIELD=V1,V2,... (e.g. learning_rate=3e-4,1e-3)")
+        if len(set(values)) != len(values):
+            raise runs.UserError(f"--grid {spec!r}: a value is given twice")
+        if field in dict(grid):
+            raise runs.UserError(f"--grid: {field} is given twice; give its values in one FIELD=V1,V2,...")
+        grid.append((field, values))
+    return grid
+
+
+def points(grid) -> list[str]:
+    """The grid's points, in order (the last field varying fastest): 'field=v,...' each."""
+    return [",".join(f"{f}={v}" for f, v in zip(dict(grid), combo)) for combo in itertools.product(*dict(grid).values())]
+
+
+def arm(method: str, point: str) -> str:
+    """The arm of `method` at a grid point: `a3c` at 'learning_rate=3e-4' is
+    `a3c@learning_rate=3e-4`; an arm's own fields stay (`a3c@x=1` -> `a3c@x=1,learning_rate=3e-4`)."""
+    return method + ("," if "@" in method else "@") + point
+
+
+def arms(args: Args, grid) -> dict[str, dict[str, str]]:
+    """{method: {point: arm}}, every arm checked against the preset: a field an arm cannot
+    set, a value not of its type, or a grid field the method's own arm fields set is refused."""
+    table = {}
+    for method in args.methods:
+        _, own = split_arm(method)
+        clash = sorted(set(own) & set(dict(grid)))
+        if clash:
+            raise runs.UserError(f"--methods {method}: sets {', '.join(clash)}, which --grid varies; drop it from one")
+        table[method] = {p: arm(method, p) for p in points(grid)}
+        for name in table[method].values():
+            sweep.method_schedule(name, sweep_args(args, (name,), Path(".")))  # a ValueError names what is wrong
+    return table
+
+
+def sweep_args(args: Args, methods: tuple[str, ...], folder: Path) -> sweep.Args:
+    reuse = tuple(f / "sweep" if (Path(f) / "tune.json").is_file() else Path(f) for f in map(Path, args.reuse))
+    return sweep.Args(methods=methods, setup=args.setup, seeds=args.seeds, preset=args.preset, seed=args.seed,
+                      out=folder, resume=(folder / "sweep.json").is_file(), reuse=reuse, num_updates=args.num_updates,
+                      test_episodes_per_room=args.test_episodes_per_room, val_episodes_per_room=args.val_episodes_per_room,
+                      stop_after_chunks=args.stop_after_chunks, progress=args.progress)  # fmt: skip
+
+
+# ---------------------------------------------------------------------- choosing on validation
+def selection_sr(per_seed: list[dict]) -> np.ndarray:
+    """Per seed, the validation SR of its selected model (the validation at its selected
+    update): what the value is chosen by. Test numbers are not read."""
+    out = []
+    for r in per_seed:
+        at = [h["SR"] for h in r["validation"] if h["update"] == r["selected_update"]]
+        if len(at) != 1:
+            raise runs.UserError(f"seed {r['seed']}: no single validation at its selected update {r['selected_update']}")
+        out.append(sweep.rate(at[0]))
+    return np.array(out)
+
+
+def choose(by_point: dict[str, list[dict]]) -> str:
+    """The grid point (of `by_point`: point -> a method's per-seed results there) whose mean
+    validation SR (`selection_sr`) is highest; a tie goes to the first point in grid order."""
+    means = {p: float(selection_sr(per_seed).mean()) for p, per_seed in by_point.items()}
+    return max(means, key=lambda p: (means[p], -list(means).index(p)))
+
+
+# ---------------------------------------------------------------------- the report
+def _mean_std(x: np.ndarray) -> str:
+    return f"{x.mean():.1f} ± {x.std(ddof=1):.1f}" if len(x) > 1 else f"{x.mean():.1f}"
+
+
+def grid_table(table: dict, results: dict, chosen: dict) -> tuple[str, list[dict]]:
+    rows, cells = [], []
+    for method, by_point in table.items():
+        for point, name in by_point.items():
+            per_seed = results[name]
+            val, sr, spl = selection_sr(per_seed), compare.values(per_seed, "SR"), compare.values(per_seed, "SPL")
+            rows.append({"method": method, "point": point, "arm": name, "val_SR": val.tolist(), "SR": sr.tolist(),
+                         "SPL": spl.tolist(), "chosen": point == chosen[method]})  # fmt: skip
+            cells.append([method, point, _mean_std(val), _mean_std(sr), _mean_std(spl),
+                          "**chosen**" if point == chosen[method] else ""])  # fmt: skip
+    md = markdown_table(cells, ["method", "value", "validation SR (chooses)", "test SR", "test SPL", ""])
+    return md + "\n", rows
+
+
+def pairs_of(methods) -> list[tuple[str, str]]:
+    """Every pair of methods (A before B in --methods): B - A."""
+    return list(itertools.combinations(methods, 2))
+
+
+def report(args: Args, grid, table: dict, results: dict) -> tuple[str, dict]:
+    """tune.md's text and tune.json's numbers from the arms' per-seed results."""
+    chosen = {m: choose({p: results[a] for p, a in by_point.items()}) for m, by_point in table.items()}
+    seeds = [r["seed"] for r in next(iter(results.values()))]
+    fields = ", ".join(f for f, _ in grid)
+    md = (f"# Tuning {fields}: {', '.join(args.methods)}\n\n"
+          f"Preset {args.preset}, setup {args.setup}, seeds {', '.join(map(str, seeds))}; each seed's model selected on "
+          "validation, each method's value chosen by its seeds' mean validation SR (the test split does not choose). "
+          "Mean ± sample std over seeds.\n\n## The grid\n\n")  # fmt: skip
+    text, rows = grid_table(table, results, chosen)
+    md += text
+    out = {"chosen": chosen, "grid": rows, "seeds": seeds, "best_vs_best": {}, "common": {}}
+    pairs = pairs_of(args.methods)
+    if pairs and len(seeds) > 1:
+        best = {m: results[table[m][chosen[m]]] for m in args.methods}
+        columns = [c for c in compare.shown_columns(best) if c in (*compare.TEST, compare.TRAINING)]
+        md += ("\n## Best vs best: each method at its own chosen value\n\n"
+               + ", ".join(f"{m}: {chosen[m]}" for m in args.methods) + "\n")
+        text, out["best_vs_best"] = compare.paired_report(best, pairs, columns, level="###")
+        md += text
+        for point in points(grid):
+            at = {m: results[table[m][point]] for m in args.methods}
+            md += f"\n## All at {point}\n"
+            text, out["common"][point] = compare.paired_report(at, pairs, columns, level="###")
+            md += text
+    md += f"\n![learning curves per value](tune_curves.png)\n\nThe arms' sweep: {args.out / 'sweep'} (its table1.md).\n"
+    return md, out
+
+
+def curves_png(path: Path, table: dict, results: dict) -> None:
+    """One panel per method: each grid point's training success rate (smoothed, mean and
+    band over seeds) and its mean validation SR (markers)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(4.2 * len(table), 3.6))
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(1, len(table), sharey=True, squeeze=False)[0]
+    for ax, (method, by_point) in zip(axes, table.items()):
+        for i, (point, name) in enumerate(by_point.items()):
+            per_seed, color = results[name], f"C{i}"
+            y = 100 * np.array([runs.smooth(r["training_success_rate"]) for r in per_seed])
+            x = np.arange(1, y.shape[1] + 1)
+            ax.plot(x, y.mean(0), color=color, label=point)
+            ax.fill_between(x, y.mean(0) - y.std(0), y.mean(0) + y.std(0), color=color, alpha=0.2)
+            updates = [h["update"] for h in per_seed[0]["validation"]]
+            val = np.array([[sweep.rate(h["SR"]) for h in r["validation"]] for r in per_seed])  # percent
+            ax.plot(updates, val.mean(0), "o", color=color, markersize=3)
+        ax.set_title(method)
+        ax.set_xlabel("updates")
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("SR (%): training (line), validation (o)")
+    axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def main(args: Args) -> dict | None:
+    """Run (or continue) the tune; returns tune.json's numbers (None when stopped early)."""
+    if args.resume:
+        args = runs.resumed_args(args, "tune.json", "tune", keep=KEEP)
+    if args.seeds < 1:
+        raise runs.UserError(f"--seeds must be >= 1, got {args.seeds}")
+    if not args.methods or len(set(args.methods)) != len(args.methods):
+        raise runs.UserError("--methods needs at least one method, each once")
+    grid = parse_grid(args.grid)
+    table = arms(args, grid)
+    if not args.resume:
+        runs.prepare_run_dir(args.out, resume=False, overwrite=args.overwrite, marker="tune.json", kind="tune")
+        runs.write_started_args(args.out / "tune.json", args, KEEP)
+    names = tuple(a for by_point in table.values() for a in by_point.values())
+    print(f"tuning {', '.join(f for f, _ in grid)}: {len(args.methods)} method(s) x {len(points(grid))} value(s) "
+          f"= {len(names)} arms, {args.seeds} seed(s) each", flush=True)  # fmt: skip
+    if sweep.main(sweep_args(args, names, args.out / "sweep")) is None:
+        print("continue with: python -m experiments.tune --resume --out " + str(args.out))
+        return None
+    results = {a: runs.read_json(args.out / "sweep" / "methods" / a / "results.json")["results"] for a in names}
+    md, out = report(args, grid, table, results)
+    (args.out / "tune.md").write_text(md)
+    runs.write_json(args.out / "tune_results.json", out)
+    curves_png(args.out / "tune_curves.png", table, results)
+    print(md)
+    print(f"wrote {args.out}/tune.md, tune_results.json, tune_curves.png")
+    return out
+
+
+def cli(argv=None) -> dict | None:
+    return runs.run_cli(Args, main, argv)
+
+
+def console() -> None:
+    """The `foresit-tune` console script: as `python -m experiments.tune`."""
+    devices.split_host_into_devices()  # before jax starts (see experiments.devices)
+    cli(sys.argv[1:])
+
+
+if __name__ == "__main__":
+    console()
