@@ -6,12 +6,14 @@ seed). For each seed's selected model (`foresit_jax.probes` has the functions):
 
 * test SR on the same test episodes (the run's test key, `--episodes-per-room` per room
   type) with i_tau as the default evaluation gives it (the trained f_w, the noise at the
-  end of training, whatever `Config.evaluation_noise` the run used), with the noise off, from an untrained f_w (the run's initial w), and
-  shuffled across episodes; for a method evaluated greedily (ORG), also with sampled
+  end of training, whatever `Config.evaluation_noise` the run used), with the noise off, from an untrained f_w (the run's initial w),
+  shuffled across episodes, and shuffled with the noise off (only i_tau's content moves); for a method evaluated greedily (ORG), also with sampled
   actions. Each condition is paired with the first over the seeds (`experiments.stats`);
 * f_w against its targets on `--windows` fresh training windows of the agent (held out:
   f_w never trained on them): smooth-L1, R^2 over the targets' mean, and over each target
-  category's mean; the variance of f_w's outputs beside the noise's;
+  category's mean; what f_w's inputs tell, fit on half the items: s_0 itself, ridge on
+  [s_0 : g], f_w's architecture trained offline (`foresit_jax.probes.imagination_fit`);
+  the variance of f_w's outputs beside the noise's;
 * where the sub-goal falls in its successful episode: t*/T and the share at the Done step.
 
 Writes `probe.md` and `probe.json` into `--run` or `--out` (refusing to replace them without
@@ -33,7 +35,7 @@ import numpy as np
 from experiments import runs, selection, stats
 from experiments.tables import markdown_table
 
-CONDITIONS = ("trained", "noise off", "untrained f_w", "shuffled", "sampled actions")
+CONDITIONS = ("trained", "noise off", "untrained f_w", "shuffled", "shuffled, noise off", "sampled actions")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -130,6 +132,9 @@ def sr_conditions(model: Model, evaluator, episodes: int, shuffled) -> dict[str,
         out["noise off"] = sr(trained._replace(noise_variance=jnp.zeros_like(training_end)))
         out["untrained f_w"] = sr(trained._replace(imagination_params=untrained_w))
         out["shuffled"] = sr(trained, agent=shuffled)
+        # At the training-end noise most of i_tau's variance can be noise: shuffling then
+        # changes little of what the policy sees. Without the noise, only i_tau's content moves.
+        out["shuffled, noise off"] = sr(trained._replace(noise_variance=jnp.zeros_like(training_end)), agent=shuffled)
     if config.pieces.greedy_evaluation:
         out["sampled actions"] = sr(trained, greedy=False)
     return out
@@ -139,7 +144,7 @@ def imagination_items(model: Model, windows: int) -> dict:
     """f_w's fit, its signal beside the noise, and the sub-goal positions, on the items of
     `windows` fresh training windows (`Trainer.collect_subgoal_items`)."""
     from foresit_jax.evaluate import agent_params
-    from foresit_jax.probes import imagination_fit, signal_to_noise, subgoal_position_histogram
+    from foresit_jax.probes import fit_imagination_offline, imagination_fit, signal_to_noise, subgoal_position_histogram
 
     trainer, state = model.trainer, model.state
     state = state._replace(key=jax.random.fold_in(state.key, 7))  # windows f_w never saw
@@ -148,8 +153,13 @@ def imagination_items(model: Model, windows: int) -> dict:
     add = add.astype(bool)
     out = {"subgoal": subgoal_position_histogram(t_star[add], step[add])}
     if model.config.pieces.imagination.trains_imagination and add.sum() >= 4:
-        predicted = np.asarray(trainer.agent.imagine(state.imagination_params, s_0[add], goal[add]))
-        out["fit"] = imagination_fit(predicted, subgoal[add], goal[add])
+        s_0, goal, subgoal = s_0[add], goal[add], subgoal[add]
+        predicted = np.asarray(trainer.agent.imagine(state.imagination_params, s_0, goal))
+        w_init = trainer.init(selection.run_key(model.seed)).imagination_params  # the run's own initial f_w
+        offline, steps = fit_imagination_offline(trainer.agent.imagine, w_init, s_0, goal, subgoal)
+        out["fit"] = imagination_fit(predicted, subgoal, goal, s_0=s_0,
+                                     offline=np.asarray(trainer.agent.imagine(offline, s_0, goal)))  # fmt: skip
+        out["fit"]["offline_steps"] = steps
         variance = float(agent_params(state, model.config.sigma2_max, "training_end").noise_variance)
         out["signal"] = signal_to_noise(predicted, variance)
     return out
@@ -182,13 +192,18 @@ def markdown(report: dict, episodes: int, windows: int, level: int = 1) -> str:
             for r in per_seed:
                 f, g = r["items"]["fit"], r["items"]["signal"]
                 cells.append([r["seed"], f["items"], f"{f['smooth_l1']:.4f}", _fmt(f["r2_over_mean"], 2),
-                              _fmt(f["category_r2_over_mean"], 2), _fmt(f["r2_over_category"], 2),
+                              _fmt(f["category_r2_over_mean"], 2), _fmt(f.get("identity_r2_over_mean"), 2),
+                              _fmt(f.get("ridge_r2_over_mean"), 2), _fmt(f.get("offline_r2_over_mean"), 2),
+                              _fmt(f["r2_over_category"], 2),
                               f"{g['signal_variance']:.3f} / {g['noise_variance']:.3f} ({g['signal_share']:.2f})"])  # fmt: skip
-            md.append("f_w on held-out sub-goal items (odd items; the baselines fit on the even ones): "
-                      "R^2 over the targets' mean, the category-mean baseline's, and f_w's over that baseline; "
-                      "i_tau's variance: f_w's outputs across episodes / the noise's (signal share).\n")  # fmt: skip
-            md.append(markdown_table(cells, ["seed", "items", "smooth-L1", "R^2 f_w", "R^2 category mean",
-                                             "R^2 f_w over category", "signal / noise variance"]) + "\n")  # fmt: skip
+            md.append("f_w on held-out sub-goal items (odd items; the baselines fit on the even ones), R^2 over the "
+                      "targets' mean: the online f_w; the target category's mean; s_0 itself (f_w's input); ridge "
+                      "regression on [s_0 : g]; f_w's architecture trained offline on the even items (full batch, "
+                      "Adam, early-stopped on a fifth of them); then f_w's R^2 over the category mean; i_tau's "
+                      "variance: f_w's outputs across episodes / the noise's (signal share).\n")  # fmt: skip
+            md.append(markdown_table(cells, ["seed", "items", "smooth-L1", "R^2 f_w", "category mean", "s_0",
+                                             "ridge", "offline f_w", "R^2 f_w over category",
+                                             "signal / noise variance"]) + "\n")  # fmt: skip
         sub = [r["items"]["subgoal"] for r in per_seed]
         edges = sub[0]["edges"]
         bins = [f"{edges[i]:.1f}-{edges[i + 1]:.1f}" for i in range(len(edges) - 1)]

@@ -53,16 +53,58 @@ def smooth_l1(predicted: np.ndarray, target: np.ndarray) -> float:
     return float(np.mean(np.where(d < 1.0, 0.5 * d**2, d - 0.5)))
 
 
-def imagination_fit(predicted: np.ndarray, target: np.ndarray, goal: np.ndarray) -> dict[str, float]:
+def halves(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The probe's split of n items: (fit: the even ones, held out: the odd ones)."""
+    return np.arange(0, n, 2), np.arange(1, n, 2)
+
+
+RIDGE_ALPHAS = tuple(10.0 ** np.arange(-4, 5))
+
+
+def ridge_fit(x: np.ndarray, y: np.ndarray, alphas=RIDGE_ALPHAS) -> tuple[np.ndarray, np.ndarray, float]:
+    """Ridge regression of y `[N, H]` on x `[N, F]` with an intercept (not penalised), the
+    penalty chosen among `alphas` by exact leave-one-out error on these items (the hat
+    matrix of the centred problem: residual_i / (1 - h_ii)). Returns (W `[F, H]`, b `[H]`,
+    alpha), the prediction being x @ W + b."""
+    x, y = np.asarray(x, np.float64), np.asarray(y, np.float64)
+    mx, my = x.mean(0), y.mean(0)
+    xc, yc = x - mx, y - my
+    u, s, vt = np.linalg.svd(xc, full_matrices=False)
+    uty = u.T @ yc
+    best = None
+    for alpha in alphas:
+        shrink = s**2 / (s**2 + alpha)
+        fitted = u @ (shrink[:, None] * uty)
+        # with the intercept, the centred hat matrix plus 1/N is the leave-one-out's
+        h = np.sum(u**2 * shrink, axis=1) + 1.0 / len(x)
+        loo = float(np.sum(((yc - fitted) / np.maximum(1.0 - h, 1e-9)[:, None]) ** 2))
+        if best is None or loo < best[0]:
+            best = (loo, alpha)
+    alpha = best[1]
+    w = vt.T @ ((s / (s**2 + alpha))[:, None] * uty)
+    return w, my - mx @ w, float(alpha)
+
+
+def imagination_fit(predicted: np.ndarray, target: np.ndarray, goal: np.ndarray, s_0: np.ndarray | None = None,
+                    offline: np.ndarray | None = None) -> dict[str, float]:  # fmt: skip
     """How well f_w's predictions `[N, H]` match the sub-goals `[N, H]` of items whose
-    targets are `goal [N, D]`, against two baselines fit on the even items and scored,
-    as f_w is, on the odd ones: the targets' mean, and each target category's mean (a
+    targets are `goal [N, D]`, against baselines fit on the even items and scored, as f_w
+    is, on the odd ones (`halves`): the targets' mean, and each target category's mean (a
     category is a distinct goal vector; one unseen in the even half gets the mean).
     Returns items, f_w's smooth-L1 and R^2 over the mean, the category baseline's R^2
     over the mean, and f_w's R^2 over the category baseline (> 0: f_w knows more than the
-    target category alone)."""
+    target category alone).
+
+    With f_w's inputs `s_0 [N, H]`, what those inputs tell (each as R^2 over the mean, on
+    the odd items): `identity_r2_over_mean`, the sub-goal predicted as s_0 itself (exact
+    where the critic's sub-goal is the start, f_w's own input); `ridge_r2_over_mean`,
+    ridge regression on [s_0 : g] fit on the even items (`ridge_fit`, its penalty in
+    `ridge_alpha`). With `offline` `[N, H]`, the predictions of f_w's architecture trained
+    offline on the even items (`fit_imagination_offline`): `offline_r2_over_mean`.
+    Where these beat the category mean and f_w does not, f_w is fitted worse than its
+    inputs allow."""
     predicted, target, goal = (np.asarray(x, np.float64) for x in (predicted, target, goal))
-    fit, held = np.arange(0, len(target), 2), np.arange(1, len(target), 2)
+    fit, held = halves(len(target))
     mean = target[fit].mean(axis=0)
     categories, index = np.unique(goal, axis=0, return_inverse=True)
     index = index.reshape(-1)
@@ -72,13 +114,64 @@ def imagination_fit(predicted: np.ndarray, target: np.ndarray, goal: np.ndarray)
         if len(members):
             category_mean[c] = target[members].mean(axis=0)
     by_category = category_mean[index[held]]
-    return {
+    out = {
         "items": int(len(target)),
         "smooth_l1": smooth_l1(predicted[held], target[held]),
         "r2_over_mean": r_squared(predicted[held], target[held], mean),
         "category_r2_over_mean": r_squared(by_category, target[held], mean),
         "r2_over_category": r_squared(predicted[held], target[held], by_category),
     }
+    if s_0 is not None:
+        s_0 = np.asarray(s_0, np.float64)
+        out["identity_r2_over_mean"] = r_squared(s_0[held], target[held], mean)
+        x = np.concatenate([s_0, goal], axis=-1)
+        w, b, out["ridge_alpha"] = ridge_fit(x[fit], target[fit])
+        out["ridge_r2_over_mean"] = r_squared(x[held] @ w + b, target[held], mean)
+    if offline is not None:
+        out["offline_r2_over_mean"] = r_squared(np.asarray(offline, np.float64)[held], target[held], mean)
+    return out
+
+
+def fit_imagination_offline(imagine, w_init, s_0, goal, target, steps: int = 3000, learning_rate: float = 1e-3,
+                            check_every: int = 50):  # fmt: skip
+    """f_w's architecture (`imagine(w, s_0, goal)`, from `w_init`) trained offline on the
+    even items of (s_0, goal, target) (`halves`) with f_w's own loss (smooth-L1), full
+    batch, Adam at `learning_rate`, up to `steps` steps: as well fitted as these items
+    allow, beside the online f_w, which sees each item in one lane's buffer of M, one step
+    per item. One even item in five is held back for early stopping (every
+    `check_every` steps; the parameters of its lowest loss are returned), so the odd items
+    the probe scores stay unseen. Returns (parameters, steps taken to the best)."""
+    import optax
+
+    from foresit_jax.losses import smooth_l1 as loss_of
+
+    fit, _ = halves(len(target))
+    stop, train = fit[::5], np.setdiff1d(fit, fit[::5])
+    data = [jnp.asarray(np.asarray(x)[i]) for i in (train, stop) for x in (s_0, goal, target)]
+    optimizer = optax.adam(learning_rate)
+
+    def loss(w, s, g, y):
+        return jnp.mean(loss_of(imagine(w, s, g), y))
+
+    @jax.jit
+    def run(w, opt, s, g, y):
+        def step(carry, _):
+            w, opt = carry
+            grads = jax.grad(loss)(w, s, g, y)
+            updates, opt = optimizer.update(grads, opt, w)
+            return (optax.apply_updates(w, updates), opt), None
+
+        return jax.lax.scan(step, (w, opt), None, length=check_every)[0]
+
+    check = jax.jit(loss)
+    w, opt = w_init, optimizer.init(w_init)
+    best = (float(check(w, *data[3:])), w, 0)
+    for done in range(check_every, steps + 1, check_every):
+        w, opt = run(w, opt, *data[:3])
+        held = float(check(w, *data[3:]))
+        if held < best[0]:
+            best = (held, w, done)
+    return best[1], best[2]
 
 
 def signal_to_noise(predicted: np.ndarray, noise_variance: float) -> dict[str, float]:

@@ -454,7 +454,7 @@ def test_probe_of_a_run_reproduces_its_test_sr_and_reports_every_probe(finished_
     assert seed["seed"] == SEED
     tested = json.loads((run / "results_test.json").read_text())["results"]["overall"]["SR"]
     assert seed["sr"]["trained"] == pytest.approx(tested)
-    assert set(seed["sr"]) == {"trained", "noise off", "untrained f_w", "shuffled"}
+    assert set(seed["sr"]) == {"trained", "noise off", "untrained f_w", "shuffled", "shuffled, noise off"}
     assert all(0.0 <= v <= 100.0 for v in seed["sr"].values())
     sub = seed["items"]["subgoal"]
     assert sub["episodes"] > 0 and sum(sub["shares"]) == pytest.approx(1.0)

@@ -234,6 +234,76 @@ def test_imagination_fit_against_hand_computed_values():
     assert probes.imagination_fit(np.tile(mean, (60, 1)), target, goals)["r2_over_mean"] == pytest.approx(0.0, abs=1e-12)
 
 
+def test_probe_baselines_recover_known_answers():
+    """s_0 as the sub-goal is exact where the sub-goal is s_0; ridge on [s_0 : g] recovers
+    a linear map (noise-free: R^2 1, the map's coefficients) and scores a noisy one as a
+    hand computation with its chosen penalty does."""
+    rng = np.random.default_rng(3)
+    goals = np.repeat(np.eye(4), 30, axis=0)
+    s_0 = rng.normal(size=(120, 6))
+    same = probes.imagination_fit(np.zeros_like(s_0), s_0, goals, s_0=s_0)
+    assert same["identity_r2_over_mean"] == 1.0 and same["ridge_r2_over_mean"] > 0.999
+    w_true, b_true = rng.normal(size=(10, 6)), rng.normal(size=6)
+    x = np.concatenate([s_0, goals], axis=1)
+    linear = x @ w_true + b_true
+    w, b, alpha = probes.ridge_fit(x[::2], linear[::2])
+    assert alpha == min(probes.RIDGE_ALPHAS)
+    np.testing.assert_allclose(x @ w + b, linear, atol=1e-3)  # the map (the one-hot columns are collinear with b)
+    fit = probes.imagination_fit(np.zeros_like(linear), linear, goals, s_0=s_0)
+    assert fit["ridge_r2_over_mean"] > 0.9999 and fit["identity_r2_over_mean"] < 0.5
+    noisy = linear + rng.normal(size=linear.shape) * 3
+    fit = probes.imagination_fit(np.zeros_like(noisy), noisy, goals, s_0=s_0)
+    w, b, alpha = probes.ridge_fit(x[::2], noisy[::2])
+    assert fit["ridge_alpha"] == alpha
+    held = noisy[1::2]
+    sse = ((held - (x[1::2] @ w + b)) ** 2).sum()
+    assert fit["ridge_r2_over_mean"] == pytest.approx(1 - sse / ((held - noisy[::2].mean(0)) ** 2).sum())
+
+
+def test_ridge_penalty_is_the_brute_force_leave_one_out_choice():
+    """The closed-form leave-one-out errors choose the penalty a loop that refits without
+    each item chooses (numpy's lstsq on the augmented system, an independent reference)."""
+    rng = np.random.default_rng(4)
+    x, y = rng.normal(size=(25, 8)), rng.normal(size=(25, 3))
+    y += x[:, :2] @ rng.normal(size=(2, 3))  # some signal, much noise: a middle penalty wins
+
+    def loo(alpha):
+        sse = 0.0
+        for i in range(len(x)):
+            keep = np.arange(len(x)) != i
+            xm, ym = x[keep].mean(0), y[keep].mean(0)
+            a = np.vstack([x[keep] - xm, np.sqrt(alpha) * np.eye(x.shape[1])])
+            t = np.vstack([y[keep] - ym, np.zeros((x.shape[1], y.shape[1]))])
+            w = np.linalg.lstsq(a, t, rcond=None)[0]
+            sse += float(((y[i] - ym - (x[i] - xm) @ w) ** 2).sum())
+        return sse
+
+    alphas = (1e-2, 1.0, 10.0, 30.0, 100.0, 1e4)
+    errors = [loo(a) for a in alphas]
+    _, _, chosen = probes.ridge_fit(x, y, alphas)
+    assert chosen == alphas[int(np.argmin(errors))]
+    assert alphas[int(np.argmin(errors))] not in (alphas[0], alphas[-1])  # the case tests a choice
+
+
+def test_offline_f_w_fits_what_a_teacher_f_w_computes():
+    """f_w's architecture trained offline on the even items of a teacher f_w's outputs
+    predicts the odd ones far better than the untrained f_w (from which it starts)."""
+    from foresit_jax.networks import ImaginationNet
+
+    net = ImaginationNet((32, 16, 8, 16, 32, 16))  # f_w as Agent.imagine applies it, at H = 16
+    rng = np.random.default_rng(5)
+    n = 400
+    goal = rng.normal(size=(n, 8)).astype(np.float32)
+    s_0 = rng.normal(size=(n, 16)).astype(np.float32)
+    teacher, w_init = (net.init(jax.random.PRNGKey(k), s_0[0], goal[0]) for k in (1, 2))
+    target = 3 * np.asarray(net.apply(teacher, s_0, goal))
+    w, steps = probes.fit_imagination_offline(net.apply, w_init, s_0, goal, target)
+    assert steps > 0
+    fit = probes.imagination_fit(np.asarray(net.apply(w_init, s_0, goal)), target, goal, s_0=s_0,
+                                 offline=np.asarray(net.apply(w, s_0, goal)))  # fmt: skip
+    assert fit["offline_r2_over_mean"] > 0.6 > fit["r2_over_mean"] + 0.5  # measured: 0.74 against -0.11
+
+
 def test_signal_to_noise_and_subgoal_histogram_by_hand():
     s = probes.signal_to_noise(np.array([[1.0, 0.0], [-1.0, 2.0]]), 0.5)  # variances 1 and 1
     assert s == {"signal_variance": 1.0, "noise_variance": 0.5, "signal_share": pytest.approx(2 / 3)}
