@@ -51,10 +51,30 @@ class Args:
     """Test episodes per room type for each condition."""
     windows: int = 40
     """Training windows played to collect f_w's held-out items and the sub-goals."""
+    fit_options: bool = False
+    """Also replay f_w's online training with other options (`FIT_OPTIONS`) on the same
+    items at the trained encoder, from the run's initial f_w, streamed --fit-passes times:
+    which procedure fits as well as the offline f_w."""
+    fit_passes: int = 5
+    """How many times the items are streamed through each replayed option."""
     out: Optional[Path] = None
     """Folder for probe.md and probe.json (default: --run)."""
     overwrite: bool = False
     """Replace an existing probe.md / probe.json."""
+
+
+# f_w's training options replayed by --fit-options: the run's own first, then one change
+# each (Config fields: imagination_optimizer, imagination_lr, imagination_epochs, buffer_size).
+FIT_OPTIONS = {
+    "as trained": {},
+    "epochs 1": {"imagination_epochs": 1},
+    "epochs 20": {"imagination_epochs": 20},
+    "lr 3e-4": {"imagination_lr": 3e-4},
+    "lr 3e-3": {"imagination_lr": 3e-3},
+    "sgd, lr 1e-2 (Algorithm 1)": {"imagination_optimizer": "sgd", "imagination_lr": 1e-2},
+    "M 8": {"buffer_size": 8},
+    "M 128": {"buffer_size": 128},
+}
 
 
 @dataclasses.dataclass
@@ -140,16 +160,40 @@ def sr_conditions(model: Model, evaluator, episodes: int, shuffled) -> dict[str,
     return out
 
 
-def imagination_items(model: Model, windows: int) -> dict:
+def fit_options(model: Model, w_init, items, passes: int) -> dict[str, float]:
+    """R^2 over the mean on the held-out items of f_w trained by each of `FIT_OPTIONS`
+    (`probes.replay_online_fit`) from `w_init` on the fit items of `items` ((s_0, goal,
+    subgoal, add), each `[windows, T, B, ...]`)."""
+    from foresit_jax.imagination import make_imagination_optimizer
+    from foresit_jax.probes import halves, only_fit_items, r_squared, replay_online_fit
+
+    s_0, goal, subgoal, add = (x.reshape((-1,) + x.shape[2:]) for x in items)  # steps in time order
+    add = add.astype(bool)
+    fit, held = halves(int(add.sum()))
+    mean = subgoal[add][fit].mean(axis=0)
+    out = {}
+    for name, change in FIT_OPTIONS.items():
+        config = dataclasses.replace(model.config, **change)
+        optimizer = make_imagination_optimizer(config.imagination_optimizer, config.imagination_lr)
+        w = replay_online_fit(model.trainer.agent.imagine, w_init, s_0, goal, subgoal, only_fit_items(add), optimizer,
+                              config.imagination_epochs, config.buffer_size, passes)  # fmt: skip
+        predicted = np.asarray(model.trainer.agent.imagine(w, s_0[add][held], goal[add][held]))
+        out[name] = r_squared(predicted, subgoal[add][held], mean)
+    return out
+
+
+def imagination_items(model: Model, windows: int, options_passes: int = 0) -> dict:
     """f_w's fit, its signal beside the noise, and the sub-goal positions, on the items of
-    `windows` fresh training windows (`Trainer.collect_subgoal_items`)."""
+    `windows` fresh training windows (`Trainer.collect_subgoal_items`); with
+    `options_passes`, `fit_options` too."""
     from foresit_jax.evaluate import agent_params
     from foresit_jax.probes import fit_imagination_offline, imagination_fit, signal_to_noise, subgoal_position_histogram
 
     trainer, state = model.trainer, model.state
     state = state._replace(key=jax.random.fold_in(state.key, 7))  # windows f_w never saw
     collect = jax.jit(trainer.collect_subgoal_items, static_argnums=2)
-    (s_0, goal, subgoal, add), (t_star, step) = jax.tree.map(np.asarray, collect(state, trainer.env_params, windows))
+    items, (t_star, step) = jax.tree.map(np.asarray, collect(state, trainer.env_params, windows))
+    s_0, goal, subgoal, add = items
     add = add.astype(bool)
     out = {"subgoal": subgoal_position_histogram(t_star[add], step[add])}
     if model.config.pieces.imagination.trains_imagination and add.sum() >= 4:
@@ -160,6 +204,8 @@ def imagination_items(model: Model, windows: int) -> dict:
         out["fit"] = imagination_fit(predicted, subgoal, goal, s_0=s_0,
                                      offline=np.asarray(trainer.agent.imagine(offline, s_0, goal)))  # fmt: skip
         out["fit"]["offline_steps"] = steps
+        if options_passes:
+            out["fit_options"] = fit_options(model, w_init, items, options_passes)
         variance = float(agent_params(state, model.config.sigma2_max, "training_end").noise_variance)
         out["signal"] = signal_to_noise(predicted, variance)
     return out
@@ -204,6 +250,14 @@ def markdown(report: dict, episodes: int, windows: int, level: int = 1) -> str:
             md.append(markdown_table(cells, ["seed", "items", "smooth-L1", "R^2 f_w", "category mean", "s_0",
                                              "ridge", "offline f_w", "R^2 f_w over category",
                                              "signal / noise variance"]) + "\n")  # fmt: skip
+        if all(r["items"].get("fit_options") for r in per_seed):
+            names = list(per_seed[0]["items"]["fit_options"])
+            cells = [[r["seed"], *(_fmt(r["items"]["fit_options"][n], 2) for n in names),
+                      _fmt(r["items"]["fit"]["offline_r2_over_mean"], 2)] for r in per_seed]  # fmt: skip
+            md.append("f_w's online training replayed on the fit items at the trained encoder, from the run's initial "
+                      "f_w, one option changed at a time (`--fit-options`): R^2 over the mean on the held-out items, "
+                      "beside the offline f_w's.\n")  # fmt: skip
+            md.append(markdown_table(cells, ["seed", *names, "offline f_w"]) + "\n")
         sub = [r["items"]["subgoal"] for r in per_seed]
         edges = sub[0]["edges"]
         bins = [f"{edges[i]:.1f}-{edges[i + 1]:.1f}" for i in range(len(edges) - 1)]
@@ -215,7 +269,7 @@ def markdown(report: dict, episodes: int, windows: int, level: int = 1) -> str:
     return "\n".join(md)
 
 
-def probe(models: dict[str, list[Model]], episodes: int, windows: int) -> dict:
+def probe(models: dict[str, list[Model]], episodes: int, windows: int, options_passes: int = 0) -> dict:
     """{method: [per seed: {"seed", "sr": `sr_conditions`, "items": `imagination_items`}]}."""
     from foresit_jax.evaluate import Evaluator
     from foresit_jax.probes import ShuffledImagination
@@ -228,15 +282,16 @@ def probe(models: dict[str, list[Model]], episodes: int, windows: int) -> dict:
             where = (model.config.setup, model.config.layout)
             evaluator = evaluators.setdefault(where, Evaluator(*where))
             sr = sr_conditions(model, evaluator, episodes, shuffled)
-            report[method].append({"seed": model.seed, "sr": sr, "items": imagination_items(model, windows)})
+            items = imagination_items(model, windows, options_passes)
+            report[method].append({"seed": model.seed, "sr": sr, "items": items})
             print(f"probe {method} seed {model.seed}: {sr} ({time.time() - t0:.0f} s)", flush=True)
     return report
 
 
 def main(args: Args) -> dict:
 
-    if args.episodes_per_room < 1 or args.windows < 1:
-        raise runs.UserError("--episodes-per-room and --windows must be >= 1")
+    if args.episodes_per_room < 1 or args.windows < 1 or args.fit_passes < 1:
+        raise runs.UserError("--episodes-per-room, --windows and --fit-passes must be >= 1")
     folder = args.run if args.out is None else args.out
     out_md, out_json = folder / "probe.md", folder / "probe.json"
     if out_json.exists() and not args.overwrite:
@@ -251,10 +306,11 @@ def main(args: Args) -> dict:
     if not models:
         raise runs.UserError(f"{args.run}: no finished method with imagination or the attention critic to probe")
     runs.claim(folder)  # the one writer of the folder, and writable, before the probe's work
-    report = probe(models, args.episodes_per_room, args.windows)
+    report = probe(models, args.episodes_per_room, args.windows, args.fit_passes if args.fit_options else 0)
     md = markdown(report, args.episodes_per_room, args.windows)
     folder.mkdir(parents=True, exist_ok=True)
-    runs.write_json(out_json, {"episodes_per_room": args.episodes_per_room, "windows": args.windows, "methods": report})
+    runs.write_json(out_json, {"episodes_per_room": args.episodes_per_room, "windows": args.windows,
+                               "fit_passes": args.fit_passes if args.fit_options else 0, "methods": report})  # fmt: skip
     out_md.write_text(md)
     print(md)
     print(f"wrote {out_md} and {out_json} ({time.time() - t0:.0f} s)")

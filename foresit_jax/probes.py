@@ -174,6 +174,43 @@ def fit_imagination_offline(imagine, w_init, s_0, goal, target, steps: int = 300
     return best[1], best[2]
 
 
+def replay_online_fit(imagine, w_start, s_0, goal, subgoal, add, optimizer, epochs: int, buffer_size: int,
+                      passes: int = 1):  # fmt: skip
+    """f_w trained from `w_start` as training trains it (`imagination.buffer_add` and
+    `train_on_full_buffers`, step by step in time order, one buffer of `buffer_size` per
+    lane, `epochs` passes of one `optimizer` step per item, a fresh optimiser state per
+    buffer), on a stream of items `[S, B, ...]` (S steps of B lanes; `add [S, B]`: which
+    steps offer their item), streamed `passes` times: how well the online procedure fits
+    these items at a fixed encoder, to hold against `fit_imagination_offline` on the same
+    items. Jitted per call; returns the parameters."""
+    from foresit_jax import imagination
+
+    lanes = add.shape[1]
+    buffers = jax.tree.map(lambda x: jnp.broadcast_to(x, (lanes,) + x.shape),
+                           imagination.buffer_init(buffer_size, s_0.shape[-1], goal.shape[-1]))  # fmt: skip
+    stream = tuple(jnp.asarray(np.concatenate([np.asarray(x)] * passes)) for x in (s_0, goal, subgoal, add))
+
+    @jax.jit
+    def run(w, buffers, stream):
+        def step(carry, item):
+            w, buffers = carry
+            buffers = jax.vmap(imagination.buffer_add)(buffers, *item)
+            w, buffers, _ = imagination.train_on_full_buffers(w, buffers, imagine, optimizer, epochs)
+            return (w, buffers), None
+
+        return jax.lax.scan(step, (w, buffers), stream)[0][0]
+
+    return run(w_start, buffers, stream)
+
+
+def only_fit_items(add: np.ndarray) -> np.ndarray:
+    """`add` (any shape) keeping only the items `halves` puts in the fit half: the even
+    ones in row-major order, the order in which `x[add]` lists them."""
+    add = np.asarray(add, bool)
+    rank = np.cumsum(add.reshape(-1)).reshape(add.shape) - 1
+    return add & (rank % 2 == 0)
+
+
 def signal_to_noise(predicted: np.ndarray, noise_variance: float) -> dict[str, float]:
     """How much of i_tau's variance is signal: the variance of f_w's outputs across
     episodes (mean over dimensions) beside the variance of the noise added to them (Eq. 7);

@@ -304,6 +304,35 @@ def test_offline_f_w_fits_what_a_teacher_f_w_computes():
     assert fit["offline_r2_over_mean"] > 0.6 > fit["r2_over_mean"] + 0.5  # measured: 0.74 against -0.11
 
 
+def test_only_fit_items_are_the_even_items_in_the_order_of_a_boolean_index():
+    add = np.random.default_rng(6).random((5, 3, 4)) < 0.4
+    x = np.arange(add.size).reshape(add.shape)
+    np.testing.assert_array_equal(x[probes.only_fit_items(add)], x[add][::2])
+
+
+def test_replayed_online_fit_is_the_training_procedure():
+    """`replay_online_fit` streaming items twice gives the f_w `Trainer.store_and_train`
+    gives from the same start on the stream written twice (the procedure training runs),
+    bit for bit."""
+    from foresit_jax import imagination
+
+    config = H.tiny_config("a3c+foresit", buffer_size=3, imagination_epochs=2)
+    trainer = H.trainer(config)
+    rng = np.random.default_rng(7)
+    steps, lanes, hidden, goal_size = 6, config.num_lanes, config.hidden_size, 8
+    items = (rng.normal(size=(steps, lanes, hidden)).astype(np.float32), rng.normal(size=(steps, lanes, goal_size)).astype(np.float32),
+             rng.normal(size=(steps, lanes, hidden)).astype(np.float32), rng.random((steps, lanes)) < 0.5)  # fmt: skip
+    w0 = trainer.agent.imagination_net.init(jax.random.PRNGKey(0), items[0][0, 0], items[1][0, 0])
+    buffers = jax.tree.map(lambda x: jnp.broadcast_to(x, (lanes,) + x.shape),
+                           imagination.buffer_init(config.buffer_size, hidden, goal_size))  # fmt: skip
+    doubled = tuple(jnp.asarray(np.concatenate([x, x])) for x in items)
+    want, _, _ = jax.jit(trainer.store_and_train)(w0, buffers, doubled)
+    got = probes.replay_online_fit(trainer.agent.imagine, w0, *items, trainer.imagination_optimizer,
+                                   config.imagination_epochs, config.buffer_size, passes=2)  # fmt: skip
+    H.assert_trees_bitwise_equal(got, want)
+    assert not H.trees_bitwise_equal(got, w0)
+
+
 def test_signal_to_noise_and_subgoal_histogram_by_hand():
     s = probes.signal_to_noise(np.array([[1.0, 0.0], [-1.0, 2.0]]), 0.5)  # variances 1 and 1
     assert s == {"signal_variance": 1.0, "noise_variance": 0.5, "signal_share": pytest.approx(2 / 3)}
@@ -420,3 +449,29 @@ def test_sweep_diagnostics_table_by_hand():
     assert lines[2].split(" | ")[2] == "6"  # mean over the seeds of 3 and 9
     assert lines[0].rstrip(" |").endswith("| 2") and lines[0].endswith("|  |")  # no f_w loss recorded
     assert "other" not in md and sweep.diagnostics_markdown({"x": [{}]}) == ""
+
+
+@pytest.mark.slow
+def test_fit_options_replay_each_option_on_the_fit_items_and_score_the_held_out_ones():
+    """`experiments.probe.fit_options` on items `[windows, T, B]`: one R^2 per option of
+    FIT_OPTIONS; 'as trained' is the run's own procedure replayed on the even items and
+    scored on the odd ones against their mean, as a direct computation gives it."""
+    from experiments import probe
+
+    config = H.tiny_config("a3c+foresit", buffer_size=2)
+    trainer = H.trainer(config)
+    rng = np.random.default_rng(8)
+    shape = (3, 5, config.num_lanes)
+    items = (rng.normal(size=shape + (16,)).astype(np.float32), rng.normal(size=shape + (8,)).astype(np.float32),
+             rng.normal(size=shape + (16,)).astype(np.float32), rng.random(shape) < 0.6)  # fmt: skip
+    w0 = trainer.agent.imagination_net.init(jax.random.PRNGKey(0), items[0][0, 0, 0], items[1][0, 0, 0])
+    model = probe.Model(config, trainer, 0, None, None)
+    got = probe.fit_options(model, w0, items, passes=2)
+    assert list(got) == list(probe.FIT_OPTIONS) and all(np.isfinite(v) for v in got.values())
+    flat = [x.reshape((-1,) + x.shape[2:]) for x in items]
+    add = flat[3]
+    w = probes.replay_online_fit(trainer.agent.imagine, w0, *flat[:3], probes.only_fit_items(add),
+                                 trainer.imagination_optimizer, config.imagination_epochs, config.buffer_size, 2)  # fmt: skip
+    target = flat[2][add]
+    predicted = np.asarray(trainer.agent.imagine(w, flat[0][add][1::2], flat[1][add][1::2]))
+    assert got["as trained"] == pytest.approx(probes.r_squared(predicted, target[1::2], target[::2].mean(0)))
