@@ -190,6 +190,7 @@ class Agent:
             attention_critic=self.method.attention_critic,
             attention_size=config.attention_size,
             value_hidden=config.value_hidden,
+            linear_value_head=config.value_head == "linear",
             imagination_input=config.imagination_input,
             zero_value_init=config.attention_value_init == "zeros",
             key_gradient=config.attention_key_gradient == "full",

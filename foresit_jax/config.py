@@ -17,6 +17,7 @@ LAYOUTS: tuple[str, ...] = ("room", "house")
 IMAGINATION_OPTIMIZERS: tuple[str, ...] = ("sgd", "adam")
 IMAGINATION_INPUTS: tuple[str, ...] = ("head", "encoder", "mlp")
 EVALUATION_NOISES: tuple[str, ...] = ("training_end", "off")
+VALUE_HEADS: tuple[str, ...] = ("mlp", "linear")
 ATTENTION_VALUE_INITS: tuple[str, ...] = ("lecun", "zeros")
 ATTENTION_KEY_GRADIENTS: tuple[str, ...] = ("full", "stopped")
 
@@ -89,6 +90,12 @@ class Config:
     """Width of the critic's query and key layers."""
     value_hidden: int = 256
     """Hidden width of the two-layer value MLP."""
+    value_head: str = "mlp"
+    """'mlp': V is a two-layer MLP (`value_hidden` units, ReLU), as the paper writes it for
+    the attended state (Section 5.2), here for every method; 'linear': one dense layer, SAVN's
+    critic (models/basemodel.py, Linear(512, 1)), whose A3C row the paper's table copies
+    (ORG's two stacked linear layers are linear too). The attention critic's s*_t feeds
+    the same head. docs/deviations.md."""
     attention_value_init: str = "lecun"
     """Initial kernel of the attention critic's v in s*_t = sum_j alpha_j v(s_j) + s_t
     (Eq. 3): 'lecun' (lecun-normal, as every other layer; the paper gives none), whose
@@ -184,6 +191,7 @@ class Config:
                 needs = ", ".join(f"{k}={v!r}" for k, v in pieces.required_config.items())
                 raise ValueError(f"method {self.method!r} supports {name} {supported}, not {value!r} (it needs {needs}).")
         for name, valid in (("imagination_input", IMAGINATION_INPUTS), ("evaluation_noise", EVALUATION_NOISES),
+                            ("value_head", VALUE_HEADS),
                             ("attention_value_init", ATTENTION_VALUE_INITS),
                             ("attention_key_gradient", ATTENTION_KEY_GRADIENTS)):  # fmt: skip
             if getattr(self, name) not in valid:

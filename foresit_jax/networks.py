@@ -141,13 +141,15 @@ class PolicyHead(nn.Module):
 
 
 class ValueHead(nn.Module):
-    """Two-layer MLP `[..., H] -> [...]` (Dense hidden, ReLU, Dense 1)."""
+    """Two-layer MLP `[..., H] -> [...]` (Dense hidden, ReLU, Dense 1), the paper's value
+    function; with `hidden` 0, one Dense layer (SAVN's linear critic)."""
 
     hidden: int = 256
 
     @nn.compact
     def __call__(self, x: chex.Array) -> chex.Array:
-        x = nn.relu(Dense(self.hidden, name="hidden")(x))
+        if self.hidden:
+            x = nn.relu(Dense(self.hidden, name="hidden")(x))
         return Dense(1, name="out")(x)[..., 0]
 
 
@@ -296,6 +298,7 @@ class ActorCritic(nn.Module):
     attention_critic: bool = True
     attention_size: int = 512
     value_hidden: int = 256
+    linear_value_head: bool = False
     imagination_input: str = "head"
     zero_value_init: bool = False
     key_gradient: bool = True
@@ -312,7 +315,8 @@ class ActorCritic(nn.Module):
         self.encoder = Encoder(hidden_size=self.hidden_size, imagination_features=features, object_graph=self.object_graph)
         policy_hidden = self.value_hidden if self.imagination_input == "mlp" else 0
         self.policy = PolicyHead(self.num_actions, self.use_imagination and not self.imagination_in_encoder, policy_hidden)
-        self.value_critic = Critic(self.attention_critic, self.attention_size, self.value_hidden, self.zero_value_init,
+        value_hidden = 0 if self.linear_value_head else self.value_hidden
+        self.value_critic = Critic(self.attention_critic, self.attention_size, value_hidden, self.zero_value_init,
                                    self.key_gradient)  # fmt: skip
 
     def encode(

@@ -26,6 +26,14 @@ def observation():
 
 
 # ---------------------------------------------------------------------- parameters
+def test_a_linear_value_head_is_one_dense_layer_for_every_critic():
+    for method in ("a3c", "a3c+foresit"):
+        config = H.tiny_config(method, value_head="linear")
+        params, _ = jax.eval_shape(Agent(config).init, jax.random.PRNGKey(0), observation())
+        head = params["params"]["value_critic"]["value_head"]
+        assert set(head) == {"out"} and head["out"]["kernel"].shape == (config.hidden_size, 1)
+
+
 @pytest.mark.parametrize("method", H.METHODS)
 def test_parameter_tree_of_each_method(method):
     config = H.tiny_config(method)

@@ -46,6 +46,7 @@ def test_frozen_and_hashable():
         ("num_steps", True, "num_steps"),
         ("rollout", "async", "rollout"),
         ("gradient", "finite_differences", "gradient"),
+        ("value_head", "deep", "value_head must be one of \\('mlp', 'linear'\\)"),
     ],
 )
 def test_invalid_values_raise(field, value, match):

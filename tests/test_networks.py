@@ -255,6 +255,17 @@ class CriticTest(chex.TestCase):
         expected = np_mlp_value(jax.tree.map(np.asarray, params["params"]["value_head"]), self.states)
         np.testing.assert_allclose(out.value, expected, rtol=1e-5, atol=1e-6)
 
+    def test_linear_value_head_is_one_dense_layer(self):
+        """Config.value_head='linear' (SAVN's critic): V = s W + b, nothing else."""
+        for attention in (False, True):
+            critic = networks.Critic(attention=attention, attention_size=8, value_hidden=0)
+            params = random_params(np.random.default_rng(2), critic, self.states, self.valid)
+            head = jax.tree.map(np.asarray, params["params"]["value_head"])
+            self.assertEqual(set(head), {"out"})
+            out = critic.apply(params, self.states, self.valid)
+            attended = np.asarray(out.attended_state)
+            np.testing.assert_allclose(out.value, np_dense(head["out"], attended)[..., 0], rtol=1e-5, atol=1e-6)
+
     def test_default_sizes(self):
         critic = networks.Critic()
         states = jnp.zeros((5, 512))
