@@ -61,3 +61,26 @@ def test_the_base_is_ahead_on_every_seed_as_results_md_says(study):
     gaps = compare.values(arms["a3c"], "SR") - compare.values(arms["a3c+foresit"], "SR")
     assert (gaps > 0).all()
     assert f"by {gaps.min():.1f} to {gaps.max():.1f} points" in (REPO / "docs" / "results.md").read_text()
+
+
+def test_results_md_quotes_the_probe_of_the_3e4_foresit_seeds():
+    """The f_w baselines and the replayed fit options of results.md are those of
+    docs/data/fair_probe_lr3e-4.json (what `experiments.probe --fit-options` wrote)."""
+    import json
+
+    from experiments import probe
+
+    report = json.loads((REPO / "docs" / "data" / "fair_probe_lr3e-4.json").read_text())
+    results = (REPO / "docs" / "results.md").read_text()
+    per_seed = report["methods"]["a3c+foresit@learning_rate=3e-4"]
+    assert [r["seed"] for r in per_seed] == [0, 1, 2, 3, 4] and report["fit_passes"] == 5
+    for r in per_seed:
+        f, sub = r["items"]["fit"], r["items"]["subgoal"]
+        cells = [f"{100 * sub['shares'][0]:.0f}%"] + [f"{f[k]:.2f}" for k in (
+            "r2_over_mean", "category_r2_over_mean", "identity_r2_over_mean", "ridge_r2_over_mean", "offline_r2_over_mean")]
+        row = f"| {r['seed']} | " + " | ".join(cells) + " |"
+        assert row in results, row
+        options = r["items"]["fit_options"]
+        assert list(options) == list(probe.FIT_OPTIONS)
+        row = f"| {r['seed']} | " + " | ".join(f"{v:.2f}" for v in options.values()) + " |"
+        assert row in results, row
