@@ -60,3 +60,19 @@ def test_houses_md_by_length_pairs_are_the_sweeps(study):
     for (bucket, episodes, critic, _), (_, _, a3c, _) in zip(against_critic, against_a3c):
         assert f"| {bucket} | {episodes} |" in houses, bucket
         assert f"| {interval(critic)} | {interval(a3c)} |" in houses, bucket
+
+
+def test_houses_md_quotes_the_robust_statistics_of_the_archive(study, tmp_path, capsys):
+    """The IQM / P(B > A) / Holm / MDE table of houses.md is experiments.compare's on the archive."""
+    root = study_data.unpack("house_study.tar.xz", tmp_path, METHODS)
+    pairs = (("a3c", "a3c+critic"), ("a3c", "a3c+foresit"), ("a3c+critic", "a3c+foresit"))
+    out = compare.main(compare.Args(run=root, pairs=tuple(f"{a}:{b}" for a, b in pairs)))
+    capsys.readouterr()
+    houses = (REPO / "docs" / "houses.md").read_text()
+    for a, b in pairs:
+        r = out["pairs"][f"{b} - {a}"]["robust"]["SR"]
+        cells = [f"{x[0]:.1f} [{x[1]:.1f}, {x[2]:.1f}]" for x in (r["iqm_a"], r["iqm_b"])]
+        poi = r["probability_of_improvement"]
+        row = (f"| {b} - {a} | {cells[0]} | {cells[1]} | {poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | "
+               f"{r['p_holm']:.3f} | {r['mde']:.1f} |")
+        assert row in houses, row
