@@ -881,6 +881,7 @@ BENCH_ARGS = {  # commands whose flags are parsed here and which run in their ow
     "experiments.bench_env": lambda: importlib.import_module("experiments.bench_env").BenchConfig,
     "experiments.compare": lambda: importlib.import_module("experiments.compare").Args,  # tests/test_compare.py
     "experiments.tune": lambda: importlib.import_module("experiments.tune").Args,  # tests/test_tune.py runs it
+    "experiments.foresight": lambda: importlib.import_module("experiments.foresight").Args,  # tests/test_foresight.py
 }
 
 
