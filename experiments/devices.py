@@ -22,7 +22,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 
-# Measured with experiments.bench_devices on the 2-core CPU (a3c+foresit, quick, 4 seeds):
+# Measured with benchmarks.bench_devices on the 2-core CPU (a3c+foresit, quick, 4 seeds):
 # 2 host devices ran the sweep's chunk 1.19x faster than 1 (6.94 vs 8.23 s per 20 updates).
 DEFAULT_HOST_DEVICES = 2
 

@@ -3,7 +3,7 @@
 `quick` is the README's main command: a visible result in minutes on a 2-core CPU, on all
 four room types: 32 lanes stepping packed windows of 16 steps, Adam 1e-3, a 128-unit
 network (measured: test SR ~50-60% after 3000 updates, about 7 minutes; the settings were
-chosen by `experiments.search_learner`, see docs/learner.md).
+chosen by `benchmarks.search_learner`, see docs/learner.md).
 `house` is quick's learner in houses (`layout="house"`) for 12,000 updates, with the
 reward shaped by the oracle's distance (`Config.progress_reward` 0.1, a deviation from the
 paper's reward: without it a3c learns to give up at the start): measured, a3c seed 0 at

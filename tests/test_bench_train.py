@@ -1,4 +1,4 @@
-"""experiments.bench_train at a tiny size: every combination is built, compiled and run,
+"""benchmarks.bench_train at a tiny size: every combination is built, compiled and run,
 and the table reports the useful share the run's own metrics give (no timed assertions:
 timings belong to the benchmark itself)."""
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import train_helpers as H
-from experiments import bench_train as B
+from benchmarks import bench_train as B
 
 
 @pytest.mark.slow

@@ -873,12 +873,12 @@ CLI_MODULES = {"experiments.train": train_cli, "experiments.evaluate": evaluate_
 # Benchmarks the README documents: their flags must parse (they run in their own tests or
 # take minutes by design).
 BENCH_ARGS = {  # commands whose flags are parsed here and which run in their own tests
-    "experiments.bench_train": lambda: importlib.import_module("experiments.bench_train").BenchConfig,
-    "experiments.bench_learning": lambda: importlib.import_module("experiments.bench_learning").BenchLearning,
+    "benchmarks.bench_train": lambda: importlib.import_module("benchmarks.bench_train").BenchConfig,
+    "benchmarks.bench_learning": lambda: importlib.import_module("benchmarks.bench_learning").BenchLearning,
     "experiments.cvae_compare": lambda: importlib.import_module("experiments.cvae_compare").Args,
     "experiments.paper": lambda: importlib.import_module("experiments.paper").Args,  # tests/test_paper.py runs it
     "experiments.demo": lambda: importlib.import_module("experiments.demo").DemoConfig,
-    "experiments.bench_env": lambda: importlib.import_module("experiments.bench_env").BenchConfig,
+    "benchmarks.bench_env": lambda: importlib.import_module("benchmarks.bench_env").BenchConfig,
     "experiments.compare": lambda: importlib.import_module("experiments.compare").Args,  # tests/test_compare.py
     "experiments.tune": lambda: importlib.import_module("experiments.tune").Args,  # tests/test_tune.py runs it
     "experiments.foresight": lambda: importlib.import_module("experiments.foresight").Args,  # tests/test_foresight.py
@@ -898,7 +898,7 @@ def readme_commands(text: str = README) -> list[list[str]]:
         for line in body.replace("\\\n", " ").splitlines():
             for part in line.split("&&"):
                 words = shlex.split(part, comments=True)
-                if words[:2] == ["python", "-m"] and words[2].startswith("experiments."):
+                if words[:2] == ["python", "-m"] and words[2].startswith(("experiments.", "benchmarks.")):
                     commands.append(words[2:])
     return commands
 
@@ -912,7 +912,7 @@ def test_readme_commands_parse():
         parser = CLI_MODULES[module].Args if module in CLI_MODULES else BENCH_ARGS[module]()
         args = tyro.cli(parser, args=argv)
         assert dataclasses.is_dataclass(args)
-    for module in set(re.findall(r"python -m (experiments\.\w+)", README)):
+    for module in set(re.findall(r"python -m ((?:experiments|benchmarks)\.\w+)", README)):
         assert importlib.util.find_spec(module) is not None, module
     for link in re.findall(r"\]\(((?!https?:)[^)#]+)\)", README):  # relative links and the picture exist
         assert (REPO / link).exists(), link
@@ -926,7 +926,7 @@ def test_docs_commands_parse(doc):
     for module, *argv in readme_commands(text):
         parser = CLI_MODULES[module].Args if module in CLI_MODULES else BENCH_ARGS[module]()
         assert dataclasses.is_dataclass(tyro.cli(parser, args=argv)), (doc, module, argv)
-    for module in set(re.findall(r"python -m (experiments\.\w+)", text)):
+    for module in set(re.findall(r"python -m ((?:experiments|benchmarks)\.\w+)", text)):
         assert importlib.util.find_spec(module) is not None, (doc, module)
     for link in re.findall(r"\]\(((?!https?:)[^)#]+)\)", text):  # relative links lead somewhere
         assert (REPO / "docs" / link).exists(), (doc, link)

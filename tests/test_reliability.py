@@ -26,8 +26,9 @@ import pytest
 
 import envs
 import train_helpers as H
+from benchmarks import search_learner
 from experiments import evaluate as evaluate_cli
-from experiments import runs, search_learner, sweep
+from experiments import runs, sweep
 from experiments import train as train_cli
 from foresit_jax.config import Config
 

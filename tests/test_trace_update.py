@@ -1,4 +1,4 @@
-"""experiments.trace_update: the training path a reader crosses, and the lowered programs'
+"""benchmarks.trace_update: the training path a reader crosses, and the lowered programs'
 hashes a refactor is checked with. Lowering only (nothing compiles or runs)."""
 
 import dataclasses
@@ -6,7 +6,7 @@ import dataclasses
 import jax
 import pytest
 
-from experiments import trace_update
+from benchmarks import trace_update
 from experiments.presets import preset
 from foresit_jax.train import make_trainer
 

@@ -2,7 +2,7 @@
 (episodes that ended in the last `--chunk` updates, all four room types) first reaches
 10, 20 and 30 %, per method, each seed run alone (so wall times are a single run's).
 
-    python -m experiments.bench_learning --methods a3c a3c+foresit --seeds 3 --frames 2000000
+    python -m benchmarks.bench_learning --methods a3c a3c+foresit --seeds 3 --frames 2000000
 
 Prints one line per run as it finishes, then a table: for each method and goal, how many
 seeds reached it, and the mean ± std (over the seeds that did) of the wall seconds
@@ -17,7 +17,7 @@ import jax
 import numpy as np
 import tyro
 
-from experiments.search_learner import GOALS, Args, run_variant
+from benchmarks.search_learner import GOALS, Args, run_variant
 
 
 @dataclasses.dataclass(frozen=True)

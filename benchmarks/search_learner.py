@@ -1,7 +1,7 @@
 """The learner's hyperparameter search: training success rate against useful frames and
 wall time, on all four room types, for variants of one base config.
 
-    python -m experiments.search_learner --variants '{}' '{"learning_rate": 3e-4}' \
+    python -m benchmarks.search_learner --variants '{}' '{"learning_rate": 3e-4}' \
         --seeds 2 --frames 1500000 --out search.jsonl
 
 Each variant is a JSON dict of `Config` fields over `BASE` (the `quick` preset's learner).

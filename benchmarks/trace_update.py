@@ -1,5 +1,5 @@
 """What one training update is, for a reader and for a refactor:
-`python -m experiments.trace_update --methods a3c+foresit a3c+maml+foresit`.
+`python -m benchmarks.trace_update --methods a3c+foresit a3c+maml+foresit`.
 
 For each method (at a preset's sizes, tiny by default):
 

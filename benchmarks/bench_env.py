@@ -1,6 +1,6 @@
 """Environment throughput: env steps per second of a jitted ``lax.scan`` over a vmapped step.
 
-    python -m experiments.bench_env --batch-sizes 1 64 1024 4096 --steps 200 \
+    python -m benchmarks.bench_env --batch-sizes 1 64 1024 4096 --steps 200 \
         --mode both --compare xminigrid
 
 For each batch size B, one jitted function runs ``steps`` steps of ``jax.vmap(env.step)``

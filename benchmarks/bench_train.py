@@ -1,9 +1,9 @@
 """Training throughput: frames/s (useful and stepped), updates/s, compile time, memory and
 the environment's share of the time, for methods and learner layouts side by side.
 
-    python -m experiments.bench_train --preset quick --methods a3c a3c+foresit \
+    python -m benchmarks.bench_train --preset quick --methods a3c a3c+foresit \
         --rollouts packed episodes --gradients replay through_rollout --lanes 32
-    python -m experiments.bench_train --methods a3c a3c+maml --rollouts episodes \
+    python -m benchmarks.bench_train --methods a3c a3c+maml --rollouts episodes \
         --gradients through_rollout --variants '{}' '{"maml_first_order": true}'
 
 For every combination, one jitted `Trainer.run` of `--updates` updates is compiled, run

@@ -1,6 +1,6 @@
 """Is a seed sweep faster with its seeds spread over several host devices?
 
-    python -m experiments.bench_devices --seeds 4 --preset quick --devices 1 2
+    python -m benchmarks.bench_devices --seeds 4 --preset quick --devices 1 2
 
 For each device count N a fresh interpreter (XLA_FLAGS=--xla_force_host_platform_device_count=N
 must be set before jax starts) times the program `experiments.sweep` runs: `--seeds` seeds
@@ -18,6 +18,7 @@ import os
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import tyro
 
@@ -71,11 +72,12 @@ def main(bench: BenchDevices) -> list[dict]:
     rows = []
     for n in bench.devices:
         env = {**os.environ, "XLA_FLAGS": f"{os.environ.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count={n}"}
-        code = ("import json, tyro; from experiments import bench_devices as B; "
+        code = ("import json, tyro; from benchmarks import bench_devices as B; "
                 "print('RESULT', json.dumps(B.measure(tyro.cli(B.BenchDevices))))")  # fmt: skip
         argv = [f"--seeds={bench.seeds}", f"--method={bench.method}", f"--preset={bench.preset}",
                 f"--updates={bench.updates}", f"--repeats={bench.repeats}"]  # fmt: skip
-        proc = subprocess.run([sys.executable, "-c", code, *argv], env=env, capture_output=True, text=True)
+        proc = subprocess.run([sys.executable, "-c", code, *argv], env=env, capture_output=True, text=True,
+                              cwd=Path(__file__).resolve().parents[1])  # the root, where `benchmarks` imports from
         if proc.returncode != 0:
             raise SystemExit(f"error: the run with {n} host devices failed:\n{proc.stderr[-2000:]}")
         row = json.loads(proc.stdout.split("RESULT", 1)[1])
