@@ -55,6 +55,7 @@ import numpy as np
 
 from envs.catalog import ROOM_TYPES
 from experiments import cvae_compare, devices, numerics, runs, selection, stats, sweep
+from experiments.presets import split_arm
 from experiments.tables import markdown_table, write_csv
 
 # The methods of each setup's sweep: Table 1's rows, then Table 3's ablations.
@@ -98,6 +99,11 @@ class Args:
     """Output folder (report.md, one sweep folder per setup)."""
     exclude: tuple[str, ...] = ()
     """Methods to leave out (e.g. a3c+maml a3c+maml+foresit on a CPU)."""
+    arms: tuple[str, ...] = ()
+    """Methods of the tables run with Config fields of their own, METHOD@field=value,...:
+    e.g. each method at the learning rate `experiments.tune` chose for it on validation
+    (a3c@learning_rate=1e-3 a3c+foresit@learning_rate=3e-4). Rows keep the method's name;
+    the report lists the arms."""
     resume: bool = False
     """Continue a killed run in --out with the arguments it was started with."""
     overwrite: bool = False
@@ -129,11 +135,24 @@ class Args:
     """Show the progress bar."""
 
 
+def arm_of(args: Args, method: str) -> str:
+    """The arm `method` runs as (`--arms`), or the method itself: its folder's name in its sweep."""
+    return {split_arm(a)[0]: a for a in args.arms}.get(method, method)
+
+
+def by_method(args: Args, by_arm: dict) -> dict:
+    """`by_arm` (keyed by the arms' folder names) keyed by their methods."""
+    names = {arm_of(args, m): m for m in SETUP_OF}
+    return {names.get(name, name): value for name, value in by_arm.items()}
+
+
 def sweep_args(args: Args, setup: str, methods: tuple[str, ...]) -> sweep.Args:
+    """The sweep of `setup` over `methods` (each run as its arm, `arm_of`)."""
     fields = ("seeds", "preset", "seed", "num_updates", "test_episodes_per_room", "val_episodes_per_room",
               "stop_after_chunks", "progress")  # fmt: skip
     folder = args.out / setup
     reuse = reuse_sweeps(args, setup)
+    methods = tuple(arm_of(args, m) for m in methods)
     return sweep.Args(methods=methods, setup=setup, out=folder, resume=(folder / "sweep.json").exists(),
                       reuse=reuse, **{k: getattr(args, k) for k in fields})  # fmt: skip
 
@@ -157,6 +176,13 @@ def check(args: Args) -> None:
                              f"they are {', '.join(SETUP_OF)}")  # fmt: skip
     if not any(m not in args.exclude for m in SETUP_OF):
         raise runs.UserError("--exclude leaves no method to run")
+    armed = [split_arm(a)[0] for a in args.arms]  # split_arm's ValueError names a malformed arm
+    wrong = [a for a, m in zip(args.arms, armed) if m not in SETUP_OF or m in args.exclude]
+    if wrong:
+        raise runs.UserError(f"--arms {' '.join(wrong)}: each arm's method must be a method of the paper's tables "
+                             "that runs (not excluded)")  # fmt: skip
+    if len(set(armed)) != len(armed):
+        raise runs.UserError("--arms: give each method at most one arm")
     if args.seeds < 1:
         raise runs.UserError(f"--seeds must be >= 1, got {args.seeds}")
     for run in map(Path, args.reuse):
@@ -184,7 +210,8 @@ def main(args: Args) -> dict | None:
     if importlib.util.find_spec("sklearn") is None:  # Figure 4's t-SNE, drawn after the training
         raise runs.UserError("the paper report needs scikit-learn (Figure 4's t-SNE): pip install 'foresit_jax[paper]'")
     for method in SETUP_OF:  # fail before any training
-        sweep.method_schedule(method, dataclasses.replace(sweep.Args(), preset=args.preset, setup=SETUP_OF[method]))
+        sweep.method_schedule(arm_of(args, method), dataclasses.replace(sweep.Args(), preset=args.preset,
+                                                                        setup=SETUP_OF[method]))  # fmt: skip
     if not args.resume:
         runs.prepare_run_dir(args.out, resume=False, overwrite=args.overwrite, marker="paper.json", kind="paper run")
         runs.write_started_args(args.out / "paper.json", args, keep)
@@ -199,7 +226,7 @@ def main(args: Args) -> dict | None:
             print("stopped (continue with --resume)")
             return None
         per_seed = runs.read_json(args.out / setup / "results_per_seed.json")
-        results.update(per_seed)
+        results.update(by_method(args, per_seed))
     print(f"sweeps done ({time.time() - t0:.0f} s); writing the report", flush=True)
     return write_report(args, results)
 
@@ -392,7 +419,8 @@ def claims_markdown(lines) -> str:
 # ---------------------------------------------------------------------- figures 3 and 4
 def _first_seed(args: Args, method: str):
     """(config, trainer, last training state, selected AgentParams) of the first seed."""
-    config, trainer, states, best = sweep.load_method(method, _method_args(args, method), args.out / SETUP_OF[method] / "methods" / method)
+    arm = arm_of(args, method)
+    config, trainer, states, best = sweep.load_method(arm, _method_args(args, method), args.out / SETUP_OF[method] / "methods" / arm)
     return config, trainer, devices.seed_slice(states, 0), devices.seed_slice(best, 0)
 
 
@@ -566,7 +594,8 @@ def sampled_section(args: Args, results: dict) -> str:
     print(f"sampled actions: {', '.join(greedy)}", flush=True)
     sampled = {}
     for setup in dict.fromkeys(SETUP_OF[m] for m in greedy):
-        sampled.update(sampled_results(args.out / setup, [m for m in greedy if SETUP_OF[m] == setup]))
+        arms = [arm_of(args, m) for m in greedy if SETUP_OF[m] == setup]
+        sampled.update(by_method(args, sampled_results(args.out / setup, arms)))
     md, rows = sampled_markdown(results, sampled)
     write_csv(args.out / "sampled.csv", rows)
     return (title + "ORG's code acts greedily at evaluation (the argmax of the policy), SAVN's samples; greedy play can "
@@ -585,7 +614,7 @@ def probe_section(args: Args, results: dict) -> str:
         return "## Imagination probes\n\nNot run: no probed ForeSIT method was trained.\n"
     models = {}
     for m in methods:
-        models.update(probe.models_of_sweep(args.out / SETUP_OF[m], (m,)))
+        models.update(by_method(args, probe.models_of_sweep(args.out / SETUP_OF[m], (arm_of(args, m),))))
     report = probe.probe(models, args.probe_episodes_per_room, args.cvae_windows)
     runs.write_json(args.out / "probe.json", report)
     return probe.markdown(report, args.probe_episodes_per_room, args.cvae_windows, level=2)
@@ -598,10 +627,13 @@ def write_report(args: Args, results: dict) -> dict:
     md = [f"# ForeSIT on GridNav: the paper's evaluation (preset {args.preset}, seeds {seeds})\n",
           f"Test split, each seed's model selected on validation (`experiments.selection`); mean ± sample std "
           f"[95% Student-t interval] over {args.seeds} seed(s). Not run: {', '.join(excluded) or 'none'}.\n"]  # fmt: skip
+    if args.arms:
+        md.append("Methods run with fields of their own (`--arms`; the rows keep the method's name): "
+                  + "; ".join(f"{split_arm(a)[0]} at {a.partition('@')[2]}" for a in args.arms) + ".\n")  # fmt: skip
 
     compared = [*PAIRS, *(("a3c+org+foresit", m) for m in TABLE3[1:-1])]  # the claims' pairs
     md.append(numerics.markdown(results, compared)
-              + sweep.assembled_markdown({m: out / SETUP_OF[m] / "methods" / m for m in results}))  # fmt: skip
+              + sweep.assembled_markdown({m: out / SETUP_OF[m] / "methods" / arm_of(args, m) for m in results}))  # fmt: skip
     t1, rows1 = table1(results)
     write_csv(out / "table1.csv", rows1)
     md.append("## Table 1\n\n" + t1)

@@ -14,7 +14,9 @@ selected model's validation SR, `selection_sr`): the test split never chooses. T
   paired seed by seed (`experiments.compare.paired_report`: difference and t interval,
   IQM, P(B > A), Holm over these pairs, the minimum detectable effect);
 * the same pairs at each common value of the grid (one family per value);
-* the learning curves of every value, one panel per method.
+* the learning curves of every value, one panel per method;
+* the `experiments.paper` command that reports the paper's tables with each method at its
+  chosen value (`--arms`), reusing the arms trained here.
 
 Several `--grid` fields make their product (`--grid learning_rate=3e-4,1e-3
 entropy_coef=0.01,0.02`). `--resume` continues a killed tune; `--reuse` takes arms that
@@ -201,7 +203,10 @@ def report(args: Args, grid, table: dict, results: dict) -> tuple[str, dict]:
             md += f"\n## All at {point}\n"
             text, out["common"][point] = compare.paired_report(at, pairs, columns, level="###")
             md += text
-    md += f"\n![learning curves per value](tune_curves.png)\n\nThe arms' sweep: {args.out / 'sweep'} (its table1.md).\n"
+    chosen_arms = " ".join(table[m][chosen[m]] for m in args.methods)
+    md += (f"\n![learning curves per value](tune_curves.png)\n\nThe arms' sweep: {args.out / 'sweep'} (its table1.md). "
+           f"The paper's report with each method at its chosen value (the methods of its tables): "
+           f"`python -m experiments.paper --arms {chosen_arms} --reuse {args.out / 'sweep'}`.\n")  # fmt: skip
     return md, out
 
 

@@ -48,13 +48,18 @@ def test_tiny_report_has_every_table_figure_and_claim_after_a_kill_resume_and_re
     assert "a3c+foresit" in (part / "report.md").read_text().split("Not run:")[1].splitlines()[0]
     reused = (part / "savn" / "methods" / "a3c" / "results.json").read_text()
     capsys.readouterr()
-    claims = paper.cli([*argv, "--out", str(out), "--exclude", *EXCLUDE, "--reuse", str(part)])
+    # a3c+foresit as an arm (--arms): trained in its arm's folder, reported under its method's name.
+    claims = paper.cli([*argv, "--out", str(out), "--exclude", *EXCLUDE, "--reuse", str(part),
+                        "--arms", "a3c+foresit@learning_rate=3e-4"])  # fmt: skip
     assert "a3c: finished in" in capsys.readouterr().out  # copied, not trained again
+    assert (out / "savn" / "methods" / "a3c+foresit@learning_rate=3e-4" / "results.json").is_file()
+    assert json.loads((out / "probe.json").read_text()).keys() == {"a3c+foresit"}
     assert (out / "savn" / "methods" / "a3c" / "results.json").read_text() == reused
     per_seed = json.loads((out / "savn" / "results_per_seed.json").read_text())
     assert per_seed["a3c"] == json.loads(reused)["results"]
     assert (part / "savn" / "methods" / "a3c" / "results.json").read_text() == reused  # the source untouched
     report = (out / "report.md").read_text()
+    assert "(`--arms`; the rows keep the method's name): a3c+foresit at learning_rate=3e-4." in report
     for section in SECTIONS:
         assert section in report, section
     assert "Every method was trained on cpu (" in report  # a3c copied from a run on this machine
@@ -176,8 +181,23 @@ def test_reuse_lends_each_setup_its_own_sweeps(tmp_path):
     assert paper.sweep_args(args, "org", ("a3c+org",)).reuse == (org,)
 
 
+def test_arms_name_the_folders_and_the_rows_keep_the_method(tmp_path):
+    args = paper.Args(arms=("a3c+foresit@learning_rate=3e-4",), out=tmp_path)
+    assert paper.arm_of(args, "a3c+foresit") == "a3c+foresit@learning_rate=3e-4"
+    assert paper.arm_of(args, "a3c") == "a3c"
+    assert paper.sweep_args(args, "savn", ("a3c", "a3c+foresit")).methods == ("a3c", "a3c+foresit@learning_rate=3e-4")
+    assert paper.by_method(args, {"a3c": 1, "a3c+foresit@learning_rate=3e-4": 2}) == {"a3c": 1, "a3c+foresit": 2}
+
+
 def test_paper_rejects_bad_input_in_one_line(tmp_path, capsys):
     base = ["--preset", "tiny", "--out", tmp_path / "p"]
+    assert "each arm's method must be a method of the paper's tables" in cli_error(
+        paper.cli, [*base, "--arms", "a3c+critic+foresit@learning_rate=1e-3"], capsys)
+    assert "each arm's method must be" in cli_error(
+        paper.cli, [*base, "--exclude", "a3c+maml", "--arms", "a3c+maml@learning_rate=1e-3"], capsys)
+    assert "at most one arm" in cli_error(
+        paper.cli, [*base, "--arms", "a3c@learning_rate=1e-3", "a3c@learning_rate=3e-4"], capsys)
+    assert "is not a Config field" in cli_error(paper.cli, [*base, "--arms", "a3c@no_such=1"], capsys)
     assert "not a method of the paper's tables" in cli_error(paper.cli, [*base, "--exclude", "bogus"], capsys)
     assert "leaves no method" in cli_error(paper.cli, [*base, "--exclude", *paper.SETUP_OF], capsys)
     assert "--seeds must be >= 1" in cli_error(paper.cli, [*base, "--seeds", "0"], capsys)

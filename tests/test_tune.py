@@ -120,6 +120,7 @@ def test_report_pairs_each_method_at_its_own_value_and_at_each_common_value(tmp_
         got = out["common"][point]["a3c+foresit - a3c"]["SR"]
         np.testing.assert_allclose(got["diff"], np.mean(np.subtract(sr(f"a3c+foresit@{point}"), sr(f"a3c@{point}"))))
     assert "## Best vs best" in md and "a3c: learning_rate=1e-3, a3c+foresit: learning_rate=3e-4" in md
+    assert "experiments.paper --arms a3c@learning_rate=1e-3 a3c+foresit@learning_rate=3e-4 --reuse" in md
     assert [r["chosen"] for r in out["grid"]] == [False, True, True, False]
     tune.curves_png(tmp_path / "curves.png", table, results)
     assert (tmp_path / "curves.png").stat().st_size > 0
