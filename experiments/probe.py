@@ -64,7 +64,8 @@ class Args:
 
 
 # f_w's training options replayed by --fit-options: the run's own first, then one change
-# each (Config fields: imagination_optimizer, imagination_lr, imagination_epochs, buffer_size).
+# each (Config fields: imagination_optimizer, imagination_lr, imagination_epochs, buffer_size,
+# imagination_batch).
 FIT_OPTIONS = {
     "as trained": {},
     "epochs 1": {"imagination_epochs": 1},
@@ -74,6 +75,8 @@ FIT_OPTIONS = {
     "sgd, lr 1e-2 (Algorithm 1)": {"imagination_optimizer": "sgd", "imagination_lr": 1e-2},
     "M 8": {"buffer_size": 8},
     "M 128": {"buffer_size": 128},
+    "batch 8": {"imagination_batch": 8},
+    "batch 8, lr 3e-3": {"imagination_batch": 8, "imagination_lr": 3e-3},
 }
 
 
@@ -176,7 +179,7 @@ def fit_options(model: Model, w_init, items, passes: int) -> dict[str, float]:
         config = dataclasses.replace(model.config, **change)
         optimizer = make_imagination_optimizer(config.imagination_optimizer, config.imagination_lr)
         w = replay_online_fit(model.trainer.agent.imagine, w_init, s_0, goal, subgoal, only_fit_items(add), optimizer,
-                              config.imagination_epochs, config.buffer_size, passes)  # fmt: skip
+                              config.imagination_epochs, config.buffer_size, passes, config.imagination_batch)  # fmt: skip
         predicted = np.asarray(model.trainer.agent.imagine(w, s_0[add][held], goal[add][held]))
         out[name] = r_squared(predicted, subgoal[add][held], mean)
     return out

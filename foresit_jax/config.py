@@ -123,6 +123,9 @@ class Config:
     """Lane-local optimiser of f_w: 'sgd' or 'adam' (fresh state per buffer flush)."""
     imagination_lr: float = 1e-3
     """Learning rate beta of f_w (the paper does not give it)."""
+    imagination_batch: int = 1
+    """Items per f_w step within a full buffer, in buffer order (their mean loss): 1, one
+    item a step, is Algorithm 1's; it must divide buffer_size."""
     sigma2_max: float = 0.9
     """Maximum imagination-noise variance sigma^2_max (Eq. 7). The paper's 0.9 keeps most
     of i_tau's variance noise at this budget; 0.1 (a deviation) keeps the signal above it,
@@ -203,7 +206,7 @@ class Config:
             )
         for name in (
             "num_lanes", "num_updates", "num_steps", "num_actions", "hidden_size",
-            "attention_size", "value_hidden", "buffer_size", "imagination_epochs",
+            "attention_size", "value_hidden", "buffer_size", "imagination_epochs", "imagination_batch",
             "success_window", "int_interval", "maml_segment",
         ):
             value = getattr(self, name)
@@ -211,6 +214,9 @@ class Config:
                 raise ValueError(f"{name} must be an int, got {value!r} ({type(value).__name__}).")
             if value < 1:
                 raise ValueError(f"{name} must be >= 1, got {value}.")
+        if self.buffer_size % self.imagination_batch:
+            raise ValueError(f"imagination_batch ({self.imagination_batch}) must divide buffer_size ({self.buffer_size}): "
+                             "a full buffer is split into steps of that many items")  # fmt: skip
         if isinstance(self.maml_inner_updates, bool) or not isinstance(self.maml_inner_updates, int) or self.maml_inner_updates < 0:
             raise ValueError(f"maml_inner_updates must be an int >= 0, got {self.maml_inner_updates!r}.")
         for f in dataclasses.fields(self):  # inf or NaN breaks a run and cannot be saved in strict JSON

@@ -123,17 +123,21 @@ def train_on_buffer(
     apply_fn: ImagineFn,
     optimizer: optax.GradientTransformation,
     epochs: int,
+    batch: int = 1,
 ) -> tuple[Any, chex.Array]:
-    """Train f_w on one full buffer: `epochs` passes, one optimiser step per item, in
-    buffer order (Algorithm 1), starting from `params` with a fresh optimiser state.
+    """Train f_w on one full buffer: `epochs` passes, one optimiser step per item (per
+    `batch` consecutive items, their mean loss), in buffer order (Algorithm 1 with batch
+    1), starting from `params` with a fresh optimiser state.
 
-    Returns (trained params, per-step losses `[epochs, M]`, each the item's loss before
+    Returns (trained params, per-step losses `[epochs, M / batch]`, each the loss before
     its step).
     """
     grad_fn = jax.value_and_grad(
         lambda p, s0, g, sg: imagination_loss(apply_fn, p, s0, g, sg)
     )
     items = (buffer.s_0, buffer.goal, buffer.subgoal)  # each [M, ...]
+    if batch > 1:  # [M / batch, batch, ...]: the loss is the batch's mean (batch 1 keeps Algorithm 1's program)
+        items = jax.tree.map(lambda x: x.reshape((x.shape[0] // batch, batch) + x.shape[1:]), items)
 
     def item_step(carry, item):
         params, opt_state = carry
@@ -185,8 +189,10 @@ def train_on_full_buffers(
     apply_fn: ImagineFn,
     optimizer: optax.GradientTransformation,
     epochs: int,
+    batch: int = 1,
 ) -> tuple[Any, ReplayBuffer, ImaginationLosses]:
-    """Update the shared f_w from every lane whose buffer is full, then empty those.
+    """Update the shared f_w from every lane whose buffer is full, then empty those
+    (`train_on_buffer` with `batch` items a step).
 
     Args:
       w_params: the shared f_w parameters.
@@ -209,7 +215,7 @@ def train_on_full_buffers(
     def body(carry):
         i, params, loss_sum, first_sum, last_sum = carry
         lane = jax.tree.map(lambda x: x[order[i]], buffers)
-        params, step_losses = train_on_buffer(params, lane, apply_fn, optimizer, epochs)
+        params, step_losses = train_on_buffer(params, lane, apply_fn, optimizer, epochs, batch)
         return (
             i + 1,
             params,

@@ -104,7 +104,37 @@ def brute_force_train(params, buffer, optimizer, epochs):
     return params, step_losses
 
 
+def brute_force_batched(params, buffer, optimizer, epochs, batch):
+    """Reference for train_on_buffer with `batch` items a step: the mean of the items'
+    losses and gradients (the loss is a mean over the batch), consecutive items in order."""
+    opt_state = optimizer.init(params)
+    step_losses = np.zeros((epochs, buffer.capacity // batch))
+    for e in range(epochs):
+        for j in range(buffer.capacity // batch):
+            parts = [item_loss_and_grad(params, buffer.s_0[i], buffer.goal[i], buffer.subgoal[i])
+                     for i in range(j * batch, (j + 1) * batch)]  # fmt: skip
+            step_losses[e, j] = np.mean([float(loss) for loss, _ in parts])
+            grads = jax.tree.map(lambda *g: sum(g) / batch, *[g for _, g in parts])
+            updates, opt_state = optimizer.update(grads, opt_state, params)
+            params = jax.tree.map(lambda p, u: p + u, params, updates)
+    return params, step_losses
+
+
 class TrainTest(chex.TestCase):
+    @parameterized.parameters(("sgd", 0.5, 2), ("adam", 1e-2, 4))
+    def test_train_on_buffer_in_batches_matches_loop(self, name, lr, batch):
+        rng = np.random.default_rng(5)
+        buffer = filled_buffer(rng, M)
+        optimizer = imagination.make_imagination_optimizer(name, lr)
+        params = init_params()
+        trained, step_losses = jax.jit(
+            lambda p, b: imagination.train_on_buffer(p, b, apply_fn, optimizer, 2, batch)
+        )(params, buffer)
+        chex.assert_shape(step_losses, (2, M // batch))
+        ref_params, ref_losses = brute_force_batched(params, buffer, optimizer, 2, batch)
+        chex.assert_trees_all_close(trained, ref_params, rtol=1e-4, atol=1e-6)
+        np.testing.assert_allclose(step_losses, ref_losses, rtol=1e-4, atol=1e-7)
+
     @parameterized.parameters(("sgd", 0.5), ("adam", 1e-2))
     def test_train_on_buffer_matches_loop(self, name, lr):
         rng = np.random.default_rng(3)

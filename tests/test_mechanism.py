@@ -312,11 +312,11 @@ def test_only_fit_items_are_the_even_items_in_the_order_of_a_boolean_index():
 
 def test_replayed_online_fit_is_the_training_procedure():
     """`replay_online_fit` streaming items twice gives the f_w `Trainer.store_and_train`
-    gives from the same start on the stream written twice (the procedure training runs),
-    bit for bit."""
+    gives from the same start on the stream written twice (the procedure training runs,
+    here two items a step), bit for bit."""
     from foresit_jax import imagination
 
-    config = H.tiny_config("a3c+foresit", buffer_size=3, imagination_epochs=2)
+    config = H.tiny_config("a3c+foresit", buffer_size=4, imagination_epochs=2, imagination_batch=2)
     trainer = H.trainer(config)
     rng = np.random.default_rng(7)
     steps, lanes, hidden, goal_size = 6, config.num_lanes, config.hidden_size, 8
@@ -328,7 +328,7 @@ def test_replayed_online_fit_is_the_training_procedure():
     doubled = tuple(jnp.asarray(np.concatenate([x, x])) for x in items)
     want, _, _ = jax.jit(trainer.store_and_train)(w0, buffers, doubled)
     got = probes.replay_online_fit(trainer.agent.imagine, w0, *items, trainer.imagination_optimizer,
-                                   config.imagination_epochs, config.buffer_size, passes=2)  # fmt: skip
+                                   config.imagination_epochs, config.buffer_size, passes=2, batch=2)  # fmt: skip
     H.assert_trees_bitwise_equal(got, want)
     assert not H.trees_bitwise_equal(got, w0)
 
