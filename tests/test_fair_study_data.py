@@ -84,3 +84,25 @@ def test_results_md_quotes_the_probe_of_the_3e4_foresit_seeds():
         assert list(options) == list(probe.FIT_OPTIONS)
         row = f"| {r['seed']} | " + " | ".join(f"{v:.2f}" for v in options.values()) + " |"
         assert row in results, row
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(600)
+def test_the_gpu_script_runs_dry_on_a_cpu(tmp_path):
+    """scripts/fair_study_gpu.sh at a tiny size: the three arms side by side at 3e-4, their
+    table and pairs, the 1e-4 arms until their deadline, one archive without checkpoints."""
+    import os
+    import subprocess
+    import tarfile
+
+    env = {**os.environ, "PRESET": "tiny", "SEEDS": "2", "UPDATES": "4", "LOW_LR_SECONDS": "120",
+           "OUT": str(tmp_path / "out"), "RUNS": str(tmp_path / "runs")}  # fmt: skip
+    proc = subprocess.run(["bash", str(REPO / "scripts" / "fair_study_gpu.sh")], env=env, capture_output=True,
+                          text=True, cwd=tmp_path)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    runs_ = tmp_path / "runs"
+    assert (runs_ / "lr3e-4_3x" / "table1.md").is_file()
+    assert "a3c+foresit@learning_rate=3e-4 - a3c@learning_rate=3e-4" in (runs_ / "lr3e-4_3x" / "compare.md").read_text()
+    with tarfile.open(tmp_path / "out" / "fair_gpu.tar.xz") as tar:
+        names = tar.getnames()
+    assert any(n.endswith("lr3e-4_3x/table1.md") for n in names) and not any("checkpoints" in n for n in names)
