@@ -121,8 +121,13 @@ def arms(args: Args, grid) -> dict[str, dict[str, str]]:
         if clash:
             raise runs.UserError(f"--methods {method}: sets {', '.join(clash)}, which --grid varies; drop it from one")
         table[method] = {p: arm(method, p) for p in points(grid)}
-        for name in table[method].values():
-            sweep.method_schedule(name, sweep_args(args, (name,), Path(".")))  # a ValueError names what is wrong
+        configs = {}
+        for point, name in table[method].items():  # a ValueError names what is wrong
+            config, _ = sweep.method_schedule(name, sweep_args(args, (name,), Path(".")))
+            same = [p for p, c in configs.items() if c == config]
+            if same:
+                raise runs.UserError(f"--grid: {method} at {point} trains what it trains at {same[0]}; give distinct values")
+            configs[point] = config
     return table
 
 

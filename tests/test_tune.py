@@ -59,6 +59,8 @@ def test_arms_are_checked_against_the_preset(tmp_path):
         tune.arms(tune.Args(methods=("a3c",), out=tmp_path), tune.parse_grid(["no_such_field=1"]))
     with pytest.raises(ValueError, match="is not a float"):
         tune.arms(tune.Args(methods=("a3c",), out=tmp_path), tune.parse_grid(["learning_rate=fast"]))
+    with pytest.raises(runs.UserError, match="trains what it trains at learning_rate=1e-3"):
+        tune.arms(tune.Args(methods=("a3c",), out=tmp_path), tune.parse_grid(["learning_rate=1e-3,0.001"]))
     table = tune.arms(tune.Args(methods=("a3c", "a3c+critic"), out=tmp_path), tune.parse_grid(["learning_rate=3e-4,1e-3"]))
     assert table["a3c+critic"] == {"learning_rate=3e-4": "a3c+critic@learning_rate=3e-4",
                                    "learning_rate=1e-3": "a3c+critic@learning_rate=1e-3"}  # fmt: skip
@@ -164,3 +166,12 @@ def test_tune_end_to_end_resumes_and_reuses_a_plain_sweep(tmp_path, capsys):
     with pytest.raises(runs.UserError, match="already exists"):
         tune.main(tune.Args(methods=("a3c",), seeds=2, preset="tiny", out=out, progress=False))
 
+
+
+def test_reuse_takes_a_tune_folder_by_its_sweep(tmp_path):
+    """--reuse accepts a tune folder (tune.json inside) for its arms' sweep, a sweep folder as it is."""
+    (tmp_path / "tune").mkdir()
+    (tmp_path / "tune" / "tune.json").write_text("{}")
+    args = tune.Args(out=tmp_path / "new", reuse=(tmp_path / "tune", tmp_path / "a_sweep"))
+    assert tune.sweep_args(args, ("a3c",), tmp_path / "new" / "sweep").reuse == (tmp_path / "tune" / "sweep",
+                                                                                 tmp_path / "a_sweep")  # fmt: skip
