@@ -166,7 +166,8 @@ def sr_conditions(model: Model, evaluator, episodes: int, shuffled) -> dict[str,
 def fit_options(model: Model, w_init, items, passes: int) -> dict[str, float]:
     """R^2 over the mean on the held-out items of f_w trained by each of `FIT_OPTIONS`
     (`probes.replay_online_fit`) from `w_init` on the fit items of `items` ((s_0, goal,
-    subgoal, add), each `[windows, T, B, ...]`)."""
+    subgoal, add), each `[windows, T, B, ...]`); NaN for an option this run's Config
+    cannot take (a batch that does not divide its buffer)."""
     from foresit_jax.imagination import make_imagination_optimizer
     from foresit_jax.probes import halves, only_fit_items, r_squared, replay_online_fit
 
@@ -176,7 +177,11 @@ def fit_options(model: Model, w_init, items, passes: int) -> dict[str, float]:
     mean = subgoal[add][fit].mean(axis=0)
     out = {}
     for name, change in FIT_OPTIONS.items():
-        config = dataclasses.replace(model.config, **change)
+        try:
+            config = dataclasses.replace(model.config, **change)
+        except ValueError:  # e.g. a batch that does not divide this run's buffer: not applicable
+            out[name] = float("nan")
+            continue
         optimizer = make_imagination_optimizer(config.imagination_optimizer, config.imagination_lr)
         w = replay_online_fit(model.trainer.agent.imagine, w_init, s_0, goal, subgoal, only_fit_items(add), optimizer,
                               config.imagination_epochs, config.buffer_size, passes, config.imagination_batch)  # fmt: skip

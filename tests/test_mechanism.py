@@ -458,7 +458,7 @@ def test_fit_options_replay_each_option_on_the_fit_items_and_score_the_held_out_
     scored on the odd ones against their mean, as a direct computation gives it."""
     from experiments import probe
 
-    config = H.tiny_config("a3c+foresit", buffer_size=2)
+    config = H.tiny_config("a3c+foresit", buffer_size=8)
     trainer = H.trainer(config)
     rng = np.random.default_rng(8)
     shape = (3, 5, config.num_lanes)
@@ -468,6 +468,8 @@ def test_fit_options_replay_each_option_on_the_fit_items_and_score_the_held_out_
     model = probe.Model(config, trainer, 0, None, None)
     got = probe.fit_options(model, w0, items, passes=2)
     assert list(got) == list(probe.FIT_OPTIONS) and all(np.isfinite(v) for v in got.values())
+    small = probe.Model(dataclasses.replace(config, buffer_size=2), trainer, 0, None, None)
+    assert np.isnan(probe.fit_options(small, w0, items, passes=1)["batch 8"])  # 8 does not divide 2
     flat = [x.reshape((-1,) + x.shape[2:]) for x in items]
     add = flat[3]
     w = probes.replay_online_fit(trainer.agent.imagine, w0, *flat[:3], probes.only_fit_items(add),
