@@ -1,7 +1,7 @@
-"""The fairness study's first sweep (issue 44: a3c, a3c+critic and a3c+foresit at Adam 3e-4,
+"""The fairness study (issue 44: a3c, a3c+critic and a3c+foresit at Adam 3e-4 and 1e-3,
 seeds 0-4, quick): the figures docs/results.md and the README quote are those of its files,
-kept without checkpoints as docs/data/fair_lr3e-4.tar.xz, recomputed here by
-`experiments.compare`, as results.md's command makes them."""
+kept without checkpoints as docs/data/fair_lr3e-4.tar.xz and fair_tune.tar.xz, recomputed here by
+`experiments.compare` and `experiments.tune`, as results.md's commands make them."""
 
 from __future__ import annotations
 
@@ -35,7 +35,7 @@ def interval(p: dict) -> str:
     return f"{signed(p['diff'])} [{signed(p['ci_low'])}, {signed(p['ci_high'])}]"
 
 
-def test_results_md_and_the_readme_quote_the_sweep(study):
+def test_results_md_quotes_the_sweep(study):
     arms, pairs = study
     results = (REPO / "docs" / "results.md").read_text()
     for arm, per_seed in arms.items():
@@ -52,8 +52,6 @@ def test_results_md_and_the_readme_quote_the_sweep(study):
         row = (f"| {b} - {a} | {interval(pair['SR'])} | {interval(pair['SPL'])} | "
                f"{poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | {robust['p_holm']:.3f} | {robust['mde']:.1f} |")
         assert row in results, row
-    headline = interval(pairs[f"{ARMS['a3c+foresit']} - {ARMS['a3c']}"]["SR"])
-    assert headline in (REPO / "README.md").read_text(), headline
 
 
 def test_the_base_is_ahead_on_every_seed_as_results_md_says(study):
@@ -106,3 +104,47 @@ def test_the_gpu_script_runs_dry_on_a_cpu(tmp_path):
     with tarfile.open(tmp_path / "out" / "fair_gpu.tar.xz") as tar:
         names = tar.getnames()
     assert any(n.endswith("lr3e-4_3x/table1.md") for n in names) and not any("checkpoints" in n for n in names)
+
+
+def test_results_md_quotes_the_tuned_comparison():
+    """The tuned study's grid and best-vs-best rows in results.md are what `experiments.tune`'s
+    report computes from its files (docs/data/fair_tune.tar.xz: the tune folder, no checkpoints)."""
+    import tarfile
+    import tempfile
+
+    from experiments import runs, tune
+
+    with tempfile.TemporaryDirectory() as tmp, tarfile.open(REPO / "docs" / "data" / "fair_tune.tar.xz") as tar:
+        tar.extractall(tmp, **({"filter": "data"} if hasattr(tarfile, "data_filter") else {}))
+        root = Path(tmp) / "tune"
+        args = runs.args_from_saved(tune.Args, runs.read_json(root / "tune.json"), out=root)
+        grid = tune.parse_grid(args.grid)
+        table = tune.arms(args, grid)
+        results = {a: runs.read_json(root / "sweep" / "methods" / a / "results.json")["results"]
+                   for by_point in table.values() for a in by_point.values()}  # fmt: skip
+    chosen = {m: tune.choose({p: results[a] for p, a in by_point.items()}) for m, by_point in table.items()}
+    assert chosen == {"a3c": "learning_rate=1e-3", "a3c+critic": "learning_rate=3e-4", "a3c+foresit": "learning_rate=3e-4"}
+    _, grid_rows = tune.grid_table(table, results, chosen)
+    best = {m: results[table[m][chosen[m]]] for m in args.methods}  # as tune.report pairs them
+    _, best_vs_best = compare.paired_report(best, tune.pairs_of(args.methods), ["SR", "SPL"])
+    doc = (REPO / "docs" / "results.md").read_text()
+    for row in grid_rows:
+        val, sr, spl = (stats.summary(row[k]) for k in ("val_SR", "SR", "SPL"))
+        line = (f"| {row['method']} | {row['point'].split('=')[1]} | {val['mean']:.1f} ± {val['std']:.1f} | "
+                f"{sr['mean']:.1f} ± {sr['std']:.1f} | {spl['mean']:.1f} ± {spl['std']:.1f} | "
+                + ("**chosen** |" if row["chosen"] else "|"))
+        assert line in doc, line
+    for name, pair in best_vs_best.items():
+        r, spl_r = pair["robust"]["SR"], pair["robust"]["SPL"]
+        poi, iqm = r["probability_of_improvement"], r["iqm_b"]
+        line = (f"| {name} | {interval(pair['SR'])} | "
+                f"{interval(pair['SPL'])} | {iqm[0]:.1f} [{iqm[1]:.1f}, {iqm[2]:.1f}] | "
+                f"{poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | {r['p_holm']:.3f} / {spl_r['p_holm']:.3f} | {r['mde']:.1f} |")
+        assert line in doc, line
+    headline = best_vs_best["a3c+foresit - a3c"]
+    readme = (REPO / "README.md").read_text()
+    iqm = headline["robust"]["SR"]
+    for quoted in (f"{interval(headline['SR'])} SR and {interval(headline['SPL'])} SPL",
+                   f"IQM of SR is {iqm['iqm_b'][0]:.1f} against {iqm['iqm_a'][0]:.1f}",
+                   f"a3c+foresit - a3c+critic is {interval(best_vs_best['a3c+foresit - a3c+critic']['SR'])} SR"):
+        assert quoted in readme, quoted
