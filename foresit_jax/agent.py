@@ -307,7 +307,8 @@ class Agent:
         def renewed():
             mask = renew[:, None]  # [B, 1], before the imagination (the order of the lowered program's ops)
             return jnp.where(mask, variant.imagine(self.imagine, acting.imagination_params, s_t, goal, key, noise_variance,
-                                                    cfg.rnd_variance), actor.imagined)  # fmt: skip
+                                                    cfg.rnd_variance, cfg.imagination_noise == "input"),
+                             actor.imagined)  # fmt: skip
 
         return jax.lax.cond(jnp.any(renew), renewed, lambda: actor.imagined)
 

@@ -18,6 +18,7 @@ IMAGINATION_OPTIMIZERS: tuple[str, ...] = ("sgd", "adam")
 IMAGINATION_INPUTS: tuple[str, ...] = ("head", "encoder", "mlp")
 EVALUATION_NOISES: tuple[str, ...] = ("training_end", "off")
 VALUE_HEADS: tuple[str, ...] = ("mlp", "linear")
+IMAGINATION_NOISES: tuple[str, ...] = ("output", "input")
 ATTENTION_VALUE_INITS: tuple[str, ...] = ("lecun", "zeros")
 ATTENTION_KEY_GRADIENTS: tuple[str, ...] = ("full", "stopped")
 
@@ -123,6 +124,10 @@ class Config:
     """Lane-local optimiser of f_w: 'sgd' or 'adam' (fresh state per buffer flush)."""
     imagination_lr: float = 1e-3
     """Learning rate beta of f_w (the paper does not give it)."""
+    imagination_noise: str = "output"
+    """Where the exploration noise N(0, sigma^2 I) of Eq. 7's variance enters: 'output', on
+    f_w's output, i_tau = f_w([s_0 : g_tau]) + eta (Eq. 6, the spec); 'input', on f_w's input,
+    i_tau = f_w([s_0 : g_tau] + eta), as Algorithm 1 writes it (the two disagree)."""
     imagination_batch: int = 1
     """Items per f_w step within a full buffer, in buffer order (their mean loss): 1, one
     item a step, is Algorithm 1's; it must divide buffer_size."""
@@ -194,7 +199,7 @@ class Config:
                 needs = ", ".join(f"{k}={v!r}" for k, v in pieces.required_config.items())
                 raise ValueError(f"method {self.method!r} supports {name} {supported}, not {value!r} (it needs {needs}).")
         for name, valid in (("imagination_input", IMAGINATION_INPUTS), ("evaluation_noise", EVALUATION_NOISES),
-                            ("value_head", VALUE_HEADS),
+                            ("value_head", VALUE_HEADS), ("imagination_noise", IMAGINATION_NOISES),
                             ("attention_value_init", ATTENTION_VALUE_INITS),
                             ("attention_key_gradient", ATTENTION_KEY_GRADIENTS)):  # fmt: skip
             if getattr(self, name) not in valid:

@@ -306,6 +306,20 @@ def add_imagination_noise(
     return imagined + jnp.sqrt(variance)[..., None] * eta
 
 
+def add_input_noise(
+    key: chex.PRNGKey, s_0: chex.Array, goal: chex.Array, variance: chex.Array
+) -> tuple[chex.Array, chex.Array]:
+    """Algorithm 1's placement: f_w's input [s_0 : g_tau] + eta, eta ~ N(0, sigma^2 I) over its
+    H + D dimensions (one draw, split back into the two parts).
+
+    s_0 `[..., H]`, goal `[..., D]`, variance `[...]` (per lane) -> (s_0, goal) with the noise.
+    """
+    chex.assert_equal_shape_prefix([s_0, goal, variance], variance.ndim)
+    h = s_0.shape[-1]
+    eta = jax.random.normal(key, s_0.shape[:-1] + (h + goal.shape[-1],), s_0.dtype) * jnp.sqrt(variance)[..., None]
+    return s_0 + eta[..., :h], goal + eta[..., h:]
+
+
 def random_imagination(
     key: chex.PRNGKey, shape: tuple[int, ...], variance: float = 0.5
 ) -> chex.Array:

@@ -93,12 +93,17 @@ class Imagination:
 
     def imagine(
         self, imagine_fn: Callable, w_params, s_t: chex.Array, goal: chex.Array, key: chex.PRNGKey,
-        noise_variance: chex.Array, rnd_variance: float,
+        noise_variance: chex.Array, rnd_variance: float, noise_on_input: bool = False,
     ) -> chex.Array:  # fmt: skip
         """i_tau `[B, H]` for the policy (stop-gradient: the policy loss never trains f_w
-        or, through it, s_0). learned: f_w([s_t : g]) + N(0, sigma2); random: tanh(N(0, v))."""
+        or, through it, s_0). learned: f_w([s_t : g]) + N(0, sigma2) (Eq. 6), or with
+        `noise_on_input` f_w([s_t : g] + N(0, sigma2)) (Algorithm 1; Config.imagination_noise);
+        random: tanh(N(0, v))."""
         if self.source == "random":
             return imagination.random_imagination(key, s_t.shape, rnd_variance)
+        if noise_on_input:
+            s_in, goal_in = imagination.add_input_noise(key, jax.lax.stop_gradient(s_t), goal, noise_variance)
+            return jax.lax.stop_gradient(imagine_fn(w_params, s_in, goal_in))
         imagined = imagine_fn(w_params, jax.lax.stop_gradient(s_t), goal)
         return jax.lax.stop_gradient(imagination.add_imagination_noise(key, imagined, noise_variance))
 

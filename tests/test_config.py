@@ -49,6 +49,7 @@ def test_frozen_and_hashable():
         ("value_head", "deep", "value_head must be one of \\('mlp', 'linear'\\)"),
         ("imagination_batch", 3, "imagination_batch \\(3\\) must divide buffer_size \\(32\\)"),
         ("imagination_batch", 0, "imagination_batch must be >= 1"),
+        ("imagination_noise", "inside", "imagination_noise must be one of \\('output', 'input'\\)"),
     ],
 )
 def test_invalid_values_raise(field, value, match):

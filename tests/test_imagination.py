@@ -312,6 +312,19 @@ class NoiseTest(chex.TestCase):
         np.testing.assert_allclose(np.mean(out, axis=1), [0.5, -0.2, 0.1], atol=0.03)
         np.testing.assert_array_equal(out[2], mean[2])  # sigma^2 = 0: exactly f_w's output
 
+    def test_input_noise_is_one_draw_over_the_input_split_back(self):
+        """Algorithm 1's placement: [s_0 : g] + eta, eta ~ N(0, sigma^2 I) over H + D, each
+        lane at its own variance; variance 0 leaves the input as it is."""
+        key = jax.random.key(4)
+        s_0, goal = jnp.ones((3, H)), jnp.zeros((3, D))
+        variance = jnp.array([0.0, 0.25, 4.0])
+        noisy_s, noisy_g = imagination.add_input_noise(key, s_0, goal, variance)
+        eta = np.asarray(jax.random.normal(key, (3, H + D)))
+        want = np.concatenate([s_0, goal], -1) + eta * np.sqrt(np.asarray(variance))[:, None]
+        np.testing.assert_allclose(np.concatenate([noisy_s, noisy_g], -1), want, rtol=1e-6)
+        np.testing.assert_array_equal(noisy_s[0], s_0[0])
+        np.testing.assert_array_equal(noisy_g[0], goal[0])
+
     def test_random_imagination(self):
         out = imagination.random_imagination(jax.random.key(1), (4, 10000), 0.5)
         chex.assert_shape(out, (4, 10000))

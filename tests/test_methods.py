@@ -155,3 +155,33 @@ def test_the_agent_acts_through_its_bases_act():
     finally:
         methods.BASE_PIECES = original
     assert len(calls) == 1 and calls[0].greedy is True and traj.actions.shape == (3, 2)
+
+
+def test_noise_on_the_input_is_algorithm_1s_and_on_the_output_eq_6s():
+    """The learned imagination's i_tau: f_w([s : g]) + eta by default (Eq. 6); with the
+    noise on the input, f_w([s : g] + eta) (Algorithm 1), eta from the same key and variance."""
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    from foresit_jax import imagination, methods
+
+    def imagine_fn(w, s, g):  # a nonlinear stand-in for f_w: where the noise enters matters
+        return jnp.tanh(w * s + g.sum(-1, keepdims=True))
+
+    piece = methods.IMAGINATIONS["foresit"]
+    key, s_t, goal = jax.random.key(1), jnp.full((2, 4), 0.5), jnp.ones((2, 3))
+    variance = jnp.array([0.3, 1.0])
+    out = piece.imagine(imagine_fn, 2.0, s_t, goal, key, variance, 0.5)
+    np.testing.assert_allclose(out, imagination.add_imagination_noise(key, imagine_fn(2.0, s_t, goal), variance))
+    inside = piece.imagine(imagine_fn, 2.0, s_t, goal, key, variance, 0.5, noise_on_input=True)
+    np.testing.assert_allclose(inside, imagine_fn(2.0, *imagination.add_input_noise(key, s_t, goal, variance)))
+    assert not np.allclose(inside, out)
+
+
+@pytest.mark.slow
+def test_training_with_the_noise_on_f_ws_input_runs_and_stays_finite():
+    import train_helpers as H
+
+    state, metrics = H.init_and_run(H.tiny_config("a3c+foresit", imagination_noise="input"), 0, 2)
+    H.assert_tree_finite((state.params, state.imagination_params, metrics))
