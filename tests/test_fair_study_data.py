@@ -148,3 +148,18 @@ def test_results_md_quotes_the_tuned_comparison():
                    f"IQM of SR is {iqm['iqm_b'][0]:.1f} against {iqm['iqm_a'][0]:.1f}",
                    f"a3c+foresit - a3c+critic is {interval(best_vs_best['a3c+foresit - a3c+critic']['SR'])} SR"):
         assert quoted in readme, quoted
+
+
+def test_results_md_quotes_the_bases_with_savns_head_and_one_step_td(tmp_path, capsys):
+    root = study_data.unpack("fair_bases.tar.xz", tmp_path, ("a3c", "a3c@value_head=linear", "a3c@gae_lambda=0"))
+    arms = ("a3c@value_head=linear", "a3c@gae_lambda=0")
+    out = compare.main(compare.Args(run=root, pairs=tuple(f"a3c:{b}" for b in arms)))
+    capsys.readouterr()
+    results, doc = compare.load(root), (REPO / "docs" / "results.md").read_text()
+    for b in arms:
+        pair = out["pairs"][f"{b} - a3c"]
+        r = pair["robust"]["SR"]
+        poi, sr = r["probability_of_improvement"], stats.summary(compare.values(results[b], "SR"))
+        row = (f"| {b} - a3c | {sr['mean']:.1f} ± {sr['std']:.1f} | {interval(pair['SR'])} | {interval(pair['SPL'])} | "
+               f"{poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | {r['p_holm']:.3f} | {r['mde']:.1f} |")
+        assert row in doc, row
