@@ -163,3 +163,21 @@ def test_results_md_quotes_the_bases_with_savns_head_and_one_step_td(tmp_path, c
         row = (f"| {b} - a3c | {sr['mean']:.1f} ± {sr['std']:.1f} | {interval(pair['SR'])} | {interval(pair['SPL'])} | "
                f"{poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | {r['p_holm']:.3f} | {r['mde']:.1f} |")
         assert row in doc, row
+
+
+def test_results_md_quotes_the_better_fitted_fw_arm(tmp_path, capsys):
+    arm = "a3c+foresit@imagination_lr=3e-4"
+    root = study_data.unpack("fair_fw.tar.xz", tmp_path, ("a3c", "a3c+critic", "a3c+foresit", arm))
+    bases = ("a3c+foresit", "a3c", "a3c+critic")
+    out = compare.main(compare.Args(run=root, pairs=tuple(f"{a}:{arm}" for a in bases)))
+    capsys.readouterr()
+    results, doc = compare.load(root), (REPO / "docs" / "results.md").read_text()
+    sr = stats.summary(compare.values(results[arm], "SR"))
+    for a in bases:
+        pair = out["pairs"][f"{arm} - {a}"]
+        r = pair["robust"]["SR"]
+        poi = r["probability_of_improvement"]
+        row = (f"| {arm} - {a} | {sr['mean']:.1f} ± {sr['std']:.1f} | {interval(pair['SR'])} | {interval(pair['SPL'])} | "
+               f"{poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | {r['p_holm']:.3f} | {r['mde']:.1f} |")
+        assert row in doc, row
+    assert out["pairs"][f"{arm} - a3c"]["robust"]["SPL"]["p_holm"] < 0.05  # "with an interval that excludes 0"
