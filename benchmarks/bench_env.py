@@ -17,7 +17,8 @@ env); ``raycast`` casts the view at every step (``precomputed_views=False``; tim
 ``--raycast-steps`` steps per call, since it is about a hundred times slower).  Timings on
 a shared machine are noisy: compare the best column of one run.
 ``--layouts room house`` times single rooms and houses (``layout="house"``) in the same
-rounds and prints the ratio houses / rooms per batch size.
+rounds and prints the ratio houses / rooms per batch size; ``--priors False True`` times
+today's layouts and those with priors (envs.priors) and prints the ratio priors / today's.
 ``--compare xminigrid`` measures XLand-MiniGrid's ``MiniGrid-DoorKey-8x8`` the same way
 (its ``GymAutoResetWrapper``, random actions, observation carried) and prints the ratio
 ours / DoorKey per batch size.
@@ -64,6 +65,8 @@ class BenchConfig:
     """GridNav scene split (train: 80 rooms, 60 houses)"""
     layouts: tuple[Literal["room", "house"], ...] = ("room",)
     """GridNav layouts to time: single rooms, houses (envs.houses) or both (then their ratio)"""
+    priors: tuple[bool, ...] = (False,)
+    """today's layouts (False), those with priors (True, envs.priors) or both (then their ratio)"""
     seed: int = 0
     """PRNG seed"""
 
@@ -94,11 +97,13 @@ def time_once(compiled, args: tuple, key, batch_size: int, steps: int) -> float:
     return batch_size * steps / (time.perf_counter() - start)
 
 
-def gridnav_rollout(precomputed_views: bool, setup: str, split: str, batch_size: int, steps: int, layout: str = "room"):
+def gridnav_rollout(precomputed_views: bool, setup: str, split: str, batch_size: int, steps: int, layout: str = "room",
+                    priors: bool = False):  # fmt: skip
     """(jitted rollout(params, carry, key) -> carry, (params, carry)) for GridNav-v0.
 
     The scene bank is an argument, not a constant folded into the program."""
-    env, params = envs.make("GridNav-v0", setup=setup, split=split, precomputed_views=precomputed_views, layout=layout)
+    env, params = envs.make("GridNav-v0", setup=setup, split=split, precomputed_views=precomputed_views, layout=layout,
+                            priors=priors)  # fmt: skip
     vstep = jax.vmap(env.step, in_axes=(0, 0, 0, None))
 
     @jax.jit
@@ -170,12 +175,14 @@ def main(config: BenchConfig) -> int:
     for batch_size in config.batch_sizes:
         jobs = []
         for layout in config.layouts:
-            for precomputed in modes:
-                steps = config.steps if precomputed else config.raycast_steps
-                name = f"GridNav {'precomputed' if precomputed else 'raycast'}" + ("" if layout == "room" else " house")
-                build = lambda p=precomputed, n=steps, lay=layout: gridnav_rollout(  # noqa: E731
-                    p, config.setup, config.split, batch_size, n, lay)
-                jobs.append((name, steps, build))
+            for priors in config.priors:
+                for precomputed in modes:
+                    steps = config.steps if precomputed else config.raycast_steps
+                    name = (f"GridNav {'precomputed' if precomputed else 'raycast'}" + ("" if layout == "room" else " house")
+                            + (" priors" if priors else ""))  # fmt: skip
+                    build = lambda p=precomputed, n=steps, lay=layout, pr=priors: gridnav_rollout(  # noqa: E731
+                        p, config.setup, config.split, batch_size, n, lay, pr)
+                    jobs.append((name, steps, build))
         if config.compare == "xminigrid":
             jobs.append((f"xminigrid {XMINIGRID_ENV}", config.steps, lambda: xminigrid_rollout(batch_size, config.steps)))
         # Compile everything of this batch size first, then time round-robin: on a shared
@@ -204,14 +211,17 @@ def main(config: BenchConfig) -> int:
         for m, _ in results:
             if m.name.startswith("GridNav"):
                 print(f"  {m.name:20s} B={m.batch_size:<5d} {m.best_sps / reference[m.batch_size]:6.2f}x")
-    if set(config.layouts) == {"room", "house"}:
+    best = {(m.name, m.batch_size): m.best_sps for m, _ in results}
+    for wanted, label, suffix in ((set(config.layouts) == {"room", "house"}, "houses / rooms", " house"),
+                                  (set(config.priors) == {False, True}, "priors / today's layouts", " priors")):
+        if not wanted:
+            continue
         print()
-        print("ratio houses / rooms (best steps/s)")
-        best = {(m.name, m.batch_size): m.best_sps for m, _ in results}
+        print(f"ratio {label} (best steps/s)")
         for m, _ in results:
-            if m.name.endswith(" house"):
-                room = best[(m.name.removesuffix(" house"), m.batch_size)]
-                print(f"  {m.name.removesuffix(' house'):20s} B={m.batch_size:<5d} {m.best_sps / room:6.2f}x")
+            if m.name.endswith(suffix):
+                base = best[(m.name.removesuffix(suffix), m.batch_size)]
+                print(f"  {m.name.removesuffix(suffix):28s} B={m.batch_size:<5d} {m.best_sps / base:6.2f}x")
     print(f"\ntotal time {time.perf_counter() - start:.0f} s")
     return 0
 

@@ -85,7 +85,7 @@ def program_hashes(trainer, state) -> dict[str, str]:
 
     config = trainer.config
     train = jax.jit(trainer.run, static_argnums=2).lower(state, trainer.env_params, 2).as_text()
-    evaluator = Evaluator(config.setup, config.layout)
+    evaluator = Evaluator.for_config(config)
     rollout = evaluator.agent_rollout(config, 30, config.pieces.greedy_evaluation)
     room = evaluator.room_params("val", (config.room_types or ("bathroom",))[0])
     evaluate = rollout.lower(state.params, state.imagination_params, room, jax.random.PRNGKey(1), jnp.zeros(8)).as_text()

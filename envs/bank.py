@@ -30,9 +30,10 @@ from envs import bank_cache as cache
 from envs import catalog as C
 from envs.dynamics import pose_from_index, pose_index, transition
 from envs.raycast import (
-    DEPTH_RESOLUTION, NUM_ROWS, ROW_BANDS, ROW_MAX_DIST, ROW_MIN_DIST, _first_hit, column_angles_deg, ray_cells,
+    DEPTH_RESOLUTION, NUM_ROWS, ROW_BANDS, ROW_MAX_DIST, ROW_MIN_DIST, column_angles_deg, ray_cells, view_rows,
 )  # fmt: skip
 from envs.houses import generate_house
+from envs.priors import target_encodings as prior_target_encodings
 from envs.scenes import generate_layout
 
 UNREACHABLE = np.iinfo(np.int16).max
@@ -61,11 +62,15 @@ class SceneBank:
     starts: jax.Array  # int32 [S, K, G*G*8] start poses (pose index // 2), valid ones first
     num_starts: jax.Array  # int32 [S, K]
     target_vectors: jax.Array  # float32 [n_categories, D] what the agent is given as target
+    # int8 [S, G, G] the semantic class each furniture cell shows (layouts with priors, else
+    # None: no array, and the program of today's layouts stays as it was)
+    furniture_sem: jax.Array | None = None
 
 
 @functools.partial(jax.jit, static_argnames=("view_width",))
-def _scene_views(cell_type, obj_cat, obj_band, view_width: int):
-    """The view of every pose of one scene: (sem int8 [P, 3, W], depth code uint8 [P, 3, W]).
+def _scene_views(cell_type, obj_cat, obj_band, view_width: int, furniture_sem=None):
+    """The view of every pose of one scene: (sem int8 [P, 3, W], depth code uint8 [P, 3, W]);
+    ``furniture_sem`` as ``raycast.cast_view`` takes it.
 
     Equal, pixel for pixel, to ``raycast.cast_view`` of each pose (tests check it), but the
     rays of a (cell, heading) are cast and their cells gathered once for both horizons (the
@@ -77,17 +82,16 @@ def _scene_views(cell_type, obj_cat, obj_band, view_width: int):
     cell = idx // C.NUM_HEADINGS
     pos = jnp.stack([cell // grid_size, cell % grid_size], -1)
     offsets = jnp.asarray(column_angles_deg(view_width), jnp.float32)
-    per_row = jax.vmap(_first_hit, in_axes=(None, None, None, None, 0, 0, 0))  # view rows
-    per_col = jax.vmap(per_row, in_axes=(0, 0, 0, 0, None, None, None))  # view columns
 
     def cast(p, h):  # as cast_view, for horizons 0 and 1 at once
         angles = h.astype(jnp.float32) * 45.0 + offsets
         rows, cols, entry = jax.vmap(lambda a: ray_cells(p, a, grid_size))(angles)  # [W, K]
         cell_t, cat, band = cell_type[rows, cols], obj_cat[rows, cols], obj_band[rows, cols]
+        furn = None if furniture_sem is None else furniture_sem[rows, cols]
 
         def at_horizon(z):
             row_band, lo, hi = (jnp.asarray(t)[z] for t in (ROW_BANDS, ROW_MIN_DIST, ROW_MAX_DIST))
-            sem, depth = per_col(cell_t, cat, band, entry, row_band, lo, hi)  # [W, 3]
+            sem, depth = view_rows(cell_t, cat, band, entry, row_band, lo, hi, furn)  # [W, 3]
             depth = jnp.round(depth * DEPTH_RESOLUTION) / DEPTH_RESOLUTION
             return sem.T, depth.T  # [3, W]
 
@@ -136,12 +140,13 @@ def _distances(goal, next_poses):
     return dist
 
 
-def _expected_arrays(setup: str, scene_numbers, grid_size: int, view_width: int) -> dict:
+def _expected_arrays(setup: str, scene_numbers, grid_size: int, view_width: int, priors: bool = False) -> dict:
     """name -> (shape, dtype) of every array of a bank."""
     s, g, k = len(scene_numbers), grid_size, _max_targets(setup, scene_numbers)
     p = g * g * C.NUM_HEADINGS * C.NUM_HORIZONS
     i8, i32 = np.dtype(np.int8), np.dtype(np.int32)
-    return {
+    furniture = {"furniture_sem": ((s, g, g), i8)} if priors else {}
+    return furniture | {
         "numbers": ((s,), i32), "room_type": ((s,), i32), "cell_type": ((s, g, g), i8),
         "obj_cat": ((s, g, g), i8), "obj_band": ((s, g, g), i8), "cell_room": ((s, g, g), i8),
         "room_types": ((s, MAX_ROOMS), i32), "target_room": ((s, k), i32), "targets": ((s, k), i32),
@@ -162,39 +167,45 @@ def _max_targets(setup: str, scene_numbers) -> int:
 
 @functools.lru_cache(maxsize=16)
 def build_bank(setup: str, scene_numbers: tuple[int, ...], grid_size: int, view_width: int,
-               target_rooms: tuple[int, ...] = ALL_ROOM_TYPES) -> dict:  # fmt: skip
+               target_rooms: tuple[int, ...] = ALL_ROOM_TYPES, priors: bool = False) -> dict:  # fmt: skip
     """Numpy arrays of a SceneBank, cached in memory and on disk (see the module doc).
 
     The first build of a split takes seconds (all four room types of the train split: about
     10 s on one CPU core); loading it from the disk cache takes a fraction of a second."""
-    args = (setup, scene_numbers, grid_size, view_width, target_rooms)
+    args = (setup, scene_numbers, grid_size, view_width, target_rooms, priors)
     path = cache.bank_cache_path(*args)
     if path is None:
         return compute_bank(*args)
     key = cache.bank_cache_key(*args)
-    arrays = cache.load(path, key, _expected_arrays(setup, scene_numbers, grid_size, view_width))
+    arrays = cache.load(path, key, _expected_arrays(setup, scene_numbers, grid_size, view_width, priors))
     if arrays is None:
         arrays = compute_bank(*args)
         cache.save(path, key, arrays)
     return arrays
 
 
-def generate_scene(number: int, setup: str, grid_size: int):
-    """The layout of a single room (an AI2-THOR number) or of a house (envs.houses)."""
-    return (generate_house if C.is_house(number) else generate_layout)(number, setup, grid_size)
+def generate_scene(number: int, setup: str, grid_size: int, priors: bool = False):
+    """The layout of a single room (an AI2-THOR number) or of a house (envs.houses), with
+    the priors of real homes or without (envs.priors)."""
+    return (generate_house if C.is_house(number) else generate_layout)(number, setup, grid_size, priors)
 
 
 def compute_bank(setup: str, scene_numbers: tuple[int, ...], grid_size: int, view_width: int,
-                 target_rooms: tuple[int, ...] = ALL_ROOM_TYPES) -> dict:  # fmt: skip
+                 target_rooms: tuple[int, ...] = ALL_ROOM_TYPES, priors: bool = False) -> dict:  # fmt: skip
     """Numpy arrays of a SceneBank, built from scratch (no cache).  A scene's targets are the
     categories present in it whose room has a type in ``target_rooms``."""
     categories = C.categories(setup)
     radius_cells = C.SETUPS[setup][2] / C.CELL_SIZE_M
     max_targets = _max_targets(setup, scene_numbers)
-    out = {k: [] for k in SceneBank.__dataclass_fields__ if k != "target_vectors"}
+    out = {k: [] for k in SceneBank.__dataclass_fields__ if k != "target_vectors" and (priors or k != "furniture_sem")}
     for number in scene_numbers:
-        layout = generate_scene(number, setup, grid_size)
-        sem, depth_code = _scene_views(layout.cell_type, layout.obj_cat, layout.obj_band, view_width)
+        layout = generate_scene(number, setup, grid_size, priors)
+        furniture_sem = None
+        if priors:
+            furniture_sem = np.where(layout.furniture >= 0, C.furniture_sem(setup, 0) + layout.furniture,
+                                     C.SEM_FURNITURE).astype(np.int8)  # fmt: skip
+            out["furniture_sem"].append(furniture_sem)
+        sem, depth_code = _scene_views(layout.cell_type, layout.obj_cat, layout.obj_band, view_width, furniture_sem)
         sem, depth_code = np.asarray(sem), np.asarray(depth_code)
         present = sorted(c for c, room in layout.target_room.items() if layout.room_types[room] in target_rooms)
         in_range = depth_code <= radius_cells * DEPTH_RESOLUTION  # [P, 3, W]
@@ -235,7 +246,7 @@ def compute_bank(setup: str, scene_numbers: tuple[int, ...], grid_size: int, vie
     arrays["numbers"] = arrays["numbers"].astype(np.int32)
     arrays["room_type"] = arrays["room_type"].astype(np.int32)
     arrays["num_targets"] = arrays["num_targets"].astype(np.int32)
-    arrays["target_vectors"] = C.target_encodings(setup)
+    arrays["target_vectors"] = prior_target_encodings(setup) if priors else C.target_encodings(setup)
     assert len(categories) == arrays["target_vectors"].shape[0]
     return arrays
 
@@ -257,9 +268,10 @@ def _start_poses(ok, room_of_start, target_room: int, seed) -> np.ndarray:
     return np.concatenate([np.flatnonzero(away), near])
 
 
-def make_bank(setup: str, scene_numbers, grid_size: int, view_width: int, target_rooms=ALL_ROOM_TYPES) -> SceneBank:
+def make_bank(setup: str, scene_numbers, grid_size: int, view_width: int, target_rooms=ALL_ROOM_TYPES,
+              priors: bool = False) -> SceneBank:  # fmt: skip
     scene_numbers = tuple(int(n) for n in scene_numbers)
-    arrays = build_bank(setup, scene_numbers, grid_size, view_width, tuple(int(r) for r in target_rooms))
+    arrays = build_bank(setup, scene_numbers, grid_size, view_width, tuple(int(r) for r in target_rooms), bool(priors))
     return SceneBank(**{k: jnp.asarray(v) for k, v in arrays.items()})
 
 

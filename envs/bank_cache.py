@@ -32,7 +32,8 @@ BANK_CACHE_FORMAT = 1  # bump when the file layout (not the arrays) changes
 CACHE_DIR_ENV = "FORESIT_CACHE_DIR"  # root of the disk cache; banks go to its "banks" folder
 NO_CACHE_ENV = "FORESIT_NO_CACHE"  # "1" (anything but "", "0", "false", "no"): no disk cache
 # The modules whose source determines a bank's arrays (hashed into the cache key).
-_GENERATOR_SOURCES = ("scenes.py", "houses.py", "bank.py", "dynamics.py", "raycast.py", "catalog.py")
+_GENERATOR_SOURCES = ("scenes.py", "houses.py", "priors.py", "grid.py", "bank.py", "dynamics.py", "raycast.py",
+                      "catalog.py")
 
 
 def bank_cache_dir() -> Path | None:
@@ -59,7 +60,8 @@ def _generator_digest() -> str:
     return digest.hexdigest()
 
 
-def bank_cache_key(setup: str, scene_numbers, grid_size: int, view_width: int, target_rooms=(0, 1, 2, 3)) -> str:
+def bank_cache_key(setup: str, scene_numbers, grid_size: int, view_width: int, target_rooms=(0, 1, 2, 3),
+                   priors: bool = False) -> str:  # fmt: skip
     """Hex sha256 of every input that determines the arrays of a bank (see the module doc)."""
     inputs = {
         "format": BANK_CACHE_FORMAT,
@@ -70,17 +72,20 @@ def bank_cache_key(setup: str, scene_numbers, grid_size: int, view_width: int, t
         "target_rooms": [int(r) for r in target_rooms],
         "generator": _generator_digest(),
     }
+    if priors:  # only then: the keys of today's layouts stay as they were
+        inputs["priors"] = True
     return hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()
 
 
 def bank_cache_path(setup: str, scene_numbers, grid_size: int, view_width: int,
-                    target_rooms=(0, 1, 2, 3)) -> Path | None:  # fmt: skip
+                    target_rooms=(0, 1, 2, 3), priors: bool = False) -> Path | None:  # fmt: skip
     """Where the bank of these inputs is (or would be) cached; None when caching is off."""
     folder = bank_cache_dir()
     if folder is None:
         return None
-    key = bank_cache_key(setup, scene_numbers, grid_size, view_width, target_rooms)
-    return folder / f"{setup}-{len(scene_numbers)}scenes-g{grid_size}-w{view_width}-{key[:32]}.npz"
+    key = bank_cache_key(setup, scene_numbers, grid_size, view_width, target_rooms, priors)
+    kind = "-priors" if priors else ""
+    return folder / f"{setup}{kind}-{len(scene_numbers)}scenes-g{grid_size}-w{view_width}-{key[:32]}.npz"
 
 
 def load(path: Path, key: str, expected: dict) -> dict | None:

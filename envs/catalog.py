@@ -44,6 +44,14 @@ HEADING_DELTAS = np.array(
 SEM_NOTHING, SEM_WALL, SEM_FLOOR, SEM_FURNITURE = range(4)
 NUM_STRUCTURAL = 4
 
+# Furniture kinds of the layouts with priors (envs.priors; AI2-THOR object types): each is a
+# semantic class of its own there, after the categories (``furniture_sem``); today's layouts
+# show all furniture as SEM_FURNITURE.
+FURNITURE_KINDS = (
+    "CounterTop", "DiningTable", "Shelf", "Sofa", "ArmChair", "CoffeeTable", "TVStand", "Bed", "SideTable",
+    "Dresser", "Desk", "Toilet", "Bathtub",
+)  # fmt: skip
+
 # Cell types of the occupancy grid.
 CELL_FLOOR, CELL_WALL, CELL_FURNITURE, CELL_OBJECT = range(4)
 
@@ -115,6 +123,17 @@ def check_split(split: str) -> None:
 def check_layout(layout: str) -> None:
     if layout not in LAYOUTS:
         raise ValueError(f"unknown layout {layout!r}; choose one of {list(LAYOUTS)}")
+
+
+def num_semantic(setup: str, priors: bool = False) -> int:
+    """Semantic classes of a view pixel: the structural ones, the setup's categories and,
+    under priors, the furniture kinds."""
+    return NUM_STRUCTURAL + len(categories(setup)) + (len(FURNITURE_KINDS) if priors else 0)
+
+
+def furniture_sem(setup: str, kind: int) -> int:
+    """The semantic class of furniture kind index ``kind`` (layouts with priors)."""
+    return NUM_STRUCTURAL + len(categories(setup)) + int(kind)
 
 
 def categories(setup: str) -> tuple[str, ...]:

@@ -135,6 +135,11 @@ class GridNav:
         room at the start, time limits 60 / 300).  In a house, ``room_types`` (of
         ``make_params``) selects the targets by the type of the room that holds them,
         and ``info["room_type"]`` is that room's type.
+      priors: layouts with the regularities of real homes (envs.priors): furniture of
+        distinct kinds, each its own semantic class in the view (after the categories), every
+        target placed by relations to furniture and other targets, houses' rooms in adjacent
+        pairs, and (savn) target word vectors related as the categories are.  False (the
+        default) gives today's layouts, whose targets stand uniformly at random.
       grid_size: side of the padded scene grid, in 0.25 m cells (default 20 for rooms,
         30 for houses).
       view_width: number of view columns (rays) across the 100 degree field of view.
@@ -153,6 +158,7 @@ class GridNav:
         final_observation: bool = True,
         check_actions: bool = False,
         layout: str = "room",
+        priors: bool = False,
     ):
         C.check_setup(setup)
         C.check_layout(layout)
@@ -169,7 +175,8 @@ class GridNav:
         self.categories = C.categories(setup)
         self.num_categories = len(self.categories)
         self.success_radius_m = C.SETUPS[setup][2]
-        self.num_semantic = C.NUM_STRUCTURAL + self.num_categories
+        self.priors = bool(priors)
+        self.num_semantic = C.num_semantic(setup, self.priors)
         self.max_depth = float(grid_size) * 1.5  # depth channel = depth in cells / max_depth
         # Multiply by reciprocals, never divide by constants: XLA rewrites x / c as
         # x * (1 / c) under jit only, which would make jit and no-jit differ in the last bit.
@@ -193,7 +200,7 @@ class GridNav:
             numbers, target_rooms = [n for n in C.house_numbers(split) if set(house_room_types(n)) & set(rooms)], rooms
         else:  # the rooms of those types, all their targets
             numbers, target_rooms = C.scene_numbers(split, rooms), tuple(range(4))
-        bank = make_bank(self.setup, numbers, self.grid_size, self.view_width, target_rooms)
+        bank = make_bank(self.setup, numbers, self.grid_size, self.view_width, target_rooms, self.priors)
         limits = time_limits(split == "train" if training is None else training, self.layout)
         return EnvParams(bank=bank, max_steps=limits)
 
@@ -329,9 +336,10 @@ class GridNav:
             depth = bank.view_depth[state.scene, pose].astype(jnp.float32) / DEPTH_RESOLUTION
             return sem, depth
         s = state.scene
+        furniture_sem = None if bank.furniture_sem is None else bank.furniture_sem[s]
         return cast_view(
             bank.cell_type[s], bank.obj_cat[s], bank.obj_band[s],
-            state.agent_pos, state.heading, state.horizon, self.view_width,
+            state.agent_pos, state.heading, state.horizon, self.view_width, furniture_sem,
         )  # fmt: skip
 
     def get_obs(self, state: EnvState, params: EnvParams) -> dict[str, jax.Array]:

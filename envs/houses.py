@@ -25,7 +25,9 @@ from __future__ import annotations
 import numpy as np
 
 from envs import catalog as C
-from envs.scenes import ROOM_SIZE_RANGES, Layout, _next_to, _rng, _walkable_connected, furnish, place_objects
+from envs import priors as P
+from envs.grid import next_to, walkable_connected
+from envs.scenes import ROOM_SIZE_RANGES, Layout, _rng, furnish, place_objects
 
 HOUSE_GRID_SIZE = 30  # the largest footprint (28 x 28 cells, 7 m) plus its outer walls
 DOOR_WIDTH = 3  # cells (0.75 m), as the single living rooms' doorway
@@ -45,21 +47,27 @@ def house_room_types(number: int) -> tuple[int, ...]:
     return tuple(int(t) for t in _rng("house", number).permutation(4)[:size])
 
 
-def generate_house(number: int, setup: str, grid_size: int = HOUSE_GRID_SIZE) -> Layout:
-    """House ``number`` (2001-2030, 3001-3030, 4001-4030) under ``setup``'s categories."""
+def generate_house(number: int, setup: str, grid_size: int = HOUSE_GRID_SIZE, priors: bool = False) -> Layout:
+    """House ``number`` (2001-2030, 3001-3030, 4001-4030) under ``setup``'s categories; with
+    ``priors``, its rooms in adjacent pairs, furnished with kinds and filled by relations
+    (envs.priors)."""
     C.check_setup(setup)
     if grid_size < HOUSE_GRID_SIZE:
         raise ValueError(f"a house needs grid_size >= {HOUSE_GRID_SIZE}, got {grid_size}")
     types = house_room_types(number)
     rng = _rng("house", number)
     rng.permutation(4)  # the draw house_room_types made
+    first_k = None
+    if priors:
+        rng = _rng("priors-house", number)
+        types, first_k = P.room_order(types, rng)
     areas = [nominal_area(t) * rng.uniform(*HOUSE_ROOM_SCALE) for t in types]
     aspect = rng.uniform(0.75, 1.0 / 0.75)
     inner = grid_size - 2
     rows = int(np.clip(round(np.sqrt(sum(areas) * aspect)) + 1, 2 * MIN_SIDE + 1, inner))
     cols = int(np.clip(round(sum(areas) / rows) + 1, 2 * MIN_SIDE + 1, inner))
     top, left = int(rng.integers(1, grid_size - rows)), int(rng.integers(1, grid_size - cols))
-    rooms, doors = _partition((top, left, rows, cols), list(enumerate(areas)), rng)
+    rooms, doors = _partition((top, left, rows, cols), list(enumerate(areas)), rng, first_k)
 
     cell = np.full((grid_size, grid_size), C.CELL_WALL, np.int8)
     cell_room = np.full((grid_size, grid_size), -1, np.int8)
@@ -70,37 +78,44 @@ def generate_house(number: int, setup: str, grid_size: int = HOUSE_GRID_SIZE) ->
     is_door[tuple(np.array(doors).T)] = True
     # The cells in front of a doorway stay free (no furniture, no floor object): then a room
     # whose own floor is connected stays so without its doorways, and no doorway is blocked.
-    keep_free = _next_to(cell == C.CELL_FLOOR, is_door)
+    keep_free = next_to(cell == C.CELL_FLOOR, is_door)
     rects = {index: rect for rect, index in rooms}
+    furniture = np.full(cell.shape, -1, np.int8) if priors else None
     for index, room in enumerate(types):  # each room furnished on its own (its floor kept connected)
         r0, c0, h, w = rects[index]
         alone = np.full(cell.shape, C.CELL_WALL, np.int8)
         alone[r0 : r0 + h, c0 : c0 + w] = cell[r0 : r0 + h, c0 : c0 + w]
-        alone = furnish(alone, room, rng, rects[index], keep_free)
+        if priors:
+            alone, kinds = P.furnish_with_kinds(alone, furniture, room, rng, rects[index], keep_free)
+            furniture[r0 : r0 + h, c0 : c0 + w] = kinds[r0 : r0 + h, c0 : c0 + w]
+        else:
+            alone = furnish(alone, room, rng, rects[index], keep_free)
         cell[r0 : r0 + h, c0 : c0 + w] = alone[r0 : r0 + h, c0 : c0 + w]
     cell[is_door] = C.CELL_FLOOR
 
     obj_cat = np.full(cell.shape, -1, np.int8)
     obj_band = np.full(cell.shape, -1, np.int8)
-    rng = _rng("house-objects", setup, number)
+    rng = _rng("priors-house-objects" if priors else "house-objects", setup, number)
     categories, target_room = C.categories(setup), {}
     for index, room in enumerate(types):
         names = [n for n in C.SETUPS[setup][1][room] if categories.index(n) not in target_room]
         elsewhere = (cell_room >= 0) & (cell_room != index)
         cell, placed = place_objects(cell, obj_cat, obj_band, setup, names, rng, cell_room == index, elsewhere,
-                                     keep_free)  # fmt: skip
+                                     keep_free, furniture)  # fmt: skip
         target_room.update(dict.fromkeys(placed, index))
-    if not _walkable_connected(cell):
+    if not walkable_connected(cell):
         raise AssertionError(f"house {number}: the floor is not connected")
-    return Layout(number, -1, cell, obj_cat, obj_band, cell_room, types, target_room)
+    return Layout(number, -1, cell, obj_cat, obj_band, cell_room, types, target_room, furniture)
 
 
-def _partition(rect, rooms, rng):
+def _partition(rect, rooms, rng, first_k=None):
     """([(rect, room index)], door cells [(row, col)]) of ``rect`` = (top, left, rows, cols)
-    cut between ``rooms`` = [(room index, area)] (see the module doc)."""
+    cut between ``rooms`` = [(room index, area)] (see the module doc); ``first_k``, when
+    given, is the first cut's count of rooms on its first side."""
     if len(rooms) == 1:
         return [(rect, rooms[0][0])], []
     k = len(rooms) // 2 + int(len(rooms) % 2 and rng.random() < 0.5)  # 1|1, 1|2 or 2|1, 2|2
+    k = k if first_k is None else first_k
     first, second = rooms[:k], rooms[k:]
     share = sum(a for _, a in first) / sum(a for _, a in rooms)
     top, left, rows, cols = rect

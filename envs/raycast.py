@@ -77,8 +77,10 @@ def ray_cells(pos: jax.Array, angle_deg: jax.Array, grid_size: int):
     return jnp.clip(rows, 0, grid_size - 1), jnp.clip(cols, 0, grid_size - 1), entry
 
 
-def _first_hit(cell_t, cat, band, entry, row_band, lo, hi):
-    """Category and depth one row sees along one ray ([K] arrays of the cells it enters)."""
+def _first_hit(cell_t, cat, band, entry, row_band, lo, hi, furn_sem=None):
+    """Category and depth one row sees along one ray ([K] arrays of the cells it enters).
+    ``furn_sem`` ([K], layouts with priors) is the class each furniture cell shows; None:
+    every piece shows as SEM_FURNITURE."""
     is_wall = cell_t == C.CELL_WALL
     is_furn = cell_t == C.CELL_FURNITURE
     in_window = (entry >= lo) & (entry < hi)
@@ -97,7 +99,7 @@ def _first_hit(cell_t, cat, band, entry, row_band, lo, hi):
         jnp.where(shows_obj[first], obj_sem[first], C.SEM_WALL),
         jnp.where(
             is_furn[first],
-            jnp.where(shows_obj[first], obj_sem[first], C.SEM_FURNITURE),
+            jnp.where(shows_obj[first], obj_sem[first], C.SEM_FURNITURE if furn_sem is None else furn_sem[first]),
             jnp.where(floor_obj[first], obj_sem[first], C.SEM_FLOOR),
         ),
     )
@@ -108,22 +110,36 @@ def _first_hit(cell_t, cat, band, entry, row_band, lo, hi):
     return sem, depth
 
 
-def cast_view(cell_type, obj_cat, obj_band, pos, heading, horizon, view_width: int):
+def view_rows(cell_t, cat, band, entry, row_band, lo, hi, furn_sem=None):
+    """``_first_hit`` of every (view column, view row): the [W, K] cells the columns' rays
+    enter (and ``furn_sem`` [W, K] or None), the rows' [3] bands and depth windows.
+    Returns (sem, depth), each [W, 3]."""
+    if furn_sem is None:  # the program as before layouts with priors existed
+        per_row = jax.vmap(_first_hit, in_axes=(None, None, None, None, 0, 0, 0))  # rows
+        per_col = jax.vmap(per_row, in_axes=(0, 0, 0, 0, None, None, None))  # columns
+        return per_col(cell_t, cat, band, entry, row_band, lo, hi)
+    per_row = jax.vmap(_first_hit, in_axes=(None, None, None, None, 0, 0, 0, None))
+    per_col = jax.vmap(per_row, in_axes=(0, 0, 0, 0, None, None, None, 0))
+    return per_col(cell_t, cat, band, entry, row_band, lo, hi, furn_sem)
+
+
+def cast_view(cell_type, obj_cat, obj_band, pos, heading, horizon, view_width: int, furniture_sem=None):
     """Render the first-person view of one pose.
 
     cell_type, obj_cat, obj_band: int [G, G] (one scene); pos: int32 [2]; heading, horizon:
-    int32 scalars.  Returns sem: int32 [3, W] semantic class per pixel (catalog.SEM_* or
-    NUM_STRUCTURAL + category); depth: float32 [3, W] in cells (1/8 cell resolution).
+    int32 scalars; furniture_sem: int [G, G], the class each furniture cell shows (layouts
+    with priors: ``catalog.furniture_sem`` of its kind), or None (SEM_FURNITURE).  Returns
+    sem: int32 [3, W] semantic class per pixel (catalog.SEM_*, NUM_STRUCTURAL + category
+    or a furniture kind's class); depth: float32 [3, W] in cells (1/8 cell resolution).
     """
     grid_size = cell_type.shape[0]
     angles = heading.astype(jnp.float32) * 45.0 + jnp.asarray(column_angles_deg(view_width), jnp.float32)
     rows, cols, entry = jax.vmap(lambda a: ray_cells(pos, a, grid_size))(angles)  # [W, K]
     cell_t, cat, band = cell_type[rows, cols], obj_cat[rows, cols], obj_band[rows, cols]
+    furn = None if furniture_sem is None else furniture_sem[rows, cols]
     row_band = jnp.asarray(ROW_BANDS)[horizon]  # [3]
     lo = jnp.asarray(ROW_MIN_DIST)[horizon]
     hi = jnp.asarray(ROW_MAX_DIST)[horizon]
-    per_row = jax.vmap(_first_hit, in_axes=(None, None, None, None, 0, 0, 0))  # rows
-    per_col = jax.vmap(per_row, in_axes=(0, 0, 0, 0, None, None, None))  # columns
-    sem, depth = per_col(cell_t, cat, band, entry, row_band, lo, hi)  # [W, 3]
+    sem, depth = view_rows(cell_t, cat, band, entry, row_band, lo, hi, furn)  # [W, 3]
     depth = jnp.minimum(jnp.round(depth * DEPTH_RESOLUTION), 255) / DEPTH_RESOLUTION
     return sem.T.astype(jnp.int32), depth.T.astype(jnp.float32)

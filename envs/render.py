@@ -54,6 +54,14 @@ BAND_NAMES = {C.BAND_FLOOR: "on the floor", C.BAND_MID: "on furniture", C.BAND_H
 DPI = 100
 
 
+def furniture_colors() -> np.ndarray:
+    """float [len(FURNITURE_KINDS), 3] in [0, 1]: shades of brown, one per furniture kind
+    (layouts with priors), around the plain furniture colour."""
+    base = np.array(_rgb01(SEM_RGB[C.SEM_FURNITURE]))
+    steps = np.linspace(-0.28, 0.28, len(C.FURNITURE_KINDS))
+    return np.clip(base[None, :] + steps[:, None] * np.array([1.0, 0.9, 0.7])[None, :], 0.0, 1.0)
+
+
 def category_colors(num_categories: int) -> np.ndarray:
     """float [n, 3] in [0, 1]: one distinct colour per object category (tab20, then tab20b)."""
     table = list(matplotlib.colormaps["tab20"].colors) + list(matplotlib.colormaps["tab20b"].colors)
@@ -181,7 +189,18 @@ def render_topdown(
     image = np.zeros((rows, cols, 3), np.uint8)
     for kind, rgb in CELL_RGB.items():
         image[cell_type == kind] = rgb
+    kinds = None if bank.furniture_sem is None else np.asarray(bank.furniture_sem[scene_index]) - (C.NUM_STRUCTURAL + num_categories)
+    if kinds is not None:  # layouts with priors: each furniture kind its own shade, named once per piece
+        shades = np.round(255 * furniture_colors()).astype(np.uint8)
+        image[kinds >= 0] = shades[kinds[kinds >= 0]]
     ax.imshow(image, origin="upper", interpolation="nearest", zorder=0)
+    if kinds is not None and labels:
+        for r, c in np.argwhere(kinds >= 0):
+            k = kinds[r, c]
+            if (r > 0 and kinds[r - 1, c] == k) or (c > 0 and kinds[r, c - 1] == k):
+                continue  # named at the piece's first cell
+            ax.text(c - 0.45, r - 0.45, C.FURNITURE_KINDS[k], ha="left", va="top", fontsize=max(4.0, 0.17 * cell_px),
+                    style="italic", color="#3a2a1a", zorder=2)  # fmt: skip
     ax.set_xlim(c0 - 0.5, c1 - 0.5)
     ax.set_ylim(r1 - 0.5, r0 - 0.5)  # row 0 at the top
     if decorations:  # thin lines between cells, a tick on every cell
@@ -292,13 +311,14 @@ def _sem_depth(obs_or_view, max_depth):
 def view_image(sem, depth, num_categories: int) -> np.ndarray:
     """float [3, W, 3] RGB in [0, 1]: each pixel's semantic colour, darker with depth.
 
-    sem: int [3, W] (catalog.SEM_* or NUM_STRUCTURAL + category); depth: float [3, W]
+    sem: int [3, W] (catalog.SEM_*, NUM_STRUCTURAL + category, or a furniture kind's class
+    after the categories: catalog.furniture_sem); depth: float [3, W]
     (any unit; the shading is relative to the largest depth in the view).
     """
     sem = np.asarray(sem)
     depth = np.asarray(depth, np.float64)
     structural = np.array([_rgb01(SEM_RGB[k]) for k in range(C.NUM_STRUCTURAL)])
-    palette = np.concatenate([structural, category_colors(num_categories)])
+    palette = np.concatenate([structural, category_colors(num_categories), furniture_colors()])
     rgb = palette[np.clip(sem, 0, len(palette) - 1)]
     far = max(float(depth.max()), 1e-6)
     shade = 1.0 - 0.6 * np.clip(depth / far, 0.0, 1.0)
@@ -346,7 +366,7 @@ def render_view(
     ax.tick_params(labelsize=7)
     ax.set_xlabel(f"view column, left to right (numbers: depth in {unit})", fontsize=8)
     ax.set_title(title or "first-person view (colour: semantic class, darker: farther)", fontsize=9)
-    names = list(STRUCTURAL_NAMES) + list(categories)
+    names = list(STRUCTURAL_NAMES) + list(categories) + list(C.FURNITURE_KINDS)
     palette = view_image(np.arange(len(names))[None], np.zeros((1, len(names))), len(categories))[0]
     present = sorted({int(v) for v in sem.reshape(-1)})
     handles = [Patch(facecolor=palette[k], edgecolor="black", label=names[k]) for k in present if k < len(names)]

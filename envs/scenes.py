@@ -11,12 +11,13 @@ the same scene.
 from __future__ import annotations
 
 import zlib
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 
 from envs import catalog as C
+from envs import priors as P
+from envs.grid import next_to, walkable_connected
 
 # Interior size ranges (rows, cols) in 0.25 m cells, by room type: bathrooms smallest,
 # living rooms largest.
@@ -51,43 +52,16 @@ class Layout:
     cell_room: np.ndarray  # int8 [G, G], index of the room a cell lies in (0 in a single room), -1 for none
     room_types: tuple[int, ...]  # the room type of each room index
     target_room: dict  # category index -> index of the room its (one) instance belongs to
+    furniture: np.ndarray | None = None  # int8 [G, G] furniture kind per cell, -1 for none (priors only)
 
 
 def _rng(*parts) -> np.random.Generator:
     return np.random.default_rng(zlib.crc32("/".join(map(str, parts)).encode()))
 
 
-def _walkable_connected(cell_type: np.ndarray) -> bool:
-    free = np.argwhere(cell_type == C.CELL_FLOOR)
-    if len(free) == 0:
-        return False
-    seen = np.zeros(cell_type.shape, bool)
-    queue = deque([tuple(free[0])])
-    seen[tuple(free[0])] = True
-    count = 1
-    while queue:
-        r, c = queue.popleft()
-        for dr, dc in ((1, 0), (-1, 0), (0, 1), (0, -1)):
-            nr, nc = r + dr, c + dc
-            if cell_type[nr, nc] == C.CELL_FLOOR and not seen[nr, nc]:
-                seen[nr, nc] = True
-                count += 1
-                queue.append((nr, nc))
-    return count == len(free)
-
-
-def _next_to(mask: np.ndarray, other: np.ndarray) -> np.ndarray:
-    """Cells of ``mask`` with a 4-neighbour in the boolean grid ``other``."""
-    near = np.zeros_like(mask)
-    near[1:, :] |= other[:-1, :]
-    near[:-1, :] |= other[1:, :]
-    near[:, 1:] |= other[:, :-1]
-    near[:, :-1] |= other[:, 1:]
-    return mask & near
-
-
-def generate_layout(number: int, setup: str, grid_size: int = MIN_GRID_SIZE) -> Layout:
-    """The scene with AI2-THOR number ``number`` under ``setup``'s object placements."""
+def generate_layout(number: int, setup: str, grid_size: int = MIN_GRID_SIZE, priors: bool = False) -> Layout:
+    """The scene with AI2-THOR number ``number`` under ``setup``'s object placements; with
+    ``priors``, the same walls furnished with kinds and filled by relations (envs.priors)."""
     room = C.room_type_of(number)
     C.check_setup(setup)
     if grid_size < MIN_GRID_SIZE:
@@ -115,15 +89,20 @@ def generate_layout(number: int, setup: str, grid_size: int = MIN_GRID_SIZE) -> 
             cell[top : top + rows, c] = C.CELL_WALL
             cell[door : door + 3, c] = C.CELL_FLOOR
 
-    cell = furnish(cell, room, rng, (top, left, rows, cols))
+    if priors:
+        cell, furniture = P.furnish_with_kinds(cell, np.full(cell.shape, -1, np.int8), room, rng, (top, left, rows, cols))
+    else:
+        cell, furniture = furnish(cell, room, rng, (top, left, rows, cols)), None
     obj_cat = np.full(cell.shape, -1, np.int8)
     obj_band = np.full(cell.shape, -1, np.int8)
     interior = np.zeros(cell.shape, bool)
     interior[1:-1, 1:-1] = True
-    rng = _rng("objects", setup, number)
-    cell, placed = place_objects(cell, obj_cat, obj_band, setup, C.SETUPS[setup][1][room], rng, interior)
+    rng = _rng("priors-objects" if priors else "objects", setup, number)
+    cell, placed = place_objects(cell, obj_cat, obj_band, setup, C.SETUPS[setup][1][room], rng, interior,
+                                 furniture=furniture)  # fmt: skip
     cell_room = np.where(_rect_mask(cell.shape, (top, left, rows, cols)) & (cell != C.CELL_WALL), 0, -1)
-    return Layout(number, room, cell, obj_cat, obj_band, cell_room.astype(np.int8), (room,), dict.fromkeys(placed, 0))
+    return Layout(number, room, cell, obj_cat, obj_band, cell_room.astype(np.int8), (room,), dict.fromkeys(placed, 0),
+                  furniture)  # fmt: skip
 
 
 def _rect_mask(shape, rect) -> np.ndarray:
@@ -153,38 +132,44 @@ def furnish(cell: np.ndarray, room: int, rng: np.random.Generator, rect, keep_fr
                 continue
             trial = cell.copy()
             trial[r : r + h, c : c + w] = C.CELL_FURNITURE
-            if _walkable_connected(trial):
+            if walkable_connected(trial):
                 cell = trial
                 break
     return cell
 
 
-def place_objects(cell, obj_cat, obj_band, setup, names, rng, region, elsewhere=None, keep_free=None):
+def place_objects(cell, obj_cat, obj_band, setup, names, rng, region, elsewhere=None, keep_free=None, furniture=None):
     """Place one instance of each category in ``names`` inside ``region`` (bool [G, G]):
     floor objects on free floor of the region (never cutting the walkable floor in two),
     mid objects on the region's furniture next to floor, high objects on walls next to the
     region's floor and, when ``elsewhere`` (the floor of other rooms) is given, not next to
     it (an object hangs on one face of a wall: seen from one room only); no floor object on
-    a cell of ``keep_free``.  ``obj_cat`` and
+    a cell of ``keep_free``.  With ``furniture`` (the kinds of a layout with priors), the
+    most constrained categories go first (``priors.placement_order``) and each object's
+    candidates narrow to its relation's cells (``priors.relation_mask``) where any
+    are left, except with probability ``priors.RELATION_NOISE``.  ``obj_cat`` and
     ``obj_band`` are written in place.  Returns (cell, the category indices placed)."""
     categories = C.categories(setup)
     placed = []
-    for name in names:
+    for name in names if furniture is None else P.placement_order(names):
         band = C.category_band(name)
         floor = cell == C.CELL_FLOOR
         if band == C.BAND_MID:
-            candidates = _next_to((cell == C.CELL_FURNITURE) & (obj_cat < 0) & region, floor)
+            candidates = next_to((cell == C.CELL_FURNITURE) & (obj_cat < 0) & region, floor)
         elif band == C.BAND_HIGH:
-            candidates = _next_to((cell == C.CELL_WALL) & (obj_cat < 0), floor & region)
+            candidates = next_to((cell == C.CELL_WALL) & (obj_cat < 0), floor & region)
             if elsewhere is not None:
-                candidates &= ~_next_to(candidates, elsewhere)
+                candidates &= ~next_to(candidates, elsewhere)
         else:
             candidates = floor & region if keep_free is None else floor & region & ~keep_free
+        if furniture is not None and rng.random() >= P.RELATION_NOISE:
+            related = candidates & P.relation_mask(name, band, cell, furniture, obj_cat, categories)
+            candidates = related if related.any() else candidates
         for r, c in rng.permutation(np.argwhere(candidates)):
             if band == C.BAND_FLOOR:
                 trial = cell.copy()
                 trial[r, c] = C.CELL_OBJECT
-                if not _walkable_connected(trial):
+                if not walkable_connected(trial):
                     continue
                 cell = trial
             obj_cat[r, c] = categories.index(name)

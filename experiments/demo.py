@@ -65,6 +65,8 @@ class DemoConfig:
     """target setup (see docs/design.md)"""
     layout: Literal["room", "house"] = "room"
     """single rooms, or houses of 2-4 rooms (docs/houses.md)"""
+    priors: bool = False
+    """layouts with the regularities of real homes (docs/priors.md)"""
     overwrite: bool = False
     """replace files that already exist in --out"""
     seed: int = 0
@@ -185,7 +187,7 @@ def main(config: DemoConfig) -> int:
     timings = {}
     t = time.perf_counter()
     rooms = {room: envs.make("GridNav-v0", setup=config.setup, split="test", room_types=(room,), training=False,
-                             layout=config.layout) for room in C.ROOM_TYPES}  # fmt: skip
+                             layout=config.layout, priors=config.priors) for room in C.ROOM_TYPES}  # fmt: skip
     env = rooms[C.ROOM_TYPES[0]][0]
     timings["scene banks"] = time.perf_counter() - t
     num_steps = max(int(np.max(params.max_steps)) for _, params in rooms.values())
@@ -237,7 +239,8 @@ def main(config: DemoConfig) -> int:
     table = results_table(results, config.layout)
     checks = calibration(results, config.layout)
     check_lines = [f"[{'PASS' if ok else 'FAIL'}] {text}" for text, ok in checks]
-    header = (f"GridNav-v0 {config.setup} setup, {config.layout}s, test split, {config.episodes} episodes "
+    family = f"{config.layout}s with priors" if config.priors else f"{config.layout}s"
+    header = (f"GridNav-v0 {config.setup} setup, {family}, test split, {config.episodes} episodes "
               f"({', '.join(f'{n} {r}' for n, r in zip(per_room, C.ROOM_TYPES))}), evaluation time limits")  # fmt: skip
     (config.out / "results.md").write_text(
         f"# Demo: random and oracle policies\n\n{header}\n\n{table}\n\n## Calibration\n\n"

@@ -65,8 +65,9 @@ def play(model, split: str, episodes: int, compiled: dict) -> dict:
 
     config, params = model.config, model.selected
     if config not in compiled:
-        evaluator = compiled.get((config.setup, config.layout)) or Evaluator(config.setup, config.layout)
-        compiled[(config.setup, config.layout)] = evaluator
+        where = Evaluator.scenes_of(config)
+        evaluator = compiled.get(where) or Evaluator(*where)
+        compiled[where] = evaluator
         rollout = jax.jit(functools.partial(Agent(config).rollout, greedy=config.pieces.greedy_evaluation),
                           static_argnames="num_steps")  # fmt: skip
         compiled[config] = (evaluator, rollout, jax.jit(functools.partial(replay_oracle, evaluator.env)))

@@ -440,7 +440,7 @@ def trajectories_figure(args: Args, base: str, other: str, path: Path) -> str:
     from matplotlib.figure import Figure
 
     loaded = {m: _first_seed(args, m)[::3] for m in (base, other)}  # (config, selected params)
-    evaluator = Evaluator(SETUP_OF[base], next(iter(loaded.values()))[0].layout)
+    evaluator = Evaluator.for_config(next(iter(loaded.values()))[0])
     env, n = evaluator.env, args.trajectory_candidates
     key = selection.test_key(args.seed)
     rooms = next(iter(loaded.values()))[0].room_types or ROOM_TYPES
@@ -549,7 +549,7 @@ def sampled_results(folder: Path, methods) -> dict[str, list[dict]]:
         episodes = sweep.method_schedule(method, args)[1].test_episodes_per_room
         out[method] = []
         for model in models:
-            where = (model.config.setup, model.config.layout)
+            where = Evaluator.scenes_of(model.config)
             evaluator = evaluators.setdefault(where, Evaluator(*where))
             result = evaluator.evaluate(model.selected, model.config, "test", selection.test_key(model.seed), episodes,
                                         greedy=False)  # fmt: skip

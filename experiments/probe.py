@@ -287,7 +287,7 @@ def probe(models: dict[str, list[Model]], episodes: int, windows: int, options_p
         report[method] = []
         shuffled = ShuffledImagination(seeds[0].config)
         for model in seeds:
-            where = (model.config.setup, model.config.layout)
+            where = Evaluator.scenes_of(model.config)
             evaluator = evaluators.setdefault(where, Evaluator(*where))
             sr = sr_conditions(model, evaluator, episodes, shuffled)
             items = imagination_items(model, windows, options_passes)

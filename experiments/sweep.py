@@ -610,7 +610,7 @@ def main(args: Args) -> list[dict] | None:
     print(f"{len(args.methods)} method(s) x {args.seeds} seed(s), the seeds spread over {used} of the "
           f"{jax.device_count()} local device(s)", flush=True)  # fmt: skip
     config, _ = method_schedule(args.methods[0], args)
-    evaluator = Evaluator(args.setup, config.layout)  # one for the sweep: each method's evaluation compiles once
+    evaluator = Evaluator.for_config(config)  # one for the sweep: each method's evaluation compiles once
     bar = progress_bar(config.num_updates * len(args.methods), 0, args.progress)
     t0 = time.time()
     results, curves, budget = {}, {}, [args.stop_after_chunks]

@@ -148,7 +148,7 @@ def main(args: Args) -> dict:
 
     trainer = make_trainer(config)
     env_params = trainer.env_params
-    evaluator = Evaluator(config.setup, config.layout)  # held for the run: validation compiles once
+    evaluator = Evaluator.for_config(config)  # held for the run: validation compiles once
     state = trainer.init(selection.run_key(seed))
     manager = runs.checkpoint_manager(out / "checkpoints", schedule.keep_checkpoints)
     best_manager = runs.checkpoint_manager(out / "best", 1)

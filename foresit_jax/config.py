@@ -40,6 +40,11 @@ class Config:
     """Scenes: 'room' (single AI2-THOR-like rooms, as the paper's) or 'house' (houses of 2-4
     rooms joined by doorways, `envs.houses`: paths about 3x longer, the target in another
     room than the start in 80% of the episodes, time limits 60 / 300)."""
+    priors: bool = False
+    """Scenes with the regularities of real homes (`envs.priors`): furniture of distinct
+    kinds seen as their own classes, each target placed by relations to furniture and to
+    other targets, houses' rooms in adjacent pairs, related savn word vectors. False:
+    today's GridNav scenes, where every target stands uniformly at random."""
     progress_reward: float = 0.0
     """Reward shaping (a deviation from the paper's reward, which is +5 on success and
     -0.01 a step): each step also earns w (d_t - d_{t+1}), d the oracle's actions to

@@ -102,11 +102,21 @@ class Evaluator:
     the same episode length. Attributes: `env`, `params` ({(split, room): EnvParams}) and
     `compiled` ({key: jitted rollout}, keyed by (policy, config, num_steps, greedy))."""
 
-    def __init__(self, setup: str = "savn", layout: str = "room"):
-        self.setup, self.layout = setup, layout
-        self.env = envs.GridNav(setup=setup, layout=layout)
+    def __init__(self, setup: str = "savn", layout: str = "room", priors: bool = False):
+        self.setup, self.layout, self.priors = setup, layout, bool(priors)
+        self.env = envs.GridNav(setup=setup, layout=layout, priors=self.priors)
         self.params: dict[tuple[str, str], Any] = {}
         self.compiled: dict[tuple, Any] = {}
+
+    @staticmethod
+    def scenes_of(config: Config) -> tuple[str, str, bool]:
+        """(setup, layout, priors): what an Evaluator is made for (`Evaluator(*scenes_of(config))`)."""
+        return config.setup, config.layout, config.priors
+
+    @classmethod
+    def for_config(cls, config: Config) -> "Evaluator":
+        """An Evaluator of the config's scenes."""
+        return cls(*cls.scenes_of(config))
 
     def clear(self) -> None:
         """Drop the compiled rollouts and the scene banks."""
@@ -193,6 +203,9 @@ class Evaluator:
         if config.layout != self.layout:
             raise ValueError(f"this Evaluator is for layout {self.layout!r}, the config's is {config.layout!r}; "
                              f"make one with Evaluator(setup, layout={config.layout!r})")  # fmt: skip
+        if config.priors != self.priors:
+            raise ValueError(f"this Evaluator is for priors={self.priors}, the config's is {config.priors}; "
+                             "make one with Evaluator.for_config(config)")  # fmt: skip
 
     def evaluate(
         self, agent_params: AgentParams, config: Config, split: str = "test", key: chex.PRNGKey | None = None,
@@ -238,7 +251,7 @@ def evaluate(
     evaluator: Evaluator | None = None,
 ) -> dict[str, dict[str, float]]:  # fmt: skip
     """`Evaluator.evaluate` (with a new Evaluator unless one is given)."""
-    evaluator = Evaluator(config.setup, config.layout) if evaluator is None else evaluator
+    evaluator = Evaluator.for_config(config) if evaluator is None else evaluator
     return evaluator.evaluate(agent_params, config, split, key, episodes_per_room, greedy, room_types)
 
 
@@ -247,5 +260,5 @@ def evaluate_random_policy(
     evaluator: Evaluator | None = None,
 ) -> dict[str, dict[str, float]]:  # fmt: skip
     """`Evaluator.evaluate_random_policy` (with a new Evaluator unless one is given)."""
-    evaluator = Evaluator(config.setup, config.layout) if evaluator is None else evaluator
+    evaluator = Evaluator.for_config(config) if evaluator is None else evaluator
     return evaluator.evaluate_random_policy(config, split, key, episodes_per_room)

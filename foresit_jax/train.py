@@ -72,7 +72,7 @@ def make_env(config: Config, split: str = "train", room_types=None, training: bo
 
     rooms = room_types if room_types is not None else (config.room_types or None)
     env, params = envs.make("GridNav-v0", setup=config.setup, split=split, room_types=rooms, training=training,
-                            layout=config.layout)  # fmt: skip
+                            layout=config.layout, priors=config.priors)  # fmt: skip
     return env, params.replace(progress_reward=config.progress_reward)
 
 

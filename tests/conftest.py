@@ -157,6 +157,19 @@ def savn_val_narrow():
 
 
 @pytest.fixture(scope="session")
+def priors_test():
+    """(env, params) of the savn setup with priors (envs.priors), test split."""
+    return envs.make("GridNav-v0", setup="savn", split="test", priors=True)
+
+
+@pytest.fixture(scope="session")
+def priors_kit(priors_test):
+    from env_helpers import Kit
+
+    return Kit(*priors_test)
+
+
+@pytest.fixture(scope="session")
 def savn_kit(savn_test):
     """env_helpers.Kit of the savn test split: numpy bank and once-compiled jitted functions."""
     from env_helpers import Kit

@@ -89,8 +89,9 @@ def march_ray(cell_type, pos, angle_deg, step=0.002, max_dist=None):
     return out
 
 
-def row_sees(ray, cell_type, obj_cat, obj_band, band, lo, hi):
-    """(semantic class, depth) one view row sees along one marched ray (raycast docstring)."""
+def row_sees(ray, cell_type, obj_cat, obj_band, band, lo, hi, furniture_sem=None):
+    """(semantic class, depth) one view row sees along one marched ray (raycast docstring);
+    a piece of furniture shows as ``furniture_sem[r, c]`` when given (layouts with priors)."""
     for (r, c), d in ray:
         kind, cat, obj_b = cell_type[r, c], obj_cat[r, c], obj_band[r, c]
         in_window = lo <= d < hi
@@ -101,13 +102,14 @@ def row_sees(ray, cell_type, obj_cat, obj_band, band, lo, hi):
         if kind == WALL:  # walls stop every row
             return (FIRST_CATEGORY + cat if shows_object else SEM_WALL), d
         if kind == FURNITURE and band in (MID_BAND, FLOOR_BAND):  # furniture stops mid and floor rows
-            return (FIRST_CATEGORY + cat if shows_object else SEM_FURNITURE), d
+            piece = SEM_FURNITURE if furniture_sem is None else int(furniture_sem[r, c])
+            return (FIRST_CATEGORY + cat if shows_object else piece), d
         if kind == FLOOR_OBJECT and band == FLOOR_BAND and shows_object:  # inside its window
             return FIRST_CATEGORY + cat, d
     raise AssertionError("ray left the grid without meeting a wall")
 
 
-def reference_view(cell_type, obj_cat, obj_band, pos, heading, horizon, view_width, step=0.002):
+def reference_view(cell_type, obj_cat, obj_band, pos, heading, horizon, view_width, step=0.002, furniture_sem=None):
     """sem int [3, W], depth float [3, W] (unrounded) and the minimum margin [3, W] between
     the entry distance of the cell each pixel ends on and any window edge (for ties)."""
     cell_type, obj_cat, obj_band = (np.asarray(a) for a in (cell_type, obj_cat, obj_band))
@@ -118,7 +120,7 @@ def reference_view(cell_type, obj_cat, obj_band, pos, heading, horizon, view_wid
         ray = march_ray(cell_type, pos, angle, step)
         entries = np.array([d for _, d in ray])
         for row, (band, lo, hi) in enumerate(ROW_TABLE[int(horizon)]):
-            sem[row, col], depth[row, col] = row_sees(ray, cell_type, obj_cat, obj_band, band, lo, hi)
+            sem[row, col], depth[row, col] = row_sees(ray, cell_type, obj_cat, obj_band, band, lo, hi, furniture_sem)
             edges = [e for e in (lo, hi) if np.isfinite(e)]
             if edges:
                 margin[row, col] = np.min(np.abs(entries[:, None] - np.array(edges)[None, :]))

@@ -8,7 +8,7 @@ import pytest
 from envs import catalog as C
 
 
-@pytest.mark.parametrize("kit_name", ["savn_kit", "org_kit"])
+@pytest.mark.parametrize("kit_name", ["savn_kit", "org_kit", "priors_kit"])
 def test_optimal_lengths_of_start_states(request, kit_name):
     """4096 resets: 40-80% of the episodes need >= 5 actions; the mean optimal length rises
     bathroom < bedroom < kitchen < living room."""
@@ -23,7 +23,7 @@ def test_optimal_lengths_of_start_states(request, kit_name):
     assert length.min() >= 2
 
 
-@pytest.mark.parametrize("kit_name", ["savn_kit", "org_kit"])
+@pytest.mark.parametrize("kit_name", ["savn_kit", "org_kit", "priors_kit"])
 def test_uniform_random_policy_rarely_succeeds(request, kit_name):
     """2048 episodes of a uniformly random policy (first episode of each lane): SR <= 10%."""
     kit = request.getfixturevalue(kit_name)

@@ -54,7 +54,7 @@ def bank_pose_index(poses, grid):
     return ((poses[:, 0] * grid + poses[:, 1]) * 8 + poses[:, 2]) * 2 + poses[:, 3]
 
 
-@pytest.mark.parametrize("kit_name, scenes", [("savn_kit", [0, 7, 12, 19]), ("org_kit", [3, 16])])
+@pytest.mark.parametrize("kit_name, scenes", [("savn_kit", [0, 7, 12, 19]), ("org_kit", [3, 16]), ("priors_kit", [2, 11])])
 def test_bank_distance_equals_reference_bfs(request, kit_name, scenes):
     """Every free-cell pose of scenes of each room type, every target of the scene."""
     kit = request.getfixturevalue(kit_name)
@@ -111,7 +111,7 @@ def test_shortest_path_length_and_optimal_action_follow_the_reference(savn_kit):
             assert a != C.DONE and dist[nxt] == d - 1, (pose, C.ACTIONS[a], dist[nxt], d)
 
 
-@pytest.mark.parametrize("kit_name", ["savn_kit", "org_kit"])
+@pytest.mark.parametrize("kit_name", ["savn_kit", "org_kit", "priors_kit"])
 def test_oracle_policy_scores_sr_1_and_spl_1(request, kit_name):
     """2048 vmapped episodes under evaluation limits: following optimal_action succeeds in
     every episode with exactly the optimal number of actions (SPL = 1)."""

@@ -197,10 +197,14 @@ def patch_for_experiments(mp) -> None:
     mp.setattr(train, "make_trainer", _make_trainer_cached)
     evaluators = {}  # dropped with the patch (and its compiled rollouts with it)
 
-    def cached_evaluator(setup: str = "savn", layout: str = "room"):
-        if (setup, layout) not in evaluators:
-            evaluators[(setup, layout)] = _REAL_EVALUATOR(setup, layout)
-        return evaluators[(setup, layout)]
+    class CachedEvaluator(_REAL_EVALUATOR):
+        """Evaluator(...) and Evaluator.for_config(...) give the one Evaluator of their scenes."""
 
-    mp.setattr(evaluate, "Evaluator", cached_evaluator)
+        def __new__(cls, setup: str = "savn", layout: str = "room", priors: bool = False):
+            key = (setup, layout, bool(priors))
+            if key not in evaluators:  # a real Evaluator: its __init__ runs once, here
+                evaluators[key] = _REAL_EVALUATOR(*key)
+            return evaluators[key]
+
+    mp.setattr(evaluate, "Evaluator", CachedEvaluator)
     mp.setattr(jax, "jit", _fast_jit(jax.jit))
