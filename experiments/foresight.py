@@ -55,6 +55,8 @@ class Args:
     """Environment setup: savn or org."""
     layout: str = "room"
     """Layout family: room or house."""
+    priors: bool = False
+    """Layouts with the regularities of real homes (envs.priors) instead of today's."""
     resets: int = 20000
     """Random starts drawn per split (train fits, test scores)."""
     seed: int = 0
@@ -105,7 +107,9 @@ def foresight_bound(train: dict, test: dict, labels: str, seed: int = 0) -> dict
     and `test`, each [N, F]) predicting `train[labels]` / `test[labels]` ([N] ints, -1 to
     leave a row out), the majority class's, and the gain of `view + target` over `view`
     with its 95% interval over the test groups (`test["group"]`, e.g. the layout; the train
-    groups serve the cross-validation of `fit_and_score`)."""
+    groups serve the cross-validation of `fit_and_score`).  Where `test["subsets"]` names
+    boolean masks [N] of the test rows (e.g. "anchor in view"), the same accuracies and gain
+    on each subset's rows, under `out["subsets"]`."""
     keep_train, keep_test = train[labels] >= 0, test[labels] >= 0
     y_train, y_test = train[labels][keep_train], test[labels][keep_test]
     out = {"train_samples": int(keep_train.sum()), "test_samples": int(keep_test.sum()),
@@ -123,6 +127,15 @@ def foresight_bound(train: dict, test: dict, labels: str, seed: int = 0) -> dict
     gain = correct["view + target"] - correct["view"]
     out["gain"] = float(gain.mean())
     out["gain_ci"] = cluster_bootstrap(gain, test["group"][keep_test], np.random.default_rng(seed))
+    out["subsets"] = {}
+    for name, mask in test.get("subsets", {}).items():
+        rows = mask[keep_test]
+        part = {"samples": int(rows.sum()), "share": float(rows.mean())}
+        if rows.any():
+            part.update({k: float(correct[k][rows].mean()) for k in FEATURE_SETS})
+            part["gain"] = float(gain[rows].mean())
+            part["gain_ci"] = cluster_bootstrap(gain[rows], test["group"][keep_test][rows], np.random.default_rng(seed))
+        out["subsets"][name] = part
     return out
 
 
@@ -131,8 +144,12 @@ def features(sem: np.ndarray, depth: np.ndarray, target: np.ndarray, num_semanti
              structural: int) -> dict[str, np.ndarray]:  # fmt: skip
     """The feature sets of first views: sem, depth [N, 3, W] (envs' `view`), the target
     category [N] (ints, the setup's category index)."""
+    from envs.catalog import SEM_FURNITURE
+
     n, width = sem.shape[0], sem.shape[-1]
-    coarse = np.minimum(sem, structural)  # every object category -> one "object" class
+    # Every object category -> one "object" class; every furniture kind (layouts with
+    # priors: classes after the categories) -> furniture.
+    coarse = np.where(sem >= structural + num_targets, SEM_FURNITURE, np.minimum(sem, structural))
     geometry = np.concatenate([np.eye(structural + 1)[coarse].reshape(n, -1),
                                depth.reshape(n, -1) / max(float(depth.max()), 1e-9)], axis=1)  # fmt: skip
     half = width // 2
@@ -186,7 +203,25 @@ def collect(env, params, resets: int, key) -> dict[str, np.ndarray]:
     data = features(sem, depth, target, env.num_semantic, env.num_categories, C.NUM_STRUCTURAL)
     data.update(turn=np.where(keep, turn, -1), bearing=np.where(keep, bearing, -1),
                 group=np.asarray(bank.numbers)[scene], out_of_view=out_of_view)  # fmt: skip
+    if getattr(env, "priors", False):  # where the first view shows a piece the target stands by
+        anchor = anchor_in_view(sem, target, env.setup)
+        data["subsets"] = {"anchor in view": anchor, "anchor not in view": ~anchor}
     return data
+
+
+def anchor_in_view(sem: np.ndarray, target: np.ndarray, setup: str) -> np.ndarray:
+    """bool [N]: whether a first view (sem [N, 3, W]) shows furniture of a kind its target
+    stands on or by (`envs.priors.RELATIONS`; False for targets placed by a zone)."""
+    from envs import catalog as C
+    from envs.priors import RELATIONS
+
+    cats = C.categories(setup)
+    classes = np.zeros((len(cats), C.num_semantic(setup, priors=True)), bool)
+    for i, name in enumerate(cats):
+        for kind in RELATIONS[name].on:
+            classes[i, C.furniture_sem(setup, C.FURNITURE_KINDS.index(kind))] = True
+    flat = sem.reshape(len(sem), -1)
+    return classes[target[:, None], flat].any(axis=1)
 
 
 # ---------------------------------------------------------------------- the CLI
@@ -200,7 +235,14 @@ def markdown(args: Args, results: dict, seconds: float) -> str:
         rows.append([label, r["train_samples"], f"{r['test_samples']} ({r['test_groups']} layouts)",
                      *(f"{100 * r[k]:.1f}" for k in ("majority", *FEATURE_SETS)),
                      f"{100 * r['gain']:+.1f} [{100 * lo:+.1f}, {100 * hi:+.1f}]"])  # fmt: skip
-    return (f"# Foresight: {args.setup} setup, {args.layout} layouts\n\n"
+        for name, part in r.get("subsets", {}).items():
+            if "gain" in part:
+                lo, hi = part["gain_ci"]
+                rows.append([f"{label}, {name}", "", f"{part['samples']} ({100 * part['share']:.0f}%)", "",
+                             *(f"{100 * part[k]:.1f}" for k in FEATURE_SETS),
+                             f"{100 * part['gain']:+.1f} [{100 * lo:+.1f}, {100 * hi:+.1f}]"])  # fmt: skip
+    family = f"{args.layout} layouts with priors" if args.priors else f"{args.layout} layouts"
+    return (f"# Foresight: {args.setup} setup, {family}\n\n"
             f"{args.resets} starts per split; the starts whose first view does not show the target; fitted on the "
             "train layouts, accuracy (%) on the test layouts; the gain of the target over the view with its 95% "
             f"interval over the test layouts ({seconds:.0f} s).\n\n"
@@ -220,7 +262,8 @@ def main(args: Args) -> dict:
     t0 = time.time()
     data = {}
     for i, split in enumerate(("train", "test")):
-        env, params = envs.make("GridNav-v0", setup=args.setup, split=split, layout=args.layout, training=False)
+        env, params = envs.make("GridNav-v0", setup=args.setup, split=split, layout=args.layout, training=False,
+                                priors=args.priors)  # fmt: skip
         data[split] = collect(env, params, args.resets, jax.random.fold_in(jax.random.PRNGKey(args.seed), i))
     results = {label: foresight_bound(data["train"], data["test"], label, args.seed)
                for label in ("turn", "bearing")}  # fmt: skip

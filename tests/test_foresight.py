@@ -86,20 +86,66 @@ def test_real_rooms_offer_about_nothing_to_foresee(capsys):
     assert "| turn |" in capsys.readouterr().out
 
 
-def test_docs_quote_the_measured_bound_of_todays_layouts():
-    """docs/foresight.md's table is docs/data/foresight_today.json (what the two commands wrote)."""
+def _gain(r):
+    lo, hi = r["gain_ci"]
+    return f"{100 * r['gain']:+.1f} [{100 * lo:+.1f}, {100 * hi:+.1f}]"
+
+
+@pytest.mark.parametrize("data_file, labels", [
+    ("foresight_today.json", (("room-savn", "rooms"), ("house-savn", "houses"))),
+    ("foresight_priors.json", (("room-savn", "rooms with priors"), ("room-org", "rooms with priors, org"),
+                               ("house-savn", "houses with priors"))),
+])  # fmt: skip
+def test_docs_quote_the_measured_bound(data_file, labels):
+    """docs/foresight.md's tables are docs/data/`data_file` (what the commands wrote), the
+    split by whether the target's anchor is in view included."""
     import json
     from pathlib import Path
 
     repo = Path(__file__).resolve().parents[1]
-    data = json.loads((repo / "docs" / "data" / "foresight_today.json").read_text())
+    data = json.loads((repo / "docs" / "data" / data_file).read_text())
     doc = (repo / "docs" / "foresight.md").read_text()
-    for name, label in (("room-savn", "rooms"), ("house-savn", "houses")):
-        assert data[name]["args"]["resets"] == 20000
+    for name, label in labels:
+        assert data[name]["args"]["resets"] == 20000 and data[name]["args"].get("priors", False) == ("priors" in data_file)
         for what in ("turn", "bearing"):
             r = data[name]["results"][what]
-            lo, hi = r["gain_ci"]
             row = (f"| {label} | {what} | {r['test_samples']} ({r['test_groups']} layouts) | "
                    + " | ".join(f"{100 * r[k]:.1f}" for k in ("majority", *foresight.FEATURE_SETS))
-                   + f" | {100 * r['gain']:+.1f} [{100 * lo:+.1f}, {100 * hi:+.1f}] |")
+                   + f" | {_gain(r)} |")
             assert row in doc, row
+            for subset, part in r.get("subsets", {}).items():
+                row = (f"| {label} | {what}, {subset} | {part['samples']} ({100 * part['share']:.0f}%) | | "
+                       + " | ".join(f"{100 * part[k]:.1f}" for k in foresight.FEATURE_SETS) + f" | {_gain(part)} |")
+                assert row in doc, row
+
+
+def test_subsets_split_the_gain_where_the_relation_can_show():
+    """A planted relation visible on half of the rows only (the anchor drawn in view or
+    not): the gain is large on the rows where it shows, about 0 on the others, and the
+    subsets' rows add up to the whole."""
+    rng = np.random.default_rng(2)
+    train, test = synthetic(rng, 2000, True), synthetic(rng, 2000, True)
+    for data in (train, test):
+        hidden = np.arange(2000) % 2 == 1  # these rows' label is a coin the view cannot show
+        data["turn"] = np.where(hidden, rng.integers(0, 2, 2000), data["turn"])
+        data["subsets"] = {"shown": ~hidden, "hidden": hidden}
+    test["group"] = test["group"] + 100
+    r = foresight.foresight_bound(train, test, "turn")
+    shown, hidden = r["subsets"]["shown"], r["subsets"]["hidden"]
+    assert shown["samples"] + hidden["samples"] == r["test_samples"] == 2000
+    assert shown["gain"] > 0.3 and shown["gain_ci"][0] > 0.2 and abs(hidden["gain"]) < 0.06
+    np.testing.assert_allclose(0.5 * (shown["gain"] + hidden["gain"]), r["gain"])
+
+
+def test_anchor_in_view_reads_the_relation_table():
+    from envs import catalog as C
+
+    cats = C.categories("savn")
+    counter = C.furniture_sem("savn", C.FURNITURE_KINDS.index("CounterTop"))
+    bed = C.furniture_sem("savn", C.FURNITURE_KINDS.index("Bed"))
+    sem = np.full((3, 3, 4), C.SEM_FLOOR)
+    sem[0, 1, 2] = counter  # a toaster's counter in view
+    sem[1, 1, 2] = bed  # a bed, which no toaster stands by
+    sem[2, 1, 2] = counter  # a counter, with a pillow as the target
+    target = np.array([cats.index("Toaster"), cats.index("Toaster"), cats.index("Pillow")])
+    np.testing.assert_array_equal(foresight.anchor_in_view(sem, target, "savn"), [True, False, False])
