@@ -49,10 +49,8 @@ class Config:
     """Reward shaping (a deviation from the paper's reward, which is +5 on success and
     -0.01 a step): each step also earns w (d_t - d_{t+1}), d the oracle's actions to
     success (`envs.gridnav.EnvParams.progress_reward`; AllenAct's ObjectNav reward with its
-    `shaping_weight`). 0 is the paper's reward. In houses the paper's reward makes an early
-    Done the best-paying action while success is rare, and a3c learns to give up: about
-    half its test episodes end on a Done within 5 actions of the start (docs/houses.md).
-    The house preset uses 0.1 (measured against 0)."""
+    `shaping_weight`). 0 is the paper's reward. The house preset uses 0.1: in houses the
+    paper's reward lets a3c learn to give up at the start (docs/houses.md)."""
 
     # Training loop (synchronous batched A3C).
     rollout: str = "packed"
@@ -107,8 +105,7 @@ class Config:
     (Eq. 3): 'lecun' (lecun-normal, as every other layer; the paper gives none), whose
     sum adds a term as large as s_t itself to the value head's input at the start, or
     'zeros' (s*_t = s_t at initialisation: the critic starts as the plain one and learns
-    what to add). Measured (docs/mechanism.md, Study 3): 'zeros' does not recover the
-    attention critic's cost against the plain one."""
+    what to add). docs/mechanism.md (Study 3) measures the two."""
     attention_key_gradient: str = "full"
     """Which of the attention critic's inputs carry the value loss's gradient into the
     encoder (the paper trains omega and theta on one loss, Eq. 9, and says no more): 'full'
@@ -138,8 +135,8 @@ class Config:
     item a step, is Algorithm 1's; it must divide buffer_size."""
     sigma2_max: float = 0.9
     """Maximum imagination-noise variance sigma^2_max (Eq. 7). The paper's 0.9 keeps most
-    of i_tau's variance noise at this budget; 0.1 (a deviation) keeps the signal above it,
-    and gained nothing either (docs/mechanism.md, Study 3)."""
+    of i_tau's variance noise at this budget; 0.1 (a deviation) keeps the signal above it
+    (docs/mechanism.md, Study 3, measures both)."""
     success_window: int = 100
     """Episodes in each lane's moving success rate rho."""
     rnd_variance: float = 0.5

@@ -211,3 +211,13 @@ def test_docs_relation_table_is_the_code():
         where = ", ".join(rel.on) if rel.on else f"a {rel.zone}"
         row = f"| {name} | {setups} | {', '.join(rooms)} | {band[C.category_band(name)]} | {where} | {', '.join(rel.near) or '-'} |"
         assert row in doc, row
+
+
+def test_priors_is_the_sweeps_not_an_arms():
+    """The scenes are one sweep's (one Evaluator serves it): an arm cannot set priors, the
+    preset's override can."""
+    from experiments.presets import preset, split_arm
+
+    with pytest.raises(ValueError, match="'priors' is not a Config field an arm can set.*--priors"):
+        split_arm("a3c@priors=true")
+    assert preset("quick", "a3c", priors=True)[0].priors and not preset("quick", "a3c")[0].priors
