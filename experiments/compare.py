@@ -7,7 +7,7 @@ finished methods (`methods/<method>/results.json`) this prints, as Markdown:
 
 * per method: test SR of each seed's selected model, mean ± sample std of SR, SPL, SR>=5,
   the training success rate over the last `--last` updates, the last chunk's training
-  diagnostics (`sweep.DIAGNOSTICS`, those recorded), and the experience each seed had
+  diagnostics (`report.DIAGNOSTICS`, those recorded), and the experience each seed had
   where the sweep counted it;
 * per `--pairs A:B`: B - A seed by seed (`experiments.stats.paired`: mean difference, 95%
   t interval, p, verdict) on each of those columns;
@@ -28,14 +28,11 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-import numpy as np
-
 from experiments import runs, stats
-from experiments.sweep import DIAGNOSTICS, diagnostic_label, rate
+from experiments.report import (
+    TEST, diagnostic_label, format_mean_std, format_pair, load, paired_report, shown_columns, values,
+)  # fmt: skip
 from experiments.tables import markdown_table
-
-TEST = ("SR", "SPL", "SR>=5")
-TRAINING = "training SR"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -52,28 +49,6 @@ class Args:
     """The training success rate is the mean over this many last updates."""
 
 
-def load(run: Path) -> dict[str, list[dict]]:
-    """Every finished method of the sweep folder `run`: its per-seed results, in name order."""
-    folder = Path(run) / "methods"
-    if not folder.is_dir():
-        raise runs.UserError(f"{run} is not a sweep folder (it has no methods/): give --run the folder a sweep wrote")
-    found = {m.name: runs.read_json(m / "results.json")["results"]
-             for m in sorted(folder.iterdir()) if (m / "results.json").is_file()}  # fmt: skip
-    if not found:
-        raise runs.UserError(f"{run} has no finished method yet (no methods/*/results.json)")
-    return found
-
-
-def values(per_seed: list[dict], column: str, last: int = 250) -> np.ndarray:
-    """One value per seed: a test column of the selected model, the training success rate
-    (%) over the `last` updates, or the last chunk's mean of a diagnostic (NaN if unrecorded)."""
-    if column in TEST:
-        return np.array([rate(r["selected"]["overall"][column]) for r in per_seed])
-    if column == TRAINING:
-        return np.array([100 * np.mean(r["training_success_rate"][-last:]) for r in per_seed])
-    return np.array([(r.get("diagnostics") or {}).get(column, [np.nan])[-1] for r in per_seed], float)
-
-
 def _split(spec: str, parts: int, flag: str, results: dict) -> list[str]:
     names = spec.split(":")
     if len(names) != parts:
@@ -86,70 +61,6 @@ def _split(spec: str, parts: int, flag: str, results: dict) -> list[str]:
     if any(s != seeds[0] for s in seeds):
         raise runs.UserError(f"{flag} {spec!r}: the methods have different seeds ({seeds}); pairs need the same")
     return names
-
-
-def _pair(p: dict) -> str:
-    if not np.isfinite(p["diff"]):
-        return "n/a"
-    ci = f" [{p['ci_low']:+.2f}, {p['ci_high']:+.2f}]" if np.isfinite(p["ci_low"]) else ""
-    return f"{p['diff']:+.2f}{ci}"
-
-
-def _mean_std(x: np.ndarray) -> str:
-    x = x[np.isfinite(x)]
-    if not len(x):
-        return "n/a"
-    return f"{x.mean():.3g}" + (f" ± {x.std(ddof=1):.2g}" if len(x) > 1 else "")
-
-
-def _interval(point: float, low: float, high: float, digits: int = 1) -> str:
-    return f"{point:.{digits}f} [{low:.{digits}f}, {high:.{digits}f}]"
-
-
-def _robust(results: dict, pairs: list, out: dict, level: str = "##") -> str:
-    """The robust table of the pairs (see the module docstring); adds "robust" to out["pairs"]."""
-    rows = []
-    for column in ("SR", "SPL"):
-        family = [out["pairs"][f"{b} - {a}"][column]["p"] for a, b in pairs]
-        adjusted = stats.holm(family)
-        for (a, b), p_holm in zip(pairs, adjusted):
-            x, y = values(results[a], column), values(results[b], column)
-            iqm_a, iqm_b = (stats.stratified_bootstrap_ci(stats.iqm, v) for v in (x, y))
-            poi = stats.stratified_bootstrap_ci(stats.probability_of_improvement, y, x)
-            mde = stats.minimum_detectable_effect(float(np.std(y - x, ddof=1)) if len(x) > 1 else np.nan, len(x))
-            name = f"{b} - {a}"
-            out["pairs"][name].setdefault("robust", {})[column] = {
-                "iqm_a": iqm_a, "iqm_b": iqm_b, "probability_of_improvement": poi, "p_holm": float(p_holm), "mde": mde}
-            rows.append([name, column, _interval(*iqm_a), _interval(*iqm_b), _interval(*poi, digits=2),
-                         f"{p_holm:.3f}" if np.isfinite(p_holm) else "n/a",
-                         f"{mde:.1f}" if np.isfinite(mde) else "n/a"])  # fmt: skip
-    return (f"\n{level} What these seeds can tell: IQM and P(B > A) [95% stratified bootstrap], Holm over the pairs, "
-            "the minimum detectable effect (80% power)\n\n"
-            + markdown_table(rows, ["B - A", "", "IQM of A", "IQM of B", "P(B > A)", "p (Holm)", "MDE"]) + "\n")
-
-
-def shown_columns(results: dict, last: int = 250) -> list[str]:
-    """The columns of `TEST`, the training SR and `DIAGNOSTICS` that some seed recorded."""
-    columns = (*TEST, TRAINING, *DIAGNOSTICS)
-    return [c for c in columns if any(np.isfinite(values(rs, c, last)).any() for rs in results.values())]
-
-
-def paired_report(results: dict, pairs: list, columns: list[str], last: int = 250, level: str = "##") -> tuple[str, dict]:
-    """Markdown and numbers of `pairs` ([(A, B)] for B - A, the methods of `results`,
-    same seeds) on `columns`: the seed-by-seed table, then `_robust`'s. The pairs are one
-    family for Holm's correction. Returns (markdown, {"B - A": {column: stats.paired,
-    "robust": {...}}})."""
-    out: dict = {"pairs": {}}
-    cells = []
-    for a, b in pairs:
-        name = f"{b} - {a}"
-        out["pairs"][name] = {c: stats.paired(values(results[a], c, last), values(results[b], c, last)) for c in columns}
-        cells.append([name, *(_pair(out["pairs"][name][c]) for c in columns), stats.verdict(out["pairs"][name]["SR"])])
-    names = [diagnostic_label(c) for c in columns]
-    md = (f"\n{level} Paired seed by seed: difference [95% CI]\n\n"
-          + markdown_table(cells, ["methods", *names, "higher SR"]) + "\n")  # fmt: skip
-    md += _robust(results, pairs, out, level)
-    return md, out["pairs"]
 
 
 def main(args: Args) -> dict:
@@ -169,7 +80,7 @@ def main(args: Args) -> dict:
         experience = ("" if not all("frames/useful" in c for c in counts) else
                       ", ".join(f"{c['frames/useful'] / 1e6:.2f}M / {int(c['charts/episodes'])}" for c in counts))  # fmt: skip
         rows.append([method, ", ".join(str(r["seed"]) for r in per_seed), per,
-                     *(_mean_std(values(per_seed, c, args.last)) for c in shown), experience])  # fmt: skip
+                     *(format_mean_std(values(per_seed, c, args.last)) for c in shown), experience])  # fmt: skip
     names = [diagnostic_label(c) for c in shown]
     md = (f"# {args.run}: per method (mean ± sample std over seeds)\n\n"
           + markdown_table(rows, ["method", "seeds", "SR per seed", *names, "frames / episodes per seed"]) + "\n"
@@ -185,7 +96,7 @@ def main(args: Args) -> dict:
             name = f"({d} - {c}) - ({b} - {a})"
             out["did"][name] = {col: stats.paired(*(values(results[y], col) - values(results[x], col)
                                                     for x, y in ((a, b), (c, d)))) for col in TEST}  # fmt: skip
-            cells.append([name, *(_pair(out["did"][name][col]) for col in TEST),
+            cells.append([name, *(format_pair(out["did"][name][col]) for col in TEST),
                           *(f"{out['did'][name][col]['p']:.3f}" for col in TEST)])  # fmt: skip
         md += ("\n## Difference of differences, seed by seed [95% CI]\n\n"
                + markdown_table(cells, ["differences", *TEST, *(f"p ({c})" for c in TEST)]) + "\n")  # fmt: skip

@@ -54,7 +54,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from envs.catalog import ROOM_TYPES
-from experiments import cvae_compare, devices, numerics, runs, selection, stats, sweep
+from experiments import cvae_compare, devices, numerics, report, runs, selection, stats, sweep
 from experiments.presets import split_arm
 from experiments.tables import markdown_table, write_csv
 
@@ -253,11 +253,11 @@ def table1(results: dict) -> tuple[str, list[dict]]:
             if method not in selected:
                 cells.append([method, *[NOT_RUN] * 4, " / ".join(map(str, PAPER_TABLE1[method]))])
                 continue
-            row = sweep.table({method: selected[method]})[0]
+            row = report.table({method: selected[method]})[0]
             rows.append({"setup": setup, **row})
-            cells.append([method, *(sweep.mean_std_ci(row, c) for c in sweep.COLUMNS),
+            cells.append([method, *(report.mean_std_ci(row, c) for c in report.COLUMNS),
                           " / ".join(map(str, PAPER_TABLE1[method]))])  # fmt: skip
-        md += (f"### {setup} setup\n\n" + markdown_table(cells, ["Method", *sweep.COLUMNS, "paper (SPL / SR / SPL>5 / SR>5)"])
+        md += (f"### {setup} setup\n\n" + markdown_table(cells, ["Method", *report.COLUMNS, "paper (SPL / SR / SPL>5 / SR>5)"])
                + "\n\n")  # fmt: skip
     return md, rows
 
@@ -285,13 +285,13 @@ def table2(results: dict) -> tuple[str, list[dict]]:
 def table3(results: dict) -> tuple[str, list[dict]]:
     methods = [m for m in TABLE3 if m in results]
     selected = _selected(results, methods)
-    rows = sweep.table(selected)
-    cells = [[r["method"], sweep.mean_std_ci(r, "SPL"), sweep.mean_std_ci(r, "SR"),
+    rows = report.table(selected)
+    cells = [[r["method"], report.mean_std_ci(r, "SPL"), report.mean_std_ci(r, "SR"),
               " / ".join(map(str, PAPER_TABLE3[r["method"]]))] for r in rows]  # fmt: skip
     cells += [[m, NOT_RUN, NOT_RUN, " / ".join(map(str, PAPER_TABLE3[m]))] for m in TABLE3 if m not in results]
     md = markdown_table(cells, ["Method", "SPL", "SR", "paper (SPL / SR)"]) + "\n"
     if "a3c+org" in selected and len(selected) > 1 and len(next(iter(selected.values()))) > 1:
-        md += "\n" + sweep.paired_markdown(selected)
+        md += "\n" + report.paired_markdown(selected)
     return md, rows
 
 
@@ -312,7 +312,7 @@ def by_length_rows(results: dict) -> list[dict]:
     return rows
 
 
-_num = sweep.rate
+_num = report.rate
 
 
 def _paired_col(results: dict, base: str, other: str, get) -> dict:
@@ -341,7 +341,7 @@ def by_length_section(args: Args, results: dict) -> str:
         name = f"by_length_{base}_vs_{other}.png".replace("+", "_")
         _by_length_png(args.out / name, [r for r in rows if r["method"] in (base, other)])
         cells = [[bucket, episodes, *(f"{_fmt_pair(p)} ({stats.verdict(p)})" for p in pairs)]
-                 for bucket, episodes, *pairs in sweep.paired_by_length(results, base, other)]  # fmt: skip
+                 for bucket, episodes, *pairs in report.paired_by_length(results, base, other)]  # fmt: skip
         md += (f"### {other} against {base}\n\n![SR and SPL by L^g]({name})\n\n"
                + markdown_table(cells, ["L^g", "episodes (all seeds)", "SR difference [95% CI], p", "SPL difference"])
                + "\n\n")  # fmt: skip
@@ -643,7 +643,7 @@ def write_report(args: Args, results: dict) -> dict:
     t3, rows3 = table3(results)
     write_csv(out / "table3.csv", rows3)
     md.append("## Table 3: what to imagine (ablations on the ORG base)\n\n" + t3)
-    md.append(sweep.selection_markdown(results))
+    md.append(report.selection_markdown(results))
     md.append("## SR and SPL by optimal path length\n\n" + by_length_section(args, results))
     lines = claims(results)
     write_csv(out / "claims.csv", [{"claim": c, "verdict": v, "numbers": n} for c, v, n in lines])

@@ -11,7 +11,7 @@ selected model's validation SR, `selection_sr`): the test split never chooses. T
 * the grid: per method and value, the validation SR that chose, the test SR and SPL, the
   chosen value marked;
 * best vs best, the fair comparison: every pair of methods, each at its own chosen value,
-  paired seed by seed (`experiments.compare.paired_report`: difference and t interval,
+  paired seed by seed (`experiments.report.paired_report`: difference and t interval,
   IQM, P(B > A), Holm over these pairs, the minimum detectable effect);
 * the same pairs at each common value of the grid (one family per value);
 * the learning curves of every value, one panel per method;
@@ -36,7 +36,7 @@ from typing import Optional
 
 import numpy as np
 
-from experiments import compare, devices, runs, sweep
+from experiments import devices, report, runs, sweep
 from experiments.presets import split_arm
 from experiments.tables import markdown_table
 
@@ -148,7 +148,7 @@ def selection_sr(per_seed: list[dict]) -> np.ndarray:
         at = [h["SR"] for h in r["validation"] if h["update"] == r["selected_update"]]
         if len(at) != 1:
             raise runs.UserError(f"seed {r['seed']}: no single validation at its selected update {r['selected_update']}")
-        out.append(sweep.rate(at[0]))
+        out.append(report.rate(at[0]))
     return np.array(out)
 
 
@@ -169,7 +169,7 @@ def grid_table(table: dict, results: dict, chosen: dict) -> tuple[str, list[dict
     for method, by_point in table.items():
         for point, name in by_point.items():
             per_seed = results[name]
-            val, sr, spl = selection_sr(per_seed), compare.values(per_seed, "SR"), compare.values(per_seed, "SPL")
+            val, sr, spl = selection_sr(per_seed), report.values(per_seed, "SR"), report.values(per_seed, "SPL")
             rows.append({"method": method, "point": point, "arm": name, "val_SR": val.tolist(), "SR": sr.tolist(),
                          "SPL": spl.tolist(), "chosen": point == chosen[method]})  # fmt: skip
             cells.append([method, point, _mean_std(val), _mean_std(sr), _mean_std(spl),
@@ -183,7 +183,7 @@ def pairs_of(methods) -> list[tuple[str, str]]:
     return list(itertools.combinations(methods, 2))
 
 
-def report(args: Args, grid, table: dict, results: dict) -> tuple[str, dict]:
+def tune_report(args: Args, grid, table: dict, results: dict) -> tuple[str, dict]:
     """tune.md's text and tune.json's numbers from the arms' per-seed results."""
     chosen = {m: choose({p: results[a] for p, a in by_point.items()}) for m, by_point in table.items()}
     seeds = [r["seed"] for r in next(iter(results.values()))]
@@ -198,15 +198,15 @@ def report(args: Args, grid, table: dict, results: dict) -> tuple[str, dict]:
     pairs = pairs_of(args.methods)
     if pairs and len(seeds) > 1:
         best = {m: results[table[m][chosen[m]]] for m in args.methods}
-        columns = [c for c in compare.shown_columns(best) if c in (*compare.TEST, compare.TRAINING)]
+        columns = [c for c in report.shown_columns(best) if c in (*report.TEST, report.TRAINING)]
         md += ("\n## Best vs best: each method at its own chosen value\n\n"
                + ", ".join(f"{m}: {chosen[m]}" for m in args.methods) + "\n")
-        text, out["best_vs_best"] = compare.paired_report(best, pairs, columns, level="###")
+        text, out["best_vs_best"] = report.paired_report(best, pairs, columns, level="###")
         md += text
         for point in points(grid):
             at = {m: results[table[m][point]] for m in args.methods}
             md += f"\n## All at {point}\n"
-            text, out["common"][point] = compare.paired_report(at, pairs, columns, level="###")
+            text, out["common"][point] = report.paired_report(at, pairs, columns, level="###")
             md += text
     chosen_arms = " ".join(table[m][chosen[m]] for m in args.methods)
     md += (f"\n![learning curves per value](tune_curves.png)\n\nThe arms' sweep: {args.out / 'sweep'} (its table1.md). "
@@ -232,7 +232,7 @@ def curves_png(path: Path, table: dict, results: dict) -> None:
             ax.plot(x, y.mean(0), color=color, label=point)
             ax.fill_between(x, y.mean(0) - y.std(0), y.mean(0) + y.std(0), color=color, alpha=0.2)
             updates = [h["update"] for h in per_seed[0]["validation"]]
-            val = np.array([[sweep.rate(h["SR"]) for h in r["validation"]] for r in per_seed])  # percent
+            val = np.array([[report.rate(h["SR"]) for h in r["validation"]] for r in per_seed])  # percent
             ax.plot(updates, val.mean(0), "o", color=color, markersize=3)
         ax.set_title(method)
         ax.set_xlabel("updates")
@@ -263,7 +263,7 @@ def main(args: Args) -> dict | None:
         print("continue with: python -m experiments.tune --resume --out " + str(args.out))
         return None
     results = {a: runs.read_json(args.out / "sweep" / "methods" / a / "results.json")["results"] for a in names}
-    md, out = report(args, grid, table, results)
+    md, out = tune_report(args, grid, table, results)
     (args.out / "tune.md").write_text(md)
     runs.write_json(args.out / "tune_results.json", out)
     curves_png(args.out / "tune_curves.png", table, results)

@@ -26,7 +26,7 @@ import tyro
 
 import train_helpers as H
 from experiments import evaluate as evaluate_cli
-from experiments import numerics, presets, progress, runs, selection, sweep, tables
+from experiments import numerics, presets, progress, report, runs, selection, sweep, tables
 from experiments import train as train_cli
 from foresit_jax.config import Config
 
@@ -294,9 +294,9 @@ def test_reports_use_the_one_table_writer():
         "## T\n\n| rooms | SPL | SR | SPL>=5 | SR>=5 | episodes |\n|---|---|---|---|---|---|\n"
         "| overall | 10.00 | 20.00 | n/a | n/a | 4 |\n"
     )  # fmt: skip
-    rows = sweep.table({"a3c": [{"overall": {"SPL": 1.0, "SR": 2.0, "SPL>=5": 3.0, "SR>=5": 4.0}}] * 2,
+    rows = report.table({"a3c": [{"overall": {"SPL": 1.0, "SR": 2.0, "SPL>=5": 3.0, "SR>=5": 4.0}}] * 2,
                         "b": [{"overall": {"SPL": 1.0, "SR": 10.0, "SPL>=5": None, "SR>=5": 4.0}}]})  # fmt: skip
-    assert sweep.table_markdown(rows, "T1") == (
+    assert report.table_markdown(rows, "T1") == (
         "# T1\n\n| Method | SPL | SR | SPL>=5 | SR>=5 |\n|---|---|---|---|---|\n"
         "| a3c | 1.00 ± 0.00 [1.0, 1.0] | 2.00 ± 0.00 [2.0, 2.0] | 3.00 ± 0.00 [3.0, 3.0] | 4.00 ± 0.00 [4.0, 4.0] |\n"
         "| b | 1.00 | 10.00 | n/a | 4.00 |\n"
@@ -306,7 +306,7 @@ def test_reports_use_the_one_table_writer():
 
 def test_sweep_pairs_every_method_with_the_first_seed_by_seed():
     result = lambda sr, spl: {"overall": {"SR": sr, "SPL": spl}}  # noqa: E731
-    md = sweep.paired_markdown({"a3c": [result(1.0, 0.0), result(2.0, 0.0), result(3.0, 0.0)],
+    md = report.paired_markdown({"a3c": [result(1.0, 0.0), result(2.0, 0.0), result(3.0, 0.0)],
                                 "b": [result(2.0, 1.0), result(4.0, 1.0), result(5.0, 1.0)]})  # fmt: skip
     # SR differences 1, 2, 2: mean 5/3, t = 5 with 2 dof, p = 1 - 5 / sqrt(27) = 0.038,
     # interval 5/3 -+ 4.303 / 3; SPL differences all 1: no spread, no p.
@@ -599,7 +599,7 @@ def test_a_sweeps_table_pairs_each_path_length_bucket_over_seeds():
         return {"selected": {"by_length": by_length}}
 
     results = {m: [seed(r) for r in per_seed] for m, per_seed in sr.items()}
-    md = sweep.by_length_markdown(results)
+    md = report.by_length_markdown(results)
     row = {line.split("|")[1].strip(): [c.strip() for c in line.split("|")[2:-1]]
            for line in md.split("### a3c+critic - a3c")[1].splitlines() if line.startswith("| ")}  # fmt: skip
     for i, bucket in enumerate(("1-4", ">=5")):
@@ -609,7 +609,7 @@ def test_a_sweeps_table_pairs_each_path_length_bucket_over_seeds():
         x = np.array(sr["a3c"])[:, i]
         assert f"| {bucket} | {x.mean():.1f} ± {x.std(ddof=1):.1f} / {x.mean() / (2 if i == 0 else 4):.1f}" in md
     assert row[">=20"][:2] == ["0", "n/a"] and "| >=20 | n/a / n/a | n/a / n/a |" in md
-    assert sweep.by_length_markdown({"a3c": results["a3c"]}) == ""  # nothing to pair
+    assert report.by_length_markdown({"a3c": results["a3c"]}) == ""  # nothing to pair
 
 
 def test_sweep_rejects_bad_input_in_one_line(tmp_path, capsys):

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 import study_data
 
-from experiments import compare, stats
+from experiments import compare, report, stats
 
 REPO = Path(__file__).resolve().parents[1]
 ARMS = {"a3c": "a3c@learning_rate=3e-4", "a3c+foresit": "a3c+foresit@learning_rate=3e-4",
@@ -23,7 +23,7 @@ def study(tmp_path_factory):
     """(per-arm results, experiments.compare's output for results.md's pairs)."""
     root = study_data.unpack("fair_lr3e-4.tar.xz", tmp_path_factory.mktemp("fair"), ARMS.values())
     out = compare.main(compare.Args(run=root, pairs=tuple(f"{ARMS[a]}:{ARMS[b]}" for a, b in PAIRS)))
-    loaded = compare.load(root)
+    loaded = report.load(root)
     return {short: loaded[name] for short, name in ARMS.items()}, out["pairs"]
 
 
@@ -40,7 +40,7 @@ def test_results_md_quotes_the_sweep(study):
     results = (REPO / "docs" / "results.md").read_text()
     for arm, per_seed in arms.items():
         assert [r["seed"] for r in per_seed] == [0, 1, 2, 3, 4]
-        sr, spl = compare.values(per_seed, "SR"), compare.values(per_seed, "SPL")
+        sr, spl = report.values(per_seed, "SR"), report.values(per_seed, "SPL")
         s, iqm = stats.summary(sr), stats.stratified_bootstrap_ci(stats.iqm, sr)
         row = (f"| {arm} | " + " / ".join(f"{x:.1f}" for x in sr) + f" | {s['mean']:.1f} ± {s['std']:.1f} | "
                f"{spl.mean():.1f} ± {spl.std(ddof=1):.1f} | {iqm[0]:.1f} [{iqm[1]:.1f}, {iqm[2]:.1f}] |")
@@ -56,7 +56,7 @@ def test_results_md_quotes_the_sweep(study):
 
 def test_the_base_is_ahead_on_every_seed_as_results_md_says(study):
     arms, _ = study
-    gaps = compare.values(arms["a3c"], "SR") - compare.values(arms["a3c+foresit"], "SR")
+    gaps = report.values(arms["a3c"], "SR") - report.values(arms["a3c+foresit"], "SR")
     assert (gaps > 0).all()
     assert f"by {gaps.min():.1f} to {gaps.max():.1f} points" in (REPO / "docs" / "results.md").read_text()
 
@@ -125,8 +125,8 @@ def test_results_md_quotes_the_tuned_comparison():
     chosen = {m: tune.choose({p: results[a] for p, a in by_point.items()}) for m, by_point in table.items()}
     assert chosen == {"a3c": "learning_rate=1e-3", "a3c+critic": "learning_rate=3e-4", "a3c+foresit": "learning_rate=3e-4"}
     _, grid_rows = tune.grid_table(table, results, chosen)
-    best = {m: results[table[m][chosen[m]]] for m in args.methods}  # as tune.report pairs them
-    _, best_vs_best = compare.paired_report(best, tune.pairs_of(args.methods), ["SR", "SPL"])
+    best = {m: results[table[m][chosen[m]]] for m in args.methods}  # as tune.tune_report pairs them
+    _, best_vs_best = report.paired_report(best, tune.pairs_of(args.methods), ["SR", "SPL"])
     doc = (REPO / "docs" / "results.md").read_text()
     for row in grid_rows:
         val, sr, spl = (stats.summary(row[k]) for k in ("val_SR", "SR", "SPL"))
@@ -155,11 +155,11 @@ def test_results_md_quotes_the_bases_with_savns_head_and_one_step_td(tmp_path, c
     arms = ("a3c@value_head=linear", "a3c@gae_lambda=0")
     out = compare.main(compare.Args(run=root, pairs=tuple(f"a3c:{b}" for b in arms)))
     capsys.readouterr()
-    results, doc = compare.load(root), (REPO / "docs" / "results.md").read_text()
+    results, doc = report.load(root), (REPO / "docs" / "results.md").read_text()
     for b in arms:
         pair = out["pairs"][f"{b} - a3c"]
         r = pair["robust"]["SR"]
-        poi, sr = r["probability_of_improvement"], stats.summary(compare.values(results[b], "SR"))
+        poi, sr = r["probability_of_improvement"], stats.summary(report.values(results[b], "SR"))
         row = (f"| {b} - a3c | {sr['mean']:.1f} ± {sr['std']:.1f} | {interval(pair['SR'])} | {interval(pair['SPL'])} | "
                f"{poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | {r['p_holm']:.3f} | {r['mde']:.1f} |")
         assert row in doc, row
@@ -171,8 +171,8 @@ def test_results_md_quotes_the_better_fitted_fw_arm(tmp_path, capsys):
     bases = ("a3c+foresit", "a3c", "a3c+critic")
     out = compare.main(compare.Args(run=root, pairs=tuple(f"{a}:{arm}" for a in bases)))
     capsys.readouterr()
-    results, doc = compare.load(root), (REPO / "docs" / "results.md").read_text()
-    sr = stats.summary(compare.values(results[arm], "SR"))
+    results, doc = report.load(root), (REPO / "docs" / "results.md").read_text()
+    sr = stats.summary(report.values(results[arm], "SR"))
     for a in bases:
         pair = out["pairs"][f"{arm} - {a}"]
         r = pair["robust"]["SR"]

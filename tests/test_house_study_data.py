@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 import study_data
 
-from experiments import compare, stats, sweep
+from experiments import compare, report, stats
 
 REPO = Path(__file__).resolve().parents[1]
 METHODS = ("a3c", "a3c+critic", "a3c+foresit")
@@ -22,11 +22,11 @@ METHODS = ("a3c", "a3c+critic", "a3c+foresit")
 @pytest.fixture(scope="module")
 def study(tmp_path_factory) -> dict[str, list[dict]]:
     """Each method's per-seed results, read from the unpacked archive as `experiments.compare` reads a sweep."""
-    return compare.load(study_data.unpack("house_study.tar.xz", tmp_path_factory.mktemp("house"), METHODS))
+    return report.load(study_data.unpack("house_study.tar.xz", tmp_path_factory.mktemp("house"), METHODS))
 
 
 def sr(results: list[dict]):
-    return compare.values(results, "SR")
+    return report.values(results, "SR")
 
 
 def interval(p: dict) -> str:
@@ -53,10 +53,10 @@ def test_the_readme_and_houses_md_quote_the_study(study):
 
 def test_houses_md_by_length_pairs_are_the_sweeps(study):
     """Each bucket's row of houses.md's by-length table ends with the pairs the sweep's
-    table1.md computes (`sweep.paired_by_length`): against the critic, then against a3c."""
+    table1.md computes (`report.paired_by_length`): against the critic, then against a3c."""
     houses = (REPO / "docs" / "houses.md").read_text()
-    against_critic = sweep.paired_by_length(study, "a3c+critic", "a3c+foresit")
-    against_a3c = sweep.paired_by_length(study, "a3c", "a3c+foresit")
+    against_critic = report.paired_by_length(study, "a3c+critic", "a3c+foresit")
+    against_a3c = report.paired_by_length(study, "a3c", "a3c+foresit")
     for (bucket, episodes, critic, _), (_, _, a3c, _) in zip(against_critic, against_a3c):
         assert f"| {bucket} | {episodes} |" in houses, bucket
         assert f"| {interval(critic)} | {interval(a3c)} |" in houses, bucket

@@ -440,15 +440,15 @@ def test_explained_variance_and_advantage_spread_against_numpy():
 
 
 def test_sweep_diagnostics_table_by_hand():
-    from experiments import sweep
+    from experiments import report
 
-    seed = lambda x: {"diagnostics": {n: [x, 2 * x, 3 * x] for n in sweep.DIAGNOSTICS[:-1]}}  # noqa: E731
-    md = sweep.diagnostics_markdown({"a3c": [seed(1.0), seed(3.0)], "other": [{}]})
+    seed = lambda x: {"diagnostics": {n: [x, 2 * x, 3 * x] for n in report.DIAGNOSTICS[:-1]}}  # noqa: E731
+    md = report.diagnostics_markdown({"a3c": [seed(1.0), seed(3.0)], "other": [{}]})
     lines = [line for line in md.splitlines() if line.startswith("| a3c")]
     assert [line.split(" | ")[1] for line in lines] == ["1/3", "2/3", "3/3"]  # first, middle, last chunk
     assert lines[2].split(" | ")[2] == "6"  # mean over the seeds of 3 and 9
     assert lines[0].rstrip(" |").endswith("| 2") and lines[0].endswith("|  |")  # no f_w loss recorded
-    assert "other" not in md and sweep.diagnostics_markdown({"x": [{}]}) == ""
+    assert "other" not in md and report.diagnostics_markdown({"x": [{}]}) == ""
 
 
 @pytest.mark.slow

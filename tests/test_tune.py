@@ -104,7 +104,7 @@ def test_report_pairs_each_method_at_its_own_value_and_at_each_common_value(tmp_
     for (m, p), v in val.items():
         results[table[m][p]] = per_seed([v + rng.normal() for _ in SEEDS], rng.uniform(30, 80, len(SEEDS)), rng)
     args = tune.Args(methods=("a3c", "a3c+foresit"), out=tmp_path)
-    md, out = tune.report(args, grid, table, results)
+    md, out = tune.tune_report(args, grid, table, results)
     assert out["chosen"] == {"a3c": "learning_rate=1e-3", "a3c+foresit": "learning_rate=3e-4"}
 
     def sr(name):
