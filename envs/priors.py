@@ -10,8 +10,8 @@ it).  Under priors:
   (``PRIOR_FURNITURE``), some placed near another kind (the coffee table by the sofa, the
   side tables by the bed, the second counter by the first).
 * **Every target category placed by a relation** (``RELATIONS``): a mid-band object stands
-  on furniture of the given kinds, a floor object beside them, a high object on the wall
-  cell next to them; ``near`` prefers cells within ``NEAR_CELLS`` of categories placed
+  on furniture of the given kinds, a floor object beside them, a high object on a wall
+  within ``NEAR_CELLS`` of them; ``near`` prefers cells within ``NEAR_CELLS`` of categories placed
   before (the toaster by the coffee maker, the pans by the stove); ``zone="corner"`` puts
   an object in a corner of its room.  With probability ``RELATION_NOISE`` an object is
   placed as today's layouts place it (uniformly over its band), and where a room has no
@@ -145,12 +145,11 @@ def kind_index(kind: str) -> int:
 def furnish_with_kinds(cell, furniture, room: int, rng: np.random.Generator, rect, keep_free=None):
     """(cell, furniture) with room type ``room``'s ``PRIOR_FURNITURE`` placed inside ``rect`` =
     (top, left, rows, cols): each piece at a random orientation and place among those that
-    keep the floor connected, avoid ``keep_free`` and, for a piece against a wall, touch one;
-    a piece with ``near`` goes within NEAR_CELLS of that kind where it can, one with
-    ``opposite`` among the quarter of its places farthest across the room's centre from
-    that kind.  ``furniture``
-    (int8 [G, G], -1 where none) gets each piece's kind index.  A piece with no valid place
-    is left out."""
+    keep the floor connected, avoid ``keep_free`` and, for a piece against a wall, lay a
+    whole side on one (``_side_on_wall``); a piece with ``near`` goes within NEAR_CELLS of
+    that kind where it can, one with ``opposite`` among the quarter of its places farthest
+    across the room's centre from that kind.  ``furniture`` (int8 [G, G], -1 where none)
+    gets each piece's kind index.  A piece with no valid place is left out."""
     top, left, rows, cols = rect
     cell, furniture = cell.copy(), furniture.copy()
     for piece in PRIOR_FURNITURE[room]:

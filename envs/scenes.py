@@ -4,8 +4,9 @@ A layout is a padded ``[G, G]`` grid of cell types (floor, wall, furniture, floo
 plus an object layer (category index and height band per cell).  The walls, room size and
 furniture depend only on the scene number; the object placements depend on the scene
 number and the setup (``savn`` and ``org`` place their objects differently, as the two
-AI2-THOR configurations do).  Generation is deterministic: the same number always gives
-the same scene.
+AI2-THOR configurations do).  With ``priors`` (envs.priors) the same walls are furnished
+with pieces of distinct kinds and every object is placed by its relation.  Generation is
+deterministic: the same number always gives the same scene.
 """
 
 from __future__ import annotations

@@ -204,7 +204,7 @@ def test_docs_relation_table_is_the_code():
     from pathlib import Path
 
     doc = (Path(__file__).resolve().parents[1] / "docs" / "priors.md").read_text()
-    band = {C.BAND_FLOOR: "on the floor, beside", C.BAND_MID: "on", C.BAND_HIGH: "high on the wall next to"}
+    band = {C.BAND_FLOOR: "on the floor, beside", C.BAND_MID: "on", C.BAND_HIGH: "high on a wall, within 2 cells of"}
     for name, rel in P.RELATIONS.items():
         rooms = sorted({C.ROOM_TYPES[r].replace("_", " ") for s in C.SETUPS for r in range(4) if name in C.SETUPS[s][1][r]})
         setups = ", ".join(s for s in C.SETUPS if name in C.categories(s))
