@@ -221,3 +221,31 @@ def test_priors_is_the_sweeps_not_an_arms():
     with pytest.raises(ValueError, match="'priors' is not a Config field an arm can set.*--priors"):
         split_arm("a3c@priors=true")
     assert preset("quick", "a3c", priors=True)[0].priors and not preset("quick", "a3c")[0].priors
+
+
+@pytest.mark.slow
+def test_the_gpu_script_runs_dry_on_a_cpu(tmp_path):
+    """scripts/priors_study_gpu.sh at a tiny size: the savn and org arms side by side in rooms
+    with priors, a table and the pairs per setup, one archive without checkpoints."""
+    import os
+    import subprocess
+    import tarfile
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PRESET": "tiny", "SEEDS": "2", "UPDATES": "4", "OUT": str(tmp_path / "out"),
+           "RUNS": str(tmp_path / "runs")}  # fmt: skip
+    proc = subprocess.run(["bash", str(repo / "scripts" / "priors_study_gpu.sh")], env=env, capture_output=True,
+                          text=True, cwd=tmp_path)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    runs_ = tmp_path / "runs"
+    savn = (runs_ / "savn_all" / "compare.md").read_text()
+    assert "a3c+foresit@learning_rate=3e-4 - a3c+critic@learning_rate=3e-4" in savn
+    assert "a3c+foresit@learning_rate=3e-4 - a3c" in savn
+    assert "a3c+org+foresit - a3c+org" in (runs_ / "org_all" / "compare.md").read_text()
+    from experiments import runs
+
+    assert all(runs.read_json(runs_ / f"{s}_all" / "sweep.json")["config"]["priors"] is True for s in ("savn", "org"))
+    with tarfile.open(tmp_path / "out" / "priors_gpu.tar.xz") as tar:
+        names = tar.getnames()
+    assert any(n.endswith("org_all/table1.md") for n in names) and not any("checkpoints" in n for n in names)
