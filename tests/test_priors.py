@@ -249,3 +249,18 @@ def test_the_gpu_script_runs_dry_on_a_cpu(tmp_path):
     with tarfile.open(tmp_path / "out" / "priors_gpu.tar.xz") as tar:
         names = tar.getnames()
     assert any(n.endswith("org_all/table1.md") for n in names) and not any("checkpoints" in n for n in names)
+
+
+def test_the_view_table_equals_the_ray_cast_at_every_step():
+    """Under priors the precomputed view (a table gather) and the one cast at every step
+    (`precomputed_views=False`, which reads the bank's furniture classes) agree."""
+    import jax
+
+    kw = dict(setup="savn", split="val", room_types=("bedroom",), view_width=3, priors=True)
+    table, params = envs.make("GridNav-v0", **kw)
+    cast, params_cast = envs.make("GridNav-v0", precomputed_views=False, **kw)
+    keys = jax.random.split(jax.random.key(4), 64)
+    obs_t, _ = jax.vmap(table.reset, in_axes=(0, None))(keys, params)
+    obs_c, _ = jax.vmap(cast.reset, in_axes=(0, None))(keys, params_cast)
+    np.testing.assert_array_equal(obs_t["view"], obs_c["view"])
+    assert obs_t["view"][..., C.furniture_sem("savn", 0) : -1].any()  # furniture kinds are in view
