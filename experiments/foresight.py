@@ -24,7 +24,9 @@ Each is predicted from three feature sets of the first observation:
 The **gain** is the accuracy of `view + target` minus that of `view`: what knowing the target
 adds to what the view shows. Around 0, the layouts offer nothing to foresee. It is reported
 with a 95% interval from a bootstrap over the test layouts (starts of one scene are not
-independent). `foresight_bound` is the pure part, tested on synthetic data with a planted
+independent). On layouts with priors (`--priors`, envs.priors) the report also splits the
+test starts by whether the first view shows furniture of a kind the target stands by
+(`anchor_in_view`): where a relation could show, and where it could not. `foresight_bound` is the pure part, tested on synthetic data with a planted
 relation and without one (tests/test_foresight.py).
 """
 
