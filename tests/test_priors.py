@@ -265,3 +265,33 @@ def test_the_view_table_equals_the_ray_cast_at_every_step():
     obs_c, _ = jax.vmap(cast.reset, in_axes=(0, None))(keys, params_cast)
     np.testing.assert_array_equal(obs_t["view"], obs_c["view"])
     assert obs_t["view"][..., C.furniture_sem("savn", 0) : -1].any()  # furniture kinds are in view
+
+
+def test_docs_quote_the_study_in_rooms_with_priors(tmp_path, capsys):
+    """docs/priors.md's pairs are what experiments.compare computes from the study's files
+    (docs/data/priors_savn.tar.xz: the sweep folder without checkpoints)."""
+    from pathlib import Path
+
+    import study_data
+    from experiments import compare, report, runs, stats
+
+    arms = ("a3c", "a3c+critic@learning_rate=3e-4", "a3c+foresit@learning_rate=3e-4")
+    root = study_data.unpack("priors_savn.tar.xz", tmp_path, arms)
+    assert runs.read_json(root / "sweep.json")["config"]["priors"] is True
+    pairs = [(arms[0], arms[1]), (arms[0], arms[2]), (arms[1], arms[2])]
+    out = compare.main(compare.Args(run=root, pairs=tuple(f"{a}:{b}" for a, b in pairs)))
+    capsys.readouterr()
+    results = report.load(root)
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "priors.md").read_text()
+
+    def interval(p):
+        signed = lambda x: f"{x:+.1f}".replace("+-", "-")  # noqa: E731
+        return f"{signed(p['diff'])} [{signed(p['ci_low'])}, {signed(p['ci_high'])}]"
+
+    for a, b in pairs:
+        pair = out["pairs"][f"{b} - {a}"]
+        r = pair["robust"]["SR"]
+        poi, sr = r["probability_of_improvement"], stats.summary(report.values(results[b], "SR"))
+        row = (f"| {b} - {a} | {sr['mean']:.1f} ± {sr['std']:.1f} | {interval(pair['SR'])} | {interval(pair['SPL'])} | "
+               f"{poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | {r['p_holm']:.3f} | {r['mde']:.1f} |")
+        assert row in doc, row
