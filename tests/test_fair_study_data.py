@@ -157,11 +157,7 @@ def test_results_md_quotes_the_bases_with_savns_head_and_one_step_td(tmp_path, c
     capsys.readouterr()
     results, doc = report.load(root), (REPO / "docs" / "results.md").read_text()
     for b in arms:
-        pair = out["pairs"][f"{b} - a3c"]
-        r = pair["robust"]["SR"]
-        poi, sr = r["probability_of_improvement"], stats.summary(report.values(results[b], "SR"))
-        row = (f"| {b} - a3c | {sr['mean']:.1f} ± {sr['std']:.1f} | {interval(pair['SR'])} | {interval(pair['SPL'])} | "
-               f"{poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | {r['p_holm']:.3f} | {r['mde']:.1f} |")
+        row = study_data.pair_row(out, results, "a3c", b)
         assert row in doc, row
 
 
@@ -172,12 +168,7 @@ def test_results_md_quotes_the_better_fitted_fw_arm(tmp_path, capsys):
     out = compare.main(compare.Args(run=root, pairs=tuple(f"{a}:{arm}" for a in bases)))
     capsys.readouterr()
     results, doc = report.load(root), (REPO / "docs" / "results.md").read_text()
-    sr = stats.summary(report.values(results[arm], "SR"))
     for a in bases:
-        pair = out["pairs"][f"{arm} - {a}"]
-        r = pair["robust"]["SR"]
-        poi = r["probability_of_improvement"]
-        row = (f"| {arm} - {a} | {sr['mean']:.1f} ± {sr['std']:.1f} | {interval(pair['SR'])} | {interval(pair['SPL'])} | "
-               f"{poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | {r['p_holm']:.3f} | {r['mde']:.1f} |")
+        row = study_data.pair_row(out, results, a, arm)
         assert row in doc, row
     assert out["pairs"][f"{arm} - a3c"]["robust"]["SPL"]["p_holm"] < 0.05  # "with an interval that excludes 0"

@@ -273,7 +273,7 @@ def test_docs_quote_the_study_in_rooms_with_priors(tmp_path, capsys):
     from pathlib import Path
 
     import study_data
-    from experiments import compare, report, runs, stats
+    from experiments import compare, report, runs
 
     arms = ("a3c", "a3c+critic@learning_rate=3e-4", "a3c+foresit@learning_rate=3e-4")
     root = study_data.unpack("priors_savn.tar.xz", tmp_path, arms)
@@ -284,14 +284,6 @@ def test_docs_quote_the_study_in_rooms_with_priors(tmp_path, capsys):
     results = report.load(root)
     doc = (Path(__file__).resolve().parents[1] / "docs" / "priors.md").read_text()
 
-    def interval(p):
-        signed = lambda x: f"{x:+.1f}".replace("+-", "-")  # noqa: E731
-        return f"{signed(p['diff'])} [{signed(p['ci_low'])}, {signed(p['ci_high'])}]"
-
     for a, b in pairs:
-        pair = out["pairs"][f"{b} - {a}"]
-        r = pair["robust"]["SR"]
-        poi, sr = r["probability_of_improvement"], stats.summary(report.values(results[b], "SR"))
-        row = (f"| {b} - {a} | {sr['mean']:.1f} ± {sr['std']:.1f} | {interval(pair['SR'])} | {interval(pair['SPL'])} | "
-               f"{poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | {r['p_holm']:.3f} | {r['mde']:.1f} |")
+        row = study_data.pair_row(out, results, a, b)
         assert row in doc, row
