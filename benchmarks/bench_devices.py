@@ -4,7 +4,7 @@
 
 For each device count N a fresh interpreter (XLA_FLAGS=--xla_force_host_platform_device_count=N
 must be set before jax starts) times the program `experiments.sweep` runs: `--seeds` seeds
-of a method vmapped, the seed axis sharded over the N devices (experiments.devices), one
+of a method vmapped, the seed axis sharded over the N devices (experiments.running.devices), one
 jitted chunk of `--updates` updates, best of `--repeats` calls after a warm-up. One table,
 measured in one run: seconds per chunk, useful frames/s over all seeds, and the speed
 relative to the first device count.
@@ -45,8 +45,8 @@ def measure(bench: BenchDevices) -> dict:
     import jax.numpy as jnp
     import numpy as np
 
-    from experiments import devices, selection
-    from experiments.presets import preset
+    from experiments.running import devices, selection
+    from experiments.running.presets import preset
     from foresit_jax.train import make_trainer
 
     config, _ = preset(bench.preset, bench.method, num_updates=bench.updates)

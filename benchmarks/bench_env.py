@@ -37,7 +37,7 @@ import jax
 import tyro
 
 import envs
-from experiments.tables import markdown_table
+from experiments.reporting.tables import markdown_table
 
 XMINIGRID_ENV = "MiniGrid-DoorKey-8x8"
 XMINIGRID_INSTALL = 'xminigrid is not installed: pip install xminigrid==0.9.3 (or pip install -e ".[bench]")'

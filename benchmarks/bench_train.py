@@ -40,8 +40,8 @@ import numpy as np
 import tyro
 
 from envs.gridnav import TRAIN_TIME_LIMIT
-from experiments import runs
-from experiments.presets import preset
+from experiments.running import errors
+from experiments.running.presets import preset
 from foresit_jax.methods import parse_method
 from foresit_jax.train import Trainer
 
@@ -235,5 +235,5 @@ if __name__ == "__main__":
     try:
         main(tyro.cli(BenchConfig))
     except ValueError as e:
-        runs.fail(str(e))
+        errors.fail(str(e))
     sys.exit(0)

@@ -24,7 +24,7 @@ import jax
 import numpy as np
 import tyro
 
-from experiments.presets import PRESETS
+from experiments.running.presets import PRESETS
 from foresit_jax.config import Config
 from foresit_jax.train import Trainer
 

@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 import tyro
 
-from experiments.presets import preset
+from experiments.running.presets import preset
 
 
 @dataclasses.dataclass(frozen=True)

@@ -9,9 +9,9 @@ finished methods (`methods/<method>/results.json`) this prints, as Markdown:
   the training success rate over the last `--last` updates, the last chunk's training
   diagnostics (`report.DIAGNOSTICS`, those recorded), and the experience each seed had
   where the sweep counted it;
-* per `--pairs A:B`: B - A seed by seed (`experiments.stats.paired`: mean difference, 95%
+* per `--pairs A:B`: B - A seed by seed (`experiments.reporting.stats.paired`: mean difference, 95%
   t interval, p, verdict) on each of those columns;
-* per pair, on SR and SPL, what five seeds can tell (`experiments.stats`): each arm's
+* per pair, on SR and SPL, what five seeds can tell (`experiments.reporting.stats`): each arm's
   interquartile mean with a 95% stratified-bootstrap interval, the probability that a seed
   of B beats a seed of A (with its interval), the paired p-value Holm-corrected over the
   pairs of this call (the declared family), and the minimum difference the paired t-test
@@ -28,11 +28,12 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from experiments import runs, stats
-from experiments.report import (
+from experiments.reporting import stats
+from experiments.reporting.report import (
     TEST, diagnostic_label, format_mean_std, format_pair, load, paired_report, shown_columns, values,
 )  # fmt: skip
-from experiments.tables import markdown_table
+from experiments.reporting.tables import markdown_table
+from experiments.running import errors
 
 
 @dataclasses.dataclass(frozen=True)
@@ -52,14 +53,14 @@ class Args:
 def _split(spec: str, parts: int, flag: str, results: dict) -> list[str]:
     names = spec.split(":")
     if len(names) != parts:
-        raise runs.UserError(f"{flag} {spec!r}: give {parts} method names joined by ':'")
+        raise errors.UserError(f"{flag} {spec!r}: give {parts} method names joined by ':'")
     for name in names:
         if name not in results:
-            raise runs.UserError(f"{flag}: {name!r} is not a finished method of this sweep; it has "
-                                 + ", ".join(results))  # fmt: skip
+            raise errors.UserError(f"{flag}: {name!r} is not a finished method of this sweep; it has "
+                                   + ", ".join(results))  # fmt: skip
     seeds = [[r["seed"] for r in results[n]] for n in names]
     if any(s != seeds[0] for s in seeds):
-        raise runs.UserError(f"{flag} {spec!r}: the methods have different seeds ({seeds}); pairs need the same")
+        raise errors.UserError(f"{flag} {spec!r}: the methods have different seeds ({seeds}); pairs need the same")
     return names
 
 
@@ -67,7 +68,7 @@ def main(args: Args) -> dict:
     """Print the comparison; returns {"pairs": {"B - A": {column: stats.paired}},
     "did": {"(D - C) - (B - A)": {column: stats.paired}}}."""
     if args.last < 1:
-        raise runs.UserError(f"--last {args.last}: give a positive number of updates")
+        raise errors.UserError(f"--last {args.last}: give a positive number of updates")
     results = load(args.run)
     pairs = [_split(s, 2, "--pairs", results) for s in args.pairs]
     dids = [_split(s, 4, "--did", results) for s in args.did]
@@ -105,7 +106,7 @@ def main(args: Args) -> dict:
 
 
 def cli(argv=None) -> None:
-    runs.run_cli(Args, main, argv)
+    errors.run_cli(Args, main, argv)
 
 
 if __name__ == "__main__":

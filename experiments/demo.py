@@ -41,7 +41,7 @@ import envs
 from envs import catalog as C
 from envs import render
 from envs.metrics import LONG_PATH_MIN
-from experiments.tables import markdown_table
+from experiments.reporting.tables import markdown_table
 from foresit_jax.agent import EpisodeStats
 from foresit_jax.evaluate import outcome_metrics, random_policy_rollout
 

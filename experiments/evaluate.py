@@ -14,7 +14,8 @@ from typing import Literal, Optional
 
 import jax
 
-from experiments import runs, selection
+from experiments.reporting import tables
+from experiments.running import checkpoint, errors, rundir, selection
 
 
 @dataclasses.dataclass(frozen=True)
@@ -47,33 +48,33 @@ def main(args: Args) -> dict:
     from foresit_jax.train import make_trainer
 
     if args.split not in ("val", "test"):
-        raise runs.UserError(f"--split must be val or test, got {args.split!r}")
-    info = runs.read_run_info(args.run)
+        raise errors.UserError(f"--split must be val or test, got {args.split!r}")
+    info = rundir.read_run_info(args.run)
     config = Config(**info["config"])
     episodes = info["schedule"][f"{args.split}_episodes_per_room"] if args.episodes_per_room is None else args.episodes_per_room
     if episodes < 1:
-        raise runs.UserError(f"--episodes-per-room must be >= 1, got {episodes}")
+        raise errors.UserError(f"--episodes-per-room must be >= 1, got {episodes}")
     # The method's own protocol (sampled; greedy for ORG) writes the plain file names.
     greedy = {"method": None, "greedy": True, "sampled": False}[args.actions]
     mode = "" if args.actions == "method" else f"_{args.actions}"
     suffix = "" if (args.which, args.actions) == ("best", "method") else f"_{args.which}" + mode
     out_json = args.run / f"results_{args.split}{suffix}.json"
     if out_json.exists() and not args.overwrite:
-        raise runs.UserError(f"{out_json} exists; pass --overwrite to replace it")
-    runs.claim(args.run)  # the one writer of the run folder, and writable, before any work
+        raise errors.UserError(f"{out_json} exists; pass --overwrite to replace it")
+    rundir.claim(args.run)  # the one writer of the run folder, and writable, before any work
 
     trainer = make_trainer(config)
     like_state = trainer.init(jax.random.PRNGKey(0))
     like = agent_params(like_state, config.sigma2_max, config.evaluation_noise)
     folder = args.run / ("best" if args.which == "best" else "checkpoints")
-    manager = runs.checkpoint_manager(folder, 100)
+    manager = checkpoint.checkpoint_manager(folder, 100)
     step = manager.latest_step()
     if step is None:
-        raise runs.UserError(f"{folder} holds no checkpoint; was the run interrupted before its first chunk?")
+        raise errors.UserError(f"{folder} holds no checkpoint; was the run interrupted before its first chunk?")
     if args.which == "best":
-        chosen = runs.restore(manager, step, like)
+        chosen = checkpoint.restore(manager, step, like)
     else:
-        chosen = agent_params(runs.restore(manager, step, like_state), config.sigma2_max, config.evaluation_noise)
+        chosen = agent_params(checkpoint.restore(manager, step, like_state), config.sigma2_max, config.evaluation_noise)
     if args.seed is not None:
         key = jax.random.PRNGKey(args.seed)
     elif args.split == "test":
@@ -81,10 +82,10 @@ def main(args: Args) -> dict:
     else:
         key = selection.validation_key(info["seed"])
     results = evaluate(chosen, config, args.split, key, episodes, greedy=greedy)
-    runs.write_json(out_json, {"selected_update": step, "which": args.which, "results": results})
-    results = runs.jsonable(results)  # as written: an empty L>=5 bucket is None (JSON null)
+    rundir.write_json(out_json, {"selected_update": step, "which": args.which, "results": results})
+    results = rundir.jsonable(results)  # as written: an empty L>=5 bucket is None (JSON null)
     title = f"{config.method}, seed {info['seed']}: {args.split} split ({args.which} model, update {step})"
-    md = runs.results_markdown(results, title)
+    md = tables.results_markdown(results, title)
     out_json.with_suffix(".md").write_text(md)
     print(md)
     print(f"wrote {out_json} and {out_json.with_suffix('.md')}")
@@ -92,7 +93,7 @@ def main(args: Args) -> dict:
 
 
 def cli(argv=None) -> None:
-    runs.run_cli(Args, main, argv)
+    errors.run_cli(Args, main, argv)
 
 
 if __name__ == "__main__":

@@ -31,8 +31,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from envs.catalog import ROOM_TYPES
-from experiments import runs, selection
-from experiments.tables import markdown_table
+from experiments.reporting.tables import markdown_table
+from experiments.running import errors, rundir, selection, sweeps
+from experiments.running.models import models_of_run, models_of_sweep
 
 
 @dataclasses.dataclass(frozen=True)
@@ -130,22 +131,20 @@ def markdown(report: dict[str, list[dict]], split: str, episodes: int) -> str:
 
 
 def models_of(args: Args) -> tuple[dict, int]:
-    """({method: [probe.Model per seed]}, episodes per room type) of a run or sweep folder."""
-    from experiments import probe, sweep
-
+    """({method: [Model per seed]}, episodes per room type) of a run or sweep folder."""
     key = f"{args.split}_episodes_per_room"
     if (args.run / "sweep.json").is_file():
-        saved = runs.args_from_saved(sweep.Args, runs.read_json(args.run / "sweep.json"), out=args.run)
-        finished = tuple(m for m in saved.methods if sweep.finished_seeds(args.run / "methods" / m))
+        saved = sweeps.saved(args.run)
+        finished = tuple(m for m in saved.methods if sweeps.finished_seeds(args.run / "methods" / m))
         if not finished:
-            raise runs.UserError(f"{args.run}: no finished method yet")
-        models = probe.models_of_sweep(args.run, args.methods or finished)
-        episodes = getattr(sweep.method_schedule(next(iter(models)), saved)[1], key)
+            raise errors.UserError(f"{args.run}: no finished method yet")
+        models = models_of_sweep(args.run, args.methods or finished)
+        episodes = getattr(sweeps.method_schedule(next(iter(models)), saved)[1], key)
     else:
         if args.methods:
-            raise runs.UserError("--methods is for a sweep folder; a run folder holds one method")
-        models = probe.models_of_run(args.run)
-        episodes = runs.read_run_info(args.run)["schedule"][key]
+            raise errors.UserError("--methods is for a sweep folder; a run folder holds one method")
+        models = models_of_run(args.run)
+        episodes = rundir.read_run_info(args.run)["schedule"][key]
     return models, episodes if args.episodes_per_room is None else args.episodes_per_room
 
 
@@ -153,21 +152,21 @@ def main(args: Args) -> dict:
     from foresit_jax.probes import episode_endings
 
     if args.split not in ("val", "test"):
-        raise runs.UserError(f"--split must be val or test, got {args.split!r}")
+        raise errors.UserError(f"--split must be val or test, got {args.split!r}")
     folder = args.run if args.out is None else args.out
     out_md, out_json = folder / "failures.md", folder / "failures.json"
     if out_json.exists() and not args.overwrite:
-        raise runs.UserError(f"{out_json} exists; pass --overwrite to replace it")
+        raise errors.UserError(f"{out_json} exists; pass --overwrite to replace it")
     models, episodes = models_of(args)
     if episodes < 1:
-        raise runs.UserError(f"--episodes-per-room must be >= 1, got {episodes}")
-    runs.claim(folder)  # the one writer of the folder, and writable, before the work
+        raise errors.UserError(f"--episodes-per-room must be >= 1, got {episodes}")
+    rundir.claim(folder)  # the one writer of the folder, and writable, before the work
     compiled = {}
     report = {method: [{"seed": m.seed, **episode_endings(**play(m, args.split, episodes, compiled))} for m in seeds]
               for method, seeds in models.items()}  # fmt: skip
     md = markdown(report, args.split, episodes)
     folder.mkdir(parents=True, exist_ok=True)
-    runs.write_json(out_json, {"split": args.split, "episodes_per_room": episodes, "methods": report})
+    rundir.write_json(out_json, {"split": args.split, "episodes_per_room": episodes, "methods": report})
     out_md.write_text(md)
     print(md)
     print(f"wrote {out_md} and {out_json}")
@@ -175,7 +174,7 @@ def main(args: Args) -> dict:
 
 
 def cli(argv=None) -> None:
-    runs.run_cli(Args, main, argv)
+    errors.run_cli(Args, main, argv)
 
 
 if __name__ == "__main__":

@@ -41,8 +41,8 @@ from typing import Optional
 
 import numpy as np
 
-from experiments import runs
-from experiments.tables import markdown_table
+from experiments.reporting.tables import markdown_table
+from experiments.running import errors, rundir
 
 FEATURE_SETS = ("geometry", "view", "view + target")
 TURNS = ("left", "right")
@@ -258,9 +258,9 @@ def main(args: Args) -> dict:
     import envs
 
     if importlib.util.find_spec("sklearn") is None:
-        raise runs.UserError("experiments.foresight needs scikit-learn: pip install -e '.[paper]'")
+        raise errors.UserError("experiments.foresight needs scikit-learn: pip install -e '.[paper]'")
     if args.resets < 100:
-        raise runs.UserError(f"--resets {args.resets}: give at least 100 starts per split")
+        raise errors.UserError(f"--resets {args.resets}: give at least 100 starts per split")
     t0 = time.time()
     data = {}
     for i, split in enumerate(("train", "test")):
@@ -274,12 +274,12 @@ def main(args: Args) -> dict:
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
         (args.out / "foresight.md").write_text(md)
-        runs.write_json(args.out / "foresight.json", {"args": runs.jsonable(dataclasses.asdict(args)), "results": results})
+        rundir.write_json(args.out / "foresight.json", {"args": rundir.jsonable(dataclasses.asdict(args)), "results": results})
     return results
 
 
 def cli(argv=None) -> dict:
-    return runs.run_cli(Args, main, argv)
+    return errors.run_cli(Args, main, argv)
 
 
 if __name__ == "__main__":

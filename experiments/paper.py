@@ -15,7 +15,7 @@ seed's model selected on validation) over the methods of the paper's tables, the
 - SR and SPL by optimal path length (buckets of L^g) with 95% bands over seeds, and the
   paired difference per bucket, for each +ForeSIT pair;
 - the paper's claims, each with a verdict ("holds", "does not hold", "cannot tell at this
-  budget": a paired t interval over seeds, `experiments.stats`) and its numbers;
+  budget": a paired t interval over seeds, `experiments.reporting.stats`) and its numbers;
 - ORG's rows (greedy at evaluation, as ORG's code) with sampled actions too, on the same test
   episodes, paired: greedy play can loop where sampling escapes;
 - the imagination probes (`experiments.probe`) of A3C+ForeSIT and A3C+ORG+ForeSIT, every seed:
@@ -34,7 +34,7 @@ checkpoint (`experiments.sweep`), and the report is written again from the resul
 preset and overrides, e.g. the MAML rows run on another machine with `--exclude`, or a
 sweep folder of `experiments.sweep`, which lends its setup's rows) are copied into --out
 instead of trained, and the report covers them all. They combine seed by
-seed (`experiments.sweep.copy_finished`): `--seeds 5 --reuse A B` with seeds 0-1 in A and
+seed (`experiments.running.sweeps.copy_finished`): `--seeds 5 --reuse A B` with seeds 0-1 in A and
 2-4 (`--seed 2 --seeds 3`) in B trains nothing, so a 5-seed report can be made in blocks of
 seeds, on several machines or one after another.
 """
@@ -54,9 +54,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from envs.catalog import ROOM_TYPES
-from experiments import cvae_compare, devices, numerics, report, runs, selection, stats, sweep
-from experiments.presets import split_arm
-from experiments.tables import markdown_table, write_csv
+from experiments.reporting import cvae_comparison, probing, report, stats
+from experiments.reporting.tables import markdown_table, write_csv
+from experiments.running import devices, errors, numerics, rundir, selection, sweeps
+from experiments.running.models import models_of_sweep
+from experiments.running.presets import split_arm
 
 # The methods of each setup's sweep: Table 1's rows, then Table 3's ablations.
 GROUPS = {
@@ -146,15 +148,13 @@ def by_method(args: Args, by_arm: dict) -> dict:
     return {names.get(name, name): value for name, value in by_arm.items()}
 
 
-def sweep_args(args: Args, setup: str, methods: tuple[str, ...]) -> sweep.Args:
+def sweep_args(args: Args, setup: str, methods: tuple[str, ...]) -> sweeps.Sweep:
     """The sweep of `setup` over `methods` (each run as its arm, `arm_of`)."""
-    fields = ("seeds", "preset", "seed", "num_updates", "test_episodes_per_room", "val_episodes_per_room",
-              "stop_after_chunks", "progress")  # fmt: skip
-    folder = args.out / setup
+    fields = ("seeds", "preset", "seed", "num_updates", "test_episodes_per_room", "val_episodes_per_room")
     reuse = reuse_sweeps(args, setup)
     methods = tuple(arm_of(args, m) for m in methods)
-    return sweep.Args(methods=methods, setup=setup, out=folder, resume=(folder / "sweep.json").exists(),
-                      reuse=reuse, **{k: getattr(args, k) for k in fields})  # fmt: skip
+    return sweeps.Sweep(methods=methods, setup=setup, out=args.out / setup, reuse=reuse,
+                        **{k: getattr(args, k) for k in fields})  # fmt: skip
 
 
 def reuse_sweeps(args: Args, setup: str) -> tuple[Path, ...]:
@@ -164,7 +164,7 @@ def reuse_sweeps(args: Args, setup: str) -> tuple[Path, ...]:
     for run in map(Path, args.reuse):
         if (run / setup / "sweep.json").is_file():
             folders.append(run / setup)
-        elif not (run / "paper.json").is_file() and runs.read_json(run / "sweep.json").get("setup") == setup:
+        elif not (run / "paper.json").is_file() and rundir.read_json(run / "sweep.json").get("setup") == setup:
             folders.append(run)
     return tuple(folders)
 
@@ -172,32 +172,32 @@ def reuse_sweeps(args: Args, setup: str) -> tuple[Path, ...]:
 def check(args: Args) -> None:
     unknown = [m for m in args.exclude if m not in SETUP_OF]
     if unknown:
-        raise runs.UserError(f"--exclude {' '.join(unknown)}: not a method of the paper's tables; "
-                             f"they are {', '.join(SETUP_OF)}")  # fmt: skip
+        raise errors.UserError(f"--exclude {' '.join(unknown)}: not a method of the paper's tables; "
+                               f"they are {', '.join(SETUP_OF)}")  # fmt: skip
     if not any(m not in args.exclude for m in SETUP_OF):
-        raise runs.UserError("--exclude leaves no method to run")
+        raise errors.UserError("--exclude leaves no method to run")
     armed = [split_arm(a)[0] for a in args.arms]  # split_arm's ValueError names a malformed arm
     wrong = [a for a, m in zip(args.arms, armed) if m not in SETUP_OF or m in args.exclude]
     if wrong:
-        raise runs.UserError(f"--arms {' '.join(wrong)}: each arm's method must be a method of the paper's tables "
-                             "that runs (not excluded)")  # fmt: skip
+        raise errors.UserError(f"--arms {' '.join(wrong)}: each arm's method must be a method of the paper's tables "
+                               "that runs (not excluded)")  # fmt: skip
     if len(set(armed)) != len(armed):
-        raise runs.UserError("--arms: give each method at most one arm")
+        raise errors.UserError("--arms: give each method at most one arm")
     if args.seeds < 1:
-        raise runs.UserError(f"--seeds must be >= 1, got {args.seeds}")
+        raise errors.UserError(f"--seeds must be >= 1, got {args.seeds}")
     for run in map(Path, args.reuse):
         if not (run / "paper.json").is_file() and not (run / "sweep.json").is_file():
-            raise runs.UserError(f"--reuse {run}: neither a paper run (no paper.json) nor a sweep folder (no sweep.json)")
+            raise errors.UserError(f"--reuse {run}: neither a paper run (no paper.json) nor a sweep folder (no sweep.json)")
         if run.resolve() == Path(args.out).resolve():
-            raise runs.UserError(f"--reuse {run}: the run being written (--out); to continue it use --resume")
+            raise errors.UserError(f"--reuse {run}: the run being written (--out); to continue it use --resume")
     for setup, group in GROUPS.items():  # each setup's sweep checks its sources' protocol (and its own)
         setup_args = sweep_args(args, setup, tuple(m for m in group if m not in args.exclude))
-        sweep.reuse_sources(setup_args)
-        if args.resume and setup_args.resume:
-            sweep.check_started(setup_args)
+        sweeps.reuse_sources(setup_args)
+        if args.resume and (setup_args.out / "sweep.json").exists():
+            sweeps.check_started(setup_args)
     for name in ("cvae_windows", "cvae_epochs", "trajectory_candidates", "tsne_points", "probe_episodes_per_room"):
         if getattr(args, name) < 1:
-            raise runs.UserError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
+            raise errors.UserError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
 
 
 def main(args: Args) -> dict | None:
@@ -205,16 +205,15 @@ def main(args: Args) -> dict | None:
     ({claim: verdict line}), or None when stopped by --stop-after-chunks."""
     keep = ("stop_after_chunks", "progress")
     if args.resume:
-        args = runs.resumed_args(args, "paper.json", "paper run", keep=keep)
+        args = rundir.resumed_args(args, "paper.json", "paper run", keep=keep)
     check(args)
     if importlib.util.find_spec("sklearn") is None:  # Figure 4's t-SNE, drawn after the training
-        raise runs.UserError("the paper report needs scikit-learn (Figure 4's t-SNE): pip install 'foresit_jax[paper]'")
+        raise errors.UserError("the paper report needs scikit-learn (Figure 4's t-SNE): pip install 'foresit_jax[paper]'")
     for method in SETUP_OF:  # fail before any training
-        sweep.method_schedule(arm_of(args, method), dataclasses.replace(sweep.Args(), preset=args.preset,
-                                                                        setup=SETUP_OF[method]))  # fmt: skip
+        sweeps.method_schedule(arm_of(args, method), sweeps.Sweep(preset=args.preset, setup=SETUP_OF[method]))
     if not args.resume:
-        runs.prepare_run_dir(args.out, resume=False, overwrite=args.overwrite, marker="paper.json", kind="paper run")
-        runs.write_started_args(args.out / "paper.json", args, keep)
+        rundir.prepare_run_dir(args.out, resume=False, overwrite=args.overwrite, marker="paper.json", kind="paper run")
+        rundir.write_started_args(args.out / "paper.json", args, keep)
     t0 = time.time()
     results = {}
     for setup, group in GROUPS.items():
@@ -222,10 +221,13 @@ def main(args: Args) -> dict | None:
         if not methods:
             continue
         print(f"== {setup} setup: {', '.join(methods)}", flush=True)
-        if sweep.main(sweep_args(args, setup, methods)) is None:
+        spec = sweep_args(args, setup, methods)
+        ran = sweeps.run(spec, resume=(spec.out / "sweep.json").exists(), stop_after_chunks=args.stop_after_chunks,
+                         progress=args.progress)  # fmt: skip
+        if ran is None:
             print("stopped (continue with --resume)")
             return None
-        per_seed = runs.read_json(args.out / setup / "results_per_seed.json")
+        per_seed = rundir.read_json(args.out / setup / "results_per_seed.json")
         results.update(by_method(args, per_seed))
     print(f"sweeps done ({time.time() - t0:.0f} s); writing the report", flush=True)
     return write_report(args, results)
@@ -345,7 +347,7 @@ def by_length_section(args: Args, results: dict) -> str:
         md += (f"### {other} against {base}\n\n![SR and SPL by L^g]({name})\n\n"
                + markdown_table(cells, ["L^g", "episodes (all seeds)", "SR difference [95% CI], p", "SPL difference"])
                + "\n\n")  # fmt: skip
-    return md or f"(no +ForeSIT pair was run)\n"
+    return md or "(no +ForeSIT pair was run)\n"
 
 
 def _by_length_png(path: Path, rows: list[dict]) -> None:
@@ -420,11 +422,11 @@ def claims_markdown(lines) -> str:
 def _first_seed(args: Args, method: str):
     """(config, trainer, last training state, selected AgentParams) of the first seed."""
     arm = arm_of(args, method)
-    config, trainer, states, best = sweep.load_method(arm, _method_args(args, method), args.out / SETUP_OF[method] / "methods" / arm)
+    config, trainer, states, best = sweeps.load_method(arm, _method_args(args, method), args.out / SETUP_OF[method] / "methods" / arm)
     return config, trainer, devices.seed_slice(states, 0), devices.seed_slice(best, 0)
 
 
-def _method_args(args: Args, method: str) -> sweep.Args:
+def _method_args(args: Args, method: str) -> sweeps.Sweep:
     setup = SETUP_OF[method]
     return sweep_args(args, setup, tuple(m for m in GROUPS[setup] if m not in args.exclude))
 
@@ -498,7 +500,7 @@ def _replay_positions(env, env_params, reset_key, actions):
 
 def tsne_figure(args: Args, config, trainer, state, items, path: Path) -> int:
     """Figure 4: t-SNE of f_w([s_0 : g_tau]) and of the critic-selected sub-goals ŝ_tau of
-    `items` (`cvae_compare.collect_items`: successful training episodes of the first
+    `items` (`cvae_comparison.collect_items`: successful training episodes of the first
     seed's last agent, what f_w learns from), coloured by target category; returns the
     number of items drawn."""
     from envs.catalog import categories
@@ -540,20 +542,19 @@ def sampled_results(folder: Path, methods) -> dict[str, list[dict]]:
     episodes per room type) with actions sampled from the policy. For a method evaluated
     greedily (ORG's protocol) these are the episodes its report row played, with the other
     action rule; for one evaluated sampled, its row's own numbers again."""
-    from experiments import probe
     from foresit_jax.evaluate import Evaluator
 
-    args = runs.args_from_saved(sweep.Args, runs.read_json(folder / "sweep.json"), out=folder)
+    args = sweeps.saved(folder)
     out, evaluators = {}, {}
-    for method, models in probe.models_of_sweep(folder, tuple(methods)).items():
-        episodes = sweep.method_schedule(method, args)[1].test_episodes_per_room
+    for method, models in models_of_sweep(folder, tuple(methods)).items():
+        episodes = sweeps.method_schedule(method, args)[1].test_episodes_per_room
         out[method] = []
         for model in models:
             where = Evaluator.scenes_of(model.config)
             evaluator = evaluators.setdefault(where, Evaluator(*where))
             result = evaluator.evaluate(model.selected, model.config, "test", selection.test_key(model.seed), episodes,
                                         greedy=False)  # fmt: skip
-            out[method].append({"seed": model.seed, "overall": runs.jsonable(result["overall"])})
+            out[method].append({"seed": model.seed, "overall": rundir.jsonable(result["overall"])})
     return out
 
 
@@ -587,7 +588,7 @@ def sampled_markdown(results: dict, sampled: dict[str, list[dict]], base: str = 
 def sampled_section(args: Args, results: dict) -> str:
     """ORG's rows (evaluated greedily, as ORG's code does) evaluated with sampled actions
     too, on the same test episodes (also written to sampled.csv)."""
-    greedy = [m for m in results if sweep.method_schedule(m, sweep_args(args, SETUP_OF[m], (m,)))[0].pieces.greedy_evaluation]
+    greedy = [m for m in results if sweeps.method_schedule(m, sweep_args(args, SETUP_OF[m], (m,)))[0].pieces.greedy_evaluation]
     title = "## ORG's rows with sampled actions\n\n"
     if not greedy:
         return title + "Not run: no method evaluated greedily (ORG's rows) was trained.\n"
@@ -607,17 +608,15 @@ def sampled_section(args: Args, results: dict) -> str:
 def probe_section(args: Args, results: dict) -> str:
     """The imagination probes (`experiments.probe`) of the +ForeSIT methods of `PROBED`
     that ran, every seed, as a report section (also written to probe.json)."""
-    from experiments import probe
-
     methods = [m for m in PROBED if m in results]
     if not methods:
         return "## Imagination probes\n\nNot run: no probed ForeSIT method was trained.\n"
     models = {}
     for m in methods:
-        models.update(by_method(args, probe.models_of_sweep(args.out / SETUP_OF[m], (arm_of(args, m),))))
-    report = probe.probe(models, args.probe_episodes_per_room, args.cvae_windows)
-    runs.write_json(args.out / "probe.json", report)
-    return probe.markdown(report, args.probe_episodes_per_room, args.cvae_windows, level=2)
+        models.update(by_method(args, models_of_sweep(args.out / SETUP_OF[m], (arm_of(args, m),))))
+    report = probing.probe(models, args.probe_episodes_per_room, args.cvae_windows)
+    rundir.write_json(args.out / "probe.json", report)
+    return probing.markdown(report, args.probe_episodes_per_room, args.cvae_windows, level=2)
 
 
 def write_report(args: Args, results: dict) -> dict:
@@ -625,7 +624,7 @@ def write_report(args: Args, results: dict) -> dict:
     seeds = f"{args.seed}-{args.seed + args.seeds - 1}" if args.seeds > 1 else str(args.seed)
     excluded = [m for m in SETUP_OF if m not in results]
     md = [f"# ForeSIT on GridNav: the paper's evaluation (preset {args.preset}, seeds {seeds})\n",
-          f"Test split, each seed's model selected on validation (`experiments.selection`); mean ± sample std "
+          f"Test split, each seed's model selected on validation (`experiments.running.selection`); mean ± sample std "
           f"[95% Student-t interval] over {args.seeds} seed(s). Not run: {', '.join(excluded) or 'none'}.\n"]  # fmt: skip
     if args.arms:
         md.append("Methods run with fields of their own (`--arms`; the rows keep the method's name): "
@@ -633,7 +632,7 @@ def write_report(args: Args, results: dict) -> dict:
 
     compared = [*PAIRS, *(("a3c+org+foresit", m) for m in TABLE3[1:-1])]  # the claims' pairs
     md.append(numerics.markdown(results, compared)
-              + sweep.assembled_markdown({m: out / SETUP_OF[m] / "methods" / arm_of(args, m) for m in results}))  # fmt: skip
+              + sweeps.assembled_markdown({m: out / SETUP_OF[m] / "methods" / arm_of(args, m) for m in results}))  # fmt: skip
     t1, rows1 = table1(results)
     write_csv(out / "table1.csv", rows1)
     md.append("## Table 1\n\n" + t1)
@@ -657,11 +656,11 @@ def write_report(args: Args, results: dict) -> dict:
     else:
         print(f"the C-VAE comparison on {foresit}", flush=True)
         config, trainer, state, _ = _first_seed(args, foresit)
-        items = cvae_compare.collect_items(trainer, state, args.cvae_windows, args.seed)
-        result = cvae_compare.compare(config, items, args.cvae_epochs, args.seed)
-        runs.write_json(out / "cvae_comparison.json", result)
+        items = cvae_comparison.collect_items(trainer, state, args.cvae_windows, args.seed)
+        result = cvae_comparison.compare(config, items, args.cvae_epochs, args.seed)
+        rundir.write_json(out / "cvae_comparison.json", result)
         md.append(f"## The C-VAE comparison ({foresit}, seed {args.seed})\n\n"
-                  + (cvae_compare.markdown(result, config, args.cvae_windows, level=3) if "direct" in result
+                  + (cvae_comparison.markdown(result, config, args.cvae_windows, level=3) if "direct" in result
                      else f"Not run: {result['items']} successful episodes in {args.cvae_windows} windows.\n"))  # fmt: skip
         print("Figure 4: t-SNE", flush=True)
         n = tsne_figure(args, config, trainer, state, items, out / "fig4_tsne.png")
@@ -685,12 +684,12 @@ def write_report(args: Args, results: dict) -> dict:
 
 
 def cli(argv=None) -> dict | None:
-    return runs.run_cli(Args, main, argv)
+    return errors.run_cli(Args, main, argv)
 
 
 def console() -> None:
     """The `foresit-paper` console script: as `python -m experiments.paper`."""
-    devices.split_host_into_devices()  # before jax starts: faster on a CPU (see experiments.devices)
+    devices.split_host_into_devices()  # before jax starts: faster on a CPU (see experiments.running.devices)
     cli(sys.argv[1:])
 
 

@@ -1,8 +1,8 @@
 """Seed sweep: `python -m experiments.sweep --methods a3c a3c+foresit --seeds 5 --preset quick`.
 
 Each method's seeds run vmapped inside one jitted program (in chunks, for progress),
-spread over the local devices along the seed axis (experiments.devices).  The protocol is
-`train`'s (experiments.selection): seed i of the sweep is seed `--seed + i`, initialised
+spread over the local devices along the seed axis (experiments.running.devices).  The protocol is
+`train`'s (experiments.running.selection): seed i of the sweep is seed `--seed + i`, initialised
 from the key `train --seed <seed + i>` uses; after each chunk each seed is validated on
 the episodes that run would validate on, and the model with the best validation SR is the
 one tested, on that run's test episodes.  So a seed's numbers are those of its `train` run
@@ -17,52 +17,25 @@ confidence interval over seeds) of the selected models as Markdown and CSV; ever
 against the first one, paired seed by seed (difference, interval, p, verdict); the
 selected and last models' SR per seed; every seed's results, validation history and
 training curve (JSON); one learning-curve PNG of every method (mean and band over seeds).
-`--resume` continues a killed sweep (see `run_method`); `--reuse` takes the methods other
+`--resume` continues a killed sweep; `--reuse` takes the methods other
 sweeps of the same protocol have finished instead of training them, seed by seed: a method
 whose every seed they finished between them (e.g. seeds 0-1 in one sweep and 2-4, `--seed 2
---seeds 3`, in another) is assembled from them (`copy_finished`).
+--seeds 3`, in another) is assembled from them. The machinery is experiments.running.sweeps.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import shutil
 import sys
-import time
-from pathlib import Path
 from typing import Optional
 
-import jax
-import jax.numpy as jnp
-import numpy as np
-
-from experiments import devices, loop, numerics, runs, selection
-from experiments.presets import SweepConfigFields, config_flag, given, preset
-from experiments.progress import progress_bar
-from experiments.report import (
-    DIAGNOSTICS, by_length_markdown, diagnostics_markdown, paired_markdown, selection_markdown, table, table_markdown,
-)  # fmt: skip
-from experiments.tables import write_csv
+from experiments.running import devices, errors, rundir, sweeps
 
 
 @dataclasses.dataclass(frozen=True)
-class Args:
+class Args(sweeps.Sweep):
     """Train several methods over several seeds and tabulate them as in Table 1."""
 
-    methods: tuple[str, ...] = ("a3c", "a3c+foresit")
-    """Methods to compare ('+'-joined pieces, see foresit_jax.methods), or arms: a method
-    with Config fields of its own, METHOD@field=value,... (e.g.
-    a3c+foresit@imagination_input=encoder; experiments.presets.split_arm)."""
-    setup: str = "savn"
-    """Environment setup: savn or org (the object-graph methods need org)."""
-    seeds: int = 5
-    """Seeds per method (vmapped in one program)."""
-    preset: str = "quick"
-    """Preset: tiny, quick, house or paper."""
-    seed: int = 0
-    """Base seed: seed i of a method is the run `train --seed <seed + i>` would make."""
-    out: Path = Path("runs/sweep")
-    """Output folder."""
     resume: bool = False
     """Continue the sweep in --out where it stopped, with the arguments it was started
     with (finished methods are kept, a started one continues from its last checkpoint;
@@ -70,451 +43,32 @@ class Args:
     from one not given and is ignored)."""
     overwrite: bool = False
     """Replace an existing sweep in --out."""
-    reuse: tuple[Path, ...] = ()
-    """Sweep folders whose finished methods are taken into --out instead of trained (same
-    setup, preset and overrides), seed by seed: a method whose every seed of this sweep
-    they finished between them is copied or assembled (each seed from the first folder that
-    has it), e.g. rows run on another machine, or seeds 2-4 (--seed 2 --seeds 3) added to
-    a sweep of seeds 0-1; a method they finish only some seeds of is trained here."""
-    num_updates: Optional[int] = None
-    """Override the preset's number of updates."""
-    test_episodes_per_room: Optional[int] = None
-    """Override the preset's test episodes per room type."""
-    val_episodes_per_room: Optional[int] = None
-    """Override the preset's validation episodes per room type."""
     stop_after_chunks: Optional[int] = None
     """Stop (as if killed) after this many chunks of this invocation; for testing --resume."""
     progress: bool = True
     """Show the progress bar."""
-    config: config_flag(SweepConfigFields) = dataclasses.field(default_factory=SweepConfigFields)
-    """Every other Config field for every method, e.g. --learning-rate 3e-4: the preset's (or the arm's) unless given."""
 
 
-# What each seed trained on, summed over its updates (results.json, `counts`): the frames
-# that entered the loss and the episodes that ended, so that arms of different rollout
-# layouts or budgets can be compared at equal experience (docs/mechanism.md, Study 8).
-COUNTS = ("frames/useful", "charts/episodes")
-
-
-def counts_of(progress: dict, i: int) -> dict:
-    """Seed i's `COUNTS` summed over its training; empty where some chunk went unrecorded
-    (a sweep begun before they were kept and resumed since), rather than an undercount."""
-    counts = progress.get("counts", {})
-    chunks = len(progress["curves"])
-    return {name: float(np.sum([chunk[i] for chunk in counts[name]]))
-            for name in COUNTS if len(counts.get(name, ())) == chunks}  # fmt: skip
-
-
-def seeds_of(args: Args) -> list[int]:
-    """The seeds of the sweep: those of `train --seed` for each of its runs."""
-    return [args.seed + i for i in range(args.seeds)]
-
-
-def method_schedule(method: str, args: Args):
-    """The preset's Config and Schedule of `method`, with the sweep's overrides."""
-    config, schedule = preset(args.preset, method, num_updates=args.num_updates, setup=args.setup, **given(args.config))
-    sched = {k: getattr(args, k) for k in ("test_episodes_per_room", "val_episodes_per_room")}
-    return config, dataclasses.replace(schedule, **{k: v for k, v in sched.items() if v is not None})
-
-
-# A sweep's arguments that fix what a finished method's results are: a method is reused
-# from another sweep only when they agree.  The seeds are not among them: seed s of any
-# sweep is the run `train --seed s` makes (the same key, validation and test episodes),
-# whichever seeds were vmapped beside it (up to the float rounding of the vmapped program,
-# see the module docstring), so seeds of several sweeps combine into one.
-PROTOCOL = ("setup", "preset", "num_updates", "test_episodes_per_room", "val_episodes_per_room", "config")
-
-
-def _protocol_value(args: Args, name: str):
-    """What a sweep's `name` of PROTOCOL is, as JSON: the Config fields it set (none for
-    a sweep saved before it could set them)."""
-    value = runs.jsonable(getattr(args, name))
-    return {k: v for k, v in value.items() if v is not None} if name == "config" else value
-
-
-def reuse_sources(args: Args) -> list[Path]:
-    """The folders of --reuse, checked: a folder that is not a sweep, one run with another
-    protocol, or a finished method selected by another version of `experiments.selection`,
-    is refused in one line."""
-    sources = []
-    for folder in map(Path, args.reuse):  # str when read back from sweep.json by --resume
-        if not (folder / "sweep.json").is_file():
-            raise runs.UserError(f"--reuse {folder}: not a sweep folder (no sweep.json)")
-        if folder.resolve() == Path(args.out).resolve():
-            raise runs.UserError(f"--reuse {folder}: the sweep being written (--out); to continue it use --resume")
-        started = runs.args_from_saved(Args, runs.read_json(folder / "sweep.json"), out=folder)
-        clash = [f"--{k.replace('_', '-')} {_protocol_value(started, k)} there, {_protocol_value(args, k)} here"
-                 for k in PROTOCOL if _protocol_value(started, k) != _protocol_value(args, k)]  # fmt: skip
-        if clash:
-            raise runs.UserError(f"--reuse {folder}: run with another protocol ({'; '.join(clash)}); "
-                                 "only sweeps of the same protocol can be combined")  # fmt: skip
-        for method in args.methods:
-            found = method_folder(folder, method, args)
-            made = method_protocol(found)
-            if (found / "results.json").is_file() and made != selection.PROTOCOL_VERSION:
-                raise runs.UserError(f"--reuse {folder}: its {method} was selected by another protocol (version "
-                                     f"{made}; this code's is {selection.PROTOCOL_VERSION}, experiments/selection.py)")  # fmt: skip
-        sources.append(folder)
-    return sources
-
-
-def method_folder(sweep_folder: Path, method: str, args: Args) -> Path:
-    """The folder of `method` (an arm) in the sweep `sweep_folder`: the one of that name,
-    else the first (in name order) of an arm that trains the same Config under `args`'s
-    protocol, e.g. `a3c` for `a3c@learning_rate=1e-3` at quick, whose learning rate that is
-    (so that a tuning grid reuses a sweep of the preset's own values); the folder of that
-    name, absent, when none does."""
-    own = sweep_folder / "methods" / method
-    if own.is_dir() or not (sweep_folder / "methods").is_dir():
-        return own
-    config, _ = method_schedule(method, args)
-    for other in sorted(p for p in (sweep_folder / "methods").iterdir() if p.is_dir()):
-        try:
-            if method_schedule(other.name, args)[0] == config:
-                return other
-        except ValueError:  # a folder name that is no arm of this code
-            continue
-    return own
-
-
-def method_protocol(folder: Path) -> int | None:
-    """The version of `experiments.selection` a method folder of a sweep was validated
-    under: its results.json's (1 where it records none: finished before versions were
-    recorded), else its progress.json's (None where it records none: started before they
-    were recorded there, and so not known), else None (not started)."""
-    for name, unrecorded in (("results.json", 1), ("progress.json", None)):
-        if (folder / name).is_file():
-            return runs.read_json(folder / name).get("selection_protocol", unrecorded)
-    return None
-
-
-def check_started(args: Args) -> None:
-    """For --resume, before anything runs: refuse (one line) to continue a sweep whose
-    methods so far were validated under another selection protocol."""
-    for method in args.methods:
-        folder = args.out / "methods" / method
-        selection.check_resumable(method_protocol(folder), f"{method} in {folder}")
-
-
-def finished_seeds(folder: Path) -> list[int]:
-    """The seeds a sweep's method folder has finished (none when it has not finished)."""
-    if not (folder / "results.json").is_file():
-        return []
-    return [r["seed"] for r in runs.read_json(folder / "results.json")["results"]]
-
-
-def _seed_ranges(seeds) -> str:
-    """'0-1, 4' for [0, 1, 4]."""
-    seeds, out = sorted(seeds), []
-    for s in seeds:
-        if out and s == out[-1][1] + 1:
-            out[-1][1] = s
-        else:
-            out.append([s, s])
-    return ", ".join(str(a) if a == b else f"{a}-{b}" for a, b in out)
-
-
-def copy_finished(args: Args, sources: list[Path]) -> None:
-    """Give --out each method of `args.methods` that it lacks and whose every seed the
-    sweeps of `sources` have finished between them: its folder copied whole (checkpoints
-    included) from the first source that has exactly these seeds, else assembled seed by
-    seed, each from the first source that has it (`assemble`). A method some of whose
-    seeds no source has is left to train (all its seeds), and said so. The sources are
-    only read; a kill mid-copy leaves no half a method."""
-    wanted = seeds_of(args)
-    for method in args.methods:
-        target = args.out / "methods" / method
-        folders = [method_folder(f, method, args) for f in sources]
-        have = {folder: finished_seeds(folder) for folder in folders}
-        if target.exists() or not any(have.values()):
-            continue
-        partial = target.with_name(f".{method}.copying")
-        shutil.rmtree(partial, ignore_errors=True)
-        whole = [folder for folder in folders if have[folder] == wanted]
-        where = {}  # seed -> the first folder that finished it
-        for folder in folders:
-            for seed in have[folder]:
-                where.setdefault(seed, folder)
-        missing = [s for s in wanted if s not in where]
-        if whole:
-            shutil.copytree(whole[0], partial)
-            alias = f" (as {whole[0].name}: the same Config)" if whole[0].name != method else ""
-            print(f"{method}: finished in {whole[0].parent.parent}{alias}, copied", flush=True)
-        elif not missing:
-            parts = {s: where[s] for s in wanted}
-            assemble(method, args, parts, partial)
-            taken = "; ".join(f"seeds {_seed_ranges([s for s in wanted if parts[s] == f])} from {f.parent.parent}"
-                              for f in dict.fromkeys(parts.values()))  # fmt: skip
-            print(f"{method}: assembled ({taken})", flush=True)
-        else:
-            found = [s for s in wanted if s in where]
-            if found:
-                print(f"{method}: seeds {_seed_ranges(found)} are finished in --reuse, but not seeds "
-                      f"{_seed_ranges(missing)}, so all {len(wanted)} seeds train here (to reuse them, run the "
-                      "missing seeds with --seed/--seeds and add that run to --reuse)", flush=True)  # fmt: skip
-            continue
-        partial.rename(target)
-
-
-def assemble(method: str, args: Args, parts: dict[int, Path], target: Path) -> None:
-    """A finished method folder of `args`'s seeds in `target` (results.json and a
-    checkpoint of the seeds' last training states and selected models, stacked in seed
-    order), seed s taken from the finished method folder `parts[s]` of another sweep.
-    Its results.json records where each seed came from ("assembled_from")."""
-    seeds = seeds_of(args)
-    loaded = {}
-    for folder in dict.fromkeys(parts.values()):
-        done = runs.read_json(folder / "results.json")
-        *_, states, best = load_method(method, args, folder)
-        loaded[folder] = (done, finished_seeds(folder), states, best)
-    updates = {done["updates"] for done, *_ in loaded.values()}
-    protocols = {done.get("selection_protocol") for done, *_ in loaded.values()}
-    if len(updates) != 1 or len(protocols) != 1:  # reuse_sources checks both; this guards a hand-edited folder
-        raise runs.UserError(f"--reuse: {method}'s seeds were trained for {sorted(updates)} updates under selection "
-                             f"protocol(s) {sorted(protocols, key=str)}; they cannot be combined")  # fmt: skip
-    rows = []  # per seed: (result, curve, states, best)
-    for seed in seeds:
-        done, order, states, best = loaded[parts[seed]]
-        i = order.index(seed)
-        rows.append((done["results"][i], done["curves"][i], *jax.tree.map(lambda x: x[i], (states, best))))
-    results, curves, states, best = zip(*rows)
-    stack = lambda trees: jax.tree.map(lambda *x: np.stack(x), *trees)  # noqa: E731
-    (step,) = updates
-    target.mkdir(parents=True)
-    runs.save(runs.checkpoint_manager(target / "checkpoints", 2), step, {"states": stack(states), "best": stack(best)})
-    runs.write_json(target / "results.json", {"updates": step, "results": list(results), "curves": list(curves),
-                                              "selection_protocol": protocols.pop(),
-                                              "assembled_from": {str(s): str(parts[s]) for s in seeds}})  # fmt: skip
-
-
-def initial_states(trainer, seeds: list[int]):
-    """(the seeds' training states, stacked; the selected models (`AgentParams`), stacked:
-    at first the initial ones): what a sweep's checkpoints hold, as `runs.restore` needs it."""
-    from foresit_jax.evaluate import agent_params
-
-    states = jax.vmap(trainer.init)(jnp.stack([selection.run_key(s) for s in seeds]))
-    return states, jax.vmap(lambda s: agent_params(s, trainer.config.sigma2_max, trainer.config.evaluation_noise))(states)
-
-
-def assembled_markdown(folders: dict[str, Path]) -> str:
-    """For a report's "Platforms" section: a line per method (of `folders`: method -> its
-    folder in a sweep) whose seeds were assembled from several sweeps (`assemble`), naming
-    the folder each seed came from; '' when none was."""
-    lines = []
-    for method, folder in folders.items():
-        done = runs.read_json(folder / "results.json") if (folder / "results.json").is_file() else {}
-        where = {}  # source folder -> its seeds
-        for seed, source in done.get("assembled_from", {}).items():
-            where.setdefault(source, []).append(int(seed))
-        if where:
-            lines.append(f"- {method}: " + "; ".join(f"seeds {_seed_ranges(s)} from {f}" for f, s in where.items()))
-    if not lines:
-        return ""
-    return ("\nSeeds trained in separate sweeps and combined (`--reuse`; seed s is the run `train --seed s` makes "
-            "in any of them):\n\n" + "\n".join(lines) + "\n")  # fmt: skip
-
-
-def load_method(method: str, args: Args, folder: Path):
-    """A finished method of a sweep read back: (Config, trainer, the seeds' last training
-    states, their selected models), stacked over the seeds it finished (`finished_seeds`,
-    in its results' order) on the first local device (`runs.restore`). `args` gives the
-    protocol, not the seeds."""
-    from foresit_jax.train import make_trainer
-
-    config, _ = method_schedule(method, args)
-    trainer = make_trainer(config)
-    done = runs.read_json(folder / "results.json")["updates"]
-    states, best = initial_states(trainer, finished_seeds(folder))
-    restored = runs.restore(runs.checkpoint_manager(folder / "checkpoints", 2), done, {"states": states, "best": best})
-    return config, trainer, restored["states"], restored["best"]
-
-
-def rewind(progress: dict, step: int) -> dict:
-    """`progress` (a method's progress.json) as it was after update `step`, a chunk's end
-    (for a resume whose newer checkpoints are corrupt): the chunks after it are dropped,
-    and each seed's best model is chosen again from its validations up to `step`."""
-    lengths = np.cumsum([len(c[0]) if c else 0 for c in progress["curves"]])
-    chunks = int(np.searchsorted(lengths, step, side="right"))
-    history = [[h for h in seed_history if h["update"] <= step] for seed_history in progress["history"]]
-    best = [selection.Selection() for _ in history]
-    for b, seed_history in zip(best, history):
-        for h in seed_history:
-            b.offer(h["SR"], h["update"])
-    diagnostics, counts = ({name: chunks_[:chunks] for name, chunks_ in progress.get(kind, {}).items()}
-                           for kind in ("diagnostics", "counts"))  # fmt: skip
-    return {**progress, "done": step, "history": history, "curves": progress["curves"][:chunks],
-            "diagnostics": diagnostics, "counts": counts, "best_sr": [b.sr for b in best], "best_update": [b.update for b in best],
-            "numerics": numerics.rewind(progress.get("numerics"), step)}  # fmt: skip
-
-
-def run_method(method: str, args: Args, bar, evaluator, folder: Path, budget: list) -> tuple | None:
-    """Train `args.seeds` seeds of one method vmapped, selecting each seed's model on
-    validation after each chunk; returns (per seed: seed, selected update, test results of
-    the selected and of the last model, validation history, training success rate per
-    update; updates [n]; training success rate [seeds, n]), or None when `budget` (chunks
-    this invocation may still run, a one-item list, or [None]) ran out first.
-
-    `folder` keeps the method's progress: after each chunk an orbax checkpoint of the
-    seeds' training states and selected models, then `progress.json` (updates done,
-    validation history, curves); at the end `results.json`.  A finished method is read
-    back; a started one continues from its last checkpoint, bit for bit on the same platform
-    (progress.json records the platform of each stretch, `experiments.numerics`). The
-    loop is `train`'s (`experiments.loop`); what differs is what a chunk records."""
-    from foresit_jax.evaluate import agent_params
-    from foresit_jax.train import make_trainer
-
-    if (folder / "results.json").exists():
-        done = runs.read_json(folder / "results.json")
-        bar(done["updates"], {"method": method})
-        return done["results"], np.arange(1, done["updates"] + 1), np.array(done["curves"], float)
-    config, schedule = method_schedule(method, args)
-    seeds = seeds_of(args)
-    trainer = make_trainer(config)
-    env_params = trainer.env_params
-    mesh = devices.seed_mesh(len(seeds))
-    states, best_params = initial_states(trainer, seeds)
-    seed_params_of = jax.vmap(lambda s: agent_params(s, config.sigma2_max, config.evaluation_noise))
-    manager = runs.checkpoint_manager(folder / "checkpoints", 2)
-    progress = {"done": 0, "best_sr": [-1.0] * len(seeds), "best_update": [None] * len(seeds),
-                "history": [[] for _ in seeds], "curves": [], "selection_protocol": selection.PROTOCOL_VERSION}  # fmt: skip
-    if (folder / "progress.json").exists():
-        progress = runs.read_json(folder / "progress.json")  # its protocol: see check_started
-    # A kill between a chunk's checkpoint and its progress.json leaves a newer checkpoint
-    # that nothing else records: it is dropped, and that chunk runs again (to the same result).
-    intact = loop.resume_point(manager, folder / "checkpoints", progress["done"], label=f"{method}: ")
-    if intact != progress["done"]:
-        progress = rewind(progress, intact)
-    # The platform of the updates still to come (experiments.numerics).
-    progress["numerics"], warning = numerics.extend(progress.get("numerics"), progress["done"])
-    if warning:
-        print(f"warning: {method}: {warning}", file=sys.stderr, flush=True)
-    if progress["done"]:
-        restored = runs.restore(manager, progress["done"], {"states": states, "best": best_params})
-        states, best_params = restored["states"], restored["best"]
-        bar(progress["done"], {"method": method})
-    states = devices.shard_seeds(states, mesh)
-    best = [selection.Selection(sr, update, devices.seed_slice(best_params, i))
-            for i, (sr, update) in enumerate(zip(progress["best_sr"], progress["best_update"]))]  # fmt: skip
-    # With the bar shown, the chunk moves it after every update (`Trainer.run`'s on_update;
-    # the state's update count is this method's, the bar counts every method's).
-    offset = bar.position() - progress["done"]
-    run = trainer.seeds_runner(lambda update: bar.at(offset + np.max(update))) if bar.enabled else trainer.run_seeds
-    history = progress["history"]
-
-    def after_chunk(states, chunk: loop.Chunk) -> None:
-        """Record the chunk, select each seed's model on validation (as train does),
-        checkpoint the states and the selected models, then progress.json; move the bar."""
-        metrics = chunk.metrics  # [seeds, n]
-        progress["curves"].append(metrics["charts/success_rate"].tolist())
-        for name in filter(metrics.__contains__, DIAGNOSTICS):  # each seed's mean over the chunk
-            progress.setdefault("diagnostics", {}).setdefault(name, []).append(metrics[name].mean(axis=1).tolist())
-        for name in COUNTS:  # each seed's total over the chunk
-            progress.setdefault("counts", {}).setdefault(name, []).append(metrics[name].sum(axis=1).tolist())
-        seed_params = seed_params_of(states)
-        for i, seed in enumerate(seeds):
-            params = devices.seed_slice(seed_params, i)
-            val = selection.validate(evaluator, params, config, seed, schedule.val_episodes_per_room)
-            history[i].append({"update": chunk.done, **val["overall"]})
-            best[i].offer(val["overall"]["SR"], chunk.done, params)
-        best_params = jax.tree.map(lambda *x: np.stack(x), *[b.params for b in best])
-        runs.save(manager, chunk.done, {"states": states, "best": best_params})
-        progress.update(done=chunk.done, best_sr=[b.sr for b in best], best_update=[b.update for b in best])
-        runs.write_json(folder / "progress.json", progress)
-        val_sr = np.mean([h[-1]["SR"] for h in history])
-        bar(chunk.n, {"method": method, "SR": f"{metrics['charts/success_rate'].mean():.3f}", "val SR": f"{val_sr:.1f}%"})
-
-    states, done = loop.run_chunks(run, states, env_params, done=progress["done"], total=config.num_updates,
-                                   chunk_updates=schedule.chunk_updates, after_chunk=after_chunk, manager=manager,
-                                   checkpoints=folder / "checkpoints", seeds=seeds, budget=budget,
-                                   label=f"{method}: ")  # fmt: skip
-    if done < config.num_updates:
-        return None
-    curves = np.concatenate([np.array(c, float) for c in progress["curves"]], axis=1)
-    last_params = seed_params_of(states)
-    results = []
-    for i, seed in enumerate(seeds):
-        last = devices.seed_slice(last_params, i)
-        test = [evaluator.evaluate(p, config, "test", selection.test_key(seed), schedule.test_episodes_per_room,
-                                   by_length=True) for p in (best[i].params, last)]  # fmt: skip
-        results.append({"seed": seed, "selected_update": best[i].update, "selected": test[0], "last": test[1],
-                        "validation": history[i], "training_success_rate": curves[i].tolist(),
-                        "diagnostics": {name: [chunk[i] for chunk in chunks]
-                                        for name, chunks in progress.get("diagnostics", {}).items()},
-                        "numerics": progress["numerics"], "counts": counts_of(progress, i)})  # fmt: skip
-    runs.write_json(folder / "results.json", {"updates": done, "results": results, "curves": curves.tolist(),
-                                              "selection_protocol": selection.PROTOCOL_VERSION})  # fmt: skip
-    return results, np.arange(1, done + 1), curves
+KEEP = ("stop_after_chunks", "progress")  # this invocation's own: not saved, not resumed
 
 
 def main(args: Args) -> list[dict] | None:
-    """Run (or, with --resume, continue) the sweep; returns Table 1's rows (None when
-    stopped by --stop-after-chunks)."""
-    from foresit_jax.evaluate import Evaluator
-
-    if args.resume:
-        args = runs.resumed_args(args, "sweep.json", "sweep", keep=("stop_after_chunks", "progress"))
-    if args.seeds < 1:
-        raise runs.UserError(f"--seeds must be >= 1, got {args.seeds}")
-    if not args.methods:
-        raise runs.UserError("--methods needs at least one method")
-    for name in ("test_episodes_per_room", "val_episodes_per_room"):
-        if getattr(args, name) is not None and getattr(args, name) < 1:
-            raise runs.UserError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
-    for method in args.methods:  # fail before any training
-        method_schedule(method, args)
-    sources = reuse_sources(args)
-    if args.resume:
-        check_started(args)
-    out = args.out
-    if not args.resume:
-        runs.prepare_run_dir(out, resume=False, overwrite=args.overwrite, marker="sweep.json", kind="sweep")
-        runs.write_started_args(out / "sweep.json", args, ("stop_after_chunks", "progress"))
-    copy_finished(args, sources)
-
-    used = devices.seed_mesh(args.seeds).devices.size
-    print(f"{len(args.methods)} method(s) x {args.seeds} seed(s), the seeds spread over {used} of the "
-          f"{jax.device_count()} local device(s)", flush=True)  # fmt: skip
-    config, _ = method_schedule(args.methods[0], args)
-    evaluator = Evaluator.for_config(config)  # one for the sweep: each method's evaluation compiles once
-    bar = progress_bar(config.num_updates * len(args.methods), 0, args.progress)
-    t0 = time.time()
-    results, curves, budget = {}, {}, [args.stop_after_chunks]
-    for method in args.methods:
-        ran = run_method(method, args, bar, evaluator, out / "methods" / method, budget)
-        if ran is None:
-            bar(0, None)
-            print(f"stopped after {args.stop_after_chunks} chunks, in {method} (continue with --resume)")
-            return None
-        results[method], x, y = ran
-        curves[method] = (x, runs.smooth(y))
-    bar(0, None)
-    selected = {method: [r["selected"] for r in per_seed] for method, per_seed in results.items()}
-    rows = table(selected)
-    title = (f"Table 1 layout: test split, preset {args.preset}, seeds {args.seed}-{args.seed + args.seeds - 1} "
-             "(each seed's model selected on validation)")  # fmt: skip
-    md = table_markdown(rows, title) + "\n" + selection_markdown(results)
-    if len(selected) > 1 and args.seeds > 1:
-        md += "\n" + paired_markdown(selected)
-    md += "\n" + by_length_markdown(results)
-    md += "\n" + diagnostics_markdown(results)
-    md += "\n" + numerics.markdown(results, [(args.methods[0], m) for m in args.methods[1:]])
-    md += assembled_markdown({method: out / "methods" / method for method in args.methods})
-    (out / "table1.md").write_text(md)
-    write_csv(out / "table1.csv", rows)
-    runs.write_json(out / "results_per_seed.json", results)
-    runs.learning_curve_png(out / "learning_curves.png", curves)
-    print(md)
-    print(f"wrote {out}/table1.md, table1.csv, results_per_seed.json, learning_curves.png ({time.time() - t0:.0f} s)")
-    return rows
+    """Run (or, with --resume, continue) the sweep (`experiments.running.sweeps.run`);
+    returns Table 1's rows (None when stopped by --stop-after-chunks)."""
+    if args.resume:  # the sweep's own arguments; a flag given that contradicts them is refused
+        args = rundir.resumed_args(args, "sweep.json", "sweep", keep=KEEP)
+    spec = sweeps.Sweep(**{f.name: getattr(args, f.name) for f in dataclasses.fields(sweeps.Sweep)})
+    return sweeps.run(spec, resume=args.resume, overwrite=args.overwrite, stop_after_chunks=args.stop_after_chunks,
+                      progress=args.progress)  # fmt: skip
 
 
 def cli(argv=None) -> None:
-    runs.run_cli(Args, main, argv)
+    errors.run_cli(Args, main, argv)
 
 
 def console() -> None:
     """The `foresit-sweep` console script: as `python -m experiments.sweep`."""
-    devices.split_host_into_devices()  # before jax starts: faster on a CPU (see experiments.devices)
+    devices.split_host_into_devices()  # before jax starts: faster on a CPU (see experiments.running.devices)
     cli(sys.argv[1:])
 
 

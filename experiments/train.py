@@ -8,16 +8,16 @@ evaluation of the selected model (JSON and Markdown) and a learning-curve PNG.
 `--resume` continues an interrupted run from its last intact checkpoint (a corrupt one is
 skipped, saying so) and ends bit-identical to an uninterrupted run with the same seed on the
 same platform (run.json records the platform of each stretch of updates, and a resume on
-another one warns: `experiments.numerics`).  With `--resume`, `--num-updates` beyond the
+another one warns: `experiments.running.numerics`).  With `--resume`, `--num-updates` beyond the
 run's extends it; any other flag that differs from the run's is refused (`resume_conflicts`);
 a finished run is left as it is.  An existing run folder is never overwritten without
-`--resume` or `--overwrite`, and one process at a time writes it (`runs.claim`).  The loop
+`--resume` or `--overwrite`, and one process at a time writes it (`rundir.claim`).  The loop
 (chunks, the non-finite stop, where a resume continues) is the one `sweep` runs too:
-`experiments.loop`.
+`experiments.running.loop`.
 
 Parameters and optimiser state are checked finite before every checkpoint: a run that
 produced NaN or inf stops with an error naming its last finite checkpoint; a loss or
-gradient norm far out of range, or a collapsed entropy, is warned of (`runs.divergence`).
+gradient norm far out of range, or a collapsed entropy, is warned of (`loop.divergence`).
 """
 
 from __future__ import annotations
@@ -32,9 +32,10 @@ from typing import Literal, Optional
 import jax
 import numpy as np
 
-from experiments import loop, numerics, runs, selection, tracking
-from experiments.presets import Schedule, TrainConfigFields, config_flag, given, preset
-from experiments.progress import progress_bar
+from experiments.reporting import figures, tables
+from experiments.running import checkpoint, errors, loop, numerics, rundir, selection, tracking
+from experiments.running.presets import Schedule, TrainConfigFields, config_flag, given, preset
+from experiments.running.progress import progress_bar
 
 
 @dataclasses.dataclass(frozen=True)
@@ -106,7 +107,7 @@ def resume_conflicts(args: Args, info: dict) -> list[str]:
     clash = [f"--{k.replace('_', '-')} {getattr(args, k)} (the run has {v})" for k, v in run.items()
              if getattr(args, k) != getattr(defaults, k) and getattr(args, k) != v]  # fmt: skip
     return clash + [f"--{k.replace('_', '-')} {v} (the run has {config[k]})" for k, v in given(args.config).items()
-                    if runs.jsonable(v) != config[k]]  # fmt: skip
+                    if rundir.jsonable(v) != config[k]]  # fmt: skip
 
 
 def main(args: Args) -> dict:
@@ -120,81 +121,81 @@ def main(args: Args) -> dict:
         # Validate the arguments before touching --out (with --overwrite, a typo must not
         # delete the existing run and then fail).
         config, schedule = build(args)
-    runs.prepare_run_dir(out, args.resume, args.overwrite)
+    rundir.prepare_run_dir(out, args.resume, args.overwrite)
     if args.resume:
-        info = runs.read_run_info(out)
+        info = rundir.read_run_info(out)
         selection.check_resumable(info.get("selection_protocol"), str(out))
         clash = resume_conflicts(args, info)
         if clash:
-            raise runs.UserError(f"--resume continues {out} with its own settings; drop {', '.join(clash)} "
-                                 "(only --num-updates may differ: it extends the run)")  # fmt: skip
+            raise errors.UserError(f"--resume continues {out} with its own settings; drop {', '.join(clash)} "
+                                   "(only --num-updates may differ: it extends the run)")  # fmt: skip
         config = Config(**info["config"])
         schedule = Schedule(**info["schedule"])
         seed = info["seed"]
         if args.num_updates is not None and args.num_updates < config.num_updates:
-            raise runs.UserError(f"--num-updates {args.num_updates} would shorten {out} ({config.num_updates} updates); "
-                                 "--resume can only extend a run")  # fmt: skip
+            raise errors.UserError(f"--num-updates {args.num_updates} would shorten {out} ({config.num_updates} updates); "
+                                   "--resume can only extend a run")  # fmt: skip
         if args.num_updates is not None and args.num_updates != config.num_updates:
             config = dataclasses.replace(config, num_updates=args.num_updates)
             print(f"extending {out} to {config.num_updates} updates (it had {info['config']['num_updates']})")
             info = {**info, "config": dataclasses.asdict(config)}
-            runs.write_run_info(out, info)
+            rundir.write_run_info(out, info)
     else:
         seed = args.seed
         info = {"method": config.method, "arm": args.method, "preset": args.preset, "seed": seed,
                 "config": dataclasses.asdict(config), "schedule": dataclasses.asdict(schedule),
                 "selection_protocol": selection.PROTOCOL_VERSION, "numerics": numerics.extend(None, 0)[0]}  # fmt: skip
-        runs.write_run_info(out, info)
+        rundir.write_run_info(out, info)
 
     trainer = make_trainer(config)
     env_params = trainer.env_params
     evaluator = Evaluator.for_config(config)  # held for the run: validation compiles once
     state = trainer.init(selection.run_key(seed))
-    manager = runs.checkpoint_manager(out / "checkpoints", schedule.keep_checkpoints)
-    best_manager = runs.checkpoint_manager(out / "best", 1)
+    manager = checkpoint.checkpoint_manager(out / "checkpoints", schedule.keep_checkpoints)
+    best_manager = checkpoint.checkpoint_manager(out / "best", 1)
     done = 0
     if args.resume and (out / "results_test.json").is_file() and (manager.latest_step() or 0) >= config.num_updates:
         print(f"{out} is finished ({config.num_updates} updates) and its results are written; nothing to do "
               "(pass --num-updates N to extend it)")  # fmt: skip
-        return runs.read_json(out / "results_test.json")["results"]
+        return rundir.read_json(out / "results_test.json")["results"]
     if args.resume:
         done = loop.resume_point(manager, out / "checkpoints")
         if done:
-            state = runs.restore(manager, done, state)
+            state = checkpoint.restore(manager, done, state)
             print(f"resuming {out} from update {done}")
-        runs.drop_steps_after(best_manager, done)  # a best model of those updates is chosen again
-        # The platform of the updates still to come (experiments.numerics)
+        checkpoint.drop_steps_after(best_manager, done)  # a best model of those updates is chosen again
+        # The platform of the updates still to come (experiments.running.numerics)
         history, warning = numerics.extend(numerics.rewind(info.get("numerics"), done), done)
         if history != info.get("numerics"):
-            runs.write_run_info(out, {**info, "numerics": history})
+            rundir.write_run_info(out, {**info, "numerics": history})
         if warning:
             print(f"warning: {warning}", file=sys.stderr, flush=True)
-    runs.truncate_rows(out / "metrics", done)
-    runs.truncate_rows(out / "validation", done)
+    rundir.truncate_rows(out / "metrics", done)
+    rundir.truncate_rows(out / "validation", done)
     tracker = tracking.make(args.track, out, info)
     best = selection.Selection()
-    for r in runs.read_rows(out / "validation"):
+    for r in rundir.read_rows(out / "validation"):
         best.offer(r["SR"], r["update"])
 
     def validate_and_select(state, done: int) -> dict:
         """Validate after `done` updates; keep the model if it is the best so far."""
         params = agent_params(state, config.sigma2_max, config.evaluation_noise)
         val = selection.validate(evaluator, params, config, seed, schedule.val_episodes_per_room)
-        runs.append_rows(out / "validation", [{"update": done, **val["overall"]}])
+        rundir.append_rows(out / "validation", [{"update": done, **val["overall"]}])
         tracker.log([{"update": done, **val["overall"]}], prefix="validation/")
         if best.offer(val["overall"]["SR"], done):
-            runs.save(best_manager, done, params)
+            checkpoint.save(best_manager, done, params)
         return val
 
     # A run killed between a chunk's checkpoint and its validation, or between the
     # validation and saving the best model, is completed here (the keys depend only on
     # the seed: the same numbers as uninterrupted).
-    if done and not any(r["update"] == done for r in runs.read_rows(out / "validation")):
+    if done and not any(r["update"] == done for r in rundir.read_rows(out / "validation")):
         validate_and_select(state, done)
     elif done and best.update == done and best_manager.latest_step() != done:
-        runs.save(best_manager, done, agent_params(state, config.sigma2_max, config.evaluation_noise))
+        checkpoint.save(best_manager, done, agent_params(state, config.sigma2_max, config.evaluation_noise))
 
-    previous_rows = runs.read_rows(out / "metrics")
+    previous_rows = rundir.read_rows(out / "metrics")
     last_row = previous_rows[-1] if previous_rows else None
     total = config.num_updates
     bar = progress_bar(total, done, args.progress)
@@ -207,11 +208,11 @@ def main(args: Args) -> dict:
     def after_chunk(state, chunk: loop.Chunk) -> None:
         """Record the chunk, checkpoint it, validate and select, move the bar."""
         nonlocal last_row
-        rows = runs.metric_rows(chunk.metrics, chunk.done - chunk.n, last_row)
+        rows = rundir.metric_rows(chunk.metrics, chunk.done - chunk.n, last_row)
         last_row = rows[-1]
-        runs.append_rows(out / "metrics", rows)
+        rundir.append_rows(out / "metrics", rows)
         tracker.log(rows)
-        runs.save(manager, chunk.done, state)
+        checkpoint.save(manager, chunk.done, state)
         val = validate_and_select(state, chunk.done)  # model selection on the validation split
         useful = float(np.sum(chunk.metrics["frames/useful"]))  # steps that entered the loss
         bar(chunk.n, {"useful fps": f"{useful / (time.time() - chunk.started):,.0f}",
@@ -229,18 +230,18 @@ def main(args: Args) -> dict:
 
     # Final test evaluation of the model selected on validation.
     best_step = best_manager.latest_step()
-    chosen = runs.restore(best_manager, best_step, agent_params(state, config.sigma2_max, config.evaluation_noise))
+    chosen = checkpoint.restore(best_manager, best_step, agent_params(state, config.sigma2_max, config.evaluation_noise))
     test = evaluator.evaluate(chosen, config, "test", selection.test_key(seed), schedule.test_episodes_per_room)
     random = evaluator.evaluate_random_policy(config, "test", selection.test_key(seed), schedule.test_episodes_per_room)
-    runs.write_json(out / "results_test.json", {"selected_update": best_step, "results": test, "random_policy": random})
+    rundir.write_json(out / "results_test.json", {"selected_update": best_step, "results": test, "random_policy": random})
     title = f"{config.method}, preset {info['preset']}, seed {seed}: test split (model of update {best_step}, best validation SR)"
-    report = runs.results_markdown(test, title) + "\n" + runs.results_markdown(random, "Uniformly random policy, same rooms", level=2)
+    report = tables.results_markdown(test, title) + "\n" + tables.results_markdown(random, "Uniformly random policy, same rooms", level=2)
     (out / "results_test.md").write_text(report)
-    rows = runs.read_rows(out / "metrics")
+    rows = rundir.read_rows(out / "metrics")
     x = np.array([r["update"] for r in rows])
-    y = runs.smooth([r["charts/success_rate"] for r in rows])
-    vals = [(r["update"], r["SR"] / 100.0) for r in runs.read_rows(out / "validation")]
-    runs.learning_curve_png(out / "learning_curve.png", {config.method: (x, y)}, val_points=vals)
+    y = figures.smooth([r["charts/success_rate"] for r in rows])
+    vals = [(r["update"], r["SR"] / 100.0) for r in rundir.read_rows(out / "validation")]
+    figures.learning_curve_png(out / "learning_curve.png", {config.method: (x, y)}, val_points=vals)
     print(report)
     print(f"wrote {out}/results_test.md, results_test.json, learning_curve.png, metrics.csv "
           f"({time.time() - t_start:.0f} s)")  # fmt: skip
@@ -248,7 +249,7 @@ def main(args: Args) -> dict:
 
 
 def cli(argv=None) -> None:
-    runs.run_cli(Args, main, argv)
+    errors.run_cli(Args, main, argv)
 
 
 if __name__ == "__main__":

@@ -11,7 +11,7 @@ selected model's validation SR, `selection_sr`): the test split never chooses. T
 * the grid: per method and value, the validation SR that chose, the test SR and SPL, the
   chosen value marked;
 * best vs best, the fair comparison: every pair of methods, each at its own chosen value,
-  paired seed by seed (`experiments.report.paired_report`: difference and t interval,
+  paired seed by seed (`experiments.reporting.report.paired_report`: difference and t interval,
   IQM, P(B > A), Holm over these pairs, the minimum detectable effect);
 * the same pairs at each common value of the grid (one family per value);
 * the learning curves of every value, one panel per method;
@@ -20,7 +20,7 @@ selected model's validation SR, `selection_sr`): the test split never chooses. T
 
 Several `--grid` fields make their product (`--grid learning_rate=3e-4,1e-3
 entropy_coef=0.01,0.02`). `--resume` continues a killed tune; `--reuse` takes arms that
-other sweeps or tunes of the same protocol finished (`experiments.sweep.copy_finished`), an
+other sweeps or tunes of the same protocol finished (`experiments.running.sweeps.copy_finished`), an
 arm at the preset's own value also from a sweep that ran it under its plain method name
 (`a3c` at quick is `a3c@learning_rate=1e-3`). The grid runs arm after arm, each arm's seeds
 vmapped in one program, so seed s at value v is the seed s of a sweep of that arm.
@@ -36,9 +36,10 @@ from typing import Optional
 
 import numpy as np
 
-from experiments import devices, report, runs, sweep
-from experiments.presets import split_arm
-from experiments.tables import markdown_table
+from experiments.reporting import figures, report
+from experiments.reporting.tables import markdown_table
+from experiments.running import devices, errors, rundir, sweeps
+from experiments.running.presets import split_arm
 
 KEEP = ("stop_after_chunks", "progress")  # this invocation's own, not the tune's
 
@@ -85,17 +86,17 @@ def parse_grid(specs) -> list[tuple[str, list[str]]]:
     for what does not parse (whether a field may be set and a value has its type is checked
     on the arms, `arms`)."""
     if not specs:
-        raise runs.UserError("--grid needs at least one FIELD=V1,V2,... (e.g. learning_rate=3e-4,1e-3)")
+        raise errors.UserError("--grid needs at least one FIELD=V1,V2,... (e.g. learning_rate=3e-4,1e-3)")
     grid = []
     for spec in specs:
         field, eq, body = (x.strip() for x in spec.partition("="))
         values = [v.strip() for v in body.split(",") if v.strip()]
         if not eq or not field or not values:
-            raise runs.UserError(f"--grid {spec!r}: write FIELD=V1,V2,... (e.g. learning_rate=3e-4,1e-3)")
+            raise errors.UserError(f"--grid {spec!r}: write FIELD=V1,V2,... (e.g. learning_rate=3e-4,1e-3)")
         if len(set(values)) != len(values):
-            raise runs.UserError(f"--grid {spec!r}: a value is given twice")
+            raise errors.UserError(f"--grid {spec!r}: a value is given twice")
         if field in dict(grid):
-            raise runs.UserError(f"--grid: {field} is given twice; give its values in one FIELD=V1,V2,...")
+            raise errors.UserError(f"--grid: {field} is given twice; give its values in one FIELD=V1,V2,...")
         grid.append((field, values))
     return grid
 
@@ -119,24 +120,24 @@ def arms(args: Args, grid) -> dict[str, dict[str, str]]:
         _, own = split_arm(method)
         clash = sorted(set(own) & set(dict(grid)))
         if clash:
-            raise runs.UserError(f"--methods {method}: sets {', '.join(clash)}, which --grid varies; drop it from one")
+            raise errors.UserError(f"--methods {method}: sets {', '.join(clash)}, which --grid varies; drop it from one")
         table[method] = {p: arm(method, p) for p in points(grid)}
         configs = {}
         for point, name in table[method].items():  # a ValueError names what is wrong
-            config, _ = sweep.method_schedule(name, sweep_args(args, (name,), Path(".")))
+            config, _ = sweeps.method_schedule(name, sweep_args(args, (name,), Path(".")))
             same = [p for p, c in configs.items() if c == config]
             if same:
-                raise runs.UserError(f"--grid: {method} at {point} trains what it trains at {same[0]}; give distinct values")
+                raise errors.UserError(f"--grid: {method} at {point} trains what it trains at {same[0]}; give distinct values")
             configs[point] = config
     return table
 
 
-def sweep_args(args: Args, methods: tuple[str, ...], folder: Path) -> sweep.Args:
+def sweep_args(args: Args, methods: tuple[str, ...], folder: Path) -> sweeps.Sweep:
+    """The sweep of `methods` (arms) in `folder` under the tune's protocol."""
     reuse = tuple(f / "sweep" if (Path(f) / "tune.json").is_file() else Path(f) for f in map(Path, args.reuse))
-    return sweep.Args(methods=methods, setup=args.setup, seeds=args.seeds, preset=args.preset, seed=args.seed,
-                      out=folder, resume=(folder / "sweep.json").is_file(), reuse=reuse, num_updates=args.num_updates,
-                      test_episodes_per_room=args.test_episodes_per_room, val_episodes_per_room=args.val_episodes_per_room,
-                      stop_after_chunks=args.stop_after_chunks, progress=args.progress)  # fmt: skip
+    return sweeps.Sweep(methods=methods, setup=args.setup, seeds=args.seeds, preset=args.preset, seed=args.seed,
+                        out=folder, reuse=reuse, num_updates=args.num_updates,
+                        test_episodes_per_room=args.test_episodes_per_room, val_episodes_per_room=args.val_episodes_per_room)  # fmt: skip
 
 
 # ---------------------------------------------------------------------- choosing on validation
@@ -147,7 +148,7 @@ def selection_sr(per_seed: list[dict]) -> np.ndarray:
     for r in per_seed:
         at = [h["SR"] for h in r["validation"] if h["update"] == r["selected_update"]]
         if len(at) != 1:
-            raise runs.UserError(f"seed {r['seed']}: no single validation at its selected update {r['selected_update']}")
+            raise errors.UserError(f"seed {r['seed']}: no single validation at its selected update {r['selected_update']}")
         out.append(report.rate(at[0]))
     return np.array(out)
 
@@ -227,7 +228,7 @@ def curves_png(path: Path, table: dict, results: dict) -> None:
     for ax, (method, by_point) in zip(axes, table.items()):
         for i, (point, name) in enumerate(by_point.items()):
             per_seed, color = results[name], f"C{i}"
-            y = 100 * np.array([runs.smooth(r["training_success_rate"]) for r in per_seed])
+            y = 100 * np.array([figures.smooth(r["training_success_rate"]) for r in per_seed])
             x = np.arange(1, y.shape[1] + 1)
             ax.plot(x, y.mean(0), color=color, label=point)
             ax.fill_between(x, y.mean(0) - y.std(0), y.mean(0) + y.std(0), color=color, alpha=0.2)
@@ -246,26 +247,29 @@ def curves_png(path: Path, table: dict, results: dict) -> None:
 def main(args: Args) -> dict | None:
     """Run (or continue) the tune; returns tune.json's numbers (None when stopped early)."""
     if args.resume:
-        args = runs.resumed_args(args, "tune.json", "tune", keep=KEEP)
+        args = rundir.resumed_args(args, "tune.json", "tune", keep=KEEP)
     if args.seeds < 1:
-        raise runs.UserError(f"--seeds must be >= 1, got {args.seeds}")
+        raise errors.UserError(f"--seeds must be >= 1, got {args.seeds}")
     if not args.methods or len(set(args.methods)) != len(args.methods):
-        raise runs.UserError("--methods needs at least one method, each once")
+        raise errors.UserError("--methods needs at least one method, each once")
     grid = parse_grid(args.grid)
     table = arms(args, grid)
     if not args.resume:
-        runs.prepare_run_dir(args.out, resume=False, overwrite=args.overwrite, marker="tune.json", kind="tune")
-        runs.write_started_args(args.out / "tune.json", args, KEEP)
+        rundir.prepare_run_dir(args.out, resume=False, overwrite=args.overwrite, marker="tune.json", kind="tune")
+        rundir.write_started_args(args.out / "tune.json", args, KEEP)
     names = tuple(a for by_point in table.values() for a in by_point.values())
     print(f"tuning {', '.join(f for f, _ in grid)}: {len(args.methods)} method(s) x {len(points(grid))} value(s) "
           f"= {len(names)} arms, {args.seeds} seed(s) each", flush=True)  # fmt: skip
-    if sweep.main(sweep_args(args, names, args.out / "sweep")) is None:
+    folder = args.out / "sweep"
+    ran = sweeps.run(sweep_args(args, names, folder), resume=(folder / "sweep.json").is_file(),
+                     stop_after_chunks=args.stop_after_chunks, progress=args.progress)  # fmt: skip
+    if ran is None:
         print("continue with: python -m experiments.tune --resume --out " + str(args.out))
         return None
-    results = {a: runs.read_json(args.out / "sweep" / "methods" / a / "results.json")["results"] for a in names}
+    results = {a: rundir.read_json(args.out / "sweep" / "methods" / a / "results.json")["results"] for a in names}
     md, out = tune_report(args, grid, table, results)
     (args.out / "tune.md").write_text(md)
-    runs.write_json(args.out / "tune_results.json", out)
+    rundir.write_json(args.out / "tune_results.json", out)
     curves_png(args.out / "tune_curves.png", table, results)
     print(md)
     print(f"wrote {args.out}/tune.md, tune_results.json, tune_curves.png")
@@ -273,12 +277,12 @@ def main(args: Args) -> dict | None:
 
 
 def cli(argv=None) -> dict | None:
-    return runs.run_cli(Args, main, argv)
+    return errors.run_cli(Args, main, argv)
 
 
 def console() -> None:
     """The `foresit-tune` console script: as `python -m experiments.tune`."""
-    devices.split_host_into_devices()  # before jax starts (see experiments.devices)
+    devices.split_host_into_devices()  # before jax starts (see experiments.running.devices)
     cli(sys.argv[1:])
 
 

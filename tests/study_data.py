@@ -6,7 +6,7 @@ from __future__ import annotations
 import tarfile
 from pathlib import Path
 
-from experiments import runs
+from experiments.running import rundir
 
 DATA = Path(__file__).resolve().parents[1] / "docs" / "data"
 
@@ -17,7 +17,7 @@ def unpack(archive: str, folder: Path, methods) -> Path:
         # The "data" filter (no links out, no absolute paths) is in Python 3.11.4 and later.
         tar.extractall(folder, **({"filter": "data"} if hasattr(tarfile, "data_filter") else {}))
     (root,) = [p for p in folder.iterdir() if p.is_dir()]
-    assert runs.read_json(root / "sweep.json")["methods"] == list(methods)
+    assert rundir.read_json(root / "sweep.json")["methods"] == list(methods)
     return root
 
 
@@ -33,7 +33,7 @@ def interval(p: dict) -> str:
 def pair_row(out: dict, results: dict, a: str, b: str) -> str:
     """The docs' row of the pair B - A of `experiments.compare.main`'s `out`: B's SR (mean ±
     std), the SR and SPL intervals, P(B > A), Holm's p and the MDE on SR."""
-    from experiments import report, stats
+    from experiments.reporting import report, stats
 
     pair = out["pairs"][f"{b} - {a}"]
     r = pair["robust"]["SR"]

@@ -7,7 +7,9 @@ import numpy as np
 import pytest
 from scipy import stats as sp
 
-from experiments import compare, runs, stats
+from experiments import compare
+from experiments.reporting import stats
+from experiments.running import errors
 
 SEEDS = (3, 4, 5, 6)
 
@@ -67,13 +69,13 @@ def test_pairs_and_difference_of_differences_match_a_hand_computation(tmp_path, 
 
 
 def test_bad_input_says_what_is_wrong(tmp_path):
-    with pytest.raises(runs.UserError, match="not a sweep folder"):
+    with pytest.raises(errors.UserError, match="not a sweep folder"):
         compare.main(compare.Args(run=tmp_path))
     write_sweep(tmp_path / "one", np.random.default_rng(1), methods=("a", "b"))
     write_sweep(tmp_path / "one", np.random.default_rng(2), methods=("c",), seeds=(0, 1, 2, 3))
     for pairs, says in ((("a:x",), "'x' is not a finished method of this sweep; it has a, b, c"),
                         (("a-b",), "give 2 method names"), (("a:c",), "different seeds")):  # fmt: skip
-        with pytest.raises(runs.UserError, match=says):
+        with pytest.raises(errors.UserError, match=says):
             compare.main(compare.Args(run=tmp_path / "one", pairs=pairs))
 
 

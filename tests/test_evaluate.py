@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 import train_helpers as H
-from experiments.presets import preset
+from envs import metrics
+from experiments.running.presets import preset
 from foresit_jax import imagination
 from foresit_jax.agent import EpisodeStats
-from envs import metrics
 from foresit_jax.evaluate import (
     Evaluator,
     agent_params,

@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from experiments import presets
+from experiments.running import presets
 from foresit_jax.train import make_trainer
 
 # Trains the example and the Trainer side by side (about 50 s on a 2-core CPU).

@@ -26,8 +26,10 @@ import tyro
 
 import train_helpers as H
 from experiments import evaluate as evaluate_cli
-from experiments import numerics, presets, progress, report, runs, selection, sweep, tables
+from experiments import sweep
 from experiments import train as train_cli
+from experiments.reporting import cvae_comparison, figures, report, tables
+from experiments.running import checkpoint, errors, numerics, presets, progress, rundir, selection, sweeps
 from foresit_jax.config import Config
 
 REPO = Path(__file__).resolve().parents[1]
@@ -51,18 +53,18 @@ def finished_run(tmp_path_factory, cheap_experiments):
 
 
 def run_config(out: Path) -> Config:
-    return Config(**runs.read_run_info(out)["config"])
+    return Config(**rundir.read_run_info(out)["config"])
 
 
 def restore_latest(out: Path, folder: str = "checkpoints"):
-    manager = runs.checkpoint_manager(out / folder, 100)
+    manager = checkpoint.checkpoint_manager(out / folder, 100)
     like = H.cached_trainer(run_config(out)).init(jax.random.PRNGKey(0))
     if folder == "best":
         from foresit_jax.evaluate import agent_params
 
         like = agent_params(like, run_config(out).sigma2_max)
     step = manager.latest_step()
-    return step, manager.all_steps(), runs.restore(manager, step, like)
+    return step, manager.all_steps(), checkpoint.restore(manager, step, like)
 
 
 def snapshot(folder: Path) -> dict:
@@ -85,16 +87,16 @@ def cli_error(cli, argv, capsys) -> str:
 # ---------------------------------------------------------------------- training runs
 @pytest.mark.slow
 def test_finished_run_folder(finished_run):
-    info = runs.read_run_info(finished_run)
+    info = rundir.read_run_info(finished_run)
     assert (info["method"], info["preset"], info["seed"]) == ("a3c+foresit", "tiny", SEED)
     assert info["numerics"] == [{"from_update": 0, "platform": numerics.fingerprint()}]
-    rows = runs.read_rows(finished_run / "metrics")
+    rows = rundir.read_rows(finished_run / "metrics")
     assert [r["update"] for r in rows] == [1, 2, 3, 4]
     assert all(np.isfinite(r["losses/total_loss"]) for r in rows)
     # Running totals: ended episodes, useful frames (packed windows: every step is useful).
     assert rows[-1]["episodes"] == sum(r["charts/episodes"] for r in rows) > 0
     assert rows[-1]["frames"] == rows[-1]["stepped_frames"] == 4 * 4 * 30
-    assert [r["update"] for r in runs.read_rows(finished_run / "validation")] == [2, 4]
+    assert [r["update"] for r in rundir.read_rows(finished_run / "validation")] == [2, 4]
     results = json.loads((finished_run / "results_test.json").read_text())
     assert results["selected_update"] in (2, 4)
     assert set(results["results"]) == {"bathroom", "overall"}
@@ -116,13 +118,13 @@ def test_resume_after_a_kill_ends_bit_identical_to_an_uninterrupted_run(finished
     if killed == "before_a_checkpoint":
         # After the metrics of update 3 were written but before its checkpoint: the
         # resumed run must drop that row and redo update 3.
-        stale = dict(runs.read_rows(out / "metrics")[-1], update=3)
-        runs.append_rows(out / "metrics", [stale])
+        stale = dict(rundir.read_rows(out / "metrics")[-1], update=3)
+        rundir.append_rows(out / "metrics", [stale])
     else:
         # After update 2's checkpoint, before its validation row (and so before its best
         # model), or after the row but before the best model was saved.
         if killed == "before_its_validation":
-            runs.truncate_rows(out / "validation", 0)
+            rundir.truncate_rows(out / "validation", 0)
         shutil.rmtree(out / "best")
     # The run folder alone says what to resume (method, preset and seed are not repeated).
     train_cli.main(train_cli.Args(out=out, resume=True, progress=False))
@@ -140,15 +142,15 @@ def test_resume_after_a_kill_ends_bit_identical_to_an_uninterrupted_run(finished
 def test_a_run_resumed_on_another_platform_says_so_and_records_where_each_stretch_ran(finished_run, tmp_path, capsys):
     out = tmp_path / "moved"
     train_cli.main(tiny_args(out, stop_after_chunks=1))
-    info = runs.read_run_info(out)
+    info = rundir.read_run_info(out)
     elsewhere = {**numerics.fingerprint(), "jaxlib": "0.0.1"}  # as if started on another machine
-    runs.write_run_info(out, {**info, "numerics": [{"from_update": 0, "platform": elsewhere}]})
+    rundir.write_run_info(out, {**info, "numerics": [{"from_update": 0, "platform": elsewhere}]})
     capsys.readouterr()
     train_cli.main(train_cli.Args(out=out, resume=True, progress=False))
     err = capsys.readouterr().err
     assert "warning: continuing on another platform than updates 0-2 were trained on" in err
-    assert runs.read_run_info(out)["numerics"] == [{"from_update": 0, "platform": elsewhere},
-                                                   {"from_update": 2, "platform": numerics.fingerprint()}]  # fmt: skip
+    assert rundir.read_run_info(out)["numerics"] == [{"from_update": 0, "platform": elsewhere},
+                                                     {"from_update": 2, "platform": numerics.fingerprint()}]  # fmt: skip
     # (Here it is this machine all along: the numbers are still the uninterrupted run's.)
     assert (out / "results_test.json").read_text() == (finished_run / "results_test.json").read_text()
 
@@ -187,11 +189,11 @@ def test_existing_folders_are_never_overwritten_without_a_flag(finished_run, tmp
 
 @pytest.mark.slow
 def test_a_run_validated_under_another_selection_protocol_is_not_resumed(finished_run, tmp_path, capsys):
-    assert runs.read_run_info(finished_run)["selection_protocol"] == selection.PROTOCOL_VERSION
+    assert rundir.read_run_info(finished_run)["selection_protocol"] == selection.PROTOCOL_VERSION
     out = tmp_path / "older"
     shutil.copytree(finished_run, out)
-    info = runs.read_run_info(out)
-    runs.write_run_info(out, {**info, "selection_protocol": selection.PROTOCOL_VERSION - 1})
+    info = rundir.read_run_info(out)
+    rundir.write_run_info(out, {**info, "selection_protocol": selection.PROTOCOL_VERSION - 1})
     before = snapshot(out)
     line = cli_error(train_cli.cli, ["--out", out, "--resume"], capsys)
     assert f"validated under selection protocol {selection.PROTOCOL_VERSION - 1}" in line and "start it again" in line
@@ -219,7 +221,7 @@ def test_non_finite_loss_stops_training_naming_the_update_and_keeps_the_last_goo
     step, steps, state = restore_latest(out)
     assert (step, steps) == (2, [2])
     H.assert_tree_finite(state)
-    assert [r["update"] for r in runs.read_rows(out / "metrics")] == [1, 2]
+    assert [r["update"] for r in rundir.read_rows(out / "metrics")] == [1, 2]
     assert not (out / "results_test.json").exists()
 
 
@@ -250,7 +252,7 @@ def test_json_writes_nan_as_null(tmp_path):
 
     results = {"overall": {"SR": 12.5, "SR>=5": float("nan"), "SPL>=5": np.float32("nan"), "episodes": np.int64(8)},
                "bad": [float("inf"), -float("inf")], "args": Where(Path("runs/x"), (1, 2))}  # fmt: skip
-    runs.write_json(tmp_path / "r.json", results)
+    rundir.write_json(tmp_path / "r.json", results)
     text = (tmp_path / "r.json").read_text()
     assert "NaN" not in text and "Infinity" not in text
     assert strict_json(text) == {"overall": {"SR": 12.5, "SR>=5": None, "SPL>=5": None, "episodes": 8},
@@ -258,13 +260,13 @@ def test_json_writes_nan_as_null(tmp_path):
     # Rows: JSONL strict, CSV as before (nan), and a row read back (null -> None) is
     # written to CSV the same way (a resume rewrites the CSV from the JSONL).
     row = {"update": 1, "SR": 50.0, "SR>=5": float("nan")}
-    runs.append_rows(tmp_path / "validation", [row])
-    (back,) = runs.read_rows(tmp_path / "validation")
+    rundir.append_rows(tmp_path / "validation", [row])
+    (back,) = rundir.read_rows(tmp_path / "validation")
     assert back == {"update": 1, "SR": 50.0, "SR>=5": None}
-    runs.append_rows(tmp_path / "again", [back])
+    rundir.append_rows(tmp_path / "again", [back])
     assert (tmp_path / "again.csv").read_text() == (tmp_path / "validation.csv").read_text() == "update,SR,SR>=5\n1,50.0,nan\n"
     with pytest.raises(TypeError, match="not JSON serialisable"):
-        runs.to_json({"x": object()})
+        rundir.to_json({"x": object()})
 
 
 def test_markdown_table_of_a_hand_written_table():
@@ -290,7 +292,7 @@ def test_markdown_table_of_a_hand_written_table():
 
 def test_reports_use_the_one_table_writer():
     results = {"overall": {"SPL": 10.0, "SR": 20.0, "SPL>=5": float("nan"), "SR>=5": None, "episodes": 4}}
-    assert runs.results_markdown(results, "T", level=2) == (
+    assert tables.results_markdown(results, "T", level=2) == (
         "## T\n\n| rooms | SPL | SR | SPL>=5 | SR>=5 | episodes |\n|---|---|---|---|---|---|\n"
         "| overall | 10.00 | 20.00 | n/a | n/a | 4 |\n"
     )  # fmt: skip
@@ -323,25 +325,25 @@ def test_write_csv(tmp_path):
     assert path.read_text() == "x\n1\n"
 
 
-@pytest.mark.parametrize("marker, kind", [(runs.RUN_FILE, "run"), ("sweep.json", "sweep")])
+@pytest.mark.parametrize("marker, kind", [(rundir.RUN_FILE, "run"), ("sweep.json", "sweep")])
 def test_prepare_run_dir_never_deletes_what_it_did_not_write(tmp_path, marker, kind):
     out = tmp_path / "out"
-    runs.prepare_run_dir(out, resume=False, overwrite=False, marker=marker, kind=kind)
+    rundir.prepare_run_dir(out, resume=False, overwrite=False, marker=marker, kind=kind)
     assert out.is_dir()
-    runs.prepare_run_dir(out, resume=False, overwrite=False, marker=marker, kind=kind)  # empty: fine
+    rundir.prepare_run_dir(out, resume=False, overwrite=False, marker=marker, kind=kind)  # empty: fine
     (out / "notes.txt").write_text("mine")
     for overwrite, says in ((False, "already exists and is not empty"), (True, f"not a {kind} folder")):
-        with pytest.raises(runs.UserError, match=says) as e:
-            runs.prepare_run_dir(out, resume=False, overwrite=overwrite, marker=marker, kind=kind)
+        with pytest.raises(errors.UserError, match=says) as e:
+            rundir.prepare_run_dir(out, resume=False, overwrite=overwrite, marker=marker, kind=kind)
         assert "\n" not in str(e.value)  # one line
-    with pytest.raises(runs.UserError, match=f"not a {kind} folder .*nothing to resume"):
-        runs.prepare_run_dir(out, resume=True, overwrite=False, marker=marker, kind=kind)
+    with pytest.raises(errors.UserError, match=f"not a {kind} folder .*nothing to resume"):
+        rundir.prepare_run_dir(out, resume=True, overwrite=False, marker=marker, kind=kind)
     assert (out / "notes.txt").read_text() == "mine"
     (out / marker).write_text("{}")
-    with pytest.raises(runs.UserError, match="--overwrite"):
-        runs.prepare_run_dir(out, resume=False, overwrite=False, marker=marker, kind=kind)
-    runs.prepare_run_dir(out, resume=False, overwrite=True, marker=marker, kind=kind)
-    assert out.is_dir() and [p.name for p in out.iterdir()] == [runs.LOCK_FILE]
+    with pytest.raises(errors.UserError, match="--overwrite"):
+        rundir.prepare_run_dir(out, resume=False, overwrite=False, marker=marker, kind=kind)
+    rundir.prepare_run_dir(out, resume=False, overwrite=True, marker=marker, kind=kind)
+    assert out.is_dir() and [p.name for p in out.iterdir()] == [rundir.LOCK_FILE]
 
 
 def test_learning_curve_png_leaves_matplotlib_global_state_alone(tmp_path, monkeypatch):
@@ -353,8 +355,8 @@ def test_learning_curve_png_leaves_matplotlib_global_state_alone(tmp_path, monke
     monkeypatch.setattr(matplotlib, "use", no_global_backend)
     had_pyplot = "matplotlib.pyplot" in sys.modules
     x = np.arange(1, 6)
-    runs.learning_curve_png(tmp_path / "c.png", {"a": (x, x / 10.0), "b": (x, np.stack([x, x + 1]) / 10.0)},
-                            val_points=[(2, 0.1), (4, 0.3)])  # fmt: skip
+    figures.learning_curve_png(tmp_path / "c.png", {"a": (x, x / 10.0), "b": (x, np.stack([x, x + 1]) / 10.0)},
+                               val_points=[(2, 0.1), (4, 0.3)])  # fmt: skip
     assert (tmp_path / "c.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert ("matplotlib.pyplot" in sys.modules) == had_pyplot
 
@@ -370,7 +372,7 @@ def test_progress_bar_is_shared_and_without_the_bar_logs_a_line_per_chunk(capsys
     assert re.fullmatch(r"\[\d\d:\d\d:\d\d\] 3/5 updates, 0\.0 min: method a3c, SR 0\.1", lines[0]), lines[0]
     assert re.fullmatch(r"\[\d\d:\d\d:\d\d\] 5/5 updates, 0\.0 min: method a3c, val SR 12\.5%", lines[1]), lines[1]
     assert not hasattr(train_cli, "_progress")
-    assert train_cli.progress_bar is sweep.progress_bar is progress.progress_bar
+    assert train_cli.progress_bar is sweeps.progress_bar is progress.progress_bar
 
 
 @pytest.mark.slow
@@ -448,7 +450,7 @@ def test_probe_of_a_run_reproduces_its_test_sr_and_reports_every_probe(finished_
 
     run = tmp_path / "run"
     shutil.copytree(finished_run, run)
-    episodes = runs.read_run_info(run)["schedule"]["test_episodes_per_room"]
+    episodes = rundir.read_run_info(run)["schedule"]["test_episodes_per_room"]
     report = probe.main(probe.Args(run=run, episodes_per_room=episodes, windows=30))
     (seed,) = report["a3c+foresit"]
     assert seed["seed"] == SEED
@@ -513,8 +515,8 @@ def test_a_sweep_arm_trains_its_own_config_and_is_probed_from_its_checkpoints(tm
     sweep.main(dataclasses.replace(sweep_args(out), methods=(arm,)))
     report = probe.main(probe.Args(run=out, episodes_per_room=2, windows=4))
     assert [r["seed"] for r in report[arm]] == [SEED, SEED + 1]
-    args = runs.args_from_saved(sweep.Args, runs.read_json(out / "sweep.json"), methods=(arm,), out=out)
-    config, _, states, _ = sweep.load_method(arm, args, out / "methods" / arm)
+    args = rundir.args_from_saved(sweep.Args, rundir.read_json(out / "sweep.json"), methods=(arm,), out=out)
+    config, _, states, _ = sweeps.load_method(arm, args, out / "methods" / arm)
     assert config.imagination_input == "encoder" and "imagination_embed" in states.params["params"]["encoder"]
 
 
@@ -564,12 +566,12 @@ def test_sweep_seed_i_is_the_run_train_makes_with_seed_i(tiny_sweep, tmp_path):
     for r, run in zip(per_seed, trained):
         mine = json.loads((run / "results_test.json").read_text())
         assert r["selected_update"] == mine["selected_update"]
-        rows = list(runs.read_rows(run / "metrics"))
+        rows = list(rundir.read_rows(run / "metrics"))
         curve = [row["charts/success_rate"] for row in rows]
         np.testing.assert_allclose(r["training_success_rate"], curve, atol=1e-6)  # the same episodes were trained on
-        for name in sweep.COUNTS:  # the experience counted is train's, update by update
+        for name in sweeps.COUNTS:  # the experience counted is train's, update by update
             assert r["counts"][name] == pytest.approx(sum(row[name] for row in rows)) and r["counts"][name] > 0
-        validation = runs.read_rows(run / "validation")
+        validation = rundir.read_rows(run / "validation")
         assert [v["update"] for v in r["validation"]] == [v["update"] for v in validation] == [2, 4]
         np.testing.assert_allclose([v["SR"] for v in r["validation"]], [v["SR"] for v in validation])
         for col in ("SR", "SPL", "episodes"):
@@ -656,11 +658,11 @@ def test_a_sweep_spread_over_two_host_devices_equals_the_one_device_sweep(tiny_s
         "import sys, pytest, jax; sys.path.insert(0, 'tests'); import train_helpers as H\n"
         "assert jax.device_count() == 2, jax.devices()\n"
         "H.patch_for_experiments(pytest.MonkeyPatch())\n"
-        "import dataclasses; from pathlib import Path; from experiments import sweep; import test_experiments as T\n"
+        "import dataclasses; from pathlib import Path; from experiments import sweep; from experiments.running import sweeps; import test_experiments as T\n"
         f"sweep.main(dataclasses.replace(T.sweep_args(Path({str(out)!r})), methods=('a3c',)))\n"
-        f"read = sweep.load_method('a3c', T.sweep_args(Path({str(out)!r})), Path({str(out / 'methods' / 'a3c')!r}))\n"
+        f"read = sweeps.load_method('a3c', T.sweep_args(Path({str(out)!r})), Path({str(out / 'methods' / 'a3c')!r}))\n"
         f"{on_one_device}\n"
-        "from experiments import devices; from experiments.presets import preset; from foresit_jax.train import make_trainer\n"
+        "from experiments.running import devices; from experiments.running.presets import preset; from foresit_jax.train import make_trainer\n"
         "trainer = make_trainer(preset('tiny', 'a3c+maml')[0])\n"
         "states = jax.vmap(trainer.init)(jax.random.split(jax.random.PRNGKey(0), 2))\n"
         "trainer.run_seeds.lower(devices.shard_seeds(states, devices.seed_mesh(2)), trainer.env_params, 2)\n"
@@ -668,7 +670,7 @@ def test_a_sweep_spread_over_two_host_devices_equals_the_one_device_sweep(tiny_s
     env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2"}
     proc = subprocess.run([sys.executable, "-c", code], cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    read = sweep.load_method("a3c", sweep_args(out), out / "methods" / "a3c")
+    read = sweeps.load_method("a3c", sweep_args(out), out / "methods" / "a3c")
     assert {d for x in jax.tree.leaves(read[2:]) for d in x.sharding.device_set} == {jax.local_devices()[0]}
     one, two = (json.loads((d / "results_per_seed.json").read_text()) for d in (tiny_sweep, out))
     assert list(two) == ["a3c"]
@@ -725,12 +727,12 @@ def test_a_sweep_copies_the_methods_another_sweep_finished_instead_of_training_t
     argv = ["--preset", "tiny", "--val-episodes-per-room", "5", "--out", tmp_path / "x", "--reuse", tiny_sweep]
     line = cli_error(sweep.cli, argv, capsys)
     assert "another protocol" in line and "--val-episodes-per-room 12 there, 5 here" in line
-    # A method selected by an earlier version of experiments.selection (no version recorded).
+    # A method selected by an earlier version of experiments.running.selection (no version recorded).
     old = tmp_path / "old"
     shutil.copytree(tiny_sweep, old)
     done = old / "methods" / "a3c" / "results.json"
     done.write_text(json.dumps({k: v for k, v in json.loads(done.read_text()).items() if k != "selection_protocol"}))
-    with pytest.raises(runs.UserError, match=r"its a3c was selected by another protocol \(version 1"):
+    with pytest.raises(errors.UserError, match=r"its a3c was selected by another protocol \(version 1"):
         sweep.main(dataclasses.replace(sweep_args(tmp_path / "x"), reuse=(old,)))
     assert not (tmp_path / "x").exists()
     # A method trained on another platform is combined, and the table says which pair mixes platforms.
@@ -779,7 +781,7 @@ def test_a_sweep_assembles_a_method_from_the_seeds_other_sweeps_finished(tiny_sw
     table = next(csv_rows(three.out / "table1.csv"))
     assert table["seeds"] == "3"
     assert float(table["SR mean"]) == pytest.approx(np.mean([r["selected"]["overall"]["SR"] for r in per_seed]))
-    loaded = [sweep.load_method("a3c", three, d / "methods" / "a3c")[2:] for d in (three.out, tiny_sweep, extra)]
+    loaded = [sweeps.load_method("a3c", three, d / "methods" / "a3c")[2:] for d in (three.out, tiny_sweep, extra)]
     assert jax.tree.structure(loaded[0]) == jax.tree.structure(loaded[1])
     for got, first, second in zip(*(jax.tree.leaves(x) for x in loaded), strict=True):
         np.testing.assert_array_equal(got, np.concatenate([first, second]))
@@ -799,7 +801,7 @@ def test_a_sweep_assembles_a_method_from_the_seeds_other_sweeps_finished(tiny_sw
 
 
 def test_the_sweep_command_asks_for_two_host_devices_unless_the_user_chose(monkeypatch):
-    from experiments import devices
+    from experiments.running import devices
 
     monkeypatch.setenv("XLA_FLAGS", "--xla_cpu_use_thunk_runtime=true")
     devices.split_host_into_devices()
@@ -815,7 +817,7 @@ def test_the_sweep_command_asks_for_two_host_devices_unless_the_user_chose(monke
 
 
 def test_seeds_go_to_the_most_devices_that_divide_them():
-    from experiments import devices
+    from experiments.running import devices
 
     fake = ["d0", "d1", "d2", "d3"]
     assert [devices.seed_mesh(n, fake).devices.tolist() for n in (5, 6, 8, 3)] == [
@@ -831,7 +833,7 @@ def test_cvae_comparison_on_a_run(finished_run, tmp_path, capsys):
     out = tmp_path / "run"
     shutil.copytree(finished_run, out)
     result = cvae_compare.main(cvae_compare.Args(run=out, windows=40, epochs=3))
-    assert result["items"] >= cvae_compare.MIN_ITEMS and result["update"] == 4 and result["latent_size"] == 8
+    assert result["items"] >= cvae_comparison.MIN_ITEMS and result["update"] == 4 and result["latent_size"] == 8
     assert np.isfinite(result["direct"]["loss"]) and np.isfinite(result["cvae_latent"]["loss"])
     assert json.loads((out / "cvae_comparison.json").read_text())["items"] == result["items"]
     assert "C-VAE's latent mean" in (out / "cvae_comparison.md").read_text()
@@ -853,7 +855,7 @@ def test_evaluate_cli_reproduces_the_test_results_of_training(finished_run, tmp_
     assert written["which"] == "best"
     # On val, the validation episodes of the selected model's update: its row again.
     val = evaluate_cli.main(evaluate_cli.Args(run=out, split="val"))
-    row = next(r for r in runs.read_rows(out / "validation") if r["update"] == trained["selected_update"])
+    row = next(r for r in rundir.read_rows(out / "validation") if r["update"] == trained["selected_update"])
     assert val["overall"]["episodes"] == row["episodes"] and val["overall"]["SR"] == pytest.approx(row["SR"])
     # The last checkpoint goes to its own files and leaves the others alone.
     last = evaluate_cli.main(evaluate_cli.Args(run=out, which="last", split="val", episodes_per_room=2))
@@ -956,7 +958,7 @@ def test_readme_commands_run_at_a_tiny_size(tmp_path, capsys):
         args = tyro.cli(CLI_MODULES[module].Args, args=tiny_argv(module, argv, tmp_path))
         CLI_MODULES[module].main(args)
     # What each command promises to write.
-    runs_written = [p for p in (tmp_path / "runs").iterdir() if runs.is_run(p)]
+    runs_written = [p for p in (tmp_path / "runs").iterdir() if rundir.is_run(p)]
     assert runs_written
     for run in runs_written:
         assert (run / "results_test.md").exists() and (run / "learning_curve.png").exists()
@@ -1051,7 +1053,7 @@ def test_config_flags_reach_the_run_and_resume_refuses_other_values(tmp_path, ca
     line = cli_error(train_cli.cli, ["--out", out, "--resume", "--gamma", "0.5"], capsys)
     assert "--gamma 0.5 (the run has 0.9)" in line
     train_cli.cli(["--out", str(out), "--resume", "--gamma", "0.9", "--no-progress"])  # the run's own value: fine
-    assert runs.read_json(out / "results_test.json")["results"]
+    assert rundir.read_json(out / "results_test.json")["results"]
 
 
 @pytest.mark.slow
@@ -1062,7 +1064,7 @@ def test_sweep_config_flags_are_saved_resumed_and_part_of_the_protocol(tmp_path,
     line = cli_error(sweep.cli, ["--out", first.out, "--resume", "--learning-rate", "1e-3"], capsys)
     assert "--learning-rate 0.001 (started with 0.0003)" in line
     sweep.cli(["--out", str(first.out), "--resume", "--no-progress"])
-    config, *_ = sweep.load_method("a3c", first, first.out / "methods" / "a3c")
+    config, *_ = sweeps.load_method("a3c", first, first.out / "methods" / "a3c")
     assert config.learning_rate == 3e-4
     # Reuse takes only the sweeps of the same Config fields.
     other = dataclasses.replace(base, out=tmp_path / "other", reuse=(first.out,))
@@ -1070,6 +1072,6 @@ def test_sweep_config_flags_are_saved_resumed_and_part_of_the_protocol(tmp_path,
                                  "--out", other.out, "--reuse", first.out], capsys)  # fmt: skip
     assert "run with another protocol" in line and "--config" in line
     # A sweep saved before it had Config fields reads back with none set.
-    saved = runs.read_json(first.out / "sweep.json")
+    saved = rundir.read_json(first.out / "sweep.json")
     del saved["config"]
-    assert runs.args_from_saved(sweep.Args, saved).config == presets.SweepConfigFields()
+    assert rundir.args_from_saved(sweep.Args, saved).config == presets.SweepConfigFields()

@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 import study_data
 
-from experiments import compare, report, stats
+from experiments import compare
+from experiments.reporting import report, stats
 
 REPO = Path(__file__).resolve().parents[1]
 ARMS = {"a3c": "a3c@learning_rate=3e-4", "a3c+foresit": "a3c+foresit@learning_rate=3e-4",
@@ -66,7 +67,7 @@ def test_results_md_quotes_the_probe_of_the_3e4_foresit_seeds():
     docs/data/fair_probe_lr3e-4.json (what `experiments.probe --fit-options` wrote)."""
     import json
 
-    from experiments import probe
+    from experiments.reporting import probing
 
     report = json.loads((REPO / "docs" / "data" / "fair_probe_lr3e-4.json").read_text())
     results = (REPO / "docs" / "results.md").read_text()
@@ -79,7 +80,7 @@ def test_results_md_quotes_the_probe_of_the_3e4_foresit_seeds():
         row = f"| {r['seed']} | " + " | ".join(cells) + " |"
         assert row in results, row
         options = r["items"]["fit_options"]
-        assert list(options) == list(probe.FIT_OPTIONS)
+        assert list(options) == list(probing.FIT_OPTIONS)
         row = f"| {r['seed']} | " + " | ".join(f"{v:.2f}" for v in options.values()) + " |"
         assert row in results, row
 
@@ -112,15 +113,16 @@ def test_results_md_quotes_the_tuned_comparison():
     import tarfile
     import tempfile
 
-    from experiments import runs, tune
+    from experiments.running import rundir
+    from experiments import tune
 
     with tempfile.TemporaryDirectory() as tmp, tarfile.open(REPO / "docs" / "data" / "fair_tune.tar.xz") as tar:
         tar.extractall(tmp, **({"filter": "data"} if hasattr(tarfile, "data_filter") else {}))
         root = Path(tmp) / "tune"
-        args = runs.args_from_saved(tune.Args, runs.read_json(root / "tune.json"), out=root)
+        args = rundir.args_from_saved(tune.Args, rundir.read_json(root / "tune.json"), out=root)
         grid = tune.parse_grid(args.grid)
         table = tune.arms(args, grid)
-        results = {a: runs.read_json(root / "sweep" / "methods" / a / "results.json")["results"]
+        results = {a: rundir.read_json(root / "sweep" / "methods" / a / "results.json")["results"]
                    for by_point in table.values() for a in by_point.values()}  # fmt: skip
     chosen = {m: tune.choose({p: results[a] for p, a in by_point.items()}) for m, by_point in table.items()}
     assert chosen == {"a3c": "learning_rate=1e-3", "a3c+critic": "learning_rate=3e-4", "a3c+foresit": "learning_rate=3e-4"}

@@ -3,7 +3,7 @@
 The study (three arms, seeds 0-4, `--preset house`) trained on a lent GPU; its sweep folder,
 without checkpoints, is kept as docs/data/house_study.tar.xz. This reads it back as
 `experiments.compare` and the sweep's tables do, recomputes the quoted means and paired
-intervals with `experiments.stats`, and checks that the README and houses.md print them.
+intervals with `experiments.reporting.stats`, and checks that the README and houses.md print them.
 """
 
 from __future__ import annotations
@@ -13,7 +13,8 @@ from pathlib import Path
 import pytest
 import study_data
 
-from experiments import compare, report, stats
+from experiments import compare
+from experiments.reporting import report, stats
 
 REPO = Path(__file__).resolve().parents[1]
 METHODS = ("a3c", "a3c+critic", "a3c+foresit")

@@ -377,7 +377,7 @@ def test_agents_train_and_evaluate_in_houses():
 
 
 def test_the_house_preset_and_its_arms():
-    from experiments.presets import preset, split_arm
+    from experiments.running.presets import preset, split_arm
 
     config, schedule = preset("house", "a3c")
     assert config.layout == "house" and schedule.test_episodes_per_room == 250 and config.progress_reward == 0.1
@@ -391,11 +391,11 @@ def test_the_house_preset_and_its_arms():
 
 
 def test_reports_add_the_house_columns():
-    from experiments import report, runs
+    from experiments.reporting import report, tables
 
     result = {"overall": {"SPL": 1.0, "SR": 2.0, "SPL>=5": 3.0, "SR>=5": 4.0, "SPL>=10": 5.0, "SR>=10": 6.0,
                           "SPL>=20": None, "SR>=20": 8.0, "episodes": 4}}  # fmt: skip
-    md = runs.results_markdown(result, "T").splitlines()
+    md = tables.results_markdown(result, "T").splitlines()
     assert md[2] == "| rooms | SPL | SR | SPL>=5 | SR>=5 | SPL>=10 | SR>=10 | SPL>=20 | SR>=20 | episodes |"
     assert md[4] == "| overall | 1.00 | 2.00 | 3.00 | 4.00 | 5.00 | 6.00 | n/a | 8.00 | 4 |"
     lines = report.table_markdown(report.table({"a3c": [result] * 2}), "T").splitlines()

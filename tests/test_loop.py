@@ -1,4 +1,4 @@
-"""experiments.loop, the run loop train and sweep share: chunking and the chunk budget,
+"""experiments.running.loop, the run loop train and sweep share: chunking and the chunk budget,
 the non-finite stop (naming update, seed and the last checkpoint), divergence warnings,
 and where a resume continues (the newest intact checkpoint the records cover). Fake
 `run` functions in numpy, and real orbax checkpoints of small trees: no training."""
@@ -6,7 +6,7 @@ and where a resume continues (the newest intact checkpoint the records cover). F
 import numpy as np
 import pytest
 
-from experiments import loop, runs
+from experiments.running import checkpoint, loop
 
 
 def fake_run(nan_at=None, nan_params_after=None, seeds=None):
@@ -107,15 +107,15 @@ def test_divergence_short_of_nan_is_warned_and_handed_on(capsys):
 
 
 def checkpoints(tmp_path, steps):
-    manager = runs.checkpoint_manager(tmp_path / "ckpt", 10)
+    manager = checkpoint.checkpoint_manager(tmp_path / "ckpt", 10)
     for step in steps:
-        runs.save(manager, step, {"w": np.full(3, step, np.float32)})
+        checkpoint.save(manager, step, {"w": np.full(3, step, np.float32)})
     manager.wait_until_finished()
     return manager
 
 
 def truncate(manager, step):
-    data = max((p for p in runs.step_dir(manager, step).rglob("*") if p.is_file() and p.name != runs.CHECKSUM_FILE),
+    data = max((p for p in checkpoint.step_dir(manager, step).rglob("*") if p.is_file() and p.name != checkpoint.CHECKSUM_FILE),
                key=lambda p: p.stat().st_size)  # fmt: skip
     data.write_bytes(data.read_bytes()[: data.stat().st_size // 2])
 
@@ -133,7 +133,7 @@ def test_a_resume_continues_from_the_newest_intact_checkpoint_the_records_cover(
     assert loop.resume_point(manager, tmp_path / "ckpt") == 0 and manager.all_steps() == []
     assert "no intact checkpoint in" in capsys.readouterr().err
     manager = checkpoints(tmp_path, [2])
-    fresh = runs.checkpoint_manager(tmp_path / "none", 10)
+    fresh = checkpoint.checkpoint_manager(tmp_path / "none", 10)
     assert loop.resume_point(fresh, tmp_path / "none") == 0 and capsys.readouterr().err == ""
     assert loop.resume_point(fresh, tmp_path / "none", recorded=2) == 0  # recorded, but the checkpoint is gone
     assert "no checkpoint in" in capsys.readouterr().err

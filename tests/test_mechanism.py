@@ -440,7 +440,7 @@ def test_explained_variance_and_advantage_spread_against_numpy():
 
 
 def test_sweep_diagnostics_table_by_hand():
-    from experiments import report
+    from experiments.reporting import report
 
     seed = lambda x: {"diagnostics": {n: [x, 2 * x, 3 * x] for n in report.DIAGNOSTICS[:-1]}}  # noqa: E731
     md = report.diagnostics_markdown({"a3c": [seed(1.0), seed(3.0)], "other": [{}]})
@@ -453,10 +453,11 @@ def test_sweep_diagnostics_table_by_hand():
 
 @pytest.mark.slow
 def test_fit_options_replay_each_option_on_the_fit_items_and_score_the_held_out_ones():
-    """`experiments.probe.fit_options` on items `[windows, T, B]`: one R^2 per option of
+    """`experiments.probing.fit_options` on items `[windows, T, B]`: one R^2 per option of
     FIT_OPTIONS; 'as trained' is the run's own procedure replayed on the even items and
     scored on the odd ones against their mean, as a direct computation gives it."""
-    from experiments import probe
+    from experiments.reporting import probing
+    from experiments.running import models
 
     config = H.tiny_config("a3c+foresit", buffer_size=8)
     trainer = H.trainer(config)
@@ -465,11 +466,11 @@ def test_fit_options_replay_each_option_on_the_fit_items_and_score_the_held_out_
     items = (rng.normal(size=shape + (16,)).astype(np.float32), rng.normal(size=shape + (8,)).astype(np.float32),
              rng.normal(size=shape + (16,)).astype(np.float32), rng.random(shape) < 0.6)  # fmt: skip
     w0 = trainer.agent.imagination_net.init(jax.random.PRNGKey(0), items[0][0, 0, 0], items[1][0, 0, 0])
-    model = probe.Model(config, trainer, 0, None, None)
-    got = probe.fit_options(model, w0, items, passes=2)
-    assert list(got) == list(probe.FIT_OPTIONS) and all(np.isfinite(v) for v in got.values())
-    small = probe.Model(dataclasses.replace(config, buffer_size=2), trainer, 0, None, None)
-    assert np.isnan(probe.fit_options(small, w0, items, passes=1)["batch 8"])  # 8 does not divide 2
+    model = models.Model(config, trainer, 0, None, None)
+    got = probing.fit_options(model, w0, items, passes=2)
+    assert list(got) == list(probing.FIT_OPTIONS) and all(np.isfinite(v) for v in got.values())
+    small = models.Model(dataclasses.replace(config, buffer_size=2), trainer, 0, None, None)
+    assert np.isnan(probing.fit_options(small, w0, items, passes=1)["batch 8"])  # 8 does not divide 2
     flat = [x.reshape((-1,) + x.shape[2:]) for x in items]
     add = flat[3]
     w = probes.replay_online_fit(trainer.agent.imagine, w0, *flat[:3], probes.only_fit_items(add),

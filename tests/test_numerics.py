@@ -1,11 +1,11 @@
-"""experiments.numerics: the platform recorded with a run, its history over a resumed run,
+"""experiments.running.numerics: the platform recorded with a run, its history over a resumed run,
 and the reports' Platforms section."""
 
 from __future__ import annotations
 
 import json
 
-from experiments import numerics
+from experiments.running import numerics
 
 CPUINFO = """processor	: 0
 vendor_id	: AuthenticAMD

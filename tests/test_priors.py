@@ -217,7 +217,7 @@ def test_docs_relation_table_is_the_code():
 def test_priors_is_the_sweeps_not_an_arms():
     """The scenes are one sweep's (one Evaluator serves it): an arm cannot set priors, the
     preset's override can."""
-    from experiments.presets import preset, split_arm
+    from experiments.running.presets import preset, split_arm
 
     with pytest.raises(ValueError, match="'priors' is not a Config field an arm can set.*--priors"):
         split_arm("a3c@priors=true")
@@ -244,9 +244,9 @@ def test_the_gpu_script_runs_dry_on_a_cpu(tmp_path):
     assert "a3c+foresit@learning_rate=3e-4 - a3c+critic@learning_rate=3e-4" in savn
     assert "a3c+foresit@learning_rate=3e-4 - a3c" in savn
     assert "a3c+org+foresit - a3c+org" in (runs_ / "org_all" / "compare.md").read_text()
-    from experiments import runs
+    from experiments.running import rundir
 
-    assert all(runs.read_json(runs_ / f"{s}_all" / "sweep.json")["config"]["priors"] is True for s in ("savn", "org"))
+    assert all(rundir.read_json(runs_ / f"{s}_all" / "sweep.json")["config"]["priors"] is True for s in ("savn", "org"))
     with tarfile.open(tmp_path / "out" / "priors_gpu.tar.xz") as tar:
         names = tar.getnames()
     assert any(n.endswith("org_all/table1.md") for n in names) and not any("checkpoints" in n for n in names)
@@ -273,11 +273,13 @@ def test_docs_quote_the_study_in_rooms_with_priors(tmp_path, capsys):
     from pathlib import Path
 
     import study_data
-    from experiments import compare, report, runs
+    from experiments.running import rundir
+    from experiments.reporting import report
+    from experiments import compare
 
     arms = ("a3c", "a3c+critic@learning_rate=3e-4", "a3c+foresit@learning_rate=3e-4")
     root = study_data.unpack("priors_savn.tar.xz", tmp_path, arms)
-    assert runs.read_json(root / "sweep.json")["config"]["priors"] is True
+    assert rundir.read_json(root / "sweep.json")["config"]["priors"] is True
     pairs = [(arms[0], arms[1]), (arms[0], arms[2]), (arms[1], arms[2])]
     out = compare.main(compare.Args(run=root, pairs=tuple(f"{a}:{b}" for a, b in pairs)))
     capsys.readouterr()

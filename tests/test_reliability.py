@@ -28,8 +28,9 @@ import envs
 import train_helpers as H
 from benchmarks import search_learner
 from experiments import evaluate as evaluate_cli
-from experiments import runs, sweep
+from experiments import sweep
 from experiments import train as train_cli
+from experiments.running import checkpoint, errors, loop, rundir, sweeps
 from foresit_jax.config import Config
 
 REPO = Path(__file__).resolve().parents[1]
@@ -71,16 +72,16 @@ HOLDER = """
 import os, sys, time
 from pathlib import Path
 sys.path.insert(0, {repo!r})
-from experiments import runs
+from experiments.running import checkpoint, errors, loop, rundir
 Path({ready!r}, str(os.getpid())).write_text("")
 while not Path({go!r}).exists():
     time.sleep(0.001)
 try:
-    runs.prepare_run_dir(Path({out!r}), resume=False, overwrite=False)
+    rundir.prepare_run_dir(Path({out!r}), resume=False, overwrite=False)
     (Path({out!r}) / "run.json").write_text("{{}}")
     print("claimed", flush=True)
     time.sleep({hold})
-except runs.UserError as e:
+except errors.UserError as e:
     print("refused:", e, flush=True)
 """
 
@@ -111,14 +112,14 @@ def test_two_processes_started_at_the_same_instant_on_one_folder_one_is_refused(
 def test_a_run_held_by_another_process_is_refused_in_one_line_and_left_as_it_was(run6, tmp_path, capsys):
     out = tmp_path / "held"
     shutil.copytree(run6, out)
-    (out / runs.LOCK_FILE).unlink()
+    (out / rundir.LOCK_FILE).unlink()
     before = snapshot(out)
     holder = subprocess.Popen([sys.executable, "-c", textwrap.dedent(f"""
         import sys, time
         sys.path.insert(0, {str(REPO)!r})
         from pathlib import Path
-        from experiments import runs
-        runs.claim(Path({str(out)!r}))
+        from experiments.running import checkpoint, errors, loop, rundir
+        rundir.claim(Path({str(out)!r}))
         print("holding", flush=True)
         time.sleep(30)
         """)], stdout=subprocess.PIPE, text=True)  # fmt: skip
@@ -132,19 +133,19 @@ def test_a_run_held_by_another_process_is_refused_in_one_line_and_left_as_it_was
     finally:
         holder.kill()
         holder.wait()
-    lock = out / runs.LOCK_FILE
-    assert {k: v for k, v in snapshot(out).items() if k != runs.LOCK_FILE} == before
+    lock = out / rundir.LOCK_FILE
+    assert {k: v for k, v in snapshot(out).items() if k != rundir.LOCK_FILE} == before
     assert lock.exists()  # left behind by the killed holder: it locks nothing now
-    runs.claim(out)
+    rundir.claim(out)
 
 
 def test_prepare_run_dir_claims_the_folder_and_ignores_its_own_lock_file(tmp_path):
     out = tmp_path / "out"
-    runs.prepare_run_dir(out, resume=False, overwrite=False)
-    assert (out / runs.LOCK_FILE).read_text() == str(os.getpid())
-    runs.prepare_run_dir(out, resume=False, overwrite=False)  # only the lock: still empty
-    with pytest.raises(runs.UserError, match="is a file"):
-        runs.claim(out / runs.LOCK_FILE)
+    rundir.prepare_run_dir(out, resume=False, overwrite=False)
+    assert (out / rundir.LOCK_FILE).read_text() == str(os.getpid())
+    rundir.prepare_run_dir(out, resume=False, overwrite=False)  # only the lock: still empty
+    with pytest.raises(errors.UserError, match="is a file"):
+        rundir.claim(out / rundir.LOCK_FILE)
 
 
 # ---------------------------------------------------------------------- 2-3. non-finite and diverging
@@ -161,7 +162,7 @@ def test_a_step_that_leaves_inf_weights_behind_a_finite_loss_is_not_reported(tmp
 
 @pytest.mark.slow
 def test_a_sweep_names_the_seed_whose_weights_went_non_finite(tmp_path, capsys):
-    """The same fault in a sweep (the loop train and sweep share, experiments.loop)."""
+    """The same fault in a sweep (the loop train and sweep share, experiments.running.loop)."""
     out = tmp_path / "inf_sweep"
     line = one_line_error(sweep.cli, ["--methods", "a3c", "--seeds", "2", "--seed", "3", "--preset", "tiny", "--out", out,
                                       "--no-progress", "--learning-rate", "1e39", "--num-updates", "1"], capsys, code=1)  # fmt: skip
@@ -173,7 +174,7 @@ def test_a_sweep_names_the_seed_whose_weights_went_non_finite(tmp_path, capsys):
 def test_nan_weights_in_a_later_chunk_stop_the_run_naming_a_checkpoint_that_exists(tmp_path, capsys, monkeypatch):
     out = tmp_path / "nan_later"
     train_cli.main(tiny(out, stop_after_chunks=1))
-    trainer = H.cached_trainer(Config(**runs.read_run_info(out)["config"]))
+    trainer = H.cached_trainer(Config(**rundir.read_run_info(out)["config"]))
     real_run = trainer.run
 
     def poisoned(state, env_params, n, **kwargs):  # the chunk's loss stays finite; its weights do not
@@ -183,33 +184,33 @@ def test_nan_weights_in_a_later_chunk_stop_the_run_naming_a_checkpoint_that_exis
     monkeypatch.setattr(trainer, "run", poisoned)
     line = one_line_error(train_cli.cli, ["--out", out, "--resume", "--no-progress"], capsys, code=1)
     assert "non-finite parameters after update 4" in line and "last checkpoint (update 2, finite)" in line, line
-    manager = runs.checkpoint_manager(out / "checkpoints", 10)
+    manager = checkpoint.checkpoint_manager(out / "checkpoints", 10)
     assert manager.all_steps() == [2]
-    assert runs.finite_seeds(runs.restore(manager, 2, trainer.init(jax.random.PRNGKey(0))))
-    assert [r["update"] for r in runs.read_rows(out / "metrics")] == [1, 2]
+    assert loop.finite_seeds(checkpoint.restore(manager, 2, trainer.init(jax.random.PRNGKey(0))))
+    assert [r["update"] for r in rundir.read_rows(out / "metrics")] == [1, 2]
 
 
 def test_finite_seeds_finds_the_seed_with_a_nan():
     tree = {"w": np.ones((3, 4), np.float32), "step": np.arange(3), "b": np.zeros((3,), np.float32)}
-    assert runs.finite_seeds(tree, 3).tolist() == [True, True, True] and runs.finite_seeds(tree)
+    assert loop.finite_seeds(tree, 3).tolist() == [True, True, True] and loop.finite_seeds(tree)
     tree["w"][1, 2] = np.inf
-    assert runs.finite_seeds(tree, 3).tolist() == [True, False, True] and not runs.finite_seeds(tree)
+    assert loop.finite_seeds(tree, 3).tolist() == [True, False, True] and not loop.finite_seeds(tree)
 
 
 def test_divergence_short_of_nan_is_warned_of():
     normal = {"losses/grad_norm": [0.5, 3.0], "losses/total_loss": [1.2, -0.4], "losses/entropy": [1.7, 0.3]}
-    assert runs.divergence(normal) is None
+    assert loop.divergence(normal) is None
     for name, values, says in (("losses/total_loss", [1.0, 1e33], "total_loss reached 1e+33"),
                                ("losses/grad_norm", [np.inf, 1.0], "grad_norm reached inf"),
                                ("losses/entropy", [0.5, 0.0], "entropy fell to 0")):  # fmt: skip
-        warning = runs.divergence({**normal, name: values})
+        warning = loop.divergence({**normal, name: values})
         assert warning is not None and says in warning, warning
 
 
 # ---------------------------------------------------------------------- 4. checkpoints verified
 def corrupt(folder: Path, how: str) -> None:
     """Damage a checkpoint as a bad disk or a killed copy would."""
-    data = sorted((p for p in folder.rglob("*") if p.is_file() and p.name != runs.CHECKSUM_FILE),
+    data = sorted((p for p in folder.rglob("*") if p.is_file() and p.name != checkpoint.CHECKSUM_FILE),
                   key=lambda p: p.stat().st_size)[-1]  # fmt: skip
     raw = bytearray(data.read_bytes())
     if how == "flipped":
@@ -255,7 +256,7 @@ def test_a_sweep_resumes_past_a_corrupt_checkpoint_to_the_same_numbers(tmp_path,
 def test_a_corrupt_best_model_is_one_line_and_the_good_results_stay(run6, tmp_path, capsys):
     out = tmp_path / "corrupt_best"
     shutil.copytree(run6, out)
-    (out / runs.LOCK_FILE).unlink()
+    (out / rundir.LOCK_FILE).unlink()
     good = (out / "results_test.json").read_bytes()
     (step,) = [p for p in (out / "best").iterdir() if p.name.isdigit()]
     corrupt(step, "flipped")
@@ -266,15 +267,15 @@ def test_a_corrupt_best_model_is_one_line_and_the_good_results_stay(run6, tmp_pa
 
 @pytest.mark.slow
 def test_a_checkpoint_saved_before_checksums_still_restores(run6, tmp_path):
-    manager = runs.checkpoint_manager(run6 / "checkpoints", 10)
+    manager = checkpoint.checkpoint_manager(run6 / "checkpoints", 10)
     step = manager.latest_step()
-    like = H.cached_trainer(Config(**runs.read_run_info(run6)["config"])).init(jax.random.PRNGKey(0))
+    like = H.cached_trainer(Config(**rundir.read_run_info(run6)["config"])).init(jax.random.PRNGKey(0))
     copy = tmp_path / "old"
     shutil.copytree(run6 / "checkpoints", copy)
-    (copy / str(step) / runs.CHECKSUM_FILE).unlink()
-    old = runs.checkpoint_manager(copy, 10)
-    assert runs.intact_step(old) == (step, [])
-    H.assert_trees_bitwise_equal(runs.restore(old, step, like), runs.restore(manager, step, like))
+    (copy / str(step) / checkpoint.CHECKSUM_FILE).unlink()
+    old = checkpoint.checkpoint_manager(copy, 10)
+    assert checkpoint.intact_step(old) == (step, [])
+    H.assert_trees_bitwise_equal(checkpoint.restore(old, step, like), checkpoint.restore(manager, step, like))
 
 
 # ---------------------------------------------------------------------- 5. resume and its flags
@@ -293,7 +294,7 @@ def test_resume_refuses_flags_that_contradict_the_run_and_extends_with_num_updat
     capsys.readouterr()
     train_cli.main(train_cli.Args(out=out, resume=True, num_updates=6, progress=False))
     assert "extending" in capsys.readouterr().out
-    assert runs.read_run_info(out)["config"]["num_updates"] == 6
+    assert rundir.read_run_info(out)["config"]["num_updates"] == 6
     # The same updates as a run of 6 from the start (the validation follows the chunks:
     # here too they end at 2, 4, 6).
     assert (out / "metrics.jsonl").read_bytes() == (run6 / "metrics.jsonl").read_bytes()
@@ -304,15 +305,15 @@ def test_resume_refuses_flags_that_contradict_the_run_and_extends_with_num_updat
 def test_resume_of_a_finished_run_leaves_its_files_alone(run6, tmp_path, capsys):
     out = tmp_path / "finished"
     shutil.copytree(run6, out)
-    (out / runs.LOCK_FILE).unlink()
+    (out / rundir.LOCK_FILE).unlink()
     with open(out / "results_test.md", "a") as f:
         f.write("\nmy note\n")
     before = snapshot(out)
     capsys.readouterr()
     results = train_cli.main(train_cli.Args(out=out, resume=True, progress=False))
     assert "nothing to do" in capsys.readouterr().out
-    assert {k: v for k, v in snapshot(out).items() if k != runs.LOCK_FILE} == before
-    assert results == runs.read_json(out / "results_test.json")["results"]
+    assert {k: v for k, v in snapshot(out).items() if k != rundir.LOCK_FILE} == before
+    assert results == rundir.read_json(out / "results_test.json")["results"]
 
 
 # ---------------------------------------------------------------------- 6. inf in Config
@@ -410,7 +411,7 @@ def test_a_full_disk_is_one_line_that_says_how_to_continue(tmp_path, capsys, mon
     def full(path, x):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
 
-    monkeypatch.setattr(runs, "write_json", full)
+    monkeypatch.setattr(rundir, "write_json", full)
     line = one_line_error(train_cli.cli, ["--preset", "tiny", "--out", tmp_path / "full"], capsys, code=1)
     assert line == f"error: {tmp_path / 'full' / 'run.json'}: No space left on device (free some space, then continue with --resume)"
 
@@ -421,7 +422,7 @@ def test_a_disk_too_full_for_a_checkpoint_is_one_line_before_orbax_writes(tmp_pa
     to the files of an uninterrupted one once the filler was deleted; orbax failing in the
     middle of a write printed 931 lines.)"""
     usage = shutil.disk_usage(tmp_path)
-    monkeypatch.setattr(runs.shutil, "disk_usage", lambda path: usage._replace(free=100_000))
+    monkeypatch.setattr(checkpoint.shutil, "disk_usage", lambda path: usage._replace(free=100_000))
     out = tmp_path / "full_at_checkpoint"
     line = one_line_error(train_cli.cli, ["--preset", "tiny", "--out", out, "--no-progress"], capsys, code=1)
     assert "No space left on device for checkpoint 2" in line and "continue with --resume" in line, line
@@ -434,7 +435,7 @@ def test_evaluate_on_a_read_only_run_folder_fails_before_evaluating(run6, tmp_pa
     stop): opening its lock file fails as on a read-only file system, before any work."""
     out = tmp_path / "read_only"
     shutil.copytree(run6, out)
-    (out / runs.LOCK_FILE).unlink()
+    (out / rundir.LOCK_FILE).unlink()
     real_open = os.open
 
     def read_only(path, *args, **kwargs):
@@ -442,10 +443,10 @@ def test_evaluate_on_a_read_only_run_folder_fails_before_evaluating(run6, tmp_pa
             raise OSError(errno.EROFS, os.strerror(errno.EROFS), str(path))
         return real_open(path, *args, **kwargs)
 
-    monkeypatch.setattr(runs.os, "open", read_only)
+    monkeypatch.setattr(rundir.os, "open", read_only)
     monkeypatch.setattr(evaluate_cli, "selection", None)  # evaluating would fail on it: it must not get there
     line = one_line_error(evaluate_cli.cli, ["--run", out, "--split", "val"], capsys)
-    assert line == f"error: {out / runs.LOCK_FILE}: {os.strerror(errno.EROFS)}"
+    assert line == f"error: {out / rundir.LOCK_FILE}: {os.strerror(errno.EROFS)}"
     assert not (out / "results_val.json").exists()
 
 
@@ -465,13 +466,13 @@ def test_sweep_rewind_drops_the_chunks_after_a_step_and_reselects():
                 "counts": {"charts/episodes": [[5.0, 6.0], [7.0, 8.0], [9.0, 10.0]]},
                 "best_sr": [50.0, 40.0], "best_update": [6, 4],
                 "numerics": [{"from_update": 0, "platform": "a"}, {"from_update": 6, "platform": "b"}]}  # fmt: skip
-    back = sweep.rewind(progress, 2)
+    back = sweeps.rewind(progress, 2)
     assert back["done"] == 2 and len(back["curves"]) == 1 and back["diagnostics"]["losses/entropy"] == [[1.0, 1.1]]
     assert back["counts"] == {"charts/episodes": [[5.0, 6.0]]}
-    assert sweep.counts_of(back, 1) == {"charts/episodes": 6.0}
-    assert sweep.counts_of({**back, "counts": {}}, 1) == {}  # recorded in no chunk: no count, not 0
-    assert sweep.counts_of({**progress, "counts": back["counts"]}, 0) == {}  # in some chunks only: no undercount
+    assert sweeps.counts_of(back, 1) == {"charts/episodes": 6.0}
+    assert sweeps.counts_of({**back, "counts": {}}, 1) == {}  # recorded in no chunk: no count, not 0
+    assert sweeps.counts_of({**progress, "counts": back["counts"]}, 0) == {}  # in some chunks only: no undercount
     assert back["best_sr"] == [10.0, 40.0] and back["best_update"] == [2, 2]
     assert [len(h) for h in back["history"]] == [1, 1] and back["numerics"] == [{"from_update": 0, "platform": "a"}]
-    back = sweep.rewind(progress, 4)
+    back = sweeps.rewind(progress, 4)
     assert back["best_sr"] == [30.0, 40.0] and back["best_update"] == [4, 4]  # a tie: the later model

@@ -1,4 +1,4 @@
-"""experiments.stats' robust statistics: against hand-computed values, a brute-force count,
+"""experiments.reporting.stats' robust statistics: against hand-computed values, a brute-force count,
 a simulation, and rliable's own functions on fixed data (where rliable is installed)."""
 
 import importlib.util
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from experiments import stats
+from experiments.reporting import stats
 
 needs_rliable = pytest.mark.skipif(importlib.util.find_spec("rliable") is None,
                                    reason="rliable is not installed (pip install rliable)")

@@ -1,8 +1,8 @@
-"""experiments.selection: which model is kept, and which keys validation and test use."""
+"""experiments.running.selection: which model is kept, and which keys validation and test use."""
 
 import numpy as np
 
-from experiments import selection
+from experiments.running import selection
 
 
 def test_the_best_validation_sr_is_kept_and_the_later_model_on_ties():

@@ -1,4 +1,4 @@
-"""experiments.stats against hand computations (a t table, the closed form of the t
+"""experiments.reporting.stats against hand computations (a t table, the closed form of the t
 distribution with 2 degrees of freedom), scipy's own paired test, and invariants."""
 
 import math
@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import stats as scipy_stats
 
-from experiments import stats
+from experiments.reporting import stats
 
 
 def test_summary_by_hand():

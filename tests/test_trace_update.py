@@ -7,7 +7,7 @@ import jax
 import pytest
 
 from benchmarks import trace_update
-from experiments.presets import preset
+from experiments.running.presets import preset
 from foresit_jax.train import make_trainer
 
 

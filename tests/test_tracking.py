@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from experiments import runs, tracking
 from experiments import train as train_cli
+from experiments.running import errors, rundir, tracking
 
 
 # Cheap in-process CLI calls for every test of this module (tests/conftest.py).
@@ -46,10 +46,10 @@ def test_tensorboard_gets_every_metric_and_validation_row_of_the_csv(tmp_path):
     out = tmp_path / "tb"
     train_cli.main(tiny(out, track="tensorboard"))
     scalars = event_scalars(out / "tensorboard")
-    rows = runs.read_rows(out / "metrics")
+    rows = rundir.read_rows(out / "metrics")
     for name in ("losses/total_loss", "charts/success_rate", "frames", "losses/explained_variance"):
         assert scalars[name] == pytest.approx({r["update"]: r[name] for r in rows}, rel=1e-6), name
-    validation = runs.read_rows(out / "validation")
+    validation = rundir.read_rows(out / "validation")
     assert scalars["validation/SR"] == pytest.approx({r["update"]: r["SR"] for r in validation})
 
 
@@ -77,17 +77,17 @@ def test_wandb_gets_the_same_rows_under_one_run_id_across_a_resume(tmp_path, mon
     assert len(inits) == 2 and inits[0]["id"] == inits[1]["id"] and inits[0]["resume"] == "allow"
     assert all(kw["mode"] == "offline" and kw["dir"] == str(out / "wandb") for kw in inits)
     logged = {step: row for kind, *rest in calls if kind == "log" for step, row in [rest] if "losses/total_loss" in row}
-    assert sorted(logged) == [r["update"] for r in runs.read_rows(out / "metrics")]
-    assert {r["update"]: r["losses/total_loss"] for r in runs.read_rows(out / "metrics")} == pytest.approx(
+    assert sorted(logged) == [r["update"] for r in rundir.read_rows(out / "metrics")]
+    assert {r["update"]: r["losses/total_loss"] for r in rundir.read_rows(out / "metrics")} == pytest.approx(
         {step: row["losses/total_loss"] for step, row in logged.items()})
 
 
 def test_an_unknown_or_missing_tracker_is_one_line_before_training(tmp_path, monkeypatch):
-    with pytest.raises(runs.UserError, match="must be one of"):
+    with pytest.raises(errors.UserError, match="must be one of"):
         tracking.check("mlflow")
     real = importlib.util.find_spec
     monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "wandb" else real(name, *a))
     monkeypatch.delitem(sys.modules, "wandb", raising=False)
-    with pytest.raises(runs.UserError, match=r"pip install 'foresit_jax\[track\]'"):
+    with pytest.raises(errors.UserError, match=r"pip install 'foresit_jax\[track\]'"):
         train_cli.main(tiny(tmp_path / "none", track="wandb"))
     assert not (tmp_path / "none").exists()

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 from scipy import stats as sp
 
-from experiments import runs, sweep, tune
+from experiments import sweep, tune
+from experiments.running import errors, sweeps
 
 SEEDS = (0, 1, 2, 3)
 
@@ -47,19 +48,19 @@ def test_grid_points_and_arms():
     ((), "at least one"),
 ])  # fmt: skip
 def test_grid_errors_name_what_is_wrong(spec, message):
-    with pytest.raises(runs.UserError, match=message):
+    with pytest.raises(errors.UserError, match=message):
         tune.parse_grid(spec)
 
 
 def test_arms_are_checked_against_the_preset(tmp_path):
     args = tune.Args(methods=("a3c@learning_rate=1e-3",), out=tmp_path)
-    with pytest.raises(runs.UserError, match="sets learning_rate, which --grid varies"):
+    with pytest.raises(errors.UserError, match="sets learning_rate, which --grid varies"):
         tune.arms(args, tune.parse_grid(["learning_rate=3e-4"]))
     with pytest.raises(ValueError, match="not a Config field"):
         tune.arms(tune.Args(methods=("a3c",), out=tmp_path), tune.parse_grid(["no_such_field=1"]))
     with pytest.raises(ValueError, match="is not a float"):
         tune.arms(tune.Args(methods=("a3c",), out=tmp_path), tune.parse_grid(["learning_rate=fast"]))
-    with pytest.raises(runs.UserError, match="trains what it trains at learning_rate=1e-3"):
+    with pytest.raises(errors.UserError, match="trains what it trains at learning_rate=1e-3"):
         tune.arms(tune.Args(methods=("a3c",), out=tmp_path), tune.parse_grid(["learning_rate=1e-3,0.001"]))
     table = tune.arms(tune.Args(methods=("a3c", "a3c+critic"), out=tmp_path), tune.parse_grid(["learning_rate=3e-4,1e-3"]))
     assert table["a3c+critic"] == {"learning_rate=3e-4": "a3c+critic@learning_rate=3e-4",
@@ -88,7 +89,7 @@ def test_a_seed_without_a_validation_at_its_selected_update_is_refused():
     rng = np.random.default_rng(0)
     bad = per_seed([50], [40], rng)
     bad[0]["selected_update"] = 25
-    with pytest.raises(runs.UserError, match="selected update 25"):
+    with pytest.raises(errors.UserError, match="selected update 25"):
         tune.selection_sr(bad)
 
 
@@ -134,11 +135,11 @@ def test_reuse_finds_an_arm_under_its_plain_method_name(tmp_path):
     (tmp_path / "methods" / "a3c").mkdir(parents=True)
     (tmp_path / "methods" / "not an arm!").mkdir()
     args = sweep.Args(methods=("a3c@learning_rate=1e-3",), preset="quick")
-    assert sweep.method_folder(tmp_path, "a3c@learning_rate=1e-3", args) == tmp_path / "methods" / "a3c"
-    assert sweep.method_folder(tmp_path, "a3c", args) == tmp_path / "methods" / "a3c"
-    missing = sweep.method_folder(tmp_path, "a3c@learning_rate=3e-4", args)
+    assert sweeps.method_folder(tmp_path, "a3c@learning_rate=1e-3", args) == tmp_path / "methods" / "a3c"
+    assert sweeps.method_folder(tmp_path, "a3c", args) == tmp_path / "methods" / "a3c"
+    missing = sweeps.method_folder(tmp_path, "a3c@learning_rate=3e-4", args)
     assert missing == tmp_path / "methods" / "a3c@learning_rate=3e-4" and not missing.exists()
-    assert sweep.method_folder(tmp_path, "a3c+critic@learning_rate=1e-3", args).name == "a3c+critic@learning_rate=1e-3"
+    assert sweeps.method_folder(tmp_path, "a3c+critic@learning_rate=1e-3", args).name == "a3c+critic@learning_rate=1e-3"
 
 
 @pytest.mark.slow
@@ -163,7 +164,7 @@ def test_tune_end_to_end_resumes_and_reuses_a_plain_sweep(tmp_path, capsys):
                for p in ("learning_rate=1e-4", "learning_rate=1e-3")}  # fmt: skip
     assert done["chosen"] == {"a3c": tune.choose(results)}
     assert (out / "tune.md").is_file() and (out / "tune_curves.png").is_file()
-    with pytest.raises(runs.UserError, match="already exists"):
+    with pytest.raises(errors.UserError, match="already exists"):
         tune.main(tune.Args(methods=("a3c",), seeds=2, preset="tiny", out=out, progress=False))
 
 

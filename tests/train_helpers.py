@@ -187,7 +187,7 @@ def patch_for_experiments(mp) -> None:
     reuses the same jitted chunk instead of recompiling it: a Trainer is pure), one Evaluator
     per setup (its compiled evaluation rollouts are shared the same way), and jit compiles
     with FAST_COMPILE."""
-    import experiments.presets as presets
+    import experiments.running.presets as presets
     import foresit_jax.train as train
 
     evaluate = importlib.import_module("foresit_jax.evaluate")  # the module (the package exports a function)

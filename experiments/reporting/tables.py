@@ -57,3 +57,19 @@ def write_csv(path: Path, rows: Sequence[dict], append: bool = False) -> None:
 
 def _csv_cell(value):
     return "nan" if value is None or (isinstance(value, float) and math.isnan(value)) else value
+
+
+RESULT_COLUMNS = ("SPL", "SR", "SPL>=5", "SR>=5")  # Table 1's columns
+HOUSE_COLUMNS = ("SPL>=10", "SR>=10", "SPL>=20", "SR>=20")  # and the houses' longer buckets (envs.metrics)
+
+
+def results_markdown(results: dict, title: str, level: int = 1) -> str:
+    """One row per room type (and overall); houses' results add their L >= 10, 20 columns."""
+    first = next(iter(results.values()))
+    cols = RESULT_COLUMNS + tuple(c for c in HOUSE_COLUMNS if c in first)
+    rows = [[room, *(_fmt(m[c]) for c in cols), m["episodes"]] for room, m in results.items()]
+    return "#" * level + f" {title}\n\n" + markdown_table(rows, ["rooms", *cols, "episodes"]) + "\n"
+
+
+def _fmt(x: float) -> str:
+    return "n/a" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.2f}"

@@ -1,25 +1,20 @@
-"""Run folders: config, metrics files, orbax checkpoints, reports and plots.
+"""Run folders: one writer at a time, the arguments a run started with, JSON and metric rows.
 
-A run folder holds:
+A run folder of `train` holds:
   run.json            what was run (method, preset, seed, config, schedule)
   metrics.jsonl/.csv  one row per update
   validation.jsonl    one row per validation (after each chunk)
-  checkpoints/        orbax checkpoints of the whole training state (latest few)
+  checkpoints/        orbax checkpoints of the whole training state (latest few; `checkpoint`)
   best/               the agent with the best validation SR (model selection)
   results_<split>.json/.md, learning_curve.png
   .lock               held (an OS lock, `claim`) by the one process writing the folder
-
-Every checkpoint gets a checksum of its files at save (`save`), checked before it is
-restored (`restore`): a corrupt or truncated one is one line naming it, and a resume falls
-back to the newest intact one (`intact_step`).
+A sweep's folder holds sweep.json and one folder per arm (`experiments.running.sweeps`).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import errno
 import fcntl
-import hashlib
 import json
 import math
 import os
@@ -27,49 +22,12 @@ import shutil
 import sys
 from pathlib import Path
 
-import jax
 import numpy as np
 
-from experiments.tables import markdown_table, write_csv
+from experiments.reporting.tables import write_csv
+from experiments.running.errors import UserError
 
 RUN_FILE = "run.json"
-
-
-class UserError(Exception):
-    """A problem with what the user asked for: printed as one line, exit status 2."""
-
-
-def fail(message: str, status: int = 2) -> None:
-    print(f"error: {message}", file=sys.stderr)
-    raise SystemExit(status)
-
-
-def run_cli(args_class, main, argv=None):
-    """A CLI's body: parse `argv` into `args_class` with tyro and run `main`; what the user
-    asked wrongly (UserError, ValueError) is one line on stderr and exit status 2."""
-    import tyro
-
-    args = tyro.cli(args_class, args=argv)
-    try:
-        return main(args)
-    except (UserError, ValueError) as e:
-        fail(str(e))
-    except OSError as e:  # disk full, read-only, not a directory: one line, not a traceback
-        if e.errno not in _USER_ERRNOS:
-            raise
-        fail(os_message(e), status=1 if e.errno in (errno.ENOSPC, errno.EDQUOT) else 2)
-
-
-# What the user's disk or paths did, not a bug: reported in one line.
-_USER_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.ENOTDIR, errno.EISDIR,
-                errno.EEXIST, errno.ENOENT}  # fmt: skip
-
-
-def os_message(e: OSError) -> str:
-    where = f"{e.filename}: " if e.filename else ""
-    return f"{where}{e.strerror or e}" + (" (free some space, then continue with --resume)"
-                                          if e.errno in (errno.ENOSPC, errno.EDQUOT) else "")  # fmt: skip
-
 
 # ---------------------------------------------------------------------- one writer per folder
 LOCK_FILE = ".lock"
@@ -309,206 +267,3 @@ def truncate_rows(path: Path, last_update: int) -> None:
         else:
             write_csv(tmp, rows)
         os.replace(tmp, target)
-
-
-def finite_seeds(tree, num_seeds: int | None = None) -> np.ndarray:
-    """Whether every float of `tree` (a training state: parameters, optimiser moments,
-    f_w) is finite: a bool, or with `num_seeds` one per seed (leaves stacked over seeds).
-    The loss is computed before each update, so a finite loss can still leave NaN
-    weights behind (an infinite step, for one): this is checked before every save."""
-    ok = np.ones(num_seeds or 1, bool)
-    for leaf in jax.tree.leaves(tree):
-        if not jax.dtypes.issubdtype(leaf.dtype, np.floating):
-            continue
-        ok &= np.isfinite(np.asarray(leaf)).reshape(len(ok), -1).all(1)
-    return ok if num_seeds else ok[0]
-
-
-# Divergence, short of NaN: bounds about 1000x past what quick training shows (its
-# gradient norm stays below 4 and |loss| below 2; entropy, at most ln 6 = 1.79, above 0.3).
-DIVERGENCE_BOUNDS = {"losses/grad_norm": 1e4, "losses/total_loss": 1e4}
-COLLAPSED_ENTROPY = 1e-3
-
-
-def divergence(metrics: dict) -> str | None:
-    """A warning when a chunk's metrics ({name: [..., n]}) show divergence short of NaN:
-    a loss or gradient norm beyond `DIVERGENCE_BOUNDS` (or infinite), or the policy's
-    entropy below `COLLAPSED_ENTROPY` (deterministic: it no longer explores); None if not."""
-    found = []
-    for name, bound in DIVERGENCE_BOUNDS.items():
-        x = np.abs(np.asarray(metrics.get(name, 0.0), float))
-        if not (x <= bound).all():
-            found.append(f"{name.split('/')[-1]} reached {np.nanmax(np.where(np.isnan(x), -np.inf, x)):.3g} (bound {bound:g})")
-    entropy = np.asarray(metrics.get("losses/entropy", 1.0), float)
-    if (entropy < COLLAPSED_ENTROPY).any():
-        found.append(f"the policy's entropy fell to {np.nanmin(entropy):.3g} (collapsed below {COLLAPSED_ENTROPY:g})")
-    return "training may be diverging: " + "; ".join(found) + " (a lower --learning-rate may help)" if found else None
-
-
-# ---------------------------------------------------------------------- checkpoints
-def checkpoint_manager(path: Path, keep: int):
-    import orbax.checkpoint as ocp
-
-    options = ocp.CheckpointManagerOptions(max_to_keep=keep, create=True)
-    return ocp.CheckpointManager(path.absolute(), options=options)
-
-
-CHECKSUM_FILE = "foresit_sha256.json"
-
-
-class CorruptCheckpoint(UserError):
-    """A checkpoint whose files are not those saved (or that orbax cannot read)."""
-
-
-def step_dir(manager, step: int) -> Path:
-    return Path(str(manager.directory)) / str(step)
-
-
-def _digest(folder: Path) -> str:
-    """SHA-256 over every file under `folder` (but the checksum file): names and bytes."""
-    h = hashlib.sha256()
-    for f in sorted(p for p in folder.rglob("*") if p.is_file() and p.name != CHECKSUM_FILE):
-        h.update(str(f.relative_to(folder)).encode() + b"\0")
-        with open(f, "rb") as stream:
-            for block in iter(lambda: stream.read(1 << 20), b""):
-                h.update(block)
-        h.update(b"\0")
-    return h.hexdigest()
-
-
-def save(manager, step: int, tree) -> None:
-    """Save `tree` as checkpoint `step` and record its checksum (`verify`). A disk too full
-    for it is an OSError (ENOSPC) before orbax starts writing: orbax's failure in the
-    middle of a write prints hundreds of lines from its storage threads."""
-    import orbax.checkpoint as ocp
-
-    folder = Path(str(manager.directory))
-    need = sum(int(getattr(leaf, "nbytes", 0)) for leaf in jax.tree.leaves(tree))
-    free = shutil.disk_usage(folder).free
-    if free < need * 1.25 + (1 << 20):
-        raise OSError(errno.ENOSPC, f"No space left on device for checkpoint {step} (about {need / 2**20:.1f} MB; "
-                                    f"{free / 2**20:.1f} MB free)", str(folder))  # fmt: skip
-    try:
-        manager.save(step, args=ocp.args.StandardSave(tree), force=True)
-        manager.wait_until_finished()
-    except Exception as e:
-        if "No space left on device" in str(e) or "os_error_code='28'" in str(e):
-            raise OSError(errno.ENOSPC, f"No space left on device while writing checkpoint {step}", str(folder)) from None
-        raise
-    folder = step_dir(manager, step)
-    write_json(folder / CHECKSUM_FILE, {"sha256": _digest(folder)})
-
-
-def verify(manager, step: int) -> None:
-    """Raise CorruptCheckpoint (one line naming it) when checkpoint `step`'s files are not
-    those `save` wrote. A checkpoint without a checksum (saved before checksums were
-    recorded) passes."""
-    folder = step_dir(manager, step)
-    recorded = folder / CHECKSUM_FILE
-    if not recorded.is_file():
-        return
-    try:
-        expected = json.loads(recorded.read_text())["sha256"]
-    except (json.JSONDecodeError, KeyError, TypeError, UnicodeDecodeError):
-        raise CorruptCheckpoint(f"checkpoint {folder} is damaged (its checksum file cannot be read)") from None
-    if _digest(folder) != expected:
-        raise CorruptCheckpoint(f"checkpoint {folder} is corrupt or truncated: its files no longer match the "
-                                "checksum recorded when it was saved")  # fmt: skip
-
-
-def intact_step(manager, at_most: int | None = None) -> tuple[int | None, list[str]]:
-    """The newest checkpoint step (at most `at_most`) that `verify` passes, or None, and
-    one line per newer one skipped as corrupt."""
-    skipped = []
-    for step in sorted(manager.all_steps(), reverse=True):
-        if at_most is not None and step > at_most:
-            continue
-        try:
-            verify(manager, step)
-            return step, skipped
-        except CorruptCheckpoint as e:
-            skipped.append(str(e))
-    return None, skipped
-
-
-def drop_steps_after(manager, step: int) -> None:
-    """Delete the checkpoints of steps after `step` (written after what a resume starts from)."""
-    for s in manager.all_steps():
-        if s > step:
-            manager.delete(s)
-
-
-def restore(manager, step: int, like):
-    """The checkpoint of `step`, shaped as `like` and placed where `like`'s arrays are
-    (numpy leaves: on the first local device), not where the saving process had them:
-    without a sharding orbax restores the saved one, so a sweep's checkpoint of seeds
-    spread over 2 devices came back spread over them in any reader, which then ran
-    cross-device collectives it never asked for (and on the CPU these could time out:
-    "Termination timeout for all reduce") and failed in a process with 1 device."""
-    import orbax.checkpoint as ocp
-
-    verify(manager, step)
-    first = jax.sharding.SingleDeviceSharding(jax.local_devices()[0])
-    abstract = jax.tree.map(lambda x: jax.ShapeDtypeStruct(np.shape(x), x.dtype, sharding=getattr(x, "sharding", first)),
-                            like)  # fmt: skip
-    try:
-        return manager.restore(step, args=ocp.args.StandardRestore(abstract))
-    except Exception as e:  # orbax's (often multi-line) reason, as one line naming the checkpoint
-        reason = " ".join(str(e).split())[:300]
-        raise CorruptCheckpoint(f"cannot restore checkpoint {step_dir(manager, step)}: {type(e).__name__}: {reason}") from None
-
-
-# ---------------------------------------------------------------------- reports
-RESULT_COLUMNS = ("SPL", "SR", "SPL>=5", "SR>=5")  # Table 1's columns
-HOUSE_COLUMNS = ("SPL>=10", "SR>=10", "SPL>=20", "SR>=20")  # and the houses' longer buckets (envs.metrics)
-
-
-def results_markdown(results: dict, title: str, level: int = 1) -> str:
-    """One row per room type (and overall); houses' results add their L >= 10, 20 columns."""
-    first = next(iter(results.values()))
-    cols = RESULT_COLUMNS + tuple(c for c in HOUSE_COLUMNS if c in first)
-    rows = [[room, *(_fmt(m[c]) for c in cols), m["episodes"]] for room, m in results.items()]
-    return "#" * level + f" {title}\n\n" + markdown_table(rows, ["rooms", *cols, "episodes"]) + "\n"
-
-
-def _fmt(x: float) -> str:
-    return "n/a" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.2f}"
-
-
-def learning_curve_png(path: Path, curves: dict, ylabel: str = "training success rate", val_points=None) -> None:
-    """curves: {label: (x [n], y [n]) or (x [n], y [seeds, n])}; bands over seeds.
-
-    Drawn with matplotlib's object API on an Agg canvas (as envs/render.py): matplotlib's
-    global backend and pyplot's state are left alone."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(7, 4))
-    FigureCanvasAgg(fig)
-    ax = fig.add_subplot()
-    for label, (x, y) in curves.items():
-        y = np.atleast_2d(np.asarray(y, float))
-        mean, std = y.mean(0), y.std(0)
-        ax.plot(x, mean, label=label)
-        if y.shape[0] > 1:
-            ax.fill_between(x, mean - std, mean + std, alpha=0.25)
-    if val_points:
-        vx, vy = zip(*val_points)
-        ax.plot(vx, vy, "o--", label="validation SR", color="black", markersize=4)
-    ax.set_xlabel("updates")
-    ax.set_ylabel(ylabel)
-    ax.grid(alpha=0.3)
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-
-
-def smooth(y, window: int = 20):
-    """Trailing moving average (same length)."""
-    y = np.asarray(y, float)
-    out = np.empty_like(y)
-    csum = np.cumsum(np.insert(y, 0, 0.0, axis=-1), axis=-1)
-    for i in range(y.shape[-1]):
-        lo = max(0, i + 1 - window)
-        out[..., i] = (csum[..., i + 1] - csum[..., lo]) / (i + 1 - lo)
-    return out

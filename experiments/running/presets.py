@@ -2,13 +2,10 @@
 
 `quick` is the README's main command: a visible result in minutes on a 2-core CPU, on all
 four room types: 32 lanes stepping packed windows of 16 steps, Adam 1e-3, a 128-unit
-network (measured: test SR ~50-60% after 3000 updates, about 7 minutes; the settings were
-chosen by `benchmarks.search_learner`, see docs/learner.md).
+network (chosen by `benchmarks.search_learner`; docs/learner.md, and the README's figures).
 `house` is quick's learner in houses (`layout="house"`) for 12,000 updates, with the
 reward shaped by the oracle's distance (`Config.progress_reward` 0.1, a deviation from the
-paper's reward: without it a3c learns to give up at the start): measured, a3c seed 0 at
-32% test SR after about 19 minutes on a 2-core EPYC (34% in 39 minutes on a slower one),
-25% without the shaping (docs/houses.md).
+paper's reward: without it a3c learns to give up at the start; docs/houses.md measures it).
 `paper` is the paper's sizes and schedule (512-unit LSTM, Adam 1e-4), for long runs on
 accelerators.  `tiny` is for tests and smoke runs (bathrooms only, tiny networks).
 A method's own requirements (`Method.required_config`: the maml base runs whole

@@ -152,5 +152,5 @@ def markdown(results_by_method: dict[str, list[dict]], pairs) -> str:
         text += ("\nTrained on different platforms (or a run on several): "
                  + ", ".join(f"{a} and {b}" for a, b in mixed)
                  + ". Their paired differences compare trajectories of different rounding, not only different "
-                 "methods: a platform moves one seed's result as much as another seed does (`experiments/numerics.py`).\n")  # fmt: skip
+                 "methods: a platform moves one seed's result as much as another seed does (`experiments/running/numerics.py`).\n")  # fmt: skip
     return text

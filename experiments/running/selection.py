@@ -19,7 +19,7 @@ from typing import Any
 
 import jax
 
-from experiments.runs import UserError
+from experiments.running.errors import UserError
 
 # Bumped whenever what selects a run's model changes (the keys, the tie rule, the presets'
 # validation episodes): results of another version are not combined with this one's
@@ -37,7 +37,7 @@ def check_resumable(recorded: int | None, what: str) -> None:
     written into run.json and progress.json; it cannot be told apart and is let through)."""
     if recorded is not None and recorded != PROTOCOL_VERSION:
         raise UserError(f"{what} was validated under selection protocol {recorded}, this code's is {PROTOCOL_VERSION} "
-                        "(experiments/selection.py): finish it with the code that started it, or start it again")  # fmt: skip
+                        "(experiments/running/selection.py): finish it with the code that started it, or start it again")  # fmt: skip
 
 
 def run_key(seed: int) -> jax.Array:

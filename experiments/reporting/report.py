@@ -9,10 +9,11 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments import runs, stats
-from experiments.tables import markdown_table
+from experiments.reporting import stats, tables
+from experiments.reporting.tables import markdown_table
+from experiments.running import errors, rundir
 
-COLUMNS, HOUSE_COLUMNS = runs.RESULT_COLUMNS, runs.HOUSE_COLUMNS  # houses' results have both
+COLUMNS, HOUSE_COLUMNS = tables.RESULT_COLUMNS, tables.HOUSE_COLUMNS  # houses' results have both
 
 
 # Training diagnostics kept per seed and chunk (the chunk's mean), in results.json: what
@@ -29,7 +30,7 @@ def diagnostic_label(name: str) -> str:
 
 def table(results_by_method: dict[str, list[dict]], room: str = "overall") -> list[dict]:
     """Rows of Table 1: per method, each column's mean, sample std and 95% confidence
-    interval over seeds (`experiments.stats.summary`; `results_by_method`: per method, one
+    interval over seeds (`experiments.reporting.stats.summary`; `results_by_method`: per method, one
     test result per seed)."""
     rows = []
     for method, per_seed in results_by_method.items():
@@ -163,11 +164,11 @@ def load(run: Path) -> dict[str, list[dict]]:
     """Every finished method of the sweep folder `run`: its per-seed results, in name order."""
     folder = Path(run) / "methods"
     if not folder.is_dir():
-        raise runs.UserError(f"{run} is not a sweep folder (it has no methods/): give --run the folder a sweep wrote")
-    found = {m.name: runs.read_json(m / "results.json")["results"]
+        raise errors.UserError(f"{run} is not a sweep folder (it has no methods/): give --run the folder a sweep wrote")
+    found = {m.name: rundir.read_json(m / "results.json")["results"]
              for m in sorted(folder.iterdir()) if (m / "results.json").is_file()}  # fmt: skip
     if not found:
-        raise runs.UserError(f"{run} has no finished method yet (no methods/*/results.json)")
+        raise errors.UserError(f"{run} has no finished method yet (no methods/*/results.json)")
     return found
 
 

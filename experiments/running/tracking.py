@@ -21,7 +21,7 @@ import importlib.util
 import os
 from pathlib import Path
 
-from experiments.runs import UserError
+from experiments.running.errors import UserError
 
 TRACKERS = ("none", "tensorboard", "wandb")
 _PACKAGE = {"tensorboard": "tensorboardX", "wandb": "wandb"}

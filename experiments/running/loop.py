@@ -24,7 +24,41 @@ from typing import Callable, NamedTuple, Optional, Sequence
 import jax
 import numpy as np
 
-from experiments import runs
+from experiments.running import checkpoint, errors
+
+
+def finite_seeds(tree, num_seeds: int | None = None) -> np.ndarray:
+    """Whether every float of `tree` (a training state: parameters, optimiser moments,
+    f_w) is finite: a bool, or with `num_seeds` one per seed (leaves stacked over seeds).
+    The loss is computed before each update, so a finite loss can still leave NaN
+    weights behind (an infinite step, for one): this is checked before every save."""
+    ok = np.ones(num_seeds or 1, bool)
+    for leaf in jax.tree.leaves(tree):
+        if not jax.dtypes.issubdtype(leaf.dtype, np.floating):
+            continue
+        ok &= np.isfinite(np.asarray(leaf)).reshape(len(ok), -1).all(1)
+    return ok if num_seeds else ok[0]
+
+
+# Divergence, short of NaN: bounds about 1000x past what quick training shows (its
+# gradient norm stays below 4 and |loss| below 2; entropy, at most ln 6 = 1.79, above 0.3).
+DIVERGENCE_BOUNDS = {"losses/grad_norm": 1e4, "losses/total_loss": 1e4}
+COLLAPSED_ENTROPY = 1e-3
+
+
+def divergence(metrics: dict) -> str | None:
+    """A warning when a chunk's metrics ({name: [..., n]}) show divergence short of NaN:
+    a loss or gradient norm beyond `DIVERGENCE_BOUNDS` (or infinite), or the policy's
+    entropy below `COLLAPSED_ENTROPY` (deterministic: it no longer explores); None if not."""
+    found = []
+    for name, bound in DIVERGENCE_BOUNDS.items():
+        x = np.abs(np.asarray(metrics.get(name, 0.0), float))
+        if not (x <= bound).all():
+            found.append(f"{name.split('/')[-1]} reached {np.nanmax(np.where(np.isnan(x), -np.inf, x)):.3g} (bound {bound:g})")
+    entropy = np.asarray(metrics.get("losses/entropy", 1.0), float)
+    if (entropy < COLLAPSED_ENTROPY).any():
+        found.append(f"the policy's entropy fell to {np.nanmin(entropy):.3g} (collapsed below {COLLAPSED_ENTROPY:g})")
+    return "training may be diverging: " + "; ".join(found) + " (a lower --learning-rate may help)" if found else None
 
 
 def warn(line: str) -> None:
@@ -37,7 +71,7 @@ class Chunk(NamedTuple):
     metrics: dict  # name -> [n] (or [seeds, n]) numpy, one value per update
     done: int  # updates done, this chunk included
     n: int  # updates in this chunk
-    warning: Optional[str]  # the divergence warning (`runs.divergence`), or None
+    warning: Optional[str]  # the divergence warning (`divergence`), or None
     started: float  # time.time() when the chunk began (for frames/s)
 
 
@@ -48,12 +82,12 @@ def resume_point(manager, folder: Path, recorded: Optional[int] = None, label: s
     saying so, and every one after the step chosen is deleted (those updates run again,
     to the same numbers). 0 when there is none."""
     if recorded is not None:  # saved after the records were: nothing else knows them
-        runs.drop_steps_after(manager, recorded)
+        checkpoint.drop_steps_after(manager, recorded)
     if manager.latest_step() is None:
         if recorded:
             warn(f"{label}no checkpoint in {folder}; starting again from update 0")
         return 0
-    intact, skipped = runs.intact_step(manager)
+    intact, skipped = checkpoint.intact_step(manager)
     for line in skipped:
         warn(f"{label}{line}; skipped")
     step = intact or 0
@@ -61,7 +95,7 @@ def resume_point(manager, folder: Path, recorded: Optional[int] = None, label: s
         warn(f"{label}no intact checkpoint in {folder}; starting again from update 0")
     elif skipped or (recorded is not None and step != recorded):
         warn(f"{label}continuing from update {step}")
-    runs.drop_steps_after(manager, step)
+    checkpoint.drop_steps_after(manager, step)
     return step
 
 
@@ -75,7 +109,7 @@ def nonfinite(metrics: dict, state, done: int, n: int, seeds: Optional[Sequence[
     if len(bad):
         seed, update = bad[0]
         return f"non-finite loss at update {done + update + 1}" + (f" of seed {seeds[seed]}" if seeds else "")
-    finite = np.atleast_1d(runs.finite_seeds(state, len(seeds) if seeds else None))
+    finite = np.atleast_1d(finite_seeds(state, len(seeds) if seeds else None))
     if finite.all():
         return None
     which = f" in seed(s) {[s for s, ok in zip(seeds, finite) if not ok]}" if seeds else ""
@@ -111,9 +145,9 @@ def run_chunks(run: Callable, state, env_params, *, done: int, total: int, chunk
         metrics = jax.tree.map(np.asarray, metrics)
         what = nonfinite(metrics, new_state, done, n, seeds)
         if what is not None:
-            runs.fail(f"{label}{what}; training stopped, {kept_checkpoint(manager, checkpoints)}; "
-                      "a lower --learning-rate may help", status=1)  # fmt: skip
-        warning = runs.divergence(metrics)
+            errors.fail(f"{label}{what}; training stopped, {kept_checkpoint(manager, checkpoints)}; "
+                        "a lower --learning-rate may help", status=1)  # fmt: skip
+        warning = divergence(metrics)
         if warning:
             warn(f"{label}updates {done + 1}-{done + n}: {warning}")
         state, done = new_state, done + n

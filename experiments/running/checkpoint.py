@@ -1,0 +1,132 @@
+"""Orbax checkpoints with checksums.
+
+Every checkpoint gets a checksum of its files at save (`save`), checked before it is
+restored (`restore`): a corrupt or truncated one is one line naming it, and a resume falls
+back to the newest intact one (`intact_step`).
+"""
+
+from __future__ import annotations
+
+import errno
+import hashlib
+import json
+import shutil
+from pathlib import Path
+
+import jax
+import numpy as np
+
+from experiments.running.errors import UserError
+from experiments.running.rundir import write_json
+
+
+def checkpoint_manager(path: Path, keep: int):
+    import orbax.checkpoint as ocp
+
+    options = ocp.CheckpointManagerOptions(max_to_keep=keep, create=True)
+    return ocp.CheckpointManager(path.absolute(), options=options)
+
+
+CHECKSUM_FILE = "foresit_sha256.json"
+
+
+class CorruptCheckpoint(UserError):
+    """A checkpoint whose files are not those saved (or that orbax cannot read)."""
+
+
+def step_dir(manager, step: int) -> Path:
+    return Path(str(manager.directory)) / str(step)
+
+
+def _digest(folder: Path) -> str:
+    """SHA-256 over every file under `folder` (but the checksum file): names and bytes."""
+    h = hashlib.sha256()
+    for f in sorted(p for p in folder.rglob("*") if p.is_file() and p.name != CHECKSUM_FILE):
+        h.update(str(f.relative_to(folder)).encode() + b"\0")
+        with open(f, "rb") as stream:
+            for block in iter(lambda: stream.read(1 << 20), b""):
+                h.update(block)
+        h.update(b"\0")
+    return h.hexdigest()
+
+
+def save(manager, step: int, tree) -> None:
+    """Save `tree` as checkpoint `step` and record its checksum (`verify`). A disk too full
+    for it is an OSError (ENOSPC) before orbax starts writing: orbax's failure in the
+    middle of a write prints hundreds of lines from its storage threads."""
+    import orbax.checkpoint as ocp
+
+    folder = Path(str(manager.directory))
+    need = sum(int(getattr(leaf, "nbytes", 0)) for leaf in jax.tree.leaves(tree))
+    free = shutil.disk_usage(folder).free
+    if free < need * 1.25 + (1 << 20):
+        raise OSError(errno.ENOSPC, f"No space left on device for checkpoint {step} (about {need / 2**20:.1f} MB; "
+                                    f"{free / 2**20:.1f} MB free)", str(folder))  # fmt: skip
+    try:
+        manager.save(step, args=ocp.args.StandardSave(tree), force=True)
+        manager.wait_until_finished()
+    except Exception as e:
+        if "No space left on device" in str(e) or "os_error_code='28'" in str(e):
+            raise OSError(errno.ENOSPC, f"No space left on device while writing checkpoint {step}", str(folder)) from None
+        raise
+    folder = step_dir(manager, step)
+    write_json(folder / CHECKSUM_FILE, {"sha256": _digest(folder)})
+
+
+def verify(manager, step: int) -> None:
+    """Raise CorruptCheckpoint (one line naming it) when checkpoint `step`'s files are not
+    those `save` wrote. A checkpoint without a checksum (saved before checksums were
+    recorded) passes."""
+    folder = step_dir(manager, step)
+    recorded = folder / CHECKSUM_FILE
+    if not recorded.is_file():
+        return
+    try:
+        expected = json.loads(recorded.read_text())["sha256"]
+    except (json.JSONDecodeError, KeyError, TypeError, UnicodeDecodeError):
+        raise CorruptCheckpoint(f"checkpoint {folder} is damaged (its checksum file cannot be read)") from None
+    if _digest(folder) != expected:
+        raise CorruptCheckpoint(f"checkpoint {folder} is corrupt or truncated: its files no longer match the "
+                                "checksum recorded when it was saved")  # fmt: skip
+
+
+def intact_step(manager, at_most: int | None = None) -> tuple[int | None, list[str]]:
+    """The newest checkpoint step (at most `at_most`) that `verify` passes, or None, and
+    one line per newer one skipped as corrupt."""
+    skipped = []
+    for step in sorted(manager.all_steps(), reverse=True):
+        if at_most is not None and step > at_most:
+            continue
+        try:
+            verify(manager, step)
+            return step, skipped
+        except CorruptCheckpoint as e:
+            skipped.append(str(e))
+    return None, skipped
+
+
+def drop_steps_after(manager, step: int) -> None:
+    """Delete the checkpoints of steps after `step` (written after what a resume starts from)."""
+    for s in manager.all_steps():
+        if s > step:
+            manager.delete(s)
+
+
+def restore(manager, step: int, like):
+    """The checkpoint of `step`, shaped as `like` and placed where `like`'s arrays are
+    (numpy leaves: on the first local device), not where the saving process had them:
+    without a sharding orbax restores the saved one, so a sweep's checkpoint of seeds
+    spread over 2 devices came back spread over them in any reader, which then ran
+    cross-device collectives it never asked for (and on the CPU these could time out:
+    "Termination timeout for all reduce") and failed in a process with 1 device."""
+    import orbax.checkpoint as ocp
+
+    verify(manager, step)
+    first = jax.sharding.SingleDeviceSharding(jax.local_devices()[0])
+    abstract = jax.tree.map(lambda x: jax.ShapeDtypeStruct(np.shape(x), x.dtype, sharding=getattr(x, "sharding", first)),
+                            like)  # fmt: skip
+    try:
+        return manager.restore(step, args=ocp.args.StandardRestore(abstract))
+    except Exception as e:  # orbax's (often multi-line) reason, as one line naming the checkpoint
+        reason = " ".join(str(e).split())[:300]
+        raise CorruptCheckpoint(f"cannot restore checkpoint {step_dir(manager, step)}: {type(e).__name__}: {reason}") from None
