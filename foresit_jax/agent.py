@@ -10,7 +10,8 @@ Acting takes three records: `AgentParams` (what acts: theta/omega, f_w's w, the 
 variance), `BoundEnv` (the environment bound to its parameters once) and `ActOptions` (how:
 greedy or sampled, packed windows or whole episodes, whether to record the inputs).
 `act` runs every lane for a window of `num_steps` steps from an `ActorState` and returns
-the next `ActorState` and the window's `Trajectory`. Lanes never idle: episodes follow one
+the next `ActorState`, the window's `Trajectory` (what each step recorded) and its
+`WindowEnd` (the state after it). Lanes never idle: episodes follow one
 another inside a window (the environment auto-resets), and an episode cut at the window's
 edge continues in the next one with its LSTM carry, s_0, i_tau, step count and (for the
 attention critic) the states it has seen so far (`ActorState.memory`). At each episode's
@@ -100,7 +101,9 @@ class StepInputs(NamedTuple):
 
 
 class Trajectory(NamedTuple):
-    """One window of `num_steps` steps per lane, time-major."""
+    """What every step of a window recorded, `[T, B, ...]` time-major (one step of
+    `Agent.act_window` records one, `[B, ...]`; the scan stacks them). What follows the
+    window is its `WindowEnd`."""
 
     states: chex.Array  # [T, B, H] s_t (LSTM hidden state)
     logits: chex.Array  # [T, B, A]
@@ -114,28 +117,16 @@ class Trajectory(NamedTuple):
     s_0: chex.Array  # [T, B, H] first state of the step's episode
     optimal_length: chex.Array  # [T, B] int32 L^g of the step's episode
     room_type: chex.Array  # [T, B] int32
-    next_state: chex.Array  # [B, H] s_T: the state after the window (bootstraps a cut episode)
-    next_episode_step: chex.Array  # [B] int32 its position in its episode
     inputs: Optional[StepInputs] = None  # recorded with record_inputs=True
 
 
-class StepRecord(NamedTuple):
-    """What one step of `Agent.act_window` records; stacked over the window, the
-    `Trajectory`'s per-step fields (same names)."""
+class WindowEnd(NamedTuple):
+    """What follows a window, per lane: the state s_T after its last step (it bootstraps
+    an episode the window cut, V(s*_T) in Eq. 8, and is the critic's last key) and its
+    position in its episode. Zeros after whole episodes: nothing is bootstrapped."""
 
-    states: chex.Array
-    logits: chex.Array
-    actions: chex.Array
-    rewards: chex.Array
-    terminated: chex.Array
-    truncated: chex.Array
-    valid: chex.Array
-    success: chex.Array
-    episode_step: chex.Array
-    s_0: chex.Array
-    optimal_length: chex.Array
-    room_type: chex.Array
-    inputs: Optional[StepInputs]
+    state: chex.Array  # [B, H] s_T, without gradient
+    episode_step: chex.Array  # [B] int32
 
 
 class EpisodeStats(NamedTuple):
@@ -277,9 +268,9 @@ class Agent:
     def act(
         self, acting: AgentParams, env: BoundEnv, actor: ActorState, key: chex.PRNGKey, num_steps: int,
         options: ActOptions = ActOptions(),
-    ) -> tuple[ActorState, Trajectory]:  # fmt: skip
+    ) -> tuple[ActorState, Trajectory, WindowEnd]:  # fmt: skip
         """Run every lane `num_steps` steps from `actor` (see the module docstring); returns
-        (the actor state after the window, the window's Trajectory).
+        (the actor state after the window, the window's Trajectory, what follows it).
 
         How a window is acted is the base's (`methods.Base.act`): the a3c base runs
         `act_window` under one parameter set; the maml base adapts each lane's parameters
@@ -316,7 +307,7 @@ class Agent:
         self, acting: AgentParams, env: BoundEnv, actor: ActorState, key: chex.PRNGKey, num_steps: int,
         options: ActOptions = ActOptions(), *, alive: Optional[chex.Array] = None,
         lstm_update: Optional[LowRankUpdate] = None, gate_offsets: Optional[chex.Array] = None,
-    ) -> tuple[ActorState, Trajectory]:  # fmt: skip
+    ) -> tuple[ActorState, Trajectory, WindowEnd]:  # fmt: skip
         """`act` under one parameter set for the whole window (every base's step).
         alive: `[B]` bool, with `whole_episodes`, which lanes' counted episode is still
         running at the window's start (default: all; a window that continues an earlier
@@ -349,7 +340,7 @@ class Agent:
             done = term | trunc
             tracker = jax.vmap(imagination.tracker_update)(actor.tracker, info["success"], done & alive)
             seen = StepInputs(actor.obs, actor.prev_probs, policy_input, encoder_imagined) if options.record_inputs else None
-            out = StepRecord(
+            out = Trajectory(
                 states=s_t, logits=logits, actions=action, rewards=reward, terminated=term, truncated=trunc,
                 valid=alive, success=info["success"] & alive, episode_step=actor.episode_step, s_0=s_0,
                 optimal_length=info["optimal_length"], room_type=info["room_type"], inputs=seen,
@@ -365,9 +356,7 @@ class Agent:
         else:  # s_T, for V(s*_T) at the cut (Eq. 8); the next window computes it again
             gates = self.input_gates(params, actor.obs, actor.prev_probs, kernels, self.encoder_imagined(actor))
             _, next_state = lstm_step(kernels, actor.lstm, gates)
-        traj = Trajectory(**out._asdict(), next_state=jax.lax.stop_gradient(next_state),
-                          next_episode_step=actor.episode_step)  # fmt: skip
-        return actor, traj
+        return actor, out, WindowEnd(jax.lax.stop_gradient(next_state), actor.episode_step)
 
     @staticmethod
     def remember(actor: ActorState, s_t: chex.Array, lanes: chex.Array) -> Optional[chex.Array]:
@@ -416,12 +405,13 @@ class Agent:
         k_start, k_act = jax.random.split(key)
         actor = self.start(k_start, env, num_lanes, reset_keys=reset_keys)
         options = ActOptions(greedy=greedy, whole_episodes=True, record_inputs=record_inputs)
-        _, traj = self.act(acting, env, actor, k_act, num_steps, options)
+        _, traj, _ = self.act(acting, env, actor, k_act, num_steps, options)
         return traj
 
     # ------------------------------------------------------------------ critic
-    def critic(self, params, traj: Trajectory, memory: Optional[chex.Array]) -> tuple[CriticOutput, chex.Array]:
-        """The critic over a window, the state after it included: (CriticOutput with
+    def critic(self, params, traj: Trajectory, end: WindowEnd,
+               memory: Optional[chex.Array]) -> tuple[CriticOutput, chex.Array]:  # fmt: skip
+        """The critic over a window, the state after it (`end`) included: (CriticOutput with
         value `[T + 1, B]` (row T: V(s*_T), the bootstrap), alpha `[B, T + 1, M + T + 1]`
         or None; keys `[B, M + T + 1, H]`, what alpha weighs).
 
@@ -430,8 +420,8 @@ class Agent:
         start, without gradient; None: no memory) and the window's."""
         if memory is None:
             memory = jnp.zeros((traj.states.shape[1], 0, traj.states.shape[2]), traj.states.dtype)
-        states = jnp.concatenate([traj.states, traj.next_state[None]], axis=0)  # [T + 1, B, H]
-        steps = jnp.concatenate([traj.episode_step, traj.next_episode_step[None]], axis=0)  # [T + 1, B]
+        states = jnp.concatenate([traj.states, end.state[None]], axis=0)  # [T + 1, B, H]
+        steps = jnp.concatenate([traj.episode_step, end.episode_step[None]], axis=0)  # [T + 1, B]
         states, steps = jnp.swapaxes(states, 0, 1), jnp.swapaxes(steps, 0, 1)  # [B, T + 1, ...]
         keys = jnp.concatenate([jax.lax.stop_gradient(memory), states], axis=1)  # [B, M + T + 1, H]
         mask = window_attention_mask(steps, memory.shape[1])

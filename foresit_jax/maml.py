@@ -220,12 +220,12 @@ def _unlane(tree):
 
 def adaptive_act(
     agent, acting, env, actor, key: chex.PRNGKey, num_steps: int, options
-) -> tuple[Any, Any, list[AdaptedParams]]:
+) -> tuple[Any, Any, Any, list[AdaptedParams]]:
     """One whole episode per lane (from `actor`, every lane at an episode start) with
     SAVN's inner loop, acting as `acting` (`AgentParams`: theta_0, w, the noise variance)
     in `env` (`BoundEnv`) with `options` (`ActOptions`: greedy, record_inputs; whole
-    episodes). Returns (actor after the window, Trajectory `[num_steps, B]`, the
-    parameters each lane used: `AdaptedParams`, theta_0 first, then theta_i after each
+    episodes). Returns (actor after the window, Trajectory `[num_steps, B]`, its
+    WindowEnd, the parameters each lane used: `AdaptedParams`, theta_0 first, then theta_i after each
     update slot (unchanged in lanes whose episode had ended))."""
     cfg = agent.config
     num_lanes = actor.episode_step.shape[0]
@@ -248,12 +248,13 @@ def adaptive_act(
 
     def segment(lanes, update, lane_actor, key, variance, alive):  # one lane
         def loss(lanes, gate_offsets):
-            next_actor, traj = window(lanes, update, lane_actor, key, variance, alive, cfg.maml_segment, True, gate_offsets)
+            next_actor, traj, end = window(lanes, update, lane_actor, key, variance, alive, cfg.maml_segment, True,
+                                          gate_offsets)  # fmt: skip
             inputs = interaction_inputs(traj.states[:, 0], traj.logits[:, 0])  # [segment, H + A]
-            return agent.interaction_loss(_join(shared, lanes), inputs), (next_actor, traj)
+            return agent.interaction_loss(_join(shared, lanes), inputs), (next_actor, traj, end)
 
         zeros = jnp.zeros((cfg.maml_segment, 1, 4 * cfg.hidden_size), kernel_dtype)
-        (_, (next_actor, traj)), (grads, gate_grads) = jax.value_and_grad(loss, (0, 1), has_aux=True)(lanes, zeros)
+        (_, (next_actor, traj, end)), (grads, gate_grads) = jax.value_and_grad(loss, (0, 1), has_aux=True)(lanes, zeros)
         rows = _kernel_update(agent, _join(shared, lanes), lane_actor, traj, gate_grads)
         if cfg.maml_first_order:
             grads, rows = jax.lax.stop_gradient((grads, rows))
@@ -262,26 +263,27 @@ def adaptive_act(
         update = rows if update is None else update.concat(rows)
         if not options.record_inputs:
             traj = traj._replace(inputs=None)
-        return inner_step(lanes, grads, cfg.maml_inner_lr, still_alive[0]), update, next_actor, traj, still_alive
+        return inner_step(lanes, grads, cfg.maml_inner_lr, still_alive[0]), update, next_actor, (traj, end), still_alive
 
     update = None
-    thetas, trajs, done_steps = [AdaptedParams(shared, lanes, update)], [], 0
+    thetas, segments, done_steps = [AdaptedParams(shared, lanes, update)], [], 0
     slots = update_steps(num_steps, cfg.maml_segment, cfg.maml_inner_updates)
     keys = jax.random.split(key, len(slots) + 1)
     for k in keys[:-1]:
-        lanes, update, lane_actor, traj, alive = jax.vmap(segment)(
+        lanes, update, lane_actor, recorded, alive = jax.vmap(segment)(
             lanes, update, lane_actor, jax.random.split(k, num_lanes), variance, alive
         )
         thetas.append(AdaptedParams(shared, lanes, update))
-        trajs.append(traj)
+        segments.append(recorded)
         done_steps += cfg.maml_segment
     if num_steps > done_steps:
         steps = num_steps - done_steps
         rest = lambda *a: window(*a, steps, options.record_inputs)  # noqa: E731
-        lane_actor, traj = jax.vmap(rest)(lanes, update, lane_actor, jax.random.split(keys[-1], num_lanes), variance, alive)
-        trajs.append(traj)
-    traj = _joined(trajs)  # (before the actor: the order of the lowered program's ops)
-    return _unlane(lane_actor), traj, thetas
+        lane_actor, traj, end = jax.vmap(rest)(lanes, update, lane_actor, jax.random.split(keys[-1], num_lanes), variance,
+                                               alive)  # fmt: skip
+        segments.append((traj, end))
+    traj, end = _joined(segments)  # (before the actor: the order of the lowered program's ops)
+    return _unlane(lane_actor), traj, end, thetas
 
 
 def _kernel_update(agent, params, lane_actor, traj, gate_grads) -> LowRankUpdate:
@@ -297,11 +299,9 @@ def _kernel_update(agent, params, lane_actor, traj, gate_grads) -> LowRankUpdate
     )
 
 
-def _joined(trajs):
-    """The lanes' segment trajectories (leaves `[B, steps, 1, ...]`) as one Trajectory
-    `[T, B, ...]`, bootstrapped from the last one's next state."""
-    last = trajs[-1]
-    per_step = [t._replace(next_state=None, next_episode_step=None) for t in trajs]
-    per_step = jax.tree.map(lambda *xs: jnp.concatenate(xs, axis=1), *per_step)  # leaves [B, T, 1, ...]
+def _joined(segments):
+    """The lanes' segments, (Trajectory, WindowEnd) each with leaves `[B, steps, 1, ...]`
+    (`[B, 1, ...]`), as one Trajectory `[T, B, ...]` and the last segment's WindowEnd `[B, ...]`."""
+    per_step = jax.tree.map(lambda *xs: jnp.concatenate(xs, axis=1), *[traj for traj, _ in segments])  # [B, T, 1, ...]
     per_step = jax.tree.map(lambda x: jnp.swapaxes(x[:, :, 0], 0, 1), per_step)  # [T, B, ...]
-    return per_step._replace(next_state=last.next_state[:, 0], next_episode_step=last.next_episode_step[:, 0])
+    return per_step, jax.tree.map(lambda x: x[:, 0], segments[-1][1])

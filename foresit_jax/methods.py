@@ -129,8 +129,8 @@ def act_adapting(agent, acting, env, actor, key, num_steps: int, options):
     episode (`foresit_jax.maml.adaptive_act`); whole episodes only."""
     if not options.whole_episodes or options.step_keys is not None:
         raise ValueError("the maml base acts in whole episodes (rollout='episodes'), without step_keys")
-    actor, traj, _ = maml.adaptive_act(agent, acting, env, actor, key, num_steps, options)
-    return actor, traj
+    actor, traj, end, _ = maml.adaptive_act(agent, acting, env, actor, key, num_steps, options)
+    return actor, traj, end
 
 
 @dataclasses.dataclass(frozen=True)
@@ -138,7 +138,7 @@ class Base:
     """A base learner, as the agent uses it.
 
     act: acts a window, `(agent, acting: AgentParams, env: BoundEnv, actor, key, num_steps,
-      options: ActOptions) -> (actor, traj)` (the records of `foresit_jax.agent`).
+      options: ActOptions) -> (actor, traj, end)` (the records of `foresit_jax.agent`).
     learned_loss: the network's extra module for the base (maml's L_phi), from the Config;
       None for none.
     adapts_in_episode: the parameters change inside an episode (maml): acting must be

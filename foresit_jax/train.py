@@ -33,7 +33,7 @@ import jax.numpy as jnp
 import optax
 
 from foresit_jax import imagination, losses
-from foresit_jax.agent import ActOptions, ActorState, Agent, AgentParams, BoundEnv, Trajectory, ended_episodes
+from foresit_jax.agent import ActOptions, ActorState, Agent, AgentParams, BoundEnv, Trajectory, WindowEnd, ended_episodes
 from foresit_jax.config import Config
 from foresit_jax.networks import subgoals_of_rows
 from foresit_jax.replay import replayed
@@ -124,12 +124,13 @@ class Trainer:
         )
 
     # ------------------------------------------------------------------ the loss
-    def window_loss(self, params, traj: Trajectory, memory: chex.Array):
+    def window_loss(self, params, traj: Trajectory, end: WindowEnd, memory: chex.Array):
         """The A3C loss (Eq. 8-9) of one window whose states and logits are differentiable
-        in `params`. memory: the critic's memory at the window's start `[B, M, H]` (or None).
+        in `params`, `end` what follows it. memory: the critic's memory at the window's
+        start `[B, M, H]` (or None).
         Returns (loss, (alpha `[B, T + 1, K]` or None, key_states `[B, K, H]`, metrics))."""
         cfg = self.config
-        critic, key_states = self.agent.critic(params, traj, memory)
+        critic, key_states = self.agent.critic(params, traj, end, memory)
         value, bootstrap = critic.value[:-1], critic.value[-1]  # [T, B], [B] V(s*_T)
         if not self.packed:
             bootstrap = jnp.zeros_like(bootstrap)  # whole episodes: nothing to bootstrap
@@ -141,7 +142,8 @@ class Trainer:
         )  # fmt: skip
         return loss, (critic.alpha, key_states, metrics)
 
-    def act(self, acting: AgentParams, env: BoundEnv, actor: ActorState, key) -> tuple[ActorState, Trajectory]:
+    def act(self, acting: AgentParams, env: BoundEnv, actor: ActorState,
+            key) -> tuple[ActorState, Trajectory, WindowEnd]:  # fmt: skip
         """One window of every lane (inputs recorded, for the replay and the buffers)."""
         options = ActOptions(whole_episodes=not self.packed, record_inputs=True)
         return self.agent.act(acting, env, actor, key, self.config.num_steps, options)
@@ -150,18 +152,18 @@ class Trainer:
         """((loss, WindowResult), grads) of one window with respect to `params`, by the
         config's gradient path (see `Config.gradient`; both give the same gradient)."""
         if self.config.gradient == "replay":
-            next_actor, traj = self.act(AgentParams(params, w_params), env, actor, key)
+            next_actor, traj, end = self.act(AgentParams(params, w_params), env, actor, key)
 
             def loss_fn(p):
                 replay_traj = replayed(self.agent, p, traj, actor.lstm)
-                loss, aux = self.window_loss(p, replay_traj, actor.memory)
+                loss, aux = self.window_loss(p, replay_traj, end, actor.memory)
                 return loss, WindowResult(next_actor, replay_traj, *aux)
 
         else:
 
             def loss_fn(p):
-                next_actor, traj = self.act(AgentParams(p, w_params), env, actor, key)
-                loss, aux = self.window_loss(p, traj, actor.memory)
+                next_actor, traj, end = self.act(AgentParams(p, w_params), env, actor, key)
+                loss, aux = self.window_loss(p, traj, end, actor.memory)
                 return loss, WindowResult(next_actor, traj, *aux)
 
         return jax.value_and_grad(loss_fn, has_aux=True)(params)
@@ -228,14 +230,14 @@ class Trainer:
             subgoals = jnp.swapaxes(subgoals_of_rows(key_states, alpha[:, :-1], self.agent.imagination.subgoal_mode), 0, 1)
         return traj.s_0, traj.inputs.obs["target"], subgoals, success
 
-    def subgoal_steps(self, traj: Trajectory, alpha) -> chex.Array:
+    def subgoal_steps(self, traj: Trajectory, end: WindowEnd, alpha) -> chex.Array:
         """Where each step's sub-goal lies in its episode, `[T, B]` int32: t* (the position
         of the key its attention row weighs most; the step's own position with the plain
         critic, whose sub-goal is the step's state). The keys are the memory, positions
         0..M-1 of the running episode, then the window's states (`Agent.critic`)."""
         if alpha is None:
             return traj.episode_step
-        steps = jnp.concatenate([traj.episode_step, traj.next_episode_step[None]], axis=0).T  # [B, T + 1]
+        steps = jnp.concatenate([traj.episode_step, end.episode_step[None]], axis=0).T  # [B, T + 1]
         memory_size = alpha.shape[-1] - steps.shape[-1]
         memory = jnp.broadcast_to(jnp.arange(memory_size, dtype=steps.dtype), (steps.shape[0], memory_size))
         key_steps = jnp.concatenate([memory, steps], axis=1)  # [B, M + T + 1]
@@ -253,11 +255,11 @@ class Trainer:
 
         def window(carry, _):
             actor, key, k_act = self.begin_window(*carry, env)
-            next_actor, traj = self.act(AgentParams(state.params, state.imagination_params), env, actor, k_act)
-            _, (alpha, key_states, _) = self.window_loss(state.params, traj, actor.memory)  # the critic's alpha
+            next_actor, traj, end = self.act(AgentParams(state.params, state.imagination_params), env, actor, k_act)
+            _, (alpha, key_states, _) = self.window_loss(state.params, traj, end, actor.memory)  # the critic's alpha
             _, stats = ended_episodes(traj)
             items = self.subgoal_items(traj, alpha, key_states, stats.success)
-            return (next_actor, key), (items, (self.subgoal_steps(traj, alpha), traj.episode_step))
+            return (next_actor, key), (items, (self.subgoal_steps(traj, end, alpha), traj.episode_step))
 
         _, items = jax.lax.scan(window, (state.actor, state.key), None, length=num_windows)
         return items

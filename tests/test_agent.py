@@ -11,7 +11,9 @@ import numpy as np
 import pytest
 
 import train_helpers as H
-from foresit_jax.agent import Agent, AgentParams, BoundEnv, EpisodeStats, Trajectory, ended_episodes, episode_stats
+from foresit_jax.agent import (
+    Agent, AgentParams, BoundEnv, EpisodeStats, Trajectory, WindowEnd, ended_episodes, episode_stats,
+)  # fmt: skip
 from foresit_jax.lstm import initial_carry
 from foresit_jax.replay import replay
 
@@ -77,8 +79,7 @@ def test_episode_stats_hand_computed():
         terminated=terminated, truncated=truncated, valid=valid, success=success,
         episode_step=np.broadcast_to(np.arange(T)[:, None], (T, B)).astype(np.int32), s_0=np.zeros((T, B, 2), np.float32),
         optimal_length=np.broadcast_to(np.array([2, 3, 4, 3, 6], np.int32), (T, B)),
-        room_type=np.full((T, B), 3, np.int32), next_state=np.zeros((B, 2), np.float32),
-        next_episode_step=np.zeros((B,), np.int32),
+        room_type=np.full((T, B), 3, np.int32),
     )  # fmt: skip
     stats = jax.tree.map(np.asarray, episode_stats(traj))
     assert isinstance(stats, EpisodeStats)
@@ -105,7 +106,8 @@ def _rollout(greedy: bool):
                              record_inputs=not greedy)  # fmt: skip
         replayed = None if greedy else replay(agent, params, traj, initial_carry((LANES,), FORESIT.hidden_size))
         memory = jnp.zeros((LANES, 0, FORESIT.hidden_size))
-        return traj, replayed, agent.critic(params, traj, memory)[0]
+        end = WindowEnd(jnp.zeros((LANES, FORESIT.hidden_size)), jnp.zeros((LANES,), jnp.int32))  # whole episodes
+        return traj, replayed, agent.critic(params, traj, end, memory)[0]
 
     return jax.jit(run, compiler_options=H.FAST_COMPILE)
 

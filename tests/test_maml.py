@@ -103,7 +103,7 @@ def adapted_rollout():
     config, agent, env, env_params, params, w_params, actor = _setup()
     run = jax.jit(lambda p, a, k: maml.adaptive_act(agent, AgentParams(p, w_params), BoundEnv(env, env_params), a, k, 30, WHOLE),
                   compiler_options=H.FAST_COMPILE)  # fmt: skip
-    _, traj, thetas = run(params, actor, jax.random.PRNGKey(5))
+    _, traj, _, thetas = run(params, actor, jax.random.PRNGKey(5))
     return config, params, traj, thetas
 
 
@@ -140,7 +140,7 @@ def test_evaluation_step_13_runs_under_theta_2_recomputed_independently():
     config, agent, env, env_params, params, w_params, actor = _setup(lr=5.0, lanes=4, training=False, never_done=True)
     run = jax.jit(lambda p, a, k: maml.adaptive_act(agent, AgentParams(p, w_params), BoundEnv(env, env_params), a, k, 14, WHOLE),
                   compiler_options=H.FAST_COMPILE)  # fmt: skip
-    _, traj, thetas = run(params, actor, jax.random.PRNGKey(6))
+    _, traj, _, thetas = run(params, actor, jax.random.PRNGKey(6))
     assert bool(np.all(np.asarray(traj.valid)[:14]))  # every lane still in its episode at step 13
     lane = 1
     lane_inputs = jax.tree.map(lambda x: x[:, lane], traj.inputs)
@@ -226,8 +226,8 @@ def _meta_objective(first_order: bool):
     w_states = jnp.asarray(rng.standard_normal((steps, 3, config.hidden_size)))
 
     def objective(p):
-        _, traj, _ = maml.adaptive_act(agent, AgentParams(p, w_params), BoundEnv(env, env_params), actor,
-                                       jax.random.PRNGKey(11), steps, WHOLE._replace(record_inputs=False))  # fmt: skip
+        _, traj, _, _ = maml.adaptive_act(agent, AgentParams(p, w_params), BoundEnv(env, env_params), actor,
+                                          jax.random.PRNGKey(11), steps, WHOLE._replace(record_inputs=False))  # fmt: skip
         valid = traj.valid[..., None]
         return jnp.sum(jnp.where(valid, traj.logits * w_logits, 0.0)) + jnp.sum(jnp.where(valid, traj.states * w_states, 0.0))
 

@@ -149,10 +149,10 @@ def _two_windows(method, seed=0):
         env = trainer.bind(trainer.env_params)
         actor, key, k_act = trainer.begin_window(actor, key, env)
         memory = actor.memory
-        next_actor, traj = trainer.act(AgentParams(state.params, state.imagination_params), env, actor, k_act)
-        _, (alpha, keys, _) = trainer.window_loss(state.params, traj, memory)
+        next_actor, traj, end = trainer.act(AgentParams(state.params, state.imagination_params), env, actor, k_act)
+        _, (alpha, keys, _) = trainer.window_loss(state.params, traj, end, memory)
         items = trainer.subgoal_items(traj, alpha, keys, traj.success)
-        return next_actor, key, (traj, items, trainer.subgoal_steps(traj, alpha))
+        return next_actor, key, (traj, items, trainer.subgoal_steps(traj, end, alpha))
 
     for _ in range(3):
         actor, key, got = window(actor, key)

@@ -151,7 +151,7 @@ def test_the_agent_acts_through_its_bases_act():
         params, w_params = agent.init(jax.random.key(1), obs)
         env = BoundEnv(env, env_params)
         actor = agent.start(jax.random.key(2), env, 2)
-        _, traj = agent.act(AgentParams(params, w_params), env, actor, jax.random.key(3), 3, ActOptions(greedy=True))
+        _, traj, _ = agent.act(AgentParams(params, w_params), env, actor, jax.random.key(3), 3, ActOptions(greedy=True))
     finally:
         methods.BASE_PIECES = original
     assert len(calls) == 1 and calls[0].greedy is True and traj.actions.shape == (3, 2)

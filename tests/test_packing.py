@@ -20,7 +20,7 @@ import pytest
 
 import train_helpers as H
 from foresit_jax import losses
-from foresit_jax.agent import ActOptions, AgentParams
+from foresit_jax.agent import ActOptions, AgentParams, WindowEnd
 from foresit_jax.networks import window_attention_mask
 from foresit_jax.replay import replayed
 from foresit_jax.train import Trainer
@@ -81,14 +81,14 @@ def windows():
     state = H.jitted_init(PACKED)(jax.random.PRNGKey(3))
     keys = jax.random.split(jax.random.PRNGKey(4), 40)
     args = (state.params, state.imagination_params, trainer.env_params)
-    long_actor, long = _act(40)(*args, state.actor, keys)
-    cut_actor, first = _act(15)(*args, state.actor, keys[:15])
-    end_actor, second = _act(25)(*args, cut_actor, keys[15:])
-    return state, (long_actor, long), (cut_actor, first), (end_actor, second)
+    long_actor, long, long_end = _act(40)(*args, state.actor, keys)
+    cut_actor, first, first_end = _act(15)(*args, state.actor, keys[:15])
+    end_actor, second, second_end = _act(25)(*args, cut_actor, keys[15:])
+    return state, (long_actor, long, long_end), (cut_actor, first, first_end), (end_actor, second, second_end)
 
 
 def test_a_cut_window_gives_the_forward_values_of_the_uncut_one(windows):
-    state, (long_actor, long), (cut_actor, first), (end_actor, second) = windows
+    state, (long_actor, long, long_end), (cut_actor, first, first_end), (end_actor, second, second_end) = windows
     for name in ("actions", "episode_step", "terminated", "truncated", "success"):
         np.testing.assert_array_equal(np.concatenate([getattr(first, name), getattr(second, name)]), getattr(long, name))
     for name in ("states", "logits"):
@@ -96,17 +96,17 @@ def test_a_cut_window_gives_the_forward_values_of_the_uncut_one(windows):
     cut_episodes = np.asarray(first.episode_step[-1] > 0) & ~np.asarray(first.terminated[-1] | first.truncated[-1])
     assert cut_episodes.any(), "precondition: some lane's episode runs across the cut"
     # The state after the first window is the second window's first state.
-    np.testing.assert_allclose(first.next_state, long.states[15], rtol=1e-6, atol=1e-6)
-    np.testing.assert_array_equal(first.next_episode_step, long.episode_step[15])
+    np.testing.assert_allclose(first_end.state, long.states[15], rtol=1e-6, atol=1e-6)
+    np.testing.assert_array_equal(first_end.episode_step, long.episode_step[15])
     # The lanes end in the same state.
     jax.tree.map(lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-6), end_actor, long_actor)
 
     # The critic of the second window, with the memory of the first, attends to the same
     # states with the same weights as the uncut window (Eq. 3-4 over the whole episode).
     critic = _critic()
-    long_out, _ = critic(state.params, long, state.actor.memory)
-    first_out, _ = critic(state.params, first, state.actor.memory)
-    second_out, _ = critic(state.params, second, cut_actor.memory)
+    long_out, _ = critic(state.params, long, long_end, state.actor.memory)
+    first_out, _ = critic(state.params, first, first_end, state.actor.memory)
+    second_out, _ = critic(state.params, second, second_end, cut_actor.memory)
     np.testing.assert_allclose(second_out.value[:25], long_out.value[15:40], rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(second_out.attended_state[:, :25], long_out.attended_state[:, 15:40], rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(first_out.value[:15], long_out.value[:15], rtol=1e-5, atol=1e-6)
@@ -119,8 +119,8 @@ def test_a_cut_window_gives_the_forward_values_of_the_uncut_one(windows):
 # ---------------------------------------------------------------------- packed == whole episodes
 def whole_episode_layout(traj, limit: int):
     """The complete episodes of a packed window, one per lane, padded to `limit` steps:
-    a Trajectory of whole episodes (as SAVN's updates see them), and the packed window's
-    mask of the steps of complete episodes."""
+    a Trajectory of whole episodes (as SAVN's updates see them) with its WindowEnd (zeros:
+    nothing to bootstrap), and the packed window's mask of the steps of complete episodes."""
     done = np.asarray(traj.terminated | traj.truncated)
     step = np.asarray(traj.episode_step)
     T, B = done.shape
@@ -149,32 +149,33 @@ def whole_episode_layout(traj, limit: int):
         terminated=lay(traj.terminated), truncated=lay(traj.truncated), valid=valid, success=lay(traj.success),
         episode_step=np.broadcast_to(np.arange(limit)[:, None], (limit, E)).astype(np.int32), s_0=lay(traj.s_0),
         optimal_length=lay(traj.optimal_length), room_type=lay(traj.room_type),
-        next_state=np.zeros((E,) + traj.next_state.shape[1:], np.float32), next_episode_step=np.zeros((E,), np.int32),
         inputs=jax.tree.map(lay, traj.inputs),
     )  # fmt: skip
-    return whole, complete
+    end = WindowEnd(np.zeros((E,) + traj.states.shape[2:], np.float32), np.zeros((E,), np.int32))
+    return whole, end, complete
 
 
 def test_packing_changes_nothing_but_speed(windows):
     """The loss and gradient over the complete episodes of a packed window equal those of
     the same episodes run one per lane, whole."""
-    state, (_, long), _, _ = windows
+    state, (_, long, long_end), _, _ = windows
     packed = H.trainer(PACKED)
     env, env_params = H.bathroom_env()
     whole_trainer = Trainer(H.tiny_config("a3c+foresit", rollout="episodes", num_steps=30), env, env_params)
-    whole, complete = whole_episode_layout(long, 30)
+    whole, whole_end, complete = whole_episode_layout(long, 30)
     assert whole.valid.shape[1] >= 8, "precondition: several complete episodes"
     hidden = PACKED.hidden_size
     E = whole.valid.shape[1]
 
     def packed_loss(p):
         traj = long._replace(valid=jnp.asarray(complete))
-        return packed.window_loss(p, replayed(packed.agent, p, traj, state.actor.lstm), state.actor.memory)[0]
+        return packed.window_loss(p, replayed(packed.agent, p, traj, state.actor.lstm), long_end, state.actor.memory)[0]
 
     def whole_loss(p):
         zeros = (jnp.zeros((E, hidden)), jnp.zeros((E, hidden)))
         traj = jax.tree.map(jnp.asarray, whole)
-        return whole_trainer.window_loss(p, replayed(whole_trainer.agent, p, traj, zeros), jnp.zeros((E, 0, hidden)))[0]
+        end = jax.tree.map(jnp.asarray, whole_end)
+        return whole_trainer.window_loss(p, replayed(whole_trainer.agent, p, traj, zeros), end, jnp.zeros((E, 0, hidden)))[0]
 
     grad = functools.partial(jax.jit, compiler_options=H.FAST_COMPILE)
     loss_p, grads_p = grad(jax.value_and_grad(packed_loss))(state.params)
@@ -220,7 +221,7 @@ def test_foresit_bookkeeping_fires_once_per_ended_episode_never_for_a_cut_one():
     new, metrics = jax.jit(trainer.update, compiler_options=H.FAST_COMPILE)(state, trainer.env_params)
     # The same window again, outside the update (same key, same parameters).
     _, k_act, _ = jax.random.split(state.key, 3)
-    _, traj = jax.jit(trainer.act, compiler_options=H.FAST_COMPILE)(
+    _, traj, _ = jax.jit(trainer.act, compiler_options=H.FAST_COMPILE)(
         AgentParams(state.params, state.imagination_params), trainer.bind(trainer.env_params), state.actor, k_act
     )
     done = np.asarray(traj.terminated | traj.truncated)
@@ -247,7 +248,7 @@ def test_foresit_bookkeeping_fires_once_per_ended_episode_never_for_a_cut_one():
     # The next update ends the cut episodes: each is counted once, in the window it ends in.
     newer, _ = jax.jit(trainer.update, compiler_options=H.FAST_COMPILE)(new, trainer.env_params)
     _, k_act, _ = jax.random.split(new.key, 3)
-    _, traj2 = jax.jit(trainer.act, compiler_options=H.FAST_COMPILE)(
+    _, traj2, _ = jax.jit(trainer.act, compiler_options=H.FAST_COMPILE)(
         AgentParams(new.params, new.imagination_params), trainer.bind(trainer.env_params), new.actor, k_act
     )
     ended_2 = np.asarray(traj2.terminated | traj2.truncated).sum(0)

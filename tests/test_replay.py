@@ -70,8 +70,8 @@ def test_replay_recomputes_the_acting_values(mid_episode_state):
     state = mid_episode_state
     trainer = H.trainer(REPLAY)
     act = jax.jit(trainer.act, compiler_options=H.FAST_COMPILE)
-    _, traj = act(AgentParams(state.params, state.imagination_params), trainer.bind(trainer.env_params), state.actor,
-                  state.key)  # fmt: skip
+    _, traj, _ = act(AgentParams(state.params, state.imagination_params), trainer.bind(trainer.env_params), state.actor,
+                     state.key)  # fmt: skip
     states, logits = jax.jit(functools.partial(replay, trainer.agent), compiler_options=H.FAST_COMPILE)(
         state.params, traj, state.actor.lstm
     )
@@ -82,7 +82,7 @@ def test_replay_recomputes_the_acting_values(mid_episode_state):
 def test_replay_needs_recorded_inputs(mid_episode_state):
     trainer = H.trainer(REPLAY)
     state = mid_episode_state
-    _, traj = jax.jit(trainer.act, compiler_options=H.FAST_COMPILE)(
+    _, traj, _ = jax.jit(trainer.act, compiler_options=H.FAST_COMPILE)(
         AgentParams(state.params, state.imagination_params), trainer.bind(trainer.env_params), state.actor, state.key
     )
     with pytest.raises(ValueError, match="record_inputs"):

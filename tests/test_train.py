@@ -64,8 +64,8 @@ def _loss_term_grads(config):
     trainer = H.trainer(dataclasses.replace(config, gradient="through_rollout"))
 
     def terms(params, w_params, actor, key):
-        _, traj = trainer.act(AgentParams(params, w_params), trainer.bind(trainer.env_params), actor, key)
-        _, (_, _, metrics) = trainer.window_loss(params, traj, actor.memory)
+        _, traj, end = trainer.act(AgentParams(params, w_params), trainer.bind(trainer.env_params), actor, key)
+        _, (_, _, metrics) = trainer.window_loss(params, traj, end, actor.memory)
         return jnp.stack([metrics["losses/policy_gradient_loss"], metrics["losses/value_loss"], metrics["losses/entropy"]])
 
     return jax.jit(jax.jacrev(terms, argnums=(0, 1)), compiler_options=H.FAST_COMPILE)
