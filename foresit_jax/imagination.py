@@ -124,13 +124,15 @@ def train_on_buffer(
     optimizer: optax.GradientTransformation,
     epochs: int,
     batch: int = 1,
-) -> tuple[Any, chex.Array]:
+    opt_state: Any = None,
+) -> tuple[Any, chex.Array, Any]:
     """Train f_w on one full buffer: `epochs` passes, one optimiser step per item (per
     `batch` consecutive items, their mean loss), in buffer order (Algorithm 1 with batch
-    1), starting from `params` with a fresh optimiser state.
+    1), starting from `params` with `opt_state` (None: a fresh optimiser state, as
+    training does at every flush).
 
     Returns (trained params, per-step losses `[epochs, M / batch]`, each the loss before
-    its step).
+    its step, the optimiser state after the last step).
     """
     grad_fn = jax.value_and_grad(
         lambda p, s0, g, sg: imagination_loss(apply_fn, p, s0, g, sg)
@@ -148,10 +150,9 @@ def train_on_buffer(
     def epoch(carry, _):
         return jax.lax.scan(item_step, carry, items)
 
-    (params, _), step_losses = jax.lax.scan(
-        epoch, (params, optimizer.init(params)), None, length=epochs
-    )
-    return params, step_losses
+    start = optimizer.init(params) if opt_state is None else opt_state
+    (params, opt_state), step_losses = jax.lax.scan(epoch, (params, start), None, length=epochs)
+    return params, step_losses, opt_state
 
 
 class ImaginationLosses(NamedTuple):
@@ -190,16 +191,21 @@ def train_on_full_buffers(
     optimizer: optax.GradientTransformation,
     epochs: int,
     batch: int = 1,
-) -> tuple[Any, ReplayBuffer, ImaginationLosses]:
+    opt_state: Any = None,
+) -> tuple[Any, ReplayBuffer, ImaginationLosses, Any]:
     """Update the shared f_w from every lane whose buffer is full, then empty those
-    (`train_on_buffer` with `batch` items a step).
+    (`train_on_buffer` with `batch` items a step). With `opt_state` None (training's
+    procedure) each lane's buffer starts a fresh optimiser state; given, one state is
+    carried from lane to lane and returned, for an optimiser kept across flushes
+    (`foresit_jax.probes.replay_online_fit` measures it; training does not offer it).
 
     Args:
       w_params: the shared f_w parameters.
       buffers: stacked per-lane buffers, leaves `[B, M, ...]`, count `[B]`.
     Returns:
       (new shared params, buffers with the full ones emptied, the losses summed over the
-      trained lanes). See the module docstring for the order and semantics.
+      trained lanes, the optimiser state carried: None when none was given). See the
+      module docstring for the order and semantics.
     """
     full = buffer_is_full(buffers)  # [B]
     num_lanes = full.shape[0]
@@ -212,20 +218,23 @@ def train_on_full_buffers(
         i = carry[0]
         return i < num_full
 
+    kept = opt_state is not None
+
     def body(carry):
-        i, params, loss_sum, first_sum, last_sum = carry
+        i, params, state, loss_sum, first_sum, last_sum = carry
         lane = jax.tree.map(lambda x: x[order[i]], buffers)
-        params, step_losses = train_on_buffer(params, lane, apply_fn, optimizer, epochs, batch)
+        params, step_losses, state_after = train_on_buffer(params, lane, apply_fn, optimizer, epochs, batch, state)
         return (
             i + 1,
             params,
+            state_after if kept else None,  # None: no leaf, the loop of a fresh state per flush
             loss_sum + jnp.mean(step_losses),
             first_sum + jnp.mean(step_losses[0]),
             last_sum + jnp.mean(step_losses[-1]),
         )
 
-    _, params, loss_sum, first_sum, last_sum = jax.lax.while_loop(
-        cond, body, (jnp.zeros((), jnp.int32), w_params, zero, zero, zero)
+    _, params, opt_state, loss_sum, first_sum, last_sum = jax.lax.while_loop(
+        cond, body, (jnp.zeros((), jnp.int32), w_params, opt_state, zero, zero, zero)
     )
     cleared = jax.vmap(buffer_clear)(buffers)
     buffers = jax.tree.map(
@@ -233,7 +242,7 @@ def train_on_full_buffers(
         cleared,
         buffers,
     )
-    return params, buffers, ImaginationLosses(num_full.astype(jnp.float32), loss_sum, first_sum, last_sum)
+    return params, buffers, ImaginationLosses(num_full.astype(jnp.float32), loss_sum, first_sum, last_sum), opt_state
 
 
 def train_full_buffers(
@@ -244,7 +253,7 @@ def train_full_buffers(
     epochs: int,
 ) -> tuple[Any, ReplayBuffer, Mapping[str, chex.Array]]:
     """`train_on_full_buffers` with its losses as metrics (`ImaginationLosses.metrics`)."""
-    params, buffers, losses = train_on_full_buffers(w_params, buffers, apply_fn, optimizer, epochs)
+    params, buffers, losses, _ = train_on_full_buffers(w_params, buffers, apply_fn, optimizer, epochs)
     return params, buffers, losses.metrics()
 
 

@@ -175,11 +175,12 @@ def fit_imagination_offline(imagine, w_init, s_0, goal, target, steps: int = 300
 
 
 def replay_online_fit(imagine, w_start, s_0, goal, subgoal, add, optimizer, epochs: int, buffer_size: int,
-                      passes: int = 1, batch: int = 1):  # fmt: skip
+                      passes: int = 1, batch: int = 1, keep_optimizer_state: bool = False):  # fmt: skip
     """f_w trained from `w_start` as training trains it (`imagination.buffer_add` and
     `train_on_full_buffers`, step by step in time order, one buffer of `buffer_size` per
     lane, `epochs` passes of one `optimizer` step per item, a fresh optimiser state per
-    buffer, `batch` items a step), on a stream of items `[S, B, ...]` (S steps of B lanes; `add [S, B]`: which
+    buffer (with `keep_optimizer_state`, one state kept across buffers instead: not a
+    training option), `batch` items a step), on a stream of items `[S, B, ...]` (S steps of B lanes; `add [S, B]`: which
     steps offer their item), streamed `passes` times: how well the online procedure fits
     these items at a fixed encoder, to hold against `fit_imagination_offline` on the same
     items. Jitted per call; returns the parameters."""
@@ -193,12 +194,13 @@ def replay_online_fit(imagine, w_start, s_0, goal, subgoal, add, optimizer, epoc
     @jax.jit
     def run(w, buffers, stream):
         def step(carry, item):
-            w, buffers = carry
+            w, buffers, state = carry
             buffers = jax.vmap(imagination.buffer_add)(buffers, *item)
-            w, buffers, _ = imagination.train_on_full_buffers(w, buffers, imagine, optimizer, epochs, batch)
-            return (w, buffers), None
+            w, buffers, _, state = imagination.train_on_full_buffers(w, buffers, imagine, optimizer, epochs, batch, state)
+            return (w, buffers, state), None
 
-        return jax.lax.scan(step, (w, buffers), stream)[0][0]
+        state = optimizer.init(w) if keep_optimizer_state else None
+        return jax.lax.scan(step, (w, buffers, state), stream)[0][0]
 
     return run(w_start, buffers, stream)
 

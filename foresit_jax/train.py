@@ -274,7 +274,7 @@ class Trainer:
         def step(carry, item):
             w_params, buffers, losses = carry
             buffers = jax.vmap(imagination.buffer_add)(buffers, *item)
-            w_params, buffers, trained = imagination.train_on_full_buffers(
+            w_params, buffers, trained, _ = imagination.train_on_full_buffers(
                 w_params, buffers, self.agent.imagine, self.imagination_optimizer, cfg.imagination_epochs,
                 cfg.imagination_batch,
             )

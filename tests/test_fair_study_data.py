@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 import study_data
 
@@ -83,6 +84,20 @@ def test_results_md_quotes_the_probe_of_the_3e4_foresit_seeds():
         assert list(options) == list(probing.FIT_OPTIONS)
         row = f"| {r['seed']} | " + " | ".join(f"{v:.2f}" for v in options.values()) + " |"
         assert row in results, row
+
+
+def test_results_md_quotes_the_kept_optimizer_state_against_a_fresh_one():
+    """The "state kept" bullet's paired differences are those of the probe's data."""
+    import json
+
+    report = json.loads((REPO / "docs" / "data" / "fair_probe_lr3e-4.json").read_text())
+    options = [r["items"]["fit_options"] for r in report["methods"]["a3c+foresit@learning_rate=3e-4"]]
+    results = " ".join((REPO / "docs" / "results.md").read_text().split())
+    for kept, fresh, text in (("state kept", "as trained", "{:+.3f} R^2 against a fresh state at each flush (per seed {:+.3f} to {:+.3f})"),
+                              ("state kept, lr 3e-4", "lr 3e-4", "{:+.3f} with lr 3e-4 ({:+.3f} to {:+.3f})")):  # fmt: skip
+        d = np.array([o[kept] - o[fresh] for o in options])
+        quoted = text.format(d.mean(), d.min(), d.max())
+        assert quoted in results, quoted
 
 
 @pytest.mark.slow

@@ -90,9 +90,10 @@ def item_loss_and_grad(params, s_0, goal, subgoal):
     return jax.value_and_grad(lambda p: losses.smooth_l1(apply_fn(p, s_0, goal), subgoal))(params)
 
 
-def brute_force_train(params, buffer, optimizer, epochs):
-    """Reference for train_on_buffer: Python loops, one optax step per item."""
-    opt_state = optimizer.init(params)
+def brute_force_train(params, buffer, optimizer, epochs, opt_state=None, with_state=False):
+    """Reference for train_on_buffer: Python loops, one optax step per item, from
+    `opt_state` (None: a fresh one); with `with_state`, the state after is returned too."""
+    opt_state = optimizer.init(params) if opt_state is None else opt_state
     step_losses = np.zeros((epochs, buffer.capacity))
     apply_step = jax.jit(optimizer.update)
     for e in range(epochs):
@@ -101,7 +102,7 @@ def brute_force_train(params, buffer, optimizer, epochs):
             step_losses[e, i] = loss
             updates, opt_state = apply_step(grads, opt_state, params)
             params = jax.tree.map(lambda p, u: p + u, params, updates)
-    return params, step_losses
+    return (params, step_losses, opt_state) if with_state else (params, step_losses)
 
 
 def brute_force_batched(params, buffer, optimizer, epochs, batch):
@@ -127,7 +128,7 @@ class TrainTest(chex.TestCase):
         buffer = filled_buffer(rng, M)
         optimizer = imagination.make_imagination_optimizer(name, lr)
         params = init_params()
-        trained, step_losses = jax.jit(
+        trained, step_losses, _ = jax.jit(
             lambda p, b: imagination.train_on_buffer(p, b, apply_fn, optimizer, 2, batch)
         )(params, buffer)
         chex.assert_shape(step_losses, (2, M // batch))
@@ -141,7 +142,7 @@ class TrainTest(chex.TestCase):
         buffer = filled_buffer(rng, M)
         optimizer = imagination.make_imagination_optimizer(name, lr)
         params = init_params()
-        trained, step_losses = jax.jit(
+        trained, step_losses, _ = jax.jit(
             lambda p, b: imagination.train_on_buffer(p, b, apply_fn, optimizer, 3)
         )(params, buffer)
         chex.assert_shape(step_losses, (3, M))
@@ -181,6 +182,27 @@ class TrainTest(chex.TestCase):
         np.testing.assert_allclose(
             metrics["imagination/first_epoch_loss"], np.mean([l[0].mean() for l in ref_losses]), rtol=1e-4
         )
+
+    def test_a_kept_optimizer_state_carries_from_lane_to_lane(self):
+        """With `opt_state` given, lanes 0 then 2 train with one Adam state carried across
+        their buffers (a Python loop with one state gives the same parameters and state);
+        without, each starts afresh, and the two differ."""
+        rng = np.random.default_rng(12)
+        optimizer = imagination.make_imagination_optimizer("adam", 1e-2)
+        buffers = stack([filled_buffer(rng, n) for n in (M, 2, M, 0)])
+        shared = init_params()
+        kept = jax.jit(lambda p, b, s: imagination.train_on_full_buffers(p, b, apply_fn, optimizer, 2, 1, s))
+        new_shared, new_buffers, _, state = kept(shared, buffers, optimizer.init(shared))
+        ref, ref_state = shared, optimizer.init(shared)
+        for lane in (0, 2):
+            ref, _, ref_state = brute_force_train(ref, jax.tree.map(lambda x: x[lane], buffers), optimizer, 2, ref_state,
+                                                  with_state=True)  # fmt: skip
+        chex.assert_trees_all_close(new_shared, ref, rtol=1e-4, atol=1e-6)
+        chex.assert_trees_all_close(state, ref_state, rtol=1e-4, atol=1e-6)
+        np.testing.assert_array_equal(new_buffers.count, [0, 2, 0, 0])
+        fresh, _, _, none = jax.jit(lambda p, b: imagination.train_on_full_buffers(p, b, apply_fn, optimizer, 2))(shared, buffers)
+        assert none is None
+        assert max(float(jnp.abs(a - b).max()) for a, b in zip(jax.tree.leaves(fresh), jax.tree.leaves(new_shared))) > 1e-4
 
     def test_vmapped_over_seeds(self):
         """Seeds with different numbers of full lanes, in one vmapped call."""

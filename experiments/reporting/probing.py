@@ -23,7 +23,8 @@ CONDITIONS = ("trained", "noise off", "untrained f_w", "shuffled", "shuffled, no
 
 # f_w's training options replayed by --fit-options: the run's own first, then one change
 # each (Config fields: imagination_optimizer, imagination_lr, imagination_epochs, buffer_size,
-# imagination_batch).
+# imagination_batch; and `KEEP_STATE`, the replay's own: one optimiser state kept across the
+# flushes instead of a fresh one each, which training does not offer).
 FIT_OPTIONS = {
     "as trained": {},
     "epochs 1": {"imagination_epochs": 1},
@@ -35,7 +36,10 @@ FIT_OPTIONS = {
     "M 128": {"buffer_size": 128},
     "batch 8": {"imagination_batch": 8},
     "batch 8, lr 3e-3": {"imagination_batch": 8, "imagination_lr": 3e-3},
+    "state kept": {"keep_optimizer_state": True},
+    "state kept, lr 3e-4": {"keep_optimizer_state": True, "imagination_lr": 3e-4},
 }
+KEEP_STATE = "keep_optimizer_state"
 
 
 def sr_conditions(model: Model, evaluator, episodes: int, shuffled) -> dict[str, float]:
@@ -79,6 +83,8 @@ def fit_options(model: Model, w_init, items, passes: int) -> dict[str, float]:
     mean = subgoal[add][fit].mean(axis=0)
     out = {}
     for name, change in FIT_OPTIONS.items():
+        change = dict(change)
+        keep_state = change.pop(KEEP_STATE, False)
         try:
             config = dataclasses.replace(model.config, **change)
         except ValueError:  # e.g. a batch that does not divide this run's buffer: not applicable
@@ -86,7 +92,8 @@ def fit_options(model: Model, w_init, items, passes: int) -> dict[str, float]:
             continue
         optimizer = make_imagination_optimizer(config.imagination_optimizer, config.imagination_lr)
         w = replay_online_fit(model.trainer.agent.imagine, w_init, s_0, goal, subgoal, only_fit_items(add), optimizer,
-                              config.imagination_epochs, config.buffer_size, passes, config.imagination_batch)  # fmt: skip
+                              config.imagination_epochs, config.buffer_size, passes, config.imagination_batch,
+                              keep_state)  # fmt: skip
         predicted = np.asarray(model.trainer.agent.imagine(w, s_0[add][held], goal[add][held]))
         out[name] = r_squared(predicted, subgoal[add][held], mean)
     return out
