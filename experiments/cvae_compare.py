@@ -44,7 +44,7 @@ def main(args: Args) -> dict:
 
     info = rundir.read_run_info(args.run)
     config = Config(**info["config"])
-    if not config.pieces.imagination.trains_imagination:
+    if not config.pieces.imagination_variant.trains_imagination:
         raise errors.UserError(f"{args.run} is a {config.method} run, whose f_w is not trained on sub-goals; "
                                "use a run of a method with ForeSIT's imagination (e.g. a3c+foresit)")  # fmt: skip
     if args.windows < 1 or args.epochs < 1:

@@ -169,7 +169,7 @@ class Agent:
     def __init__(self, config: Config):
         self.config = config
         self.method = config.pieces
-        self.imagination = self.method.imagination
+        self.imagination_variant = self.method.imagination_variant
         self.model = ActorCritic(
             # ORG's object-relation graph over the `org` setup's detector features (None: none).
             object_graph=self.method.encoder_piece.object_graph(),
@@ -177,7 +177,7 @@ class Agent:
             learned_loss=self.method.base_piece.learned_loss(config),
             num_actions=config.num_actions,
             hidden_size=config.hidden_size,
-            use_imagination=self.imagination.uses_imagination,
+            use_imagination=self.imagination_variant.uses_imagination,
             attention_critic=self.method.attention_critic,
             attention_size=config.attention_size,
             value_hidden=config.value_hidden,
@@ -189,7 +189,7 @@ class Agent:
         self.imagination_net = ImaginationNet(config.imagination_layer_sizes)
         # Where i_tau enters (Config.imagination_input), as the network decides it.
         self.imagination_in_encoder = self.model.imagination_in_encoder
-        self.imagination_in_head = self.imagination.uses_imagination and not self.imagination_in_encoder
+        self.imagination_in_head = self.imagination_variant.uses_imagination and not self.imagination_in_encoder
 
     # ------------------------------------------------------------------ init
     def init(self, key: chex.PRNGKey, obs: dict) -> tuple[Any, Any]:
@@ -198,7 +198,7 @@ class Agent:
         hidden = self.config.hidden_size
         carry = initial_carry((), hidden)
         probs = jnp.zeros((self.config.num_actions,), jnp.float32)
-        imagined = jnp.zeros((hidden,), jnp.float32) if self.imagination.uses_imagination else None
+        imagined = jnp.zeros((hidden,), jnp.float32) if self.imagination_variant.uses_imagination else None
         params = self.model.init(k_model, carry, obs, probs, imagined)
         w_params = self.imagination_net.init(k_imag, jnp.zeros((hidden,)), obs["target"])
         return params, w_params
@@ -281,12 +281,12 @@ class Agent:
 
     def imagined_at_step(self, acting: AgentParams, actor: ActorState, s_t: chex.Array,
                          key: chex.PRNGKey) -> chex.Array:  # fmt: skip
-        """i_tau for a step `[B, H]` (Eq. 6-7): renewed where the Imagination piece says (an
+        """i_tau for a step `[B, H]` (Eq. 6-7): renewed where the ImaginationVariant piece says (an
         episode's first step; every K steps for `int`) from s_t (= s_0 at the first step)
         by f_w (`acting.imagination_params`), with noise of each lane's variance
         (`acting.noise_variance` `[B]`, or Eq. 7 from its success tracker), else the
         running episode's. Unchanged without imagination."""
-        cfg, variant = self.config, self.imagination  # the method's Imagination piece
+        cfg, variant = self.config, self.imagination_variant  # the method's ImaginationVariant piece
         if not variant.uses_imagination:
             return actor.imagined
         noise_variance = acting.noise_variance

@@ -28,7 +28,7 @@ naming the maml base, A3C trained by MAML, as the paper does): `a3c`,
 names alone (`rnd`, `att`, `int`) mean `a3c+rnd` etc. `parse_method` turns a name into a `Method`;
 `Config` validates it with the setup. Each piece is a small record of behaviour the agent
 calls (`Base`: how a window is acted and the network's extra module; `Encoder`: ORG's
-object graph and its evaluation protocol; `Imagination`: where i_tau comes from and what
+object graph and its evaluation protocol; `ImaginationVariant`: where i_tau comes from and what
 f_w learns); nothing outside this module tests a piece's name (tests/test_methods.py
 checks it).
 """
@@ -57,7 +57,7 @@ ROLLOUTS: tuple[str, ...] = ("packed", "episodes")
 
 
 @dataclasses.dataclass(frozen=True)
-class Imagination:
+class ImaginationVariant:
     """An imagination variant: where i_tau comes from, when it is renewed, what f_w learns.
 
     source: 'none' (the policy sees s_t only), 'learned' (f_w([s_0 : g_tau]) + noise,
@@ -108,10 +108,10 @@ class Imagination:
         return jax.lax.stop_gradient(imagination.add_imagination_noise(key, imagined, noise_variance))
 
 
-_FORESIT = Imagination("foresit", source="learned", critic="attention")
+_FORESIT = ImaginationVariant("foresit", source="learned", critic="attention")
 
-IMAGINATIONS: dict[str, Imagination] = {
-    "none": Imagination("none"),
+IMAGINATION_VARIANTS: dict[str, ImaginationVariant] = {
+    "none": ImaginationVariant("none"),
     "foresit": _FORESIT,
     "rnd": dataclasses.replace(_FORESIT, name="rnd", source="random"),
     "att": dataclasses.replace(_FORESIT, name="att", subgoal_mode="attention_average"),
@@ -185,7 +185,7 @@ class Method:
 
     base: str = "a3c"
     encoder: str = "plain"
-    imagination: Imagination = IMAGINATIONS["none"]
+    imagination_variant: ImaginationVariant = IMAGINATION_VARIANTS["none"]
     critic: str | None = None
 
     def __post_init__(self):
@@ -193,12 +193,12 @@ class Method:
             raise ValueError(f"base must be one of {BASES} and encoder one of {ENCODERS}, got {self.base!r}, "
                              f"{self.encoder!r}")  # fmt: skip
         if self.critic is None:
-            object.__setattr__(self, "critic", self.imagination.critic)
+            object.__setattr__(self, "critic", self.imagination_variant.critic)
         if self.critic not in CRITICS:
             raise ValueError(f"critic must be one of {CRITICS}, got {self.critic!r}")
-        if self.imagination.subgoal_mode == "attention_average" and self.critic != "attention":
+        if self.imagination_variant.subgoal_mode == "attention_average" and self.critic != "attention":
             raise ValueError(
-                f"imagination {self.imagination.name!r} imagines the attention-weighted average of the "
+                f"imagination {self.imagination_variant.name!r} imagines the attention-weighted average of the "
                 f"episode's states: it needs the attention critic (drop 'plaincritic')"
             )
 
@@ -220,9 +220,9 @@ class Method:
         parts = ["a3c", "maml"] if self.base == "maml" else [self.base]
         if self.encoder != "plain":
             parts.append(self.encoder)
-        if self.imagination.name != "none":
-            parts.append(self.imagination.name)
-        if self.critic != self.imagination.critic:
+        if self.imagination_variant.name != "none":
+            parts.append(self.imagination_variant.name)
+        if self.critic != self.imagination_variant.critic:
             parts.append({v: k for k, v in CRITIC_PIECES.items()}[self.critic])
         return "+".join(parts)
 
@@ -284,7 +284,7 @@ IMPLEMENTED_METHODS: tuple[str, ...] = (
 
 
 def parse_method(name: str) -> Method:
-    """`'a3c+org+foresit'` -> Method(base='a3c', encoder='org', imagination=foresit).
+    """`'a3c+org+foresit'` -> Method(base='a3c', encoder='org', imagination_variant=foresit).
 
     Raises ValueError naming the valid pieces on an unknown or repeated piece."""
     if not isinstance(name, str) or not name.strip():
@@ -292,7 +292,7 @@ def parse_method(name: str) -> Method:
     base, encoder, critic, imagination = None, None, None, None
     valid = (
         f"bases {list(BASES)}, encoders {[e for e in ENCODERS if e != 'plain']}, critics {list(CRITIC_PIECES)}, "
-        f"imagination {list(IMAGINATIONS)}"
+        f"imagination {list(IMAGINATION_VARIANTS)}"
     )
     pieces = name.strip().lower().split("+")
     if "a3c" in pieces and "maml" in pieces:  # 'a3c+maml': MAML trains the A3C learner
@@ -304,7 +304,7 @@ def parse_method(name: str) -> Method:
             slot, value = "encoder", piece
         elif piece in CRITIC_PIECES:
             slot, value = "critic", piece
-        elif piece in IMAGINATIONS:
+        elif piece in IMAGINATION_VARIANTS:
             slot, value = "imagination", piece
         else:
             raise ValueError(f"unknown piece {piece!r} in method {name!r}; pieces are '+'-joined {valid}")
@@ -321,7 +321,7 @@ def parse_method(name: str) -> Method:
             imagination = value
     try:
         return Method(
-            base or "a3c", encoder or "plain", IMAGINATIONS[imagination or "none"],
+            base or "a3c", encoder or "plain", IMAGINATION_VARIANTS[imagination or "none"],
             CRITIC_PIECES[critic] if critic else None,
         )  # fmt: skip
     except ValueError as e:

@@ -177,7 +177,7 @@ class Trainer:
         return actor, key, k_act
 
     def update(self, state: RunnerState, env_params) -> tuple[RunnerState, dict]:
-        cfg, variant, env = self.config, self.agent.imagination, self.bind(env_params)  # the Imagination piece
+        cfg, variant, env = self.config, self.agent.imagination_variant, self.bind(env_params)
         actor, key, k_act = self.begin_window(state.actor, state.key, env)
         rho = jax.vmap(imagination.success_rate)(actor.tracker)  # [B] at the window's start
         (loss, window), grads = self.loss_and_grad(state.params, state.imagination_params, env, actor, k_act)
@@ -227,7 +227,8 @@ class Trainer:
         if alpha is None:
             subgoals = jax.lax.stop_gradient(traj.states)
         else:
-            subgoals = jnp.swapaxes(subgoals_of_rows(key_states, alpha[:, :-1], self.agent.imagination.subgoal_mode), 0, 1)
+            mode = self.agent.imagination_variant.subgoal_mode
+            subgoals = jnp.swapaxes(subgoals_of_rows(key_states, alpha[:, :-1], mode), 0, 1)
         return traj.s_0, traj.inputs.obs["target"], subgoals, success
 
     def subgoal_steps(self, traj: Trajectory, end: WindowEnd, alpha) -> chex.Array:

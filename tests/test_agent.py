@@ -41,7 +41,7 @@ def test_parameter_tree_of_each_method(method):
     config = H.tiny_config(method)
     obs = observation()
     params, w_params = jax.eval_shape(Agent(config).init, jax.random.PRNGKey(0), obs)
-    flags, hidden = config.pieces.imagination, config.hidden_size
+    flags, hidden = config.pieces.imagination_variant, config.hidden_size
     critic = params["params"]["value_critic"]
     # Only the attention critic has q, k, v (Eq. 3-4); the plain A3C critic is an MLP.
     assert {"query", "key", "value"} <= set(critic) if config.pieces.attention_critic else set(critic) == {"value_head"}

@@ -5,7 +5,7 @@ import dataclasses
 import pytest
 
 from foresit_jax.config import Config
-from foresit_jax.methods import IMAGINATIONS, Imagination
+from foresit_jax.methods import IMAGINATION_VARIANTS, ImaginationVariant
 
 
 def test_paper_defaults():
@@ -74,19 +74,20 @@ def test_unknown_methods_and_impossible_combinations():
             Config(method=name, setup="savn")
 
 
-def changed_fields(a: Imagination, b: Imagination):
-    return {f.name for f in dataclasses.fields(Imagination) if getattr(a, f.name) != getattr(b, f.name)} - {"name"}
+def changed_fields(a: ImaginationVariant, b: ImaginationVariant):
+    fields = dataclasses.fields(ImaginationVariant)
+    return {f.name for f in fields if getattr(a, f.name) != getattr(b, f.name)} - {"name"}
 
 
 def test_method_pieces():
-    a3c, foresit = Config(method="a3c").pieces.imagination, Config(method="a3c+foresit").pieces.imagination
+    a3c, foresit = (Config(method=m).pieces.imagination_variant for m in ("a3c", "a3c+foresit"))
     assert not a3c.uses_imagination and not Config(method="a3c").pieces.attention_critic
     assert foresit.trains_imagination and Config(method="a3c+foresit").pieces.attention_critic
     assert foresit.subgoal_mode == "argmax" and not foresit.renew_every_k
     # Each ablation is ForeSIT with exactly one change.
-    assert changed_fields(IMAGINATIONS["rnd"], foresit) == {"source"}
-    assert IMAGINATIONS["rnd"].uses_imagination and not IMAGINATIONS["rnd"].trains_imagination
-    assert changed_fields(IMAGINATIONS["att"], foresit) == {"subgoal_mode"}
-    assert IMAGINATIONS["att"].subgoal_mode == "attention_average"
-    assert changed_fields(IMAGINATIONS["int"], foresit) == {"renew_every_k"}
-    assert Config(method="int").pieces.imagination.renew_every_k
+    assert changed_fields(IMAGINATION_VARIANTS["rnd"], foresit) == {"source"}
+    assert IMAGINATION_VARIANTS["rnd"].uses_imagination and not IMAGINATION_VARIANTS["rnd"].trains_imagination
+    assert changed_fields(IMAGINATION_VARIANTS["att"], foresit) == {"subgoal_mode"}
+    assert IMAGINATION_VARIANTS["att"].subgoal_mode == "attention_average"
+    assert changed_fields(IMAGINATION_VARIANTS["int"], foresit) == {"renew_every_k"}
+    assert Config(method="int").pieces.imagination_variant.renew_every_k

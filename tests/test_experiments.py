@@ -1007,7 +1007,7 @@ def test_extending_blocks_run():
         exec(compile(body, "docs/extending.md", "exec"), {})  # noqa: S102
     from foresit_jax import methods
 
-    assert "myint" not in methods.IMAGINATIONS  # the example cleans up after itself
+    assert "myint" not in methods.IMAGINATION_VARIANTS  # the example cleans up after itself
 
 
 def test_console_scripts_are_the_module_programs(monkeypatch, capsys):

@@ -75,7 +75,7 @@ def test_the_mlp_reading_is_a_two_layer_head(method):
     params = scrambled(params)
     rng = np.random.default_rng(1)
     s_t, i_tau = (np.tanh(rng.normal(size=(3, config.hidden_size))).astype(np.float32) for _ in range(2))
-    uses = config.pieces.imagination.uses_imagination
+    uses = config.pieces.imagination_variant.uses_imagination
     got = agent.model.apply(params, s_t, i_tau if uses else None, method=type(agent.model).policy_logits)
     p = jax.tree.map(np.asarray, params["params"]["policy"])
     x = np.concatenate([s_t, i_tau], -1) if uses else s_t
@@ -110,7 +110,7 @@ def test_i_tau_while_acting_is_f_w_of_the_episode_state_it_was_renewed_at(method
     given = seen.encoder_imagined if reading == "encoder" else seen.imagined
     assert (seen.imagined is None) == (reading == "encoder")
     step, states, goal = traj.episode_step, traj.states, seen.obs["target"]
-    interval = config.int_interval if config.pieces.imagination.renew_every_k else 10**6
+    interval = config.int_interval if config.pieces.imagination_variant.renew_every_k else 10**6
     checked = 0
     for t in range(30):
         for b in range(lanes):

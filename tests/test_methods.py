@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from foresit_jax.config import Config
-from foresit_jax.methods import IMAGINATIONS, IMPLEMENTED_METHODS, PAPER_METHODS, Method, parse_method
+from foresit_jax.methods import IMAGINATION_VARIANTS, IMPLEMENTED_METHODS, PAPER_METHODS, Method, parse_method
 
 
 @pytest.mark.parametrize(
@@ -31,7 +31,7 @@ from foresit_jax.methods import IMAGINATIONS, IMPLEMENTED_METHODS, PAPER_METHODS
 )
 def test_names_parse_into_pieces(name, base, encoder, imagination):
     method = parse_method(name)
-    assert (method.base, method.encoder, method.imagination.name) == (base, encoder, imagination)
+    assert (method.base, method.encoder, method.imagination_variant.name) == (base, encoder, imagination)
 
 
 @pytest.mark.parametrize(
@@ -93,7 +93,7 @@ def test_gradient_paths_are_declared_per_method():
 
 
 def test_imagination_pieces():
-    foresit, att, rnd, intv, none = (IMAGINATIONS[n] for n in ("foresit", "att", "rnd", "int", "none"))
+    foresit, att, rnd, intv, none = (IMAGINATION_VARIANTS[n] for n in ("foresit", "att", "rnd", "int", "none"))
     assert foresit.trains_imagination and foresit.critic == "attention" and foresit.subgoal_mode == "argmax"
     assert att.trains_imagination and att.subgoal_mode == "attention_average"
     assert rnd.uses_imagination and not rnd.trains_imagination
@@ -105,7 +105,7 @@ def test_imagination_pieces():
 
 
 def test_no_code_outside_the_pieces_tests_a_base_or_encoder_name():
-    """Methods compose from the pieces' behaviour (`Base`, `Encoder`, `Imagination`
+    """Methods compose from the pieces' behaviour (`Base`, `Encoder`, `ImaginationVariant`
     records): outside foresit_jax/methods.py no module compares a base's or an
     encoder's name."""
     import re
@@ -169,7 +169,7 @@ def test_noise_on_the_input_is_algorithm_1s_and_on_the_output_eq_6s():
     def imagine_fn(w, s, g):  # a nonlinear stand-in for f_w: where the noise enters matters
         return jnp.tanh(w * s + g.sum(-1, keepdims=True))
 
-    piece = methods.IMAGINATIONS["foresit"]
+    piece = methods.IMAGINATION_VARIANTS["foresit"]
     key, s_t, goal = jax.random.key(1), jnp.full((2, 4), 0.5), jnp.ones((2, 3))
     variance = jnp.array([0.3, 1.0])
     out = piece.imagine(imagine_fn, 2.0, s_t, goal, key, variance, 0.5)

@@ -180,7 +180,7 @@ def test_every_method_trains_without_nan(method, foresit_run):
     H.assert_tree_finite(state)
     H.assert_tree_finite(metrics)
     assert int(state.update) == len(metrics["losses/total_loss"])
-    flags = config.pieces.imagination
+    flags = config.pieces.imagination_variant
     assert any(k.startswith("imagination/") for k in metrics) == flags.trains_imagination
     if not flags.trains_imagination:  # a3c and rnd never touch f_w
         init = H.jitted_init(config)(jax.random.PRNGKey(0))

@@ -57,7 +57,7 @@ def sr_conditions(model: Model, evaluator, episodes: int, shuffled) -> dict[str,
         return evaluator.evaluate(params, config, "test", key, episodes, **kw)["overall"]["SR"]
 
     out = {"trained": sr(trained)}
-    if config.pieces.imagination.uses_imagination:
+    if config.pieces.imagination_variant.uses_imagination:
         out["noise off"] = sr(trained._replace(noise_variance=jnp.zeros_like(training_end)))
         out["untrained f_w"] = sr(trained._replace(imagination_params=untrained_w))
         out["shuffled"] = sr(trained, agent=shuffled)
@@ -113,7 +113,7 @@ def imagination_items(model: Model, windows: int, options_passes: int = 0) -> di
     s_0, goal, subgoal, add = items
     add = add.astype(bool)
     out = {"subgoal": subgoal_position_histogram(t_star[add], step[add])}
-    if model.config.pieces.imagination.trains_imagination and add.sum() >= 4:
+    if model.config.pieces.imagination_variant.trains_imagination and add.sum() >= 4:
         s_0, goal, subgoal = s_0[add], goal[add], subgoal[add]
         predicted = np.asarray(trainer.agent.imagine(state.imagination_params, s_0, goal))
         w_init = trainer.init(selection.run_key(model.seed)).imagination_params  # the run's own initial f_w

@@ -53,7 +53,7 @@ def models_of_sweep(folder: Path, methods: tuple[str, ...]) -> dict[str, list[Mo
     out = {}
     for method in methods or finished:
         config, _ = sweeps.method_schedule(method, args)
-        if not methods and not (config.pieces.imagination.uses_imagination or config.pieces.attention_critic):
+        if not methods and not (config.pieces.imagination_variant.uses_imagination or config.pieces.attention_critic):
             continue
         config, trainer, states, best = sweeps.load_method(method, args, folder / "methods" / method)
         seeds = sweeps.finished_seeds(folder / "methods" / method)
