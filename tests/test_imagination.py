@@ -191,16 +191,16 @@ class TrainTest(chex.TestCase):
         optimizer = imagination.make_imagination_optimizer("adam", 1e-2)
         buffers = stack([filled_buffer(rng, n) for n in (M, 2, M, 0)])
         shared = init_params()
-        kept = jax.jit(lambda p, b, s: imagination.train_on_full_buffers(p, b, apply_fn, optimizer, 2, 1, s))
+        kept = jax.jit(lambda p, b, s: imagination.train_on_full_buffers(p, b, apply_fn, optimizer, 1, 1, s))
         new_shared, new_buffers, _, state = kept(shared, buffers, optimizer.init(shared))
         ref, ref_state = shared, optimizer.init(shared)
         for lane in (0, 2):
-            ref, _, ref_state = brute_force_train(ref, jax.tree.map(lambda x: x[lane], buffers), optimizer, 2, ref_state,
+            ref, _, ref_state = brute_force_train(ref, jax.tree.map(lambda x: x[lane], buffers), optimizer, 1, ref_state,
                                                   with_state=True)  # fmt: skip
         chex.assert_trees_all_close(new_shared, ref, rtol=1e-4, atol=1e-6)
         chex.assert_trees_all_close(state, ref_state, rtol=1e-4, atol=1e-6)
         np.testing.assert_array_equal(new_buffers.count, [0, 2, 0, 0])
-        fresh, _, _, none = jax.jit(lambda p, b: imagination.train_on_full_buffers(p, b, apply_fn, optimizer, 2))(shared, buffers)
+        fresh, _, _, none = jax.jit(lambda p, b: imagination.train_on_full_buffers(p, b, apply_fn, optimizer, 1))(shared, buffers)
         assert none is None
         assert max(float(jnp.abs(a - b).max()) for a, b in zip(jax.tree.leaves(fresh), jax.tree.leaves(new_shared))) > 1e-4
 
