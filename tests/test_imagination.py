@@ -90,10 +90,9 @@ def item_loss_and_grad(params, s_0, goal, subgoal):
     return jax.value_and_grad(lambda p: losses.smooth_l1(apply_fn(p, s_0, goal), subgoal))(params)
 
 
-def brute_force_train(params, buffer, optimizer, epochs, opt_state=None, with_state=False):
-    """Reference for train_on_buffer: Python loops, one optax step per item, from
-    `opt_state` (None: a fresh one); with `with_state`, the state after is returned too."""
-    opt_state = optimizer.init(params) if opt_state is None else opt_state
+def brute_force_train(params, buffer, optimizer, epochs):
+    """Reference for train_on_buffer: Python loops, one optax step per item."""
+    opt_state = optimizer.init(params)
     step_losses = np.zeros((epochs, buffer.capacity))
     apply_step = jax.jit(optimizer.update)
     for e in range(epochs):
@@ -102,7 +101,7 @@ def brute_force_train(params, buffer, optimizer, epochs, opt_state=None, with_st
             step_losses[e, i] = loss
             updates, opt_state = apply_step(grads, opt_state, params)
             params = jax.tree.map(lambda p, u: p + u, params, updates)
-    return (params, step_losses, opt_state) if with_state else (params, step_losses)
+    return params, step_losses
 
 
 def brute_force_batched(params, buffer, optimizer, epochs, batch):
@@ -185,18 +184,20 @@ class TrainTest(chex.TestCase):
 
     def test_a_kept_optimizer_state_carries_from_lane_to_lane(self):
         """With `opt_state` given, lanes 0 then 2 train with one Adam state carried across
-        their buffers (a Python loop with one state gives the same parameters and state);
-        without, each starts afresh, and the two differ."""
+        their buffers (one buffer at a time, the state handed on, gives the same parameters
+        and state); without, each starts afresh, and the two differ."""
         rng = np.random.default_rng(12)
         optimizer = imagination.make_imagination_optimizer("adam", 1e-2)
         buffers = stack([filled_buffer(rng, n) for n in (M, 2, M, 0)])
         shared = init_params()
         kept = jax.jit(lambda p, b, s: imagination.train_on_full_buffers(p, b, apply_fn, optimizer, 1, 1, s))
         new_shared, new_buffers, _, state = kept(shared, buffers, optimizer.init(shared))
+        # Reference: train_on_buffer (tested against a Python loop above) on lanes 0 then 2,
+        # the state of one handed to the next.
+        one_buffer = jax.jit(lambda p, b, s: imagination.train_on_buffer(p, b, apply_fn, optimizer, 1, 1, s))
         ref, ref_state = shared, optimizer.init(shared)
         for lane in (0, 2):
-            ref, _, ref_state = brute_force_train(ref, jax.tree.map(lambda x: x[lane], buffers), optimizer, 1, ref_state,
-                                                  with_state=True)  # fmt: skip
+            ref, _, ref_state = one_buffer(ref, jax.tree.map(lambda x: x[lane], buffers), ref_state)
         chex.assert_trees_all_close(new_shared, ref, rtol=1e-4, atol=1e-6)
         chex.assert_trees_all_close(state, ref_state, rtol=1e-4, atol=1e-6)
         np.testing.assert_array_equal(new_buffers.count, [0, 2, 0, 0])
