@@ -123,7 +123,8 @@ class Trajectory(NamedTuple):
 class WindowEnd(NamedTuple):
     """What follows a window, per lane: the state s_T after its last step (it bootstraps
     an episode the window cut, V(s*_T) in Eq. 8, and is the critic's last key) and its
-    position in its episode. Zeros after whole episodes: nothing is bootstrapped."""
+    position in its episode. After whole episodes the state is zeros: nothing is
+    bootstrapped (the position is the lanes' next one, as after any window)."""
 
     state: chex.Array  # [B, H] s_T, without gradient
     episode_step: chex.Array  # [B] int32

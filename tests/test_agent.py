@@ -106,7 +106,7 @@ def _rollout(greedy: bool):
                              record_inputs=not greedy)  # fmt: skip
         replayed = None if greedy else replay(agent, params, traj, initial_carry((LANES,), FORESIT.hidden_size))
         memory = jnp.zeros((LANES, 0, FORESIT.hidden_size))
-        end = WindowEnd(jnp.zeros((LANES, FORESIT.hidden_size)), jnp.zeros((LANES,), jnp.int32))  # whole episodes
+        end = WindowEnd(jnp.zeros((LANES, FORESIT.hidden_size)), jnp.zeros((LANES,), jnp.int32))  # whole episodes: nothing bootstrapped
         return traj, replayed, agent.critic(params, traj, end, memory)[0]
 
     return jax.jit(run, compiler_options=H.FAST_COMPILE)

@@ -44,8 +44,9 @@ from experiments.running.progress import progress_bar
 @dataclasses.dataclass(frozen=True)
 class Sweep:
     """What a sweep trains, and where: the arms, the seeds, the protocol (setup, preset,
-    overrides) and the folder. The programs that run or read sweeps (sweep, tune, paper,
-    probe, failures) all take one; sweep.json records it (`rundir.write_started_args`)."""
+    overrides) and the folder. sweep, tune and paper run one (`run`); sweep.json records
+    it (`rundir.write_started_args`), and the programs that read a sweep folder (probe,
+    failures, paper) read it back (`saved`)."""
 
     methods: tuple[str, ...] = ("a3c", "a3c+foresit")
     """Methods to compare ('+'-joined pieces, see foresit_jax.methods), or arms: a method
@@ -467,7 +468,8 @@ def run(spec: Sweep, *, resume: bool = False, overwrite: bool = False, stop_afte
     call) ran out first.
 
     `resume` continues the sweep in `spec.out`, which must have been started as `spec`
-    (`saved`); without it a folder that exists is refused unless `overwrite`."""
+    (`saved`); without it `spec.out` must be new or empty, or a sweep folder (sweep.json)
+    to replace with `overwrite` (`rundir.prepare_run_dir`)."""
     from foresit_jax.evaluate import Evaluator
 
     check(spec)
