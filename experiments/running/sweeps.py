@@ -479,8 +479,9 @@ def run(spec: Sweep, *, resume: bool = False, overwrite: bool = False, stop_afte
         rundir.prepare_run_dir(out, resume=True, overwrite=overwrite, marker="sweep.json", kind="sweep")
         differ = _differences(saved(out), spec)
         if differ:
-            raise errors.UserError(f"{out} was started as another sweep (its {', '.join(differ)} differ); "
-                                   "continue it with its own arguments")  # fmt: skip
+            raise errors.UserError(f"{out} was started as another sweep (its {', '.join(differ)} differ); continue it "
+                                   "with the arguments in its sweep.json (`experiments.sweep --resume --out` reads "
+                                   "them), or write this one to another folder")  # fmt: skip
         check_started(spec)
     else:
         rundir.prepare_run_dir(out, resume=False, overwrite=overwrite, marker="sweep.json", kind="sweep")
