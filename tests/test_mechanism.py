@@ -333,6 +333,25 @@ def test_replayed_online_fit_is_the_training_procedure():
     assert not H.trees_bitwise_equal(got, w0)
 
 
+def test_the_replay_can_keep_one_optimizer_state_across_flushes():
+    """`replay_online_fit(..., keep_optimizer_state=True)` hands Adam's state from flush to
+    flush (imagination.train_on_full_buffers, tested in test_imagination): another f_w
+    than a fresh state per flush, from the same start on the same items."""
+    import optax
+
+    config = H.tiny_config("a3c+foresit", buffer_size=2)
+    trainer = H.trainer(config)
+    rng = np.random.default_rng(9)
+    steps, lanes, hidden, goal_size = 4, config.num_lanes, config.hidden_size, 8
+    items = (rng.normal(size=(steps, lanes, hidden)).astype(np.float32), rng.normal(size=(steps, lanes, goal_size)).astype(np.float32),
+             rng.normal(size=(steps, lanes, hidden)).astype(np.float32), rng.random((steps, lanes)) < 0.7)  # fmt: skip
+    w0 = trainer.agent.imagination_net.init(jax.random.PRNGKey(0), items[0][0, 0], items[1][0, 0])
+    fresh, kept = (probes.replay_online_fit(trainer.agent.imagine, w0, *items, optax.adam(1e-2), 1, config.buffer_size,
+                                            keep_optimizer_state=keep) for keep in (False, True))  # fmt: skip
+    assert not H.trees_bitwise_equal(fresh, w0)
+    assert not H.trees_bitwise_equal(kept, fresh)
+
+
 def test_signal_to_noise_and_subgoal_histogram_by_hand():
     s = probes.signal_to_noise(np.array([[1.0, 0.0], [-1.0, 2.0]]), 0.5)  # variances 1 and 1
     assert s == {"signal_variance": 1.0, "noise_variance": 0.5, "signal_share": pytest.approx(2 / 3)}
