@@ -13,11 +13,12 @@ import pytest
 import envs
 from envs.metrics import LENGTH_BUCKETS, bucket_label, by_length
 from experiments import paper
+from experiments.reporting import paper_tables
 from test_experiments import cli_error
 
 # The tiny report trains two methods (compile time dominates): the other rows read "not run".
 RUN = ("a3c", "a3c+foresit")
-EXCLUDE = tuple(m for m in paper.SETUP_OF if m not in RUN)
+EXCLUDE = tuple(m for m in paper_tables.SETUP_OF if m not in RUN)
 SECTIONS = ("## Platforms", "## Table 1", "### savn setup", "### org setup", "## Table 2", "## Table 3", "## Model selection",
             "## SR and SPL by optimal path length", "## The paper's claims", "## ORG's rows with sampled actions",
             "## Imagination probes", "## The C-VAE comparison", "## Figure 4", "## Figure 3", "## Learning curves")  # fmt: skip
@@ -70,15 +71,15 @@ def test_tiny_report_has_every_table_figure_and_claim_after_a_kill_resume_and_re
         assert (out / name).stat().st_size > 0, name
     assert not (out / "org").exists()  # every org method excluded: no sweep
     # One line per claim; those with a method left out read "not run".
-    assert len(claims) == len(paper.claims({})) == 18
+    assert len(claims) == len(paper_tables.claims({})) == 18
     verdicts = {c: v.split(":")[0] for c, v in claims.items()}
-    assert set(verdicts.values()) <= {"holds", "does not hold", "cannot tell at this budget", paper.NOT_RUN}
-    assert verdicts["Table 1: a3c+foresit has a higher SR than a3c"] != paper.NOT_RUN
-    assert verdicts["Table 3: a3c+org+foresit has a higher SR than a3c+org+att"] == paper.NOT_RUN
+    assert set(verdicts.values()) <= {"holds", "does not hold", "cannot tell at this budget", paper_tables.NOT_RUN}
+    assert verdicts["Table 1: a3c+foresit has a higher SR than a3c"] != paper_tables.NOT_RUN
+    assert verdicts["Table 3: a3c+org+foresit has a higher SR than a3c+org+att"] == paper_tables.NOT_RUN
     for claim in claims:
         assert claim in report
     for method in ("a3c+maml", "a3c+org+rnd"):
-        assert any(method in line and paper.NOT_RUN in line for line in report.splitlines()), method
+        assert any(method in line and paper_tables.NOT_RUN in line for line in report.splitlines()), method
     # Strict JSON (an empty L^g bucket is null, never NaN) with SR/SPL by L^g per seed.
     text = (out / "savn" / "results_per_seed.json").read_text()
     assert "NaN" not in text
@@ -101,7 +102,7 @@ def test_sampled_section_pairs_greedy_with_sampled_and_each_method_with_the_base
     results = {m: [{"seed": s, "selected": {"overall": {"SR": v, "SPL": v / 2}}} for s, v in enumerate(vs)]
                for m, vs in greedy.items()}  # fmt: skip
     runs_ = {m: [{"seed": s, "overall": {"SR": v, "SPL": v / 2}} for s, v in enumerate(vs)] for m, vs in sampled.items()}
-    md, rows = paper.sampled_markdown(results, runs_)
+    md, rows = paper_tables.sampled_markdown(results, runs_)
     by = {(r["method"], r["metric"]): r for r in rows}
     assert by[("a3c+org", "SR")]["sampled - greedy"] == pytest.approx(4.0)  # (4 + 3 + 5) / 3
     assert by[("a3c+org+critic", "SR")]["sampled - greedy"] == pytest.approx(13.0)  # (12 + 14 + 13) / 3
@@ -116,18 +117,18 @@ def test_claims_hold_fail_or_cannot_tell_by_the_paired_interval():
     better = [result(60.0 + d, 58.0 + 2 * d) for d in (0.5, 2.0, -1.0, 1.5)]  # ~+10 SR, ~+18 on L>=5, small spread
     worse = [result(40.0 + d, 30.0 + d) for d in (1.0, 2.0, -2.5, 1.0)]
     noisy = [result(50.0 + d, 40.0 + d) for d in (20.0, -20.0, 15.0, -10.0)]
-    verdicts = {c: v for c, v, _ in paper.claims({"a3c": base, "a3c+foresit": better, "a3c+org": base,
+    verdicts = {c: v for c, v, _ in paper_tables.claims({"a3c": base, "a3c+foresit": better, "a3c+org": base,
                                                   "a3c+org+foresit": worse, "a3c+org+att": noisy})}  # fmt: skip
     assert verdicts["Table 1: a3c+foresit has a higher SR than a3c"] == "holds"
     assert verdicts["Table 1: a3c+foresit has a higher SPL than a3c"] == "holds"
     assert verdicts["a3c+foresit's SR gain over a3c is larger on L^g>=5 than overall"] == "holds"
     assert verdicts["Table 1: a3c+org+foresit has a higher SR than a3c+org"] == "does not hold"
     assert verdicts["Table 3: a3c+org+foresit has a higher SR than a3c+org+att"] == "cannot tell at this budget"
-    assert verdicts["Table 1: a3c+maml has a higher SR than a3c"] == paper.NOT_RUN
+    assert verdicts["Table 1: a3c+maml has a higher SR than a3c"] == paper_tables.NOT_RUN
     # selected - last is +1 SR in every run: no spread, so no interval
     assert verdicts["Protocol: the model selected on validation has a higher test SR than the last one"] == (
         "cannot tell at this budget")
-    numbers = {c: n for c, _, n in paper.claims({"a3c": base, "a3c+foresit": better})}
+    numbers = {c: n for c, _, n in paper_tables.claims({"a3c": base, "a3c+foresit": better})}
     diff = np.mean([b["selected"]["overall"]["SR"] - a["selected"]["overall"]["SR"] for a, b in zip(base, better)])
     assert numbers["Table 1: a3c+foresit has a higher SR than a3c"].startswith(f"SR difference {diff:+.1f} [")
 
@@ -199,7 +200,7 @@ def test_paper_rejects_bad_input_in_one_line(tmp_path, capsys):
         paper.cli, [*base, "--arms", "a3c@learning_rate=1e-3", "a3c@learning_rate=3e-4"], capsys)
     assert "is not a Config field" in cli_error(paper.cli, [*base, "--arms", "a3c@no_such=1"], capsys)
     assert "not a method of the paper's tables" in cli_error(paper.cli, [*base, "--exclude", "bogus"], capsys)
-    assert "leaves no method" in cli_error(paper.cli, [*base, "--exclude", *paper.SETUP_OF], capsys)
+    assert "leaves no method" in cli_error(paper.cli, [*base, "--exclude", *paper_tables.SETUP_OF], capsys)
     assert "--seeds must be >= 1" in cli_error(paper.cli, [*base, "--seeds", "0"], capsys)
     assert "--tsne-points must be >= 1" in cli_error(paper.cli, [*base, "--tsne-points", "0"], capsys)
     # --reuse: a folder that is neither a paper run nor a sweep, the run itself, a run of another protocol.
