@@ -12,7 +12,7 @@ import pytest
 import study_data
 
 from experiments import compare
-from experiments.reporting import report, stats
+from experiments.reporting import report, stats, tuning
 
 REPO = Path(__file__).resolve().parents[1]
 ARMS = {"a3c": "a3c@learning_rate=3e-4", "a3c+foresit": "a3c+foresit@learning_rate=3e-4",
@@ -139,11 +139,11 @@ def test_results_md_quotes_the_tuned_comparison():
         table = tune.arms(args, grid)
         results = {a: rundir.read_json(root / "sweep" / "methods" / a / "results.json")["results"]
                    for by_point in table.values() for a in by_point.values()}  # fmt: skip
-    chosen = {m: tune.choose({p: results[a] for p, a in by_point.items()}) for m, by_point in table.items()}
+    chosen = {m: tuning.choose({p: results[a] for p, a in by_point.items()}) for m, by_point in table.items()}
     assert chosen == {"a3c": "learning_rate=1e-3", "a3c+critic": "learning_rate=3e-4", "a3c+foresit": "learning_rate=3e-4"}
-    _, grid_rows = tune.grid_table(table, results, chosen)
-    best = {m: results[table[m][chosen[m]]] for m in args.methods}  # as tune.tune_report pairs them
-    _, best_vs_best = report.paired_report(best, tune.pairs_of(args.methods), ["SR", "SPL"])
+    _, grid_rows = tuning.grid_table(table, results, chosen)
+    best = {m: results[table[m][chosen[m]]] for m in args.methods}  # as tuning.tune_report pairs them
+    _, best_vs_best = report.paired_report(best, tuning.pairs_of(args.methods), ["SR", "SPL"])
     doc = (REPO / "docs" / "results.md").read_text()
     for row in grid_rows:
         val, sr, spl = (stats.summary(row[k]) for k in ("val_SR", "SR", "SPL"))

@@ -9,6 +9,7 @@ import pytest
 from scipy import stats as sp
 
 from experiments import sweep, tune
+from experiments.reporting import tuning
 from experiments.running import errors, sweeps
 
 SEEDS = (0, 1, 2, 3)
@@ -73,16 +74,16 @@ def test_the_value_is_chosen_on_validation_and_the_test_split_is_ignored():
     rng = np.random.default_rng(0)
     a = per_seed([50, 52, 48, 50], [40, 40, 40, 40], rng)
     b = per_seed([45, 47, 46, 44], [80, 80, 80, 80], rng)
-    np.testing.assert_array_equal(tune.selection_sr(a), [50, 52, 48, 50])
-    assert tune.choose({"lr=A": a, "lr=B": b}) == "lr=A"
+    np.testing.assert_array_equal(tuning.selection_sr(a), [50, 52, 48, 50])
+    assert tuning.choose({"lr=A": a, "lr=B": b}) == "lr=A"
     for r in b:
         r["selected"]["overall"]["SR"] = 0.0  # the test split turned around: no effect
-    assert tune.choose({"lr=A": a, "lr=B": b}) == "lr=A"
+    assert tuning.choose({"lr=A": a, "lr=B": b}) == "lr=A"
     for r in b:
         r["validation"][1]["SR"] = 60.0  # B's selected model now validates higher
-    assert tune.choose({"lr=A": a, "lr=B": b}) == "lr=B"
+    assert tuning.choose({"lr=A": a, "lr=B": b}) == "lr=B"
     tie = per_seed([50, 52, 48, 50], [0, 0, 0, 0], rng)
-    assert tune.choose({"lr=B": tie, "lr=A": a}) == "lr=B"  # a tie goes to the first in grid order
+    assert tuning.choose({"lr=B": tie, "lr=A": a}) == "lr=B"  # a tie goes to the first in grid order
 
 
 def test_a_seed_without_a_validation_at_its_selected_update_is_refused():
@@ -90,7 +91,7 @@ def test_a_seed_without_a_validation_at_its_selected_update_is_refused():
     bad = per_seed([50], [40], rng)
     bad[0]["selected_update"] = 25
     with pytest.raises(errors.UserError, match="selected update 25"):
-        tune.selection_sr(bad)
+        tuning.selection_sr(bad)
 
 
 def test_report_pairs_each_method_at_its_own_value_and_at_each_common_value(tmp_path):
@@ -125,7 +126,7 @@ def test_report_pairs_each_method_at_its_own_value_and_at_each_common_value(tmp_
     assert "## Best vs best" in md and "a3c: learning_rate=1e-3, a3c+foresit: learning_rate=3e-4" in md
     assert "experiments.paper --arms a3c@learning_rate=1e-3 a3c+foresit@learning_rate=3e-4 --reuse" in md
     assert [r["chosen"] for r in out["grid"]] == [False, True, True, False]
-    tune.curves_png(tmp_path / "curves.png", table, results)
+    tuning.curves_png(tmp_path / "curves.png", table, results)
     assert (tmp_path / "curves.png").stat().st_size > 0
 
 
@@ -162,7 +163,7 @@ def test_tune_end_to_end_resumes_and_reuses_a_plain_sweep(tmp_path, capsys):
     assert copied == json.loads((plain / "methods" / "a3c" / "results.json").read_text())
     results = {p: json.loads((out / "sweep" / "methods" / f"a3c@{p}" / "results.json").read_text())["results"]
                for p in ("learning_rate=1e-4", "learning_rate=1e-3")}  # fmt: skip
-    assert done["chosen"] == {"a3c": tune.choose(results)}
+    assert done["chosen"] == {"a3c": tuning.choose(results)}
     assert (out / "tune.md").is_file() and (out / "tune_curves.png").is_file()
     with pytest.raises(errors.UserError, match="already exists"):
         tune.main(tune.Args(methods=("a3c",), seeds=2, preset="tiny", out=out, progress=False))
