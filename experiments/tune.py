@@ -5,7 +5,7 @@ Every method is trained at every value of the grid over the same seeds: each (me
 value) is an arm `METHOD@field=value` of one seed sweep (`experiments.sweep`, in
 `--out/sweep`, a sweep folder that `compare`, `evaluate` and `probe` read as any other).
 Each method's value is then chosen by its mean validation SR over the seeds (each seed's
-selected model's validation SR, `selection_sr`): the test split never chooses. The report
+selected model's validation SR, `experiments.reporting.tuning.choose`): the test split never chooses. The report
 (`tune.md`, `tune.json`, `tune_curves.png` in --out) has:
 
 * the grid: per method and value, the validation SR that chose, the test SR and SPL, the
