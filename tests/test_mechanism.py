@@ -310,6 +310,19 @@ def test_only_fit_items_are_the_even_items_in_the_order_of_a_boolean_index():
     np.testing.assert_array_equal(x[probes.only_fit_items(add)], x[add][::2])
 
 
+GOAL_SIZE = 8  # the goal vectors of the replay streams below
+
+
+def replay_stream(config, steps: int, seed: int, offered: float):
+    """(trainer, a stream of random items (s_0, goal, subgoal, add) `[steps, lanes, ...]`,
+    each step offering its item with probability `offered`, f_w's initial w)."""
+    trainer, rng = H.trainer(config), np.random.default_rng(seed)
+    lanes, hidden = config.num_lanes, config.hidden_size
+    items = (rng.normal(size=(steps, lanes, hidden)).astype(np.float32), rng.normal(size=(steps, lanes, GOAL_SIZE)).astype(np.float32),
+             rng.normal(size=(steps, lanes, hidden)).astype(np.float32), rng.random((steps, lanes)) < offered)  # fmt: skip
+    return trainer, items, trainer.agent.imagination_net.init(jax.random.PRNGKey(0), items[0][0, 0], items[1][0, 0])
+
+
 def test_replayed_online_fit_is_the_training_procedure():
     """`replay_online_fit` streaming items twice gives the f_w `Trainer.store_and_train`
     gives from the same start on the stream written twice (the procedure training runs,
@@ -317,14 +330,9 @@ def test_replayed_online_fit_is_the_training_procedure():
     from foresit_jax import imagination
 
     config = H.tiny_config("a3c+foresit", buffer_size=4, imagination_epochs=2, imagination_batch=2)
-    trainer = H.trainer(config)
-    rng = np.random.default_rng(7)
-    steps, lanes, hidden, goal_size = 6, config.num_lanes, config.hidden_size, 8
-    items = (rng.normal(size=(steps, lanes, hidden)).astype(np.float32), rng.normal(size=(steps, lanes, goal_size)).astype(np.float32),
-             rng.normal(size=(steps, lanes, hidden)).astype(np.float32), rng.random((steps, lanes)) < 0.5)  # fmt: skip
-    w0 = trainer.agent.imagination_net.init(jax.random.PRNGKey(0), items[0][0, 0], items[1][0, 0])
-    buffers = jax.tree.map(lambda x: jnp.broadcast_to(x, (lanes,) + x.shape),
-                           imagination.buffer_init(config.buffer_size, hidden, goal_size))  # fmt: skip
+    trainer, items, w0 = replay_stream(config, steps=6, seed=7, offered=0.5)
+    buffers = jax.tree.map(lambda x: jnp.broadcast_to(x, (config.num_lanes,) + x.shape),
+                           imagination.buffer_init(config.buffer_size, config.hidden_size, GOAL_SIZE))  # fmt: skip
     doubled = tuple(jnp.asarray(np.concatenate([x, x])) for x in items)
     want, _, _ = jax.jit(trainer.store_and_train)(w0, buffers, doubled)
     got = probes.replay_online_fit(trainer.agent.imagine, w0, *items, trainer.imagination_optimizer,
@@ -340,12 +348,7 @@ def test_the_replay_can_keep_one_optimizer_state_across_flushes():
     import optax
 
     config = H.tiny_config("a3c+foresit", buffer_size=2)
-    trainer = H.trainer(config)
-    rng = np.random.default_rng(9)
-    steps, lanes, hidden, goal_size = 4, config.num_lanes, config.hidden_size, 8
-    items = (rng.normal(size=(steps, lanes, hidden)).astype(np.float32), rng.normal(size=(steps, lanes, goal_size)).astype(np.float32),
-             rng.normal(size=(steps, lanes, hidden)).astype(np.float32), rng.random((steps, lanes)) < 0.7)  # fmt: skip
-    w0 = trainer.agent.imagination_net.init(jax.random.PRNGKey(0), items[0][0, 0], items[1][0, 0])
+    trainer, items, w0 = replay_stream(config, steps=4, seed=9, offered=0.7)
     fresh, kept = (probes.replay_online_fit(trainer.agent.imagine, w0, *items, optax.adam(1e-2), 1, config.buffer_size,
                                             keep_optimizer_state=keep) for keep in (False, True))  # fmt: skip
     assert not H.trees_bitwise_equal(fresh, w0)
