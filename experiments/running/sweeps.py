@@ -130,7 +130,7 @@ def reuse_sources(spec: Sweep) -> list[Path]:
             raise errors.UserError(f"--reuse {folder}: not a sweep folder (no sweep.json)")
         if folder.resolve() == Path(spec.out).resolve():
             raise errors.UserError(f"--reuse {folder}: the sweep being written (--out); to continue it use --resume")
-        started = rundir.args_from_saved(Sweep, rundir.read_json(folder / "sweep.json"), out=folder)
+        started = saved(folder)
         clash = [f"--{k.replace('_', '-')} {_protocol_value(started, k)} there, {_protocol_value(spec, k)} here"
                  for k in PROTOCOL if _protocol_value(started, k) != _protocol_value(spec, k)]  # fmt: skip
         if clash:
