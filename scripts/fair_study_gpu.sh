@@ -13,7 +13,8 @@ cd "$(dirname "$0")/.."
 PRESET="${PRESET:-quick}"
 SEEDS="${SEEDS:-10}"
 UPDATES="${UPDATES:-9000}"
-LOW_LR_SECONDS="${LOW_LR_SECONDS:-180}"   # the 1e-4 arms' time: what is left of the 10 minutes
+HIGH_LR_SECONDS="${HIGH_LR_SECONDS:-600}"  # the 3e-4 arms' deadline
+LOW_LR_SECONDS="${LOW_LR_SECONDS:-180}"   # the 1e-4 arms' time: what is left of the 10 minutes (0: not run)
 OUT="${OUT:?set OUT to the folder the results go to}"
 RUNS="${RUNS:-runs/fair_gpu}"
 ARMS=(a3c a3c+critic a3c+foresit)
@@ -33,7 +34,7 @@ side_by_side() {  # side_by_side LR UPDATES_FLAG DEADLINE_SECONDS: the three arm
 }
 
 start=$(date +%s)
-side_by_side 3e-4 "--num-updates $UPDATES" 600
+side_by_side 3e-4 "--num-updates $UPDATES" "$HIGH_LR_SECONDS"
 echo "3e-4 at 3x the budget: $(( $(date +%s) - start )) s"
 # One table of the three (no training: --reuse combines the three sweeps), then the pairs.
 python -m experiments.sweep --preset "$PRESET" --seeds "$SEEDS" --num-updates "$UPDATES" --no-progress \
@@ -42,7 +43,7 @@ python -m experiments.sweep --preset "$PRESET" --seeds "$SEEDS" --num-updates "$
 python -m experiments.compare --run "$RUNS/lr3e-4_3x" --pairs "a3c@learning_rate=3e-4:a3c+foresit@learning_rate=3e-4" \
     "a3c@learning_rate=3e-4:a3c+critic@learning_rate=3e-4" "a3c+critic@learning_rate=3e-4:a3c+foresit@learning_rate=3e-4" \
     > "$RUNS/lr3e-4_3x/compare.md" 2>&1
-side_by_side 1e-4 "" "$LOW_LR_SECONDS"
+[ "$LOW_LR_SECONDS" -gt 0 ] && side_by_side 1e-4 "" "$LOW_LR_SECONDS"
 echo "total: $(( $(date +%s) - start )) s"
 tar --exclude=checkpoints -cJf "$OUT/fair_gpu.tar.xz" "$RUNS"
 ls -la "$OUT"
