@@ -12,8 +12,9 @@ fails `tests/test_lstm.py`, not a run.
 
 Acting and the replay get the kernels from the network itself
 (`ActorCritic.lstm_kernels`, `Agent.lstm_kernels`); `encoder_lstm_params(params)` is the
-one place that knows where the LSTM sits in the agent's parameter tree, for the maml
-base, which splits that tree into the kernels it adapts and the rest.
+one place that knows where the LSTM sits in the agent's parameter tree: with
+`split_encoder_lstm_kernels`, `join_partial_trees` and `with_encoder_lstm_kernels`, for the
+maml base, which splits that tree into the kernels it adapts and the rest.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 import numpy as np
+from flax import traverse_util
 
 LSTMCarry = tuple[chex.Array, chex.Array]  # (c, h), each [..., hidden_size]
 
@@ -44,6 +46,30 @@ def encoder_lstm_params(params: Mapping[str, Any]) -> Mapping[str, Any]:
 def is_encoder_lstm_kernel(path: tuple[str, ...]) -> bool:
     """Whether a flattened parameter path names one of the encoder LSTM's eight kernels."""
     return path[: len(ENCODER_LSTM_PATH)] == ENCODER_LSTM_PATH and path[-1] == "kernel"
+
+
+def split_encoder_lstm_kernels(params: Mapping[str, Any]) -> tuple[dict, dict]:
+    """(the encoder LSTM's eight kernels, every other parameter): two partial trees of an
+    `ActorCritic` parameter tree (the maml base adapts the first as low-rank updates)."""
+    flat = traverse_util.flatten_dict(params)
+    kernels = {path: x for path, x in flat.items() if is_encoder_lstm_kernel(path)}
+    rest = {path: x for path, x in flat.items() if not is_encoder_lstm_kernel(path)}
+    return traverse_util.unflatten_dict(kernels), traverse_util.unflatten_dict(rest)
+
+
+def join_partial_trees(first: Mapping[str, Any], second: Mapping[str, Any]) -> dict:
+    """One tree of two partial trees with no leaf in common (the inverse of
+    `split_encoder_lstm_kernels`)."""
+    return traverse_util.unflatten_dict({**traverse_util.flatten_dict(first), **traverse_util.flatten_dict(second)})
+
+
+def with_encoder_lstm_kernels(params: Mapping[str, Any], kernels: LSTMKernels) -> dict:
+    """`params` with the encoder LSTM's parameters replaced by `kernels` (their `update`
+    added in, see `LSTMKernels.dense`)."""
+    flat = traverse_util.flatten_dict(params)
+    cell = traverse_util.flatten_dict(lstm_params(kernels))
+    flat.update({ENCODER_LSTM_PATH + path: x for path, x in cell.items()})
+    return traverse_util.unflatten_dict(flat)
 
 
 class LowRankUpdate(NamedTuple):

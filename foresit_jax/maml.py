@@ -77,12 +77,12 @@ from flax import traverse_util
 
 from foresit_jax import distributions, imagination
 from foresit_jax.lstm import (
-    ENCODER_LSTM_PATH,
     LowRankUpdate,
     encoder_lstm_params,
-    is_encoder_lstm_kernel,
+    join_partial_trees,
     lstm_kernels,
-    lstm_params,
+    split_encoder_lstm_kernels,
+    with_encoder_lstm_kernels,
 )
 
 LEARNED_LOSS_SCOPE = "learned_loss"  # params["params"]["learned_loss"]: phi
@@ -178,7 +178,7 @@ class AdaptedParams(NamedTuple):
     without per-lane copies of the encoder LSTM's kernels (see "Adapted kernels" in the
     module docstring). `dense()` builds the lanes' whole trees."""
 
-    shared: Any  # theta_0's LSTM kernels: the partial tree of `_split`, unbatched
+    shared: Any  # theta_0's LSTM kernels: the first partial tree of `lstm.split_encoder_lstm_kernels`, unbatched
     lanes: Any  # every other parameter, leaves [B, ...] (phi included, never adapted)
     lstm_update: Optional[LowRankUpdate]  # [B, R, ...] each lane's change of those kernels; None: none yet
 
@@ -187,27 +187,11 @@ class AdaptedParams(NamedTuple):
         for tests and inspection, not for acting)."""
 
         def one(lanes, update):
-            params = _join(self.shared, lanes)
+            params = join_partial_trees(self.shared, lanes)
             kernels = lstm_kernels(encoder_lstm_params(params))._replace(update=update)
-            flat = traverse_util.flatten_dict(params)
-            lstm = traverse_util.flatten_dict(lstm_params(kernels))
-            flat.update({ENCODER_LSTM_PATH + path: x for path, x in lstm.items()})
-            return traverse_util.unflatten_dict(flat)
+            return with_encoder_lstm_kernels(params, kernels)
 
         return jax.vmap(one, in_axes=(0, 0))(self.lanes, self.lstm_update)
-
-
-def _split(params) -> tuple[Any, Any]:
-    """(the encoder LSTM's kernels, every other parameter), two partial trees."""
-    flat = traverse_util.flatten_dict(params)
-    shared = {path: x for path, x in flat.items() if is_encoder_lstm_kernel(path)}
-    rest = {path: x for path, x in flat.items() if not is_encoder_lstm_kernel(path)}
-    return traverse_util.unflatten_dict(shared), traverse_util.unflatten_dict(rest)
-
-
-def _join(shared, rest):
-    """The inverse of `_split`."""
-    return traverse_util.unflatten_dict({**traverse_util.flatten_dict(shared), **traverse_util.flatten_dict(rest)})
 
 
 def _per_lane(tree):
@@ -234,14 +218,14 @@ def adaptive_act(
         rho = jax.vmap(imagination.success_rate)(actor.tracker)
         noise_variance = imagination.noise_variance(rho, cfg.sigma2_max)
     variance = jnp.broadcast_to(jnp.asarray(noise_variance, jnp.float32), (num_lanes,))[:, None]  # [B, 1]
-    shared, lanes = _split(acting.params)
+    shared, lanes = split_encoder_lstm_kernels(acting.params)
     lanes = jax.tree.map(lambda x: jnp.broadcast_to(x, (num_lanes,) + x.shape), lanes)
     kernel_dtype = jax.tree.leaves(shared)[0].dtype
     lane_actor = _per_lane(actor)
     alive = jnp.ones((num_lanes, 1), bool)
 
     def window(lanes, update, lane_actor, key, variance, alive, steps, record, gate_offsets=None):  # one lane
-        lane_acting = acting._replace(params=_join(shared, lanes), noise_variance=variance)
+        lane_acting = acting._replace(params=join_partial_trees(shared, lanes), noise_variance=variance)
         lane_options = options._replace(whole_episodes=True, record_inputs=record)
         return agent.act_window(lane_acting, env, lane_actor, key, steps, lane_options, alive=alive,
                                 lstm_update=update, gate_offsets=gate_offsets)  # fmt: skip
@@ -251,11 +235,11 @@ def adaptive_act(
             next_actor, traj, end = window(lanes, update, lane_actor, key, variance, alive, cfg.maml_segment, True,
                                           gate_offsets)  # fmt: skip
             inputs = interaction_inputs(traj.states[:, 0], traj.logits[:, 0])  # [segment, H + A]
-            return agent.interaction_loss(_join(shared, lanes), inputs), (next_actor, traj, end)
+            return agent.interaction_loss(join_partial_trees(shared, lanes), inputs), (next_actor, traj, end)
 
         zeros = jnp.zeros((cfg.maml_segment, 1, 4 * cfg.hidden_size), kernel_dtype)
         (_, (next_actor, traj, end)), (grads, gate_grads) = jax.value_and_grad(loss, (0, 1), has_aux=True)(lanes, zeros)
-        rows = _kernel_update(agent, _join(shared, lanes), lane_actor, traj, gate_grads)
+        rows = _kernel_update(agent, join_partial_trees(shared, lanes), lane_actor, traj, gate_grads)
         if cfg.maml_first_order:
             grads, rows = jax.lax.stop_gradient((grads, rows))
         still_alive = traj.valid[-1] & ~(traj.terminated[-1] | traj.truncated[-1])  # [1] the episode runs on (alive next)

@@ -165,3 +165,28 @@ def test_the_agents_lstm_kernels_come_from_its_encoder_cell():
     (c2, h2), out2 = lstm.lstm_step(mine, carry, lstm.lstm_input_gates(mine, x))
     np.testing.assert_allclose(out2, out, rtol=1e-6, atol=1e-6)
     np.testing.assert_allclose(c2, c, rtol=1e-6, atol=1e-6)
+
+
+def test_splitting_the_agents_tree_at_the_encoder_lstm_and_replacing_its_kernels():
+    """What the maml base does with the tree: the split holds exactly the cell's eight
+    kernels, joins back to the same tree, and replacing the kernels by updated ones changes
+    those eight leaves alone, to the dense kernels' values."""
+    from foresit_jax.agent import Agent
+    from foresit_jax.config import Config
+
+    agent = Agent(Config(method="a3c", hidden_size=H, attention_size=4, value_hidden=4, imagination_layer_sizes=(4, H)))
+    params, _ = agent.init(jax.random.key(0), {"view": jnp.zeros((3, 2, 23)), "target": jnp.ones((300,))})
+    kernels, rest = lstm.split_encoder_lstm_kernels(params)
+    cell = lstm.encoder_lstm_params(kernels)
+    assert {name: set(leaves) for name, leaves in cell.items()} == {n + g: {"kernel"} for n in "ih" for g in lstm.LSTM_GATES}
+    assert all("kernel" not in leaves for leaves in lstm.encoder_lstm_params(rest).values())
+    chex.assert_trees_all_equal(lstm.join_partial_trees(kernels, rest), params)
+
+    keys = jax.random.split(jax.random.key(4), 3)
+    update = lstm.LowRankUpdate(*(jax.random.normal(k, s) for k, s in zip(keys, [(2, 3 * 2 * 64), (2, H), (2, 4 * H)])))
+    changed = lstm.with_encoder_lstm_kernels(params, agent.lstm_kernels(params)._replace(update=update))
+    dense = agent.lstm_kernels(params)._replace(update=update).dense()
+    chex.assert_trees_all_close(agent.lstm_kernels(changed), dense._replace(recurrent_kernel_t=None), rtol=1e-6, atol=1e-6)
+    flat_old, flat_new = (jax.tree_util.tree_flatten_with_path(t)[0] for t in (params, changed))
+    moved = [jax.tree_util.keystr(p) for (p, a), (_, b) in zip(flat_old, flat_new) if not np.array_equal(a, b)]
+    assert len(moved) == 8 and all("'lstm'" in p and "'kernel'" in p for p in moved)
