@@ -25,7 +25,7 @@ python -c "import jax; print('devices:', jax.devices())" | tee "$RUNS/logs/devic
 side_by_side() {  # side_by_side LR UPDATES_FLAG DEADLINE_SECONDS: the three arms at LR as three processes
     local lr="$1" updates="$2" deadline="$3" pids=()
     for arm in "${ARMS[@]}"; do
-        timeout "$deadline" python -m experiments.sweep --preset "$PRESET" --seeds "$SEEDS" $updates \
+        timeout -k 20 "$deadline" python -m experiments.sweep --preset "$PRESET" --seeds "$SEEDS" $updates \
             --methods "$arm@learning_rate=$lr" --out "$RUNS/lr$lr/$arm" --no-progress \
             > "$RUNS/logs/lr${lr}_$arm.log" 2>&1 &
         pids+=($!)

@@ -29,7 +29,7 @@ study() {  # study SETUP DEADLINE_SECONDS ARM...: the arms side by side, then th
     local setup="$1" deadline="$2" pids=() folders=()
     shift 2
     for arm in "$@"; do
-        timeout "$deadline" python -m experiments.sweep --setup "$setup" --priors True --preset "$PRESET" \
+        timeout -k 20 "$deadline" python -m experiments.sweep --setup "$setup" --priors True --preset "$PRESET" \
             --seeds "$SEEDS" --num-updates "$UPDATES" --methods "$arm" --out "$RUNS/$setup/$arm" --no-progress \
             > "$RUNS/logs/${setup}_$arm.log" 2>&1 &
         pids+=($!)
