@@ -17,7 +17,8 @@ confidence interval over seeds) of the selected models as Markdown and CSV; ever
 against the first one, paired seed by seed (difference, interval, p, verdict); the
 selected and last models' SR per seed; every seed's results, validation history and
 training curve (JSON); one learning-curve PNG of every method (mean and band over seeds).
-`--resume` continues a killed sweep; `--reuse` takes the methods other
+`--resume` continues a killed sweep, and with `--num-updates` extends a sweep (finished or
+not) to more updates, as if it had asked for them from the start; `--reuse` takes the methods other
 sweeps of the same protocol have finished instead of training them, seed by seed: a method
 whose every seed they finished between them (e.g. seeds 0-1 in one sweep and 2-4, `--seed 2
 --seeds 3`, in another) is assembled from them. The machinery is experiments.running.sweeps.
@@ -40,7 +41,8 @@ class Args(sweeps.Sweep):
     """Continue the sweep in --out where it stopped, with the arguments it was started
     with (finished methods are kept, a started one continues from its last checkpoint;
     other values are refused, except a flag given at its default, which cannot be told
-    from one not given and is ignored)."""
+    from one not given and is ignored). With --num-updates beyond the sweep's, every
+    method trains on to it (finished ones too; their earlier results are kept beside)."""
     overwrite: bool = False
     """Replace an existing sweep in --out."""
     stop_after_chunks: Optional[int] = None
@@ -56,6 +58,8 @@ def main(args: Args) -> list[dict] | None:
     """Run (or, with --resume, continue) the sweep (`experiments.running.sweeps.run`);
     returns Table 1's rows (None when stopped by --stop-after-chunks)."""
     if args.resume:  # the sweep's own arguments; a flag given that contradicts them is refused
+        if args.num_updates is not None:  # more updates than the sweep has extend it
+            args = dataclasses.replace(args, num_updates=sweeps.extend(args.out, args.num_updates).num_updates)
         args = rundir.resumed_args(args, "sweep.json", "sweep", keep=KEEP)
     spec = sweeps.Sweep(**{f.name: getattr(args, f.name) for f in dataclasses.fields(sweeps.Sweep)})
     return sweeps.run(spec, resume=args.resume, overwrite=args.overwrite, stop_after_chunks=args.stop_after_chunks,

@@ -8,6 +8,7 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 from foresit_jax import lstm
 
@@ -147,15 +148,21 @@ def test_low_rank_update_equals_the_dense_kernels_in_numpy():
     np.testing.assert_allclose(grads.recurrent_kernel, jnp.einsum("tbh,tbg->hg", prevs, deltas), rtol=1e-4, atol=1e-5)
 
 
-def test_the_agents_lstm_kernels_come_from_its_encoder_cell():
-    """`Agent.lstm_kernels` (the network's own method) gives the kernels of the encoder's
-    cell, the ones at the parameter path MAML splits by, and they run the cell exactly."""
+@pytest.fixture(scope="module")
+def small_agent():
+    """(an a3c Agent of hidden size H, its initial parameters)."""
     from foresit_jax.agent import Agent
     from foresit_jax.config import Config
 
     agent = Agent(Config(method="a3c", hidden_size=H, attention_size=4, value_hidden=4, imagination_layer_sizes=(4, H)))
-    obs = {"view": jnp.zeros((3, 2, 23)), "target": jnp.ones((300,))}
-    params, _ = agent.init(jax.random.key(0), obs)
+    params, _ = agent.init(jax.random.key(0), {"view": jnp.zeros((3, 2, 23)), "target": jnp.ones((300,))})
+    return agent, params
+
+
+def test_the_agents_lstm_kernels_come_from_its_encoder_cell(small_agent):
+    """`Agent.lstm_kernels` (the network's own method) gives the kernels of the encoder's
+    cell, the ones at the parameter path MAML splits by, and they run the cell exactly."""
+    agent, params = small_agent
     mine = agent.lstm_kernels(params)
     chex.assert_trees_all_equal(mine, lstm.lstm_kernels(lstm.encoder_lstm_params(params)))
     cell = nn.OptimizedLSTMCell(H)
@@ -167,15 +174,11 @@ def test_the_agents_lstm_kernels_come_from_its_encoder_cell():
     np.testing.assert_allclose(c2, c, rtol=1e-6, atol=1e-6)
 
 
-def test_splitting_the_agents_tree_at_the_encoder_lstm_and_replacing_its_kernels():
+def test_splitting_the_agents_tree_at_the_encoder_lstm_and_replacing_its_kernels(small_agent):
     """What the maml base does with the tree: the split holds exactly the cell's eight
     kernels, joins back to the same tree, and replacing the kernels by updated ones changes
     those eight leaves alone, to the dense kernels' values."""
-    from foresit_jax.agent import Agent
-    from foresit_jax.config import Config
-
-    agent = Agent(Config(method="a3c", hidden_size=H, attention_size=4, value_hidden=4, imagination_layer_sizes=(4, H)))
-    params, _ = agent.init(jax.random.key(0), {"view": jnp.zeros((3, 2, 23)), "target": jnp.ones((300,))})
+    agent, params = small_agent
     kernels, rest = lstm.split_encoder_lstm_kernels(params)
     cell = lstm.encoder_lstm_params(kernels)
     assert {name: set(leaves) for name, leaves in cell.items()} == {n + g: {"kernel"} for n in "ih" for g in lstm.LSTM_GATES}

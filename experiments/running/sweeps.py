@@ -335,6 +335,28 @@ def rewind(progress: dict, step: int) -> dict:
             "numerics": numerics.rewind(progress.get("numerics"), step)}  # fmt: skip
 
 
+def check_continuable(folder: Path) -> None:
+    """Refuse (one line) to train on a finished method folder that keeps no progress.json:
+    one assembled from other sweeps' seeds (`assemble`)."""
+    if (folder / "results.json").is_file() and not (folder / "progress.json").is_file():
+        raise errors.UserError(f"{folder.name} in {folder.parent.parent} was assembled from other sweeps' seeds "
+                               "(--reuse) and keeps no progress to continue from; extend those sweeps and assemble "
+                               "it again")  # fmt: skip
+
+
+def set_aside(folder: Path, updates: int) -> None:
+    """Keep a method's results.json of `updates` updates as `results_<updates>_updates.json`
+    before it trains on (an extended sweep); one that keeps no progress.json to continue
+    from (assembled), or whose name is taken, is refused in one line."""
+    kept = folder / f"results_{updates}_updates.json"
+    check_continuable(folder)
+    if kept.exists():
+        raise errors.UserError(f"{folder} holds both results.json and {kept.name}, both of {updates} updates; "
+                               "move one of them first")  # fmt: skip
+    (folder / "results.json").rename(kept)
+    print(f"{folder.name}: its {updates}-update results are kept as {kept.name}; it trains on", flush=True)
+
+
 def run_method(method: str, spec: Sweep, bar, evaluator, folder: Path, budget: list) -> tuple | None:
     """Train `spec.seeds` seeds of one method vmapped, selecting each seed's model on
     validation after each chunk; returns (per seed: seed, selected update, test results of
@@ -351,11 +373,13 @@ def run_method(method: str, spec: Sweep, bar, evaluator, folder: Path, budget: l
     from foresit_jax.evaluate import agent_params
     from foresit_jax.train import make_trainer
 
+    config, schedule = method_schedule(method, spec)
     if (folder / "results.json").exists():
         done = rundir.read_json(folder / "results.json")
-        bar(done["updates"], {"method": method})
-        return done["results"], np.arange(1, done["updates"] + 1), np.array(done["curves"], float)
-    config, schedule = method_schedule(method, spec)
+        if done["updates"] >= config.num_updates:
+            bar(done["updates"], {"method": method})
+            return done["results"], np.arange(1, done["updates"] + 1), np.array(done["curves"], float)
+        set_aside(folder, done["updates"])  # the sweep was extended (`extend`): this method trains on
     seeds = seeds_of(spec)
     trainer = make_trainer(config)
     env_params = trainer.env_params
@@ -451,6 +475,62 @@ def check(spec: Sweep) -> None:
 def saved(folder: Path) -> Sweep:
     """The sweep a folder holds, as its sweep.json records it."""
     return rundir.args_from_saved(Sweep, rundir.read_json(Path(folder) / "sweep.json"), out=Path(folder))
+
+
+# A sweep's report, rewritten whenever it finishes (`run`); an extension keeps the earlier one.
+REPORT_FILES = ("table1.md", "table1.csv", "results_per_seed.json", "learning_curves.png")
+
+
+def updates_of(spec: Sweep) -> int:
+    """How many updates every arm of `spec` trains (its --num-updates, else the preset's):
+    one number, or a one-line error where its arms set different ones."""
+    counts = {method: method_schedule(method, spec)[0].num_updates for method in spec.methods}
+    if len(set(counts.values())) != 1:
+        raise errors.UserError(f"the arms of {spec.out} train different numbers of updates ({counts}); "
+                               "a sweep can only be extended as a whole")  # fmt: skip
+    return next(iter(counts.values()))
+
+
+def extend(folder: Path, num_updates: int) -> Sweep:
+    """Make the sweep in `folder` (finished or not) one of `num_updates` updates, to be
+    continued by `run(..., resume=True)`: every arm then trains on from where it stopped,
+    from its checkpoint, to `num_updates` (nothing in training depends on the total, so
+    the result is that of the sweep that had asked for `num_updates` from the start, bit
+    for bit on the same platform), chooses each seed's model again over all its
+    validations, and is tested again. Nothing is lost: the sweep's report moves into
+    `report_<n>_updates/` here, and a finished arm's results.json becomes
+    `results_<n>_updates.json` beside it when it continues (`run_method`), n the updates
+    it had. sweep.json records each extension ("extensions"). Refused in one line: fewer
+    updates than the sweep has, or an arm assembled from other sweeps' seeds (`assemble`
+    keeps no progress.json to continue from). Returns the extended sweep."""
+    folder = Path(folder)
+    rundir.prepare_run_dir(folder, resume=True, overwrite=False, marker="sweep.json", kind="sweep")
+    spec = saved(folder)
+    had = updates_of(spec)
+    if num_updates < had:
+        raise errors.UserError(f"--num-updates {num_updates} would shorten {folder} ({had} updates); a sweep can only "
+                               "be extended (or trained anew in another --out)")  # fmt: skip
+    if num_updates == had:
+        return spec
+    for method in spec.methods:
+        check_continuable(folder / "methods" / method)
+    kept = folder / f"report_{had}_updates"
+    report_files = [folder / name for name in REPORT_FILES if (folder / name).is_file()]
+    if report_files and kept.exists():
+        raise errors.UserError(f"{folder} already holds {kept.name}/ from an earlier extension; move it first")
+    for path in report_files:  # first: a kill before sweep.json is written leaves an extension to repeat
+        kept.mkdir(exist_ok=True)
+        path.rename(kept / path.name)
+    record = rundir.read_json(folder / "sweep.json")
+    extensions = [*record.get("extensions", []), {"from_updates": had, "to_updates": num_updates,
+                                                  "reuse": [str(p) for p in spec.reuse]}]  # fmt: skip
+    # The methods --reuse gave the sweep are in it now; its sources, of `had` updates, no
+    # longer share its protocol, so the extended sweep names none ("extensions" keeps them).
+    extended = dataclasses.replace(spec, num_updates=num_updates, reuse=())
+    rundir.write_json(folder / "sweep.json", {**dataclasses.asdict(extended), "extensions": extensions})
+    print(f"extending {folder} from {had} to {num_updates} updates"
+          + (f" (its {had}-update report is kept in {kept.name}/)" if report_files else ""), flush=True)  # fmt: skip
+    return extended
 
 
 def _differences(a: Sweep, b: Sweep) -> list[str]:

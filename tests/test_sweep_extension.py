@@ -1,0 +1,113 @@
+"""`experiments.sweep --resume --num-updates N` extends a sweep: every method trains on
+from its checkpoint to N updates and ends where a sweep of N updates from the start ends
+(nothing in training depends on the total), its earlier results kept beside; what cannot
+be extended is refused in one line before anything changes."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import pytest
+
+from experiments import sweep
+from experiments.running import errors, rundir, sweeps
+
+# Cheap in-process CLI calls (tests/conftest.py).
+pytestmark = pytest.mark.usefixtures("cheap_experiments")
+
+
+def started(folder: Path, **kwargs) -> sweeps.Sweep:
+    """A sweep folder as `run` starts it (sweep.json), without training anything."""
+    spec = sweeps.Sweep(methods=("a3c",), seeds=2, preset="tiny", out=folder, **kwargs)
+    folder.mkdir(parents=True)
+    rundir.write_started_args(folder / "sweep.json", spec, ())
+    return spec
+
+
+def finished_method(folder: Path, method: str, updates: int, progress: bool = True) -> Path:
+    """A method folder that reads as finished after `updates` (with or without progress.json)."""
+    path = folder / "methods" / method
+    path.mkdir(parents=True)
+    rundir.write_json(path / "results.json", {"updates": updates, "results": [], "curves": []})
+    if progress:
+        rundir.write_json(path / "progress.json", {"done": updates})
+    return path
+
+
+def test_a_sweep_is_never_shortened(tmp_path):
+    spec = started(tmp_path / "s", num_updates=6)
+    with pytest.raises(errors.UserError, match="--num-updates 4 would shorten .* \\(6 updates\\)"):
+        sweeps.extend(spec.out, 4)
+    assert sweeps.extend(spec.out, 6) == spec  # the same count: nothing to do
+
+
+def test_an_assembled_method_is_refused_and_nothing_is_moved(tmp_path):
+    spec = started(tmp_path / "s", num_updates=6)
+    finished_method(spec.out, "a3c", 6, progress=False)
+    (spec.out / "table1.md").write_text("the 6-update report")
+    before = (spec.out / "sweep.json").read_text()
+    with pytest.raises(errors.UserError, match="a3c in .* was assembled from other sweeps' seeds"):
+        sweeps.extend(spec.out, 12)
+    assert (spec.out / "sweep.json").read_text() == before
+    assert (spec.out / "table1.md").is_file() and (spec.out / "methods" / "a3c" / "results.json").is_file()
+
+
+def test_an_extension_keeps_the_report_records_itself_and_drops_the_spent_reuse(tmp_path):
+    source = started(tmp_path / "source", num_updates=6)
+    spec = started(tmp_path / "s", num_updates=6, reuse=(source.out,))
+    method = finished_method(spec.out, "a3c", 6)
+    (spec.out / "table1.md").write_text("the 6-update report")
+    extended = sweeps.extend(spec.out, 12)
+    assert extended == dataclasses.replace(spec, num_updates=12, reuse=())
+    assert sweeps.saved(spec.out) == extended
+    record = json.loads((spec.out / "sweep.json").read_text())
+    assert record["extensions"] == [{"from_updates": 6, "to_updates": 12, "reuse": [str(source.out)]}]
+    assert (spec.out / "report_6_updates" / "table1.md").read_text() == "the 6-update report"
+    assert not (spec.out / "table1.md").exists()
+    assert (method / "results.json").is_file()  # set aside when the method trains on (`set_aside`)
+    sweeps.set_aside(method, 6)
+    assert (method / "results_6_updates.json").is_file() and not (method / "results.json").exists()
+    # A second extension records both, and a report of the same count already kept is refused.
+    (spec.out / "table1.md").write_text("the 12-update report")
+    sweeps.extend(spec.out, 20)
+    assert [e["to_updates"] for e in json.loads((spec.out / "sweep.json").read_text())["extensions"]] == [12, 20]
+    spec_again = started(tmp_path / "t", num_updates=6)
+    (spec_again.out / "report_6_updates").mkdir()
+    (spec_again.out / "table1.md").write_text("another report")
+    with pytest.raises(errors.UserError, match="already holds report_6_updates/"):
+        sweeps.extend(spec_again.out, 12)
+
+
+def test_set_aside_never_overwrites_kept_results(tmp_path):
+    method = finished_method(tmp_path, "a3c", 6)
+    (method / "results_6_updates.json").write_text("kept earlier")
+    with pytest.raises(errors.UserError, match="both results.json and results_6_updates.json"):
+        sweeps.set_aside(method, 6)
+    assert (method / "results_6_updates.json").read_text() == "kept earlier"
+
+
+@pytest.mark.slow
+def test_an_extended_sweep_ends_as_the_sweep_of_that_many_updates_from_the_start(tmp_path, capsys):
+    args = sweep.Args(methods=("a3c", "a3c+critic"), seeds=2, preset="tiny", num_updates=4, progress=False,
+                      val_episodes_per_room=4, test_episodes_per_room=4)  # fmt: skip
+    short, whole = tmp_path / "short", tmp_path / "whole"
+    sweep.main(dataclasses.replace(args, out=short))
+    earlier = {m: (short / "methods" / m / "results.json").read_text() for m in args.methods}
+    table = (short / "table1.md").read_text()
+    sweep.main(dataclasses.replace(args, out=whole, num_updates=8))
+    capsys.readouterr()
+    sweep.cli(["--out", str(short), "--resume", "--num-updates", "8", "--no-progress"])
+    out = capsys.readouterr().out
+    assert f"extending {short} from 4 to 8 updates" in out
+    for name in ("results_per_seed.json", "table1.csv"):
+        assert (short / name).read_text() == (whole / name).read_text(), name
+    for m in args.methods:
+        assert (short / "methods" / m / "results_4_updates.json").read_text() == earlier[m]
+        assert f"{m}: its 4-update results are kept as results_4_updates.json" in out
+    assert (short / "report_4_updates" / "table1.md").read_text() == table
+    # Resumed again: finished at 8, nothing trains, nothing moves.
+    sweep.cli(["--out", str(short), "--resume", "--no-progress"])
+    assert sorted(p.name for p in (short / "methods" / "a3c").glob("results*.json")) == [
+        "results.json", "results_4_updates.json"]
