@@ -6,7 +6,8 @@
 # checkpoints: continue with `python -m experiments.sweep --out DIR --resume`). Everything but the
 # checkpoints is packed into $OUT/fair_gpu.tar.xz.
 #
-#   OUT=/tmp/out bash scripts/fair_study_gpu.sh          # on the device (the device tool sets $OUT)
+#   source scripts/device_env.sh && bash scripts/fair_study_gpu.sh   # on the device (it sets $OUT; carry .whl,
+#                                                        # fetched here by scripts/device_wheels.sh)
 #   PRESET=tiny SEEDS=2 UPDATES=4 LOW_LR_SECONDS=60 OUT=/tmp/x bash scripts/fair_study_gpu.sh   # a dry run on a CPU
 set -uo pipefail
 cd "$(dirname "$0")/.."
