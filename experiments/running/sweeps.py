@@ -373,13 +373,13 @@ def run_method(method: str, spec: Sweep, bar, evaluator, folder: Path, budget: l
     from foresit_jax.evaluate import agent_params
     from foresit_jax.train import make_trainer
 
-    config, schedule = method_schedule(method, spec)
     if (folder / "results.json").exists():
         done = rundir.read_json(folder / "results.json")
-        if done["updates"] >= config.num_updates:
+        if spec.num_updates is None or done["updates"] >= spec.num_updates:  # (an extension sets num_updates)
             bar(done["updates"], {"method": method})
             return done["results"], np.arange(1, done["updates"] + 1), np.array(done["curves"], float)
         set_aside(folder, done["updates"])  # the sweep was extended (`extend`): this method trains on
+    config, schedule = method_schedule(method, spec)
     seeds = seeds_of(spec)
     trainer = make_trainer(config)
     env_params = trainer.env_params
@@ -512,6 +512,9 @@ def extend(folder: Path, num_updates: int) -> Sweep:
                                "be extended (or trained anew in another --out)")  # fmt: skip
     if num_updates == had:
         return spec
+    # The methods --reuse gave the sweep are in it now; its sources, of `had` updates, no
+    # longer share its protocol, so the extended sweep names none ("extensions" keeps them).
+    extended = dataclasses.replace(spec, num_updates=num_updates, reuse=())
     for method in spec.methods:
         check_continuable(folder / "methods" / method)
     kept = folder / f"report_{had}_updates"
@@ -524,9 +527,6 @@ def extend(folder: Path, num_updates: int) -> Sweep:
     record = rundir.read_json(folder / "sweep.json")
     extensions = [*record.get("extensions", []), {"from_updates": had, "to_updates": num_updates,
                                                   "reuse": [str(p) for p in spec.reuse]}]  # fmt: skip
-    # The methods --reuse gave the sweep are in it now; its sources, of `had` updates, no
-    # longer share its protocol, so the extended sweep names none ("extensions" keeps them).
-    extended = dataclasses.replace(spec, num_updates=num_updates, reuse=())
     rundir.write_json(folder / "sweep.json", {**dataclasses.asdict(extended), "extensions": extensions})
     print(f"extending {folder} from {had} to {num_updates} updates"
           + (f" (its {had}-update report is kept in {kept.name}/)" if report_files else ""), flush=True)  # fmt: skip
