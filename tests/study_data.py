@@ -40,3 +40,43 @@ def pair_row(out: dict, results: dict, a: str, b: str) -> str:
     poi, sr = r["probability_of_improvement"], stats.summary(report.values(results[b], "SR"))
     return (f"| {b} - {a} | {sr['mean']:.1f} ± {sr['std']:.1f} | {interval(pair['SR'])} | {interval(pair['SPL'])} | "
             f"{poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | {r['p_holm']:.3f} | {r['mde']:.1f} |")
+
+
+def tune_report(archive: str, folder: Path) -> dict:
+    """What `experiments.tune`'s report computes from a tune folder kept as docs/data/`archive`
+    (no checkpoints): each method's chosen point, the grid's rows, and the arms paired each
+    at its own chosen point ("best vs best")."""
+    from experiments import tune
+    from experiments.reporting import report, tuning
+
+    with tarfile.open(DATA / archive) as tar:
+        tar.extractall(folder, **({"filter": "data"} if hasattr(tarfile, "data_filter") else {}))
+    root = folder / "tune"
+    args = rundir.args_from_saved(tune.Args, rundir.read_json(root / "tune.json"), out=root)
+    table = tune.arms(args, tune.parse_grid(args.grid))
+    results = {a: rundir.read_json(root / "sweep" / "methods" / a / "results.json")["results"]
+               for by_point in table.values() for a in by_point.values()}  # fmt: skip
+    chosen = {m: tuning.choose({p: results[a] for p, a in by_point.items()}) for m, by_point in table.items()}
+    _, grid_rows = tuning.grid_table(table, results, chosen)
+    best = {m: results[table[m][chosen[m]]] for m in args.methods}  # as tuning.tune_report pairs them
+    _, best_vs_best = report.paired_report(best, tuning.pairs_of(args.methods), ["SR", "SPL"])
+    return {"chosen": chosen, "grid_rows": grid_rows, "best_vs_best": best_vs_best, "table": table, "results": results}
+
+
+def grid_line(row: dict) -> str:
+    """The docs' row of one method at one grid point (validation SR, test SR and SPL)."""
+    from experiments.reporting import stats
+
+    val, sr, spl = (stats.summary(row[k]) for k in ("val_SR", "SR", "SPL"))
+    return (f"| {row['method']} | {row['point'].split('=')[1]} | {val['mean']:.1f} ± {val['std']:.1f} | "
+            f"{sr['mean']:.1f} ± {sr['std']:.1f} | {spl['mean']:.1f} ± {spl['std']:.1f} | "
+            + ("**chosen** |" if row["chosen"] else "|"))
+
+
+def best_vs_best_line(name: str, pair: dict) -> str:
+    """The docs' row of one best-vs-best pair: SR and SPL intervals, IQM of B, P(B > A),
+    Holm's p of SR / SPL, the MDE of SR."""
+    r, spl_r = pair["robust"]["SR"], pair["robust"]["SPL"]
+    poi, iqm = r["probability_of_improvement"], r["iqm_b"]
+    return (f"| {name} | {interval(pair['SR'])} | {interval(pair['SPL'])} | {iqm[0]:.1f} [{iqm[1]:.1f}, {iqm[2]:.1f}] | "
+            f"{poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | {r['p_holm']:.3f} / {spl_r['p_holm']:.3f} | {r['mde']:.1f} |")

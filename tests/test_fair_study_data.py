@@ -12,7 +12,7 @@ import pytest
 import study_data
 
 from experiments import compare
-from experiments.reporting import report, stats, tuning
+from experiments.reporting import report, stats
 
 REPO = Path(__file__).resolve().parents[1]
 ARMS = {"a3c": "a3c@learning_rate=3e-4", "a3c+foresit": "a3c+foresit@learning_rate=3e-4",
@@ -122,42 +122,18 @@ def test_the_gpu_script_runs_dry_on_a_cpu(tmp_path):
     assert any(n.endswith("lr3e-4_3x/table1.md") for n in names) and not any("checkpoints" in n for n in names)
 
 
-def test_results_md_quotes_the_tuned_comparison():
+def test_results_md_quotes_the_tuned_comparison(tmp_path):
     """The tuned study's grid and best-vs-best rows in results.md are what `experiments.tune`'s
     report computes from its files (docs/data/fair_tune.tar.xz: the tune folder, no checkpoints)."""
-    import tarfile
-    import tempfile
-
-    from experiments.running import rundir
-    from experiments import tune
-
-    with tempfile.TemporaryDirectory() as tmp, tarfile.open(REPO / "docs" / "data" / "fair_tune.tar.xz") as tar:
-        tar.extractall(tmp, **({"filter": "data"} if hasattr(tarfile, "data_filter") else {}))
-        root = Path(tmp) / "tune"
-        args = rundir.args_from_saved(tune.Args, rundir.read_json(root / "tune.json"), out=root)
-        grid = tune.parse_grid(args.grid)
-        table = tune.arms(args, grid)
-        results = {a: rundir.read_json(root / "sweep" / "methods" / a / "results.json")["results"]
-                   for by_point in table.values() for a in by_point.values()}  # fmt: skip
-    chosen = {m: tuning.choose({p: results[a] for p, a in by_point.items()}) for m, by_point in table.items()}
-    assert chosen == {"a3c": "learning_rate=1e-3", "a3c+critic": "learning_rate=3e-4", "a3c+foresit": "learning_rate=3e-4"}
-    _, grid_rows = tuning.grid_table(table, results, chosen)
-    best = {m: results[table[m][chosen[m]]] for m in args.methods}  # as tuning.tune_report pairs them
-    _, best_vs_best = report.paired_report(best, tuning.pairs_of(args.methods), ["SR", "SPL"])
+    tuned = study_data.tune_report("fair_tune.tar.xz", tmp_path)
+    assert tuned["chosen"] == {"a3c": "learning_rate=1e-3", "a3c+critic": "learning_rate=3e-4",
+                               "a3c+foresit": "learning_rate=3e-4"}  # fmt: skip
     doc = (REPO / "docs" / "results.md").read_text()
-    for row in grid_rows:
-        val, sr, spl = (stats.summary(row[k]) for k in ("val_SR", "SR", "SPL"))
-        line = (f"| {row['method']} | {row['point'].split('=')[1]} | {val['mean']:.1f} ± {val['std']:.1f} | "
-                f"{sr['mean']:.1f} ± {sr['std']:.1f} | {spl['mean']:.1f} ± {spl['std']:.1f} | "
-                + ("**chosen** |" if row["chosen"] else "|"))
-        assert line in doc, line
+    for row in tuned["grid_rows"]:
+        assert study_data.grid_line(row) in doc, study_data.grid_line(row)
+    best_vs_best = tuned["best_vs_best"]
     for name, pair in best_vs_best.items():
-        r, spl_r = pair["robust"]["SR"], pair["robust"]["SPL"]
-        poi, iqm = r["probability_of_improvement"], r["iqm_b"]
-        line = (f"| {name} | {interval(pair['SR'])} | "
-                f"{interval(pair['SPL'])} | {iqm[0]:.1f} [{iqm[1]:.1f}, {iqm[2]:.1f}] | "
-                f"{poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | {r['p_holm']:.3f} / {spl_r['p_holm']:.3f} | {r['mde']:.1f} |")
-        assert line in doc, line
+        assert study_data.best_vs_best_line(name, pair) in doc, study_data.best_vs_best_line(name, pair)
     headline = best_vs_best["a3c+foresit - a3c"]
     readme = (REPO / "README.md").read_text()
     iqm = headline["robust"]["SR"]
