@@ -58,9 +58,11 @@ def main(args: Args) -> list[dict] | None:
     """Run (or, with --resume, continue) the sweep (`experiments.running.sweeps.run`);
     returns Table 1's rows (None when stopped by --stop-after-chunks)."""
     if args.resume:  # the sweep's own arguments; a flag given that contradicts them is refused
-        if args.num_updates is not None:  # more updates than the sweep has extend it
-            args = dataclasses.replace(args, num_updates=sweeps.extend(args.out, args.num_updates).num_updates)
-        args = rundir.resumed_args(args, "sweep.json", "sweep", keep=KEEP)
+        wanted = args.num_updates  # more updates than the sweep has extend it, once the rest is checked
+        args = rundir.resumed_args(dataclasses.replace(args, num_updates=None), "sweep.json", "sweep", keep=KEEP)
+        if wanted is not None:
+            extended = sweeps.extend(args.out, wanted)
+            args = dataclasses.replace(args, num_updates=extended.num_updates, reuse=extended.reuse)
     spec = sweeps.Sweep(**{f.name: getattr(args, f.name) for f in dataclasses.fields(sweeps.Sweep)})
     return sweeps.run(spec, resume=args.resume, overwrite=args.overwrite, stop_after_chunks=args.stop_after_chunks,
                       progress=args.progress)  # fmt: skip

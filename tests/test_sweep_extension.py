@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from experiments import sweep
-from experiments.running import errors, rundir, sweeps
+from experiments.running import errors, rundir, selection, sweeps
 
 # Cheap in-process CLI calls (tests/conftest.py).
 pytestmark = pytest.mark.usefixtures("cheap_experiments")
@@ -26,14 +26,23 @@ def started(folder: Path, **kwargs) -> sweeps.Sweep:
     return spec
 
 
-def finished_method(folder: Path, method: str, updates: int, progress: bool = True) -> Path:
-    """A method folder that reads as finished after `updates` (with or without progress.json)."""
+def finished_method(folder: Path, method: str, updates: int, progress: bool = True, protocol=None) -> Path:
+    """A method folder that reads as finished after `updates` (with or without progress.json,
+    with its last checkpoint's folder), validated under `protocol` (this code's by default)."""
     path = folder / "methods" / method
-    path.mkdir(parents=True)
-    rundir.write_json(path / "results.json", {"updates": updates, "results": [], "curves": []})
+    (path / "checkpoints" / str(updates)).mkdir(parents=True)
+    protocol = selection.PROTOCOL_VERSION if protocol is None else protocol
+    rundir.write_json(path / "results.json", {"updates": updates, "results": [], "curves": [],
+                                              "selection_protocol": protocol})  # fmt: skip
     if progress:
         rundir.write_json(path / "progress.json", {"done": updates})
     return path
+
+
+def listing(folder: Path) -> dict:
+    """Every file under `folder` (but the lock) with its bytes."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*"))
+            if p.is_file() and p.name != rundir.LOCK_FILE}  # fmt: skip
 
 
 def test_a_sweep_is_never_shortened(tmp_path):
@@ -43,15 +52,52 @@ def test_a_sweep_is_never_shortened(tmp_path):
     assert sweeps.extend(spec.out, 6) == spec  # the same count: nothing to do
 
 
-def test_an_assembled_method_is_refused_and_nothing_is_moved(tmp_path):
+@pytest.mark.parametrize("why, make, says", [
+    ("assembled", dict(progress=False), "was assembled from other sweeps' seeds"),
+    ("another protocol", dict(protocol=1), "validated under selection protocol 1"),
+    ("no checkpoint", dict(), "keeps no checkpoint of its update 6"),
+])  # fmt: skip
+def test_what_cannot_continue_is_refused_before_anything_moves(tmp_path, why, make, says):
     spec = started(tmp_path / "s", num_updates=6)
-    finished_method(spec.out, "a3c", 6, progress=False)
+    method = finished_method(spec.out, "a3c", 6, **make)
+    if why == "no checkpoint":
+        (method / "checkpoints" / "6").rmdir()
     (spec.out / "table1.md").write_text("the 6-update report")
-    before = (spec.out / "sweep.json").read_text()
-    with pytest.raises(errors.UserError, match="a3c in .* was assembled from other sweeps' seeds"):
+    before = listing(spec.out)
+    with pytest.raises(errors.UserError, match=says):
         sweeps.extend(spec.out, 12)
-    assert (spec.out / "sweep.json").read_text() == before
-    assert (spec.out / "table1.md").is_file() and (spec.out / "methods" / "a3c" / "results.json").is_file()
+    assert listing(spec.out) == before
+
+
+def test_a_flag_that_contradicts_the_sweep_is_refused_before_it_is_extended(tmp_path, capsys):
+    spec = started(tmp_path / "s", num_updates=6)
+    finished_method(spec.out, "a3c", 6)
+    (spec.out / "table1.md").write_text("the 6-update report")
+    before = listing(spec.out)
+    with pytest.raises(SystemExit):
+        sweep.cli(["--out", str(spec.out), "--resume", "--num-updates", "12", "--seeds", "7", "--no-progress"])
+    assert "--seeds 7 (started with 2)" in capsys.readouterr().err
+    assert listing(spec.out) == before
+
+
+def test_an_extension_killed_while_moving_the_report_is_repaired_by_the_same_call(tmp_path):
+    spec = started(tmp_path / "s", num_updates=6)
+    finished_method(spec.out, "a3c", 6)
+    (spec.out / "report_6_updates").mkdir()
+    (spec.out / "report_6_updates" / "table1.md").write_text("moved before the kill")
+    (spec.out / "table1.csv").write_text("left behind")
+    sweeps.extend(spec.out, 12)
+    assert listing(spec.out / "report_6_updates") == {"table1.md": b"moved before the kill", "table1.csv": b"left behind"}
+    assert sweeps.saved(spec.out).num_updates == 12
+
+
+def test_an_extension_off_the_chunk_grid_says_it_will_not_match_a_run_from_the_start(tmp_path, capsys):
+    spec = started(tmp_path / "s", num_updates=5)  # tiny's chunk is 2 updates
+    sweeps.extend(spec.out, 8)
+    assert "not a whole number of chunks" in capsys.readouterr().err
+    spec = started(tmp_path / "t", num_updates=4)
+    sweeps.extend(spec.out, 8)
+    assert "chunks" not in capsys.readouterr().err
 
 
 def test_an_extension_keeps_the_report_records_itself_and_drops_the_spent_reuse(tmp_path):
@@ -66,8 +112,7 @@ def test_an_extension_keeps_the_report_records_itself_and_drops_the_spent_reuse(
     assert record["extensions"] == [{"from_updates": 6, "to_updates": 12, "reuse": [str(source.out)]}]
     assert (spec.out / "report_6_updates" / "table1.md").read_text() == "the 6-update report"
     assert not (spec.out / "table1.md").exists()
-    assert (method / "results.json").is_file()  # set aside when the method trains on (`set_aside`)
-    sweeps.set_aside(method, 6)
+    # No finished method reads as one of 12 updates (compare, --reuse): its results are set aside.
     assert (method / "results_6_updates.json").is_file() and not (method / "results.json").exists()
     # A second extension records both, and a report of the same count already kept is refused.
     (spec.out / "table1.md").write_text("the 12-update report")
@@ -75,9 +120,11 @@ def test_an_extension_keeps_the_report_records_itself_and_drops_the_spent_reuse(
     assert [e["to_updates"] for e in json.loads((spec.out / "sweep.json").read_text())["extensions"]] == [12, 20]
     spec_again = started(tmp_path / "t", num_updates=6)
     (spec_again.out / "report_6_updates").mkdir()
+    (spec_again.out / "report_6_updates" / "table1.md").write_text("kept earlier")
     (spec_again.out / "table1.md").write_text("another report")
-    with pytest.raises(errors.UserError, match="already holds report_6_updates/"):
+    with pytest.raises(errors.UserError, match="already holds table1.md in report_6_updates/"):
         sweeps.extend(spec_again.out, 12)
+    assert (spec_again.out / "report_6_updates" / "table1.md").read_text() == "kept earlier"
 
 
 def test_set_aside_never_overwrites_kept_results(tmp_path):

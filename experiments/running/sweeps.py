@@ -336,12 +336,18 @@ def rewind(progress: dict, step: int) -> dict:
 
 
 def check_continuable(folder: Path) -> None:
-    """Refuse (one line) to train on a finished method folder that keeps no progress.json:
-    one assembled from other sweeps' seeds (`assemble`)."""
-    if (folder / "results.json").is_file() and not (folder / "progress.json").is_file():
-        raise errors.UserError(f"{folder.name} in {folder.parent.parent} was assembled from other sweeps' seeds "
-                               "(--reuse) and keeps no progress to continue from; extend those sweeps and assemble "
-                               "it again")  # fmt: skip
+    """Refuse (one line) to train on a finished method folder that cannot continue: one
+    assembled from other sweeps' seeds (`assemble` keeps no progress.json), or one without
+    the checkpoint of its last update (a folder kept without checkpoints, as docs/data's)."""
+    if not (folder / "results.json").is_file():
+        return
+    where = f"{folder.name} in {folder.parent.parent}"
+    if not (folder / "progress.json").is_file():
+        raise errors.UserError(f"{where} was assembled from other sweeps' seeds (--reuse) and keeps no progress to "
+                               "continue from; extend those sweeps and assemble it again")  # fmt: skip
+    done = rundir.read_json(folder / "progress.json")["done"]
+    if not (folder / "checkpoints" / str(done)).is_dir():
+        raise errors.UserError(f"{where} keeps no checkpoint of its update {done} to continue from")
 
 
 def set_aside(folder: Path, updates: int) -> None:
@@ -494,15 +500,18 @@ def updates_of(spec: Sweep) -> int:
 def extend(folder: Path, num_updates: int) -> Sweep:
     """Make the sweep in `folder` (finished or not) one of `num_updates` updates, to be
     continued by `run(..., resume=True)`: every arm then trains on from where it stopped,
-    from its checkpoint, to `num_updates` (nothing in training depends on the total, so
-    the result is that of the sweep that had asked for `num_updates` from the start, bit
-    for bit on the same platform), chooses each seed's model again over all its
-    validations, and is tested again. Nothing is lost: the sweep's report moves into
-    `report_<n>_updates/` here, and a finished arm's results.json becomes
-    `results_<n>_updates.json` beside it when it continues (`run_method`), n the updates
-    it had. sweep.json records each extension ("extensions"). Refused in one line: fewer
-    updates than the sweep has, or an arm assembled from other sweeps' seeds (`assemble`
-    keeps no progress.json to continue from). Returns the extended sweep."""
+    from its checkpoint, to `num_updates`, chooses each seed's model again over all its
+    validations, and is tested again. Nothing in training depends on the total, so where
+    the sweep's updates are a whole number of chunks (else it says so) the result is that
+    of the sweep that had asked for `num_updates` from the start, bit for bit on the same
+    platform. The earlier results stay: the sweep's report moves into
+    `report_<n>_updates/` and each finished arm's results.json becomes
+    `results_<n>_updates.json` beside it (n the updates it had; the models they describe
+    are not kept, the checkpoints move on), and sweep.json records each extension
+    ("extensions"). Refused in one line, before anything moves: fewer updates than the
+    sweep has, a sweep that could not be resumed (`check`, `check_started`), or an arm that
+    cannot continue (`check_continuable`). A kill part-way is repaired by the same call
+    again. Returns the extended sweep."""
     folder = Path(folder)
     rundir.prepare_run_dir(folder, resume=True, overwrite=False, marker="sweep.json", kind="sweep")
     spec = saved(folder)
@@ -515,13 +524,21 @@ def extend(folder: Path, num_updates: int) -> Sweep:
     # The methods --reuse gave the sweep are in it now; its sources, of `had` updates, no
     # longer share its protocol, so the extended sweep names none ("extensions" keeps them).
     extended = dataclasses.replace(spec, num_updates=num_updates, reuse=())
+    check(extended)
+    check_started(extended)
     for method in spec.methods:
         check_continuable(folder / "methods" / method)
     kept = folder / f"report_{had}_updates"
     report_files = [folder / name for name in REPORT_FILES if (folder / name).is_file()]
-    if report_files and kept.exists():
-        raise errors.UserError(f"{folder} already holds {kept.name}/ from an earlier extension; move it first")
-    for path in report_files:  # first: a kill before sweep.json is written leaves an extension to repeat
+    taken = [path.name for path in report_files if (kept / path.name).exists()]
+    if taken:
+        raise errors.UserError(f"{folder} already holds {', '.join(taken)} in {kept.name}/; move them first")
+    chunks = {method_schedule(m, spec)[1].chunk_updates for m in spec.methods}
+    if any(had % chunk for chunk in chunks):
+        print(f"warning: {folder} has {had} updates, not a whole number of chunks ({sorted(chunks)}): extended, it "
+              f"validates at {had}, where a sweep of {num_updates} from the start does not, so it will not end as "
+              "one", file=sys.stderr, flush=True)  # fmt: skip
+    for path in report_files:  # before sweep.json: a kill in between leaves an extension to repeat
         kept.mkdir(exist_ok=True)
         path.rename(kept / path.name)
     record = rundir.read_json(folder / "sweep.json")
@@ -530,6 +547,10 @@ def extend(folder: Path, num_updates: int) -> Sweep:
     rundir.write_json(folder / "sweep.json", {**dataclasses.asdict(extended), "extensions": extensions})
     print(f"extending {folder} from {had} to {num_updates} updates"
           + (f" (its {had}-update report is kept in {kept.name}/)" if report_files else ""), flush=True)  # fmt: skip
+    for method in spec.methods:  # no finished arm reads as one of `num_updates` (a kill before: `run_method`)
+        results = folder / "methods" / method / "results.json"
+        if results.is_file():
+            set_aside(results.parent, rundir.read_json(results)["updates"])
     return extended
 
 
