@@ -1,6 +1,7 @@
 """The fairness study (issue 44: a3c, a3c+critic and a3c+foresit at Adam 3e-4 and 1e-3,
-seeds 0-4, quick): the figures docs/results.md and the README quote are those of its files,
-kept without checkpoints as docs/data/fair_lr3e-4.tar.xz and fair_tune.tar.xz, recomputed here by
+seeds 0-4, quick; and ORG's three arms likewise on org): the figures docs/results.md and the
+README quote are those of its files, kept without checkpoints as docs/data/fair_lr3e-4.tar.xz,
+fair_tune.tar.xz and fair_tune_org.tar.xz, recomputed here by
 `experiments.compare` and `experiments.tune`, as results.md's commands make them."""
 
 from __future__ import annotations
@@ -165,3 +166,21 @@ def test_results_md_quotes_the_better_fitted_fw_arm(tmp_path, capsys):
         row = study_data.pair_row(out, results, a, arm)
         assert row in doc, row
     assert out["pairs"][f"{arm} - a3c"]["robust"]["SPL"]["p_holm"] < 0.05  # "with an interval that excludes 0"
+
+
+def test_results_md_quotes_the_org_tune(tmp_path):
+    """The org tune's grid and best-vs-best rows in results.md are what `experiments.tune`'s
+    report computes from its files (docs/data/fair_tune_org.tar.xz: the tune folder, no checkpoints)."""
+    tuned = study_data.tune_report("fair_tune_org.tar.xz", tmp_path)
+    assert tuned["chosen"] == {m: "learning_rate=1e-3" for m in ("a3c+org", "a3c+org+critic", "a3c+org+foresit")}
+    doc = (REPO / "docs" / "results.md").read_text()
+    for row in tuned["grid_rows"]:
+        assert study_data.grid_line(row) in doc, study_data.grid_line(row)
+    for name, pair in tuned["best_vs_best"].items():
+        assert study_data.best_vs_best_line(name, pair) in doc, study_data.best_vs_best_line(name, pair)
+    # "The same numbers on two machines": every 1e-3 seed's test SR is docs/mechanism.md's (the EPYC's).
+    mechanism = (REPO / "docs" / "mechanism.md").read_text()
+    for method, by_point in tuned["table"].items():
+        per_seed = [r["selected"]["overall"]["SR"] for r in tuned["results"][by_point["learning_rate=1e-3"]]]
+        joined = " / ".join(f"{x:.1f}" for x in per_seed)
+        assert f"| {method} | {joined} |" in mechanism and joined in " ".join(doc.split()), joined
