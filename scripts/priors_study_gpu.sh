@@ -2,7 +2,7 @@
 # Issue 48's study in rooms with priors (docs/priors.md) on a lent GPU, in about 10 minutes of
 # it, 10 seeds at quick's budget. First savn: a3c (1e-3), a3c+critic and a3c+foresit (3e-4), each
 # at the rate issue 44's tune validated on today's rooms (not re-validated with priors). Then
-# org: a3c+org and a3c+org+foresit at quick's 1e-3 (org was not tuned). The arms of a setup run
+# org: a3c+org and a3c+org+foresit at quick's 1e-3 (the rate issue 44's org tune chose for both). The arms of a setup run
 # as processes side by side (as docs/houses.md ran its study), then one table per setup
 # (--reuse, no training) and its pairs. An arm killed at its deadline keeps its checkpoints:
 # continue it with `python -m experiments.sweep --out DIR --resume`. Everything but the
