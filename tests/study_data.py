@@ -11,11 +11,16 @@ from experiments.running import rundir
 DATA = Path(__file__).resolve().parents[1] / "docs" / "data"
 
 
-def unpack(archive: str, folder: Path, methods) -> Path:
-    """Unpack docs/data/`archive` into `folder`; returns the sweep folder, checked to hold `methods` in that order."""
+def extract(archive: str, folder: Path) -> None:
+    """Unpack docs/data/`archive` into `folder`."""
     with tarfile.open(DATA / archive) as tar:
         # The "data" filter (no links out, no absolute paths) is in Python 3.11.4 and later.
         tar.extractall(folder, **({"filter": "data"} if hasattr(tarfile, "data_filter") else {}))
+
+
+def unpack(archive: str, folder: Path, methods) -> Path:
+    """Unpack docs/data/`archive` into `folder`; returns the sweep folder, checked to hold `methods` in that order."""
+    extract(archive, folder)
     (root,) = [p for p in folder.iterdir() if p.is_dir()]
     assert rundir.read_json(root / "sweep.json")["methods"] == list(methods)
     return root
@@ -49,8 +54,7 @@ def tune_report(archive: str, folder: Path) -> dict:
     from experiments import tune
     from experiments.reporting import report, tuning
 
-    with tarfile.open(DATA / archive) as tar:
-        tar.extractall(folder, **({"filter": "data"} if hasattr(tarfile, "data_filter") else {}))
+    extract(archive, folder)
     root = folder / "tune"
     args = rundir.args_from_saved(tune.Args, rundir.read_json(root / "tune.json"), out=root)
     table = tune.arms(args, tune.parse_grid(args.grid))
