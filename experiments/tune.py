@@ -23,7 +23,9 @@ entropy_coef=0.01,0.02`). `--resume` continues a killed tune; `--reuse` takes ar
 other sweeps or tunes of the same protocol finished (`experiments.running.sweeps.copy_finished`), an
 arm at the preset's own value also from a sweep that ran it under its plain method name
 (`a3c` at quick is `a3c@learning_rate=1e-3`). The grid runs arm after arm, each arm's seeds
-vmapped in one program, so seed s at value v is the seed s of a sweep of that arm.
+vmapped in one program, so seed s at value v is the seed s of a sweep of that arm. (A grid
+of learning rates in one program, for an accelerator: `foresit_jax.train.GridTrainer`,
+docs/reproducibility.md.)
 """
 
 from __future__ import annotations

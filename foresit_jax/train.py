@@ -322,6 +322,67 @@ class Trainer:
         return self.run(self.init(key), self.env_params, self.config.num_updates)
 
 
+class GridTrainer(Trainer):
+    """A Trainer whose learning rate is an input: `init(key, learning_rate)`, then `run` as
+    `Trainer`'s. The rate sits in the optimiser state (`optax.inject_hyperparams`, Adam's
+    other settings kept static), so runs at several rates vmap with the seeds in one XLA
+    program: one compilation for a grid, side by side on an accelerator.
+
+        grid = GridTrainer(config)
+        keys, rates = grid_inputs(seeds=[0, 1, 2], learning_rates=[3e-4, 1e-3])
+        states, metrics = jax.jit(jax.vmap(grid.train))(keys, rates)    # [6, ...], rate-major
+
+    Seed s at rate v is the run of `Trainer(config.replace(learning_rate=v))` from
+    `PRNGKey(s)`: the rate as an array multiplies as the constant does, so the updates are
+    the same to the bit (tests/test_train.py: a3c, a3c+foresit and a3c+maml, unvmapped,
+    on one machine); vmapped, a grid is the per-rate sweeps to the bit.
+    `experiments.tune` trains its arms one after another instead, each its own program:
+    on a 2-core CPU the seeds' lanes already fill the cores (docs/reproducibility.md)."""
+
+    # Adam's settings other than the rate stay Python constants: traced, eps alone moves
+    # the parameters by ~1e-7 in 6 tiny updates (measured); static, nothing moves.
+    STATIC_ADAM_ARGS = ("b1", "b2", "eps", "eps_root", "mu_dtype", "nesterov")
+
+    def __init__(self, config: Config, env=None, env_params=None):
+        super().__init__(config, env, env_params)
+        adam = optax.inject_hyperparams(optax.adam, static_args=self.STATIC_ADAM_ARGS)
+        self.optimizer = optax.chain(
+            optax.clip_by_global_norm(config.max_grad_norm), adam(learning_rate=config.learning_rate)
+        )
+
+    def init(self, key: chex.PRNGKey, learning_rate=None) -> RunnerState:
+        """`Trainer.init` with Adam's rate set to `learning_rate` (a scalar, traced or not;
+        None: the config's)."""
+        state = super().init(key)
+        if learning_rate is None:
+            return state
+        clip, adam = state.opt_state
+        rate = jnp.asarray(learning_rate, adam.hyperparams["learning_rate"].dtype)
+        return state._replace(opt_state=(clip, adam._replace(hyperparams={**adam.hyperparams, "learning_rate": rate})))
+
+    @staticmethod
+    def learning_rate(state: RunnerState) -> chex.Array:
+        """The rate a state trains at (`[]`, or `[N]` for a vmapped grid's states)."""
+        return state.opt_state[1].hyperparams["learning_rate"]
+
+    def train(self, key: chex.PRNGKey, learning_rate=None) -> tuple[RunnerState, dict]:
+        """The whole run at `learning_rate` in one jittable function (vmap it over a grid)."""
+        return self.run(self.init(key, learning_rate), self.env_params, self.config.num_updates)
+
+
+def grid_inputs(seeds, learning_rates) -> tuple[chex.Array, chex.Array]:
+    """(keys `[V * S, 2]`, rates `[V * S]`) for `vmap(GridTrainer.train)`: every seed at
+    every rate, rate-major (entry v * S + i is seed `seeds[i]` at `learning_rates[v]`,
+    its key `PRNGKey(seeds[i])`, as `train --seed` makes it)."""
+    seeds, rates = list(seeds), [float(r) for r in learning_rates]
+    if not seeds or not rates:
+        raise ValueError(f"grid_inputs: give at least one seed and one learning rate, got {seeds} and {rates}")
+    if any(not r > 0 for r in rates):
+        raise ValueError(f"grid_inputs: learning rates must be positive, got {rates}")
+    keys = jnp.stack([jax.random.PRNGKey(s) for s in seeds])
+    return jnp.tile(keys, (len(rates), 1)), jnp.repeat(jnp.asarray(rates, jnp.float32), len(seeds))
+
+
 def make_trainer(config: Config, env=None, env_params=None) -> Trainer:
     return Trainer(config, env, env_params)
 
