@@ -36,6 +36,7 @@ from flax import struct
 import envs.metrics
 from foresit_jax import distributions, imagination
 from foresit_jax.config import Config
+from foresit_jax.methods import BaseFunctions
 from foresit_jax.lstm import LowRankUpdate, LSTMCarry, LSTMKernels, initial_carry, lstm_input_gates, lstm_step, reset_carry
 from foresit_jax.networks import ActorCritic, CriticOutput, ImaginationNet, window_attention_mask
 
@@ -191,6 +192,9 @@ class Agent:
         # Where i_tau enters (Config.imagination_input), as the network decides it.
         self.imagination_in_encoder = self.model.imagination_in_encoder
         self.imagination_in_head = self.imagination_variant.uses_imagination and not self.imagination_in_encoder
+        # What the base's `act` uses: these pure functions and its settings (methods.Base).
+        self.base_functions = BaseFunctions(self.act_window, self.lstm_inputs, self.interaction_loss)
+        self.base_settings = self.method.base_piece.settings(config)
 
     # ------------------------------------------------------------------ init
     def init(self, key: chex.PRNGKey, obs: dict) -> tuple[Any, Any]:
@@ -278,7 +282,8 @@ class Agent:
         inside its episode (`foresit_jax.maml.adaptive_act`): whole episodes only, in
         training and evaluation.
         """
-        return self.method.base_piece.act(self, acting, env, actor, key, num_steps, options)
+        return self.method.base_piece.act(self.base_functions, self.base_settings, acting, env, actor, key, num_steps,
+                                          options)  # fmt: skip
 
     def imagined_at_step(self, acting: AgentParams, actor: ActorState, s_t: chex.Array,
                          key: chex.PRNGKey) -> chex.Array:  # fmt: skip

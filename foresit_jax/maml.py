@@ -202,21 +202,36 @@ def _unlane(tree):
     return jax.tree.map(lambda x: x[:, 0], tree)  # [B, 1, ...] -> [B, ...]
 
 
+class InnerLoop(NamedTuple):
+    """SAVN's inner loop as `adaptive_act` runs it (the maml base's settings, from the Config)."""
+
+    segment: int  # steps per inner update (SAVN: 6)
+    updates: int  # at most this many inner updates per episode (SAVN: 4)
+    lr: float  # the inner SGD's step size
+    first_order: bool  # drop the meta-gradient through the inner updates
+    sigma2_max: float  # Eq. 7's bound on the imagination noise (each lane's variance from its tracker)
+
+    @classmethod
+    def of(cls, config) -> "InnerLoop":
+        return cls(config.maml_segment, config.maml_inner_updates, config.maml_inner_lr, config.maml_first_order,
+                   config.sigma2_max)  # fmt: skip
+
+
 def adaptive_act(
-    agent, acting, env, actor, key: chex.PRNGKey, num_steps: int, options
+    fns, loop: InnerLoop, acting, env, actor, key: chex.PRNGKey, num_steps: int, options
 ) -> tuple[Any, Any, Any, list[AdaptedParams]]:
     """One whole episode per lane (from `actor`, every lane at an episode start) with
-    SAVN's inner loop, acting as `acting` (`AgentParams`: theta_0, w, the noise variance)
-    in `env` (`BoundEnv`) with `options` (`ActOptions`: greedy, record_inputs; whole
-    episodes). Returns (actor after the window, Trajectory `[num_steps, B]`, its
-    WindowEnd, the parameters each lane used: `AdaptedParams`, theta_0 first, then theta_i after each
-    update slot (unchanged in lanes whose episode had ended))."""
-    cfg = agent.config
+    SAVN's inner loop (`loop`), acting as `acting` (`AgentParams`: theta_0, w, the noise
+    variance) in `env` (`BoundEnv`) with `options` (`ActOptions`: greedy, record_inputs;
+    whole episodes), through `fns` (`methods.BaseFunctions`: act_window, lstm_inputs,
+    interaction_loss). Returns (actor after the window, Trajectory `[num_steps, B]`, its
+    WindowEnd, the parameters each lane used: `AdaptedParams`, theta_0 first, then
+    theta_i after each update slot (unchanged in lanes whose episode had ended))."""
     num_lanes = actor.episode_step.shape[0]
     noise_variance = acting.noise_variance
     if noise_variance is None:  # Eq. 7 from each lane's tracker (it changes only when the episode ends)
         rho = jax.vmap(imagination.success_rate)(actor.tracker)
-        noise_variance = imagination.noise_variance(rho, cfg.sigma2_max)
+        noise_variance = imagination.noise_variance(rho, loop.sigma2_max)
     variance = jnp.broadcast_to(jnp.asarray(noise_variance, jnp.float32), (num_lanes,))[:, None]  # [B, 1]
     shared, lanes = split_encoder_lstm_kernels(acting.params)
     lanes = jax.tree.map(lambda x: jnp.broadcast_to(x, (num_lanes,) + x.shape), lanes)
@@ -227,31 +242,31 @@ def adaptive_act(
     def window(lanes, update, lane_actor, key, variance, alive, steps, record, gate_offsets=None):  # one lane
         lane_acting = acting._replace(params=join_partial_trees(shared, lanes), noise_variance=variance)
         lane_options = options._replace(whole_episodes=True, record_inputs=record)
-        return agent.act_window(lane_acting, env, lane_actor, key, steps, lane_options, alive=alive,
-                                lstm_update=update, gate_offsets=gate_offsets)  # fmt: skip
+        return fns.act_window(lane_acting, env, lane_actor, key, steps, lane_options, alive=alive,
+                              lstm_update=update, gate_offsets=gate_offsets)  # fmt: skip
 
     def segment(lanes, update, lane_actor, key, variance, alive):  # one lane
         def loss(lanes, gate_offsets):
-            next_actor, traj, end = window(lanes, update, lane_actor, key, variance, alive, cfg.maml_segment, True,
+            next_actor, traj, end = window(lanes, update, lane_actor, key, variance, alive, loop.segment, True,
                                           gate_offsets)  # fmt: skip
             inputs = interaction_inputs(traj.states[:, 0], traj.logits[:, 0])  # [segment, H + A]
-            return agent.interaction_loss(join_partial_trees(shared, lanes), inputs), (next_actor, traj, end)
+            return fns.interaction_loss(join_partial_trees(shared, lanes), inputs), (next_actor, traj, end)
 
-        zeros = jnp.zeros((cfg.maml_segment, 1, 4 * cfg.hidden_size), kernel_dtype)
+        zeros = jnp.zeros((loop.segment, 1, 4 * actor.s_0.shape[-1]), kernel_dtype)
         (_, (next_actor, traj, end)), (grads, gate_grads) = jax.value_and_grad(loss, (0, 1), has_aux=True)(lanes, zeros)
-        rows = _kernel_update(agent, join_partial_trees(shared, lanes), lane_actor, traj, gate_grads)
-        if cfg.maml_first_order:
+        rows = _kernel_update(fns, loop, join_partial_trees(shared, lanes), lane_actor, traj, gate_grads)
+        if loop.first_order:
             grads, rows = jax.lax.stop_gradient((grads, rows))
         still_alive = traj.valid[-1] & ~(traj.terminated[-1] | traj.truncated[-1])  # [1] the episode runs on (alive next)
         rows = rows._replace(deltas=jnp.where(still_alive[0], rows.deltas, 0.0))
         update = rows if update is None else update.concat(rows)
         if not options.record_inputs:
             traj = traj._replace(inputs=None)
-        return inner_step(lanes, grads, cfg.maml_inner_lr, still_alive[0]), update, next_actor, (traj, end), still_alive
+        return inner_step(lanes, grads, loop.lr, still_alive[0]), update, next_actor, (traj, end), still_alive
 
     update = None
     thetas, segments, done_steps = [AdaptedParams(shared, lanes, update)], [], 0
-    slots = update_steps(num_steps, cfg.maml_segment, cfg.maml_inner_updates)
+    slots = update_steps(num_steps, loop.segment, loop.updates)
     keys = jax.random.split(key, len(slots) + 1)
     for k in keys[:-1]:
         lanes, update, lane_actor, recorded, alive = jax.vmap(segment)(
@@ -259,7 +274,7 @@ def adaptive_act(
         )
         thetas.append(AdaptedParams(shared, lanes, update))
         segments.append(recorded)
-        done_steps += cfg.maml_segment
+        done_steps += loop.segment
     if num_steps > done_steps:
         steps = num_steps - done_steps
         rest = lambda *a: window(*a, steps, options.record_inputs)  # noqa: E731
@@ -270,16 +285,16 @@ def adaptive_act(
     return _unlane(lane_actor), traj, end, thetas
 
 
-def _kernel_update(agent, params, lane_actor, traj, gate_grads) -> LowRankUpdate:
+def _kernel_update(fns, loop: InnerLoop, params, lane_actor, traj, gate_grads) -> LowRankUpdate:
     """The LSTM kernels' inner step of one lane's segment, as factors (module doc, "Adapted
     kernels"): the gradients sum_t x_t^T delta_t and sum_t h_{t-1}^T delta_t, kept as the
     segment's inputs x_t `[segment, F]` (under `params`, the lane's theta_i), carries
     h_{t-1} `[segment, H]` and -lr delta_t `[segment, 4H]` (`gate_grads`: d L_phi / d gates)."""
     seen = traj.inputs
     return LowRankUpdate(
-        inputs=agent.lstm_inputs(params, seen.obs, seen.prev_action_probs, seen.encoder_imagined)[:, 0],
+        inputs=fns.lstm_inputs(params, seen.obs, seen.prev_action_probs, seen.encoder_imagined)[:, 0],
         hiddens=jnp.concatenate([lane_actor.lstm[1], traj.states[:-1, 0]]),
-        deltas=-agent.config.maml_inner_lr * gate_grads[:, 0],
+        deltas=-loop.lr * gate_grads[:, 0],
     )
 
 

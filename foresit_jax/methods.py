@@ -36,7 +36,7 @@ checks it).
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable, Optional
+from typing import Any, Callable, NamedTuple, Optional
 
 import chex
 import flax.linen as nn
@@ -119,17 +119,35 @@ IMAGINATION_VARIANTS: dict[str, ImaginationVariant] = {
 }
 
 
-def act_in_windows(agent, acting, env, actor, key, num_steps: int, options):
-    """The a3c base's acting: one parameter set for the whole window (`Agent.act_window`)."""
-    return agent.act_window(acting, env, actor, key, num_steps, options)
+class BaseFunctions(NamedTuple):
+    """What a base's `act` uses of the agent: pure functions of its networks (`Agent`
+    builds them once, `Agent.base_functions`).
+
+    act_window: `(acting, env, actor, key, num_steps, options, *, alive=None,
+      lstm_update=None, gate_offsets=None) -> (actor, traj, end)`: a window under one
+      parameter set (`Agent.act_window`);
+    lstm_inputs: `(params, obs, prev_action_probs, encoder_imagined) -> x_t`, the encoder
+      LSTM's input (`Agent.lstm_inputs`);
+    interaction_loss: `(params, inputs) -> scalar`, the maml base's L_phi
+      (`Agent.interaction_loss`).
+    """
+
+    act_window: Callable
+    lstm_inputs: Callable
+    interaction_loss: Callable
 
 
-def act_adapting(agent, acting, env, actor, key, num_steps: int, options):
+def act_in_windows(fns: BaseFunctions, settings, acting, env, actor, key, num_steps: int, options):
+    """The a3c base's acting: one parameter set for the whole window (`act_window`)."""
+    return fns.act_window(acting, env, actor, key, num_steps, options)
+
+
+def act_adapting(fns: BaseFunctions, settings: maml.InnerLoop, acting, env, actor, key, num_steps: int, options):
     """The maml base's acting: SAVN's inner loop adapts each lane's parameters inside its
-    episode (`foresit_jax.maml.adaptive_act`); whole episodes only."""
+    episode (`foresit_jax.maml.adaptive_act`, run as `settings` says); whole episodes only."""
     if not options.whole_episodes or options.step_keys is not None:
         raise ValueError("the maml base acts in whole episodes (rollout='episodes'), without step_keys")
-    actor, traj, end, _ = maml.adaptive_act(agent, acting, env, actor, key, num_steps, options)
+    actor, traj, end, _ = maml.adaptive_act(fns, settings, acting, env, actor, key, num_steps, options)
     return actor, traj, end
 
 
@@ -137,8 +155,11 @@ def act_adapting(agent, acting, env, actor, key, num_steps: int, options):
 class Base:
     """A base learner, as the agent uses it.
 
-    act: acts a window, `(agent, acting: AgentParams, env: BoundEnv, actor, key, num_steps,
-      options: ActOptions) -> (actor, traj, end)` (the records of `foresit_jax.agent`).
+    act: acts a window, `(fns: BaseFunctions, settings, acting: AgentParams, env: BoundEnv,
+      actor, key, num_steps, options: ActOptions) -> (actor, traj, end)` (the records of
+      `foresit_jax.agent`).
+    settings: what `act` needs of the Config (maml's `InnerLoop`), from the Config; None
+      for none.
     learned_loss: the network's extra module for the base (maml's L_phi), from the Config;
       None for none.
     adapts_in_episode: the parameters change inside an episode (maml): acting must be
@@ -150,6 +171,7 @@ class Base:
 
     name: str
     act: Callable = act_in_windows
+    settings: Callable[..., Any] = lambda config: None
     learned_loss: Callable[..., Optional[nn.Module]] = lambda config: None
     adapts_in_episode: bool = False
 
@@ -169,7 +191,7 @@ class Encoder:
 
 BASE_PIECES: dict[str, Base] = {
     "a3c": Base("a3c"),
-    "maml": Base("maml", act=act_adapting, adapts_in_episode=True,
+    "maml": Base("maml", act=act_adapting, settings=maml.InnerLoop.of, adapts_in_episode=True,
                  learned_loss=lambda config: maml.LearnedLoss(segment=config.maml_segment)),  # fmt: skip
 }
 ENCODER_PIECES: dict[str, Encoder] = {

@@ -101,7 +101,7 @@ def _setup(lr=0.05, lanes=16, training=True, never_done=False, **overrides):
 @pytest.fixture(scope="module")
 def adapted_rollout():
     config, agent, env, env_params, params, w_params, actor = _setup()
-    run = jax.jit(lambda p, a, k: maml.adaptive_act(agent, AgentParams(p, w_params), BoundEnv(env, env_params), a, k, 30, WHOLE),
+    run = jax.jit(lambda p, a, k: maml.adaptive_act(agent.base_functions, agent.base_settings, AgentParams(p, w_params), BoundEnv(env, env_params), a, k, 30, WHOLE),
                   compiler_options=H.FAST_COMPILE)  # fmt: skip
     _, traj, _, thetas = run(params, actor, jax.random.PRNGKey(5))
     return config, params, traj, thetas
@@ -138,7 +138,7 @@ def test_evaluation_step_13_runs_under_theta_2_recomputed_independently():
     modules over the recorded observations, then step 13's logits under
     theta_2; they match the rollout's and differ from theta_0's."""
     config, agent, env, env_params, params, w_params, actor = _setup(lr=5.0, lanes=4, training=False, never_done=True)
-    run = jax.jit(lambda p, a, k: maml.adaptive_act(agent, AgentParams(p, w_params), BoundEnv(env, env_params), a, k, 14, WHOLE),
+    run = jax.jit(lambda p, a, k: maml.adaptive_act(agent.base_functions, agent.base_settings, AgentParams(p, w_params), BoundEnv(env, env_params), a, k, 14, WHOLE),
                   compiler_options=H.FAST_COMPILE)  # fmt: skip
     _, traj, _, thetas = run(params, actor, jax.random.PRNGKey(6))
     assert bool(np.all(np.asarray(traj.valid)[:14]))  # every lane still in its episode at step 13
@@ -188,7 +188,7 @@ def test_agent_rollout_adapts_through_the_same_code_path(monkeypatch):
     real = maml.adaptive_act
 
     def spy(*args, **kwargs):
-        calls.append(args[5])  # num_steps
+        calls.append(args[6])  # num_steps
         return real(*args, **kwargs)
 
     monkeypatch.setattr(maml, "adaptive_act", spy)
@@ -226,7 +226,7 @@ def _meta_objective(first_order: bool):
     w_states = jnp.asarray(rng.standard_normal((steps, 3, config.hidden_size)))
 
     def objective(p):
-        _, traj, _, _ = maml.adaptive_act(agent, AgentParams(p, w_params), BoundEnv(env, env_params), actor,
+        _, traj, _, _ = maml.adaptive_act(agent.base_functions, agent.base_settings, AgentParams(p, w_params), BoundEnv(env, env_params), actor,
                                           jax.random.PRNGKey(11), steps, WHOLE._replace(record_inputs=False))  # fmt: skip
         valid = traj.valid[..., None]
         return jnp.sum(jnp.where(valid, traj.logits * w_logits, 0.0)) + jnp.sum(jnp.where(valid, traj.states * w_states, 0.0))
