@@ -1044,6 +1044,20 @@ def test_every_config_field_is_a_flag_of_train_and_sweep():
     assert config.entropy_coef == presets.preset("quick", "a3c+foresit")[0].entropy_coef  # the rest: the preset's
 
 
+def test_each_config_field_flag_is_helped_by_its_docstring_on_one_line(capsys):
+    """The help of a Config field's flag is the docstring under the field, its source line
+    breaks joined (presets._field_docs, read with tyro's docstring_parser)."""
+    docs = presets._field_docs(Config)
+    assert set(docs) == {f.name for f in dataclasses.fields(Config)}
+    assert docs["gamma"] == "Discount factor."
+    assert all("\n" not in d and "  " not in d for d in docs.values())
+    with pytest.raises(SystemExit):
+        tyro.cli(train_cli.Args, args=["--help"])
+    shown = " ".join(re.sub("[\u2500-\u257f]", " ", capsys.readouterr().out).split())  # box drawing out
+    for name in ("priors", "rollout", "gamma", "entropy_coef"):
+        assert docs[name] in shown, name
+
+
 @pytest.mark.slow
 def test_config_flags_reach_the_run_and_resume_refuses_other_values(tmp_path, capsys):
     out = tmp_path / "gamma"

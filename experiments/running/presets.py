@@ -15,12 +15,11 @@ fields given explicitly override both.
 
 from __future__ import annotations
 
-import ast
 import dataclasses
-import inspect
 import typing
 from typing import Annotated, Optional
 
+import docstring_parser
 import tyro
 
 from envs.gridnav import time_limits
@@ -136,11 +135,12 @@ def preset(name: str, method: str, **overrides) -> tuple[Config, Schedule]:
 
 # ---------------------------------------------------------------------- Config fields as flags
 def _field_docs(cls) -> dict[str, str]:
-    """The docstrings written under a dataclass's fields (one line each)."""
-    body = ast.parse(inspect.getsource(cls)).body[0].body
-    return {a.target.id: " ".join(b.value.value.split()) for a, b in zip(body, body[1:])
-            if isinstance(a, ast.AnnAssign) and isinstance(b, ast.Expr) and isinstance(b.value, ast.Constant)
-            and isinstance(b.value.value, str)}  # fmt: skip
+    """The docstrings written under a dataclass's fields, each on one line: what tyro reads
+    (`docstring_parser`, its dependency), with the source's line breaks joined. tyro keeps
+    those breaks itself (1.0.17: a line of a field docstring starting with a space starts a
+    new help line), so the help it would print for Config's fields is ragged."""
+    return {p.arg_name: " ".join(p.description.split())
+            for p in docstring_parser.parse_from_object(cls).params if p.description}  # fmt: skip
 
 
 def config_fields(name: str, exclude: tuple[str, ...]) -> type:
