@@ -31,3 +31,23 @@ def test_bench_train_runs_every_combination_and_counts_useful_frames(monkeypatch
 def test_a_variant_that_is_not_a_json_object_is_refused_before_any_compile(variant):
     with pytest.raises(ValueError, match="--variants entries must be JSON objects"):
         B.main(B.BenchConfig(preset="tiny", methods=("a3c",), variants=("{}", variant)))
+
+
+@pytest.mark.slow
+def test_bench_grid_times_the_arms_and_the_grid_over_the_same_frames(monkeypatch, capsys):
+    from benchmarks import bench_grid
+
+    H.patch_for_experiments(monkeypatch)
+    out = bench_grid.main(bench_grid.BenchGrid(rates=(1e-3, 3e-3), seeds=2, method="a3c", preset="tiny", updates=2,
+                                               repeats=1))  # fmt: skip
+    printed = capsys.readouterr().out
+    assert out["rates"] == pytest.approx([1e-3, 1e-3, 3e-3, 3e-3])
+    assert out["useful_frames"] > 0 and out["speedup"] > 0
+    assert "| arms |" in printed and "| grid |" in printed and "2 rates x 2 seeds" in printed
+
+
+def test_bench_grid_refuses_an_empty_grid_before_any_compile():
+    from benchmarks import bench_grid
+
+    with pytest.raises(ValueError, match="at least one rate"):
+        bench_grid.main(bench_grid.BenchGrid(rates=(), preset="tiny"))
