@@ -37,7 +37,7 @@ import envs.metrics
 from foresit_jax import distributions, imagination
 from foresit_jax.config import Config
 from foresit_jax.methods import BaseFunctions
-from foresit_jax.lstm import LowRankUpdate, LSTMCarry, LSTMKernels, initial_carry, lstm_input_gates, lstm_step, reset_carry
+from foresit_jax.lstm import LowRankUpdate, LSTMCarry, LSTMKernels, initial_carry, lstm_step, reset_carry
 from foresit_jax.networks import ActorCritic, CriticOutput, ImaginationNet, window_attention_mask
 
 
@@ -252,15 +252,17 @@ class Agent:
         encoder's i_tau `[..., H]`, with `imagination_in_encoder`)."""
         return self.model.apply(params, obs, prev_action_probs, encoder_imagined, method=ActorCritic.encoder_features)
 
-    def lstm_kernels(self, params) -> LSTMKernels:
-        """The encoder LSTM's kernels in `params` (`ActorCritic.lstm_kernels`)."""
-        return self.model.apply(params, method=ActorCritic.lstm_kernels)
+    def lstm_kernels(self, params, update: Optional[LowRankUpdate] = None) -> LSTMKernels:
+        """The encoder LSTM's kernels in `params`, with a low-rank `update` or None
+        (`ActorCritic.lstm_kernels`)."""
+        return self.model.apply(params, update, method=ActorCritic.lstm_kernels)
 
     def input_gates(self, params, obs, prev_action_probs, kernels=None, encoder_imagined=None):
         """The encoder up to the LSTM's input gates `[..., 4H]`: everything of a step
-        that does not depend on the LSTM carry."""
+        that does not depend on the LSTM carry (`ActorCritic.input_gates`)."""
         kernels = self.lstm_kernels(params) if kernels is None else kernels
-        return lstm_input_gates(kernels, self.lstm_inputs(params, obs, prev_action_probs, encoder_imagined))
+        return self.model.apply(params, obs, prev_action_probs, encoder_imagined, kernels,
+                                method=ActorCritic.input_gates)  # fmt: skip
 
     def encoder_imagined(self, actor: ActorState) -> Optional[chex.Array]:
         """The i_tau the encoder sees at the lanes' next step `[B, H]`: the running episode's,
@@ -322,7 +324,7 @@ class Agent:
           kernels, `foresit_jax.maml`); gate_offsets: `[num_steps, B, 4H]` added to each
           step's gate pre-activations (zeros whose gradient is the pre-activations')."""
         params, lanes = acting.params, jnp.arange(actor.episode_step.shape[0])
-        kernels = self.lstm_kernels(params)._replace(update=lstm_update)  # once, outside the loop
+        kernels = self.lstm_kernels(params, lstm_update)  # once, outside the loop
 
         def step(carry, xs):
             actor, alive = carry

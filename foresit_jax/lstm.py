@@ -10,8 +10,9 @@ computes: the same concatenated kernels, the same dots, the same additions in th
 order. The parameter names are flax's: a flax upgrade that renames or reorders them
 fails `tests/test_lstm.py`, not a run.
 
-Acting and the replay get the kernels from the network itself
-(`ActorCritic.lstm_kernels`, `Agent.lstm_kernels`); `encoder_lstm_params(params)` is the
+`EncoderLSTM` is the encoder's cell with this split path as its methods: acting and the
+replay get the kernels, the input gates and the unroll through it (`ActorCritic.lstm_kernels`,
+`ActorCritic.input_gates`, `ActorCritic.replay`); `encoder_lstm_params(params)` is the
 one place that knows where the LSTM sits in the agent's parameter tree: with
 `split_encoder_lstm_kernels`, `join_partial_trees` and `with_encoder_lstm_kernels`, for the
 maml base, which splits that tree into the kernels it adapts and the rest.
@@ -200,6 +201,43 @@ def lstm_step(kernels: LSTMKernels, carry: LSTMCarry, input_gates: chex.Array) -
     new_c = f * c + i * g
     new_h = o * jnp.tanh(new_c)
     return (new_c, new_h), new_h
+
+
+class EncoderLSTM(nn.OptimizedLSTMCell):
+    """The encoder's LSTM: flax's `nn.OptimizedLSTMCell` (its parameters and its
+    `__call__`, unchanged) with the split fast path of this module as its methods, so that
+    everything the agent does with the cell goes through it.
+
+    kernels(update) -> its concatenated kernels (`LSTMKernels`), with a low-rank `update`
+      (the maml base's adapted kernels) or None;
+    input_gates(x, kernels) -> the input's part of the gates `[..., 4H]`, for any number of
+      steps at once;
+    unroll(kernels, carry, gates, episode_step, readout, xs) -> the recurrent part over a
+      window of input gates `[T, B, 4H]`, the carry zeroed before each step that starts an
+      episode (`episode_step` `[T, B]` 0), and `readout(s_t, x_t)` of each step (the
+      replay: `ActorCritic.replay`).
+    A step of acting runs `lstm_step` on `kernels` made once per window (outside the loop)."""
+
+    def kernels(self, update: Optional[LowRankUpdate] = None) -> LSTMKernels:
+        return lstm_kernels(self.variables["params"])._replace(update=update)
+
+    def input_gates(self, x: chex.Array, kernels: LSTMKernels) -> chex.Array:
+        return lstm_input_gates(kernels, x)
+
+    def unroll(self, kernels: LSTMKernels, carry: LSTMCarry, gates: chex.Array, episode_step: chex.Array, readout,
+               xs=None):  # fmt: skip
+        """(the carry after the window, `(s_t, readout(s_t, x_t))` stacked `[T, ...]`), the
+        recurrent kernel transposed once (`with_transposed_recurrent_kernel`: the unroll is
+        differentiated); `xs`: per-step inputs of `readout` (`[T, ...]` leaves, or None)."""
+        kernels = with_transposed_recurrent_kernel(kernels)
+        first = episode_step == 0  # [T, B]
+
+        def step(carry, step_xs):
+            input_gates, x, first_t = step_xs
+            carry, s_t = lstm_step(kernels, reset_carry(first_t, carry), input_gates)
+            return carry, (s_t, readout(s_t, x))
+
+        return jax.lax.scan(step, carry, (gates, xs, first))
 
 
 def initial_carry(batch_shape, hidden_size: int = 512) -> LSTMCarry:

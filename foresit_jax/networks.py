@@ -27,7 +27,9 @@ import jax
 import jax.numpy as jnp
 
 from foresit_jax.layers import Dense, GridDense
-from foresit_jax.lstm import LSTMCarry, LSTMKernels, initial_carry, lstm_kernels, reset_carry  # noqa: F401 (re-exported)
+from foresit_jax.lstm import (  # noqa: F401 (initial_carry, reset_carry: re-exported)
+    EncoderLSTM, LowRankUpdate, LSTMCarry, LSTMKernels, initial_carry, reset_carry,
+)
 
 class Encoder(nn.Module):
     """SAVN encoder: observation, target and previous action probabilities -> s_t.
@@ -62,7 +64,7 @@ class Encoder(nn.Module):
         if self.imagination_features:
             self.imagination_embed = Dense(self.imagination_features)
         self.pointwise_conv = GridDense(self.conv_features)
-        self.lstm = nn.OptimizedLSTMCell(self.hidden_size)
+        self.lstm = EncoderLSTM(self.hidden_size)
 
     def features(
         self, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array, imagined: Optional[chex.Array] = None
@@ -104,12 +106,6 @@ class Encoder(nn.Module):
     ) -> tuple[LSTMCarry, chex.Array]:  # fmt: skip
         carry, s_t = self.lstm(carry, self.features(obs, prev_action_probs, imagined))
         return carry, s_t  # s_t: [..., hidden_size]
-
-    def lstm_kernels(self) -> LSTMKernels:
-        """The LSTM's parameters as the concatenated kernels of its split form
-        (`foresit_jax.lstm`: input gates for a whole window at once, then the recurrent
-        step), which acting, the replay and MAML run instead of calling the cell."""
-        return lstm_kernels(self.lstm.variables["params"])
 
 
 class PolicyHead(nn.Module):
@@ -279,7 +275,10 @@ class ActorCritic(nn.Module):
       encode(carry, obs, prev_action_probs, imagined) -> (carry, s_t [..., H])
       encoder_features(obs, prev_action_probs, imagined) -> LSTM input [..., F]
       policy_logits(s_t, imagined) -> logits [..., A]
-      lstm_kernels() -> the encoder LSTM's kernels, for its split form (foresit_jax.lstm)
+      lstm_kernels(update) -> the encoder LSTM's kernels, for its split form (foresit_jax.lstm)
+      input_gates(obs, prev_action_probs, imagined, kernels) -> the LSTM's input gates [..., 4H]
+      replay(carry, obs, prev_action_probs, encoder_imagined, head_imagined, episode_step)
+        -> (states, logits) of a recorded window (foresit_jax.replay)
       step(carry, obs, prev_action_probs, imagined) -> (carry, s_t, logits)  (both above)
       critic(states [..., T, H], valid [..., T]) -> CriticOutput
     `__call__` runs both once (for `init`).
@@ -337,9 +336,39 @@ class ActorCritic(nn.Module):
         """pi(. | s_t, i_tau) logits `[..., A]`."""
         return self.policy(s_t, imagined)
 
-    def lstm_kernels(self) -> LSTMKernels:
-        """The encoder LSTM's kernels (`Encoder.lstm_kernels`)."""
-        return self.encoder.lstm_kernels()
+    def lstm_kernels(self, update: Optional[LowRankUpdate] = None) -> LSTMKernels:
+        """The encoder LSTM's parameters as the concatenated kernels of its split form
+        (`foresit_jax.lstm.EncoderLSTM`: input gates for any number of steps at once, then
+        the recurrent step), which acting, the replay and MAML run instead of calling the
+        cell; `update`: a low-rank change of them (the maml base's adapted kernels) or None."""
+        return self.encoder.lstm.kernels(update)
+
+    def input_gates(self, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array, imagined: Optional[chex.Array],
+                    kernels: LSTMKernels) -> chex.Array:  # fmt: skip
+        """The encoder up to the LSTM's input gates `[..., 4H]` under `kernels`: everything
+        of an acting step that does not depend on the carry (`imagined`: the encoder's i_tau)."""
+        return self.encoder.lstm.input_gates(self.encoder.features(obs, prev_action_probs, imagined), kernels)
+
+    def replay(self, carry: LSTMCarry, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array,
+               encoder_imagined: Optional[chex.Array], head_imagined: Optional[chex.Array],
+               episode_step: chex.Array) -> tuple[chex.Array, chex.Array]:  # fmt: skip
+        """(states `[T, B, H]`, logits `[T, B, A]`) of a window from its recorded inputs
+        (leaves `[T, B, ...]`) and the carry before it, as a differentiable function of the
+        parameters (`foresit_jax.replay`): the encoder up to the input gates over all T x B
+        steps at once (a few large matmuls), then the LSTM's recurrent part and the policy
+        step by step (`EncoderLSTM.unroll`; the carry zeroed where `episode_step` is 0)."""
+        num_steps, num_lanes = episode_step.shape
+        size = num_steps * num_lanes
+
+        def flat(x):  # [T, B, ...] -> [T * B, ...]
+            return x.reshape((size,) + x.shape[2:])
+
+        kernels = self.lstm_kernels()
+        encoder_imagined = None if encoder_imagined is None else flat(encoder_imagined)
+        gates = self.input_gates(jax.tree.map(flat, obs), flat(prev_action_probs), encoder_imagined, kernels)
+        gates = gates.reshape(num_steps, num_lanes, -1)  # [T, B, 4H]: one matmul over the whole window
+        _, (states, logits) = self.encoder.lstm.unroll(kernels, carry, gates, episode_step, self.policy, head_imagined)
+        return states, logits
 
     def step(
         self,

@@ -23,13 +23,14 @@ from __future__ import annotations
 import jax
 
 from foresit_jax.agent import Agent, Trajectory
-from foresit_jax.lstm import LSTMCarry, lstm_step, reset_carry, with_transposed_recurrent_kernel
+from foresit_jax.lstm import LSTMCarry
 from foresit_jax.networks import ActorCritic
 
 
-def replay(agent: Agent, params, traj: Trajectory, initial_carry: LSTMCarry):
-    """(states `[T, B, H]`, logits `[T, B, A]`) of a window recorded with
-    `record_inputs=True`, recomputed as a differentiable function of `params`.
+def replayed(agent: Agent, params, traj: Trajectory, initial_carry: LSTMCarry) -> Trajectory:
+    """`traj` (recorded with `record_inputs=True`) with its states `[T, B, H]` and logits
+    `[T, B, A]` recomputed as a differentiable function of `params`, in one `apply`
+    (`ActorCritic.replay`).
 
     initial_carry: the LSTM carry `(c, h)` `[B, H]` each before the window's first step
     (`ActorState.lstm` at the window's start). The carry is zeroed before every step that
@@ -37,34 +38,7 @@ def replay(agent: Agent, params, traj: Trajectory, initial_carry: LSTMCarry):
     """
     if traj.inputs is None:
         raise ValueError("replay needs a trajectory recorded with record_inputs=True")
-    inputs = jax.lax.stop_gradient(traj.inputs)
-    num_steps, num_lanes = traj.actions.shape
-    size = num_steps * num_lanes
-
-    def flat(x):  # [T, B, ...] -> [T * B, ...]
-        return x.reshape((size,) + x.shape[2:])
-
-    kernels = agent.lstm_kernels(params)
-    encoder_imagined = None if inputs.encoder_imagined is None else flat(inputs.encoder_imagined)
-    gates = agent.input_gates(
-        params, jax.tree.map(flat, inputs.obs), flat(inputs.prev_action_probs), kernels, encoder_imagined
-    )  # fmt: skip
-    gates = gates.reshape(num_steps, num_lanes, -1)  # [T, B, 4H]: one matmul over the whole segment
-    kernels = with_transposed_recurrent_kernel(kernels)
-    first = traj.episode_step == 0  # [T, B]
-
-    def step(carry, xs):
-        input_gates, imagined, first_t = xs
-        carry, s_t = lstm_step(kernels, reset_carry(first_t, carry), input_gates)
-        logits = agent.model.apply(params, s_t, imagined, method=ActorCritic.policy_logits)
-        return carry, (s_t, logits)
-
-    _, (states, logits) = jax.lax.scan(step, initial_carry, (gates, inputs.imagined, first))
-    return states, logits
-
-
-def replayed(agent: Agent, params, traj: Trajectory, initial_carry: LSTMCarry) -> Trajectory:
-    """`traj` with states and logits recomputed by `replay` (differentiable in params)."""
-    states, logits = replay(agent, params, traj, initial_carry)
+    seen = jax.lax.stop_gradient(traj.inputs)
+    states, logits = agent.model.apply(params, initial_carry, seen.obs, seen.prev_action_probs, seen.encoder_imagined,
+                                       seen.imagined, traj.episode_step, method=ActorCritic.replay)  # fmt: skip
     return traj._replace(states=states, logits=logits)
-

@@ -15,7 +15,7 @@ from foresit_jax.agent import (
     Agent, AgentParams, BoundEnv, EpisodeStats, Trajectory, WindowEnd, ended_episodes, episode_stats,
 )  # fmt: skip
 from foresit_jax.lstm import initial_carry
-from foresit_jax.replay import replay
+from foresit_jax.replay import replayed as replay_of
 
 DONE = 5
 LANES = 8
@@ -104,7 +104,8 @@ def _rollout(greedy: bool):
     def run(params, w_params, env_params, key, sigma2):
         traj = agent.rollout(AgentParams(params, w_params, sigma2), BoundEnv(env, env_params), key, FORESIT.num_steps, greedy,
                              record_inputs=not greedy)  # fmt: skip
-        replayed = None if greedy else replay(agent, params, traj, initial_carry((LANES,), FORESIT.hidden_size))
+        again = None if greedy else replay_of(agent, params, traj, initial_carry((LANES,), FORESIT.hidden_size))
+        replayed = None if greedy else (again.states, again.logits)
         memory = jnp.zeros((LANES, 0, FORESIT.hidden_size))
         end = WindowEnd(jnp.zeros((LANES, FORESIT.hidden_size)), jnp.zeros((LANES,), jnp.int32))  # whole episodes: nothing bootstrapped
         return traj, replayed, agent.critic(params, traj, end, memory)[0]
@@ -152,7 +153,7 @@ def test_rollout_follows_the_environment_rules(rollout):
 
 
 def test_replay_recomputes_the_acting_pass(rollout):
-    """Training differentiates `replay`: on the real steps it must give what the agent
+    """Training differentiates the replay (`replayed`): on the real steps it must give what the agent
     computed while acting (up to float rounding: the encoder runs batched over the window)."""
     _, (traj, (states, logits), _) = rollout
     valid = traj.valid
