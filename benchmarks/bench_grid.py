@@ -43,8 +43,11 @@ def main(bench: BenchGrid) -> dict:
     from experiments.running.presets import preset
     from foresit_jax.train import GridTrainer, Trainer, grid_inputs
 
-    if bench.seeds < 1 or not bench.rates or bench.updates < 1 or bench.repeats < 1:
-        raise ValueError(f"give seeds, updates and repeats >= 1 and at least one rate, got {bench}")
+    for name in ("seeds", "updates", "repeats"):
+        if getattr(bench, name) < 1:
+            raise ValueError(f"--{name} must be at least 1, got {getattr(bench, name)}")
+    if not bench.rates or any(not r > 0 for r in bench.rates):
+        raise ValueError(f"--rates: give at least one positive learning rate, got {list(bench.rates)}")
     config, _ = preset(bench.preset, bench.method, num_updates=bench.updates)
     seeds = range(bench.seeds)
     grid = GridTrainer(config)

@@ -36,8 +36,8 @@ from flax import struct
 import envs.metrics
 from foresit_jax import distributions, imagination
 from foresit_jax.config import Config
-from foresit_jax.methods import BaseFunctions
 from foresit_jax.lstm import LowRankUpdate, LSTMCarry, LSTMKernels, initial_carry, lstm_step, reset_carry
+from foresit_jax.methods import BaseFunctions
 from foresit_jax.networks import ActorCritic, CriticOutput, ImaginationNet, window_attention_mask
 
 

@@ -10,9 +10,10 @@ computes: the same concatenated kernels, the same dots, the same additions in th
 order. The parameter names are flax's: a flax upgrade that renames or reorders them
 fails `tests/test_lstm.py`, not a run.
 
-`EncoderLSTM` is the encoder's cell with this split path as its methods: acting and the
-replay get the kernels, the input gates and the unroll through it (`ActorCritic.lstm_kernels`,
-`ActorCritic.input_gates`, `ActorCritic.replay`); `encoder_lstm_params(params)` is the
+`EncoderLSTM` is the encoder's cell with this split path as its methods: acting gets the
+kernels and the input gates through it (`ActorCritic.lstm_kernels`, `ActorCritic.input_gates`;
+its step runs `lstm_step` on kernels made once per window), the replay the unroll too
+(`ActorCritic.replay`); `encoder_lstm_params(params)` is the
 one place that knows where the LSTM sits in the agent's parameter tree: with
 `split_encoder_lstm_kernels`, `join_partial_trees` and `with_encoder_lstm_kernels`, for the
 maml base, which splits that tree into the kernels it adapts and the rest.
@@ -205,8 +206,9 @@ def lstm_step(kernels: LSTMKernels, carry: LSTMCarry, input_gates: chex.Array) -
 
 class EncoderLSTM(nn.OptimizedLSTMCell):
     """The encoder's LSTM: flax's `nn.OptimizedLSTMCell` (its parameters and its
-    `__call__`, unchanged) with the split fast path of this module as its methods, so that
-    everything the agent does with the cell goes through it.
+    `__call__`, unchanged) with the split fast path of this module as its methods: what
+    the agent computes with the cell inside its networks goes through it (the maml base
+    reads and writes the kernels in a parameter tree with this module's tree functions).
 
     kernels(update) -> its concatenated kernels (`LSTMKernels`), with a low-rank `update`
       (the maml base's adapted kernels) or None;

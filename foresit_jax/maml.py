@@ -67,6 +67,7 @@ Choices where SAVN's code leaves one open or where ours differs, each with its r
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any, Callable, NamedTuple, Optional
 
 import chex
@@ -202,8 +203,10 @@ def _unlane(tree):
     return jax.tree.map(lambda x: x[:, 0], tree)  # [B, 1, ...] -> [B, ...]
 
 
-class InnerLoop(NamedTuple):
-    """SAVN's inner loop as `adaptive_act` runs it (the maml base's settings, from the Config)."""
+@dataclasses.dataclass(frozen=True)
+class InnerLoop:
+    """SAVN's inner loop as `adaptive_act` runs it (the maml base's settings, from the
+    Config; Python values, static in the traced program)."""
 
     segment: int  # steps per inner update (SAVN: 6)
     updates: int  # at most this many inner updates per episode (SAVN: 4)
@@ -252,7 +255,7 @@ def adaptive_act(
             inputs = interaction_inputs(traj.states[:, 0], traj.logits[:, 0])  # [segment, H + A]
             return fns.interaction_loss(join_partial_trees(shared, lanes), inputs), (next_actor, traj, end)
 
-        zeros = jnp.zeros((loop.segment, 1, 4 * actor.s_0.shape[-1]), kernel_dtype)
+        zeros = jnp.zeros((loop.segment, 1, 4 * actor.lstm[1].shape[-1]), kernel_dtype)  # [segment, 1, 4H]
         (_, (next_actor, traj, end)), (grads, gate_grads) = jax.value_and_grad(loss, (0, 1), has_aux=True)(lanes, zeros)
         rows = _kernel_update(fns, loop, join_partial_trees(shared, lanes), lane_actor, traj, gate_grads)
         if loop.first_order:

@@ -6,8 +6,8 @@
   Eq. 3-4 over the current episode's states (MLP on s*_t, ForeSIT).
 * `ImaginationNet`: f_w, 6 tanh layers with a bottleneck, [s_0 : g_tau] -> imagined s.
 * `ActorCritic`: Encoder + PolicyHead + Critic under one parameter tree (theta, omega),
-  with methods `encoder_features` and `policy_logits` (acting and the replay) and
-  `critic` (values over a window).
+  with methods `input_gates` and `policy_logits` (acting), `replay` (a recorded window's
+  states and logits, for the gradient), `critic` (values over a window).
 * Pure helpers: `causal_episode_mask`, `window_attention_mask` (which states each step
   attends to), `masked_softmax`, `subgoals_of_rows` (the sub-goal each attention row
   selects). The LSTM cell's split form (used by acting and the replay gradient) is in
@@ -279,7 +279,7 @@ class ActorCritic(nn.Module):
       input_gates(obs, prev_action_probs, imagined, kernels) -> the LSTM's input gates [..., 4H]
       replay(carry, obs, prev_action_probs, encoder_imagined, head_imagined, episode_step)
         -> (states, logits) of a recorded window (foresit_jax.replay)
-      step(carry, obs, prev_action_probs, imagined) -> (carry, s_t, logits)  (both above)
+      step(carry, obs, prev_action_probs, imagined) -> (carry, s_t, logits)  (encode, then policy_logits)
       critic(states [..., T, H], valid [..., T]) -> CriticOutput
     `__call__` runs both once (for `init`).
 

@@ -332,12 +332,17 @@ class GridTrainer(Trainer):
         keys, rates = grid_inputs(seeds=[0, 1, 2], learning_rates=[3e-4, 1e-3])
         states, metrics = jax.jit(jax.vmap(grid.train))(keys, rates)    # [6, ...], rate-major
 
-    Seed s at rate v is the run of `Trainer(config.replace(learning_rate=v))` from
-    `PRNGKey(s)`: the rate as an array multiplies as the constant does, so the updates are
-    the same to the bit (tests/test_train.py: a3c, a3c+foresit and a3c+maml, unvmapped,
-    on one machine); vmapped, a grid is the per-rate sweeps to the bit.
-    `experiments.tune` trains its arms one after another instead, each its own program:
-    on a 2-core CPU the seeds' lanes already fill the cores (docs/reproducibility.md)."""
+    What it equals (tests/test_train.py, on one machine, XLA's default compile options):
+    unvmapped, seed s at rate v trains as `Trainer(dataclasses.replace(config,
+    learning_rate=v))` from `PRNGKey(s)` does, bit for bit (a3c, a3c+foresit, a3c+maml: the
+    rate as an array multiplies as the constant does); vmapped over the seeds of one rate,
+    it is the program `experiments.sweep` runs at that rate (`Trainer.run_seeds`), bit for
+    bit. A grid of several rates in one program is a batch of V x S lanes instead of S,
+    another XLA program: the per-rate sweeps up to float rounding (up to 4e-5 on a parameter
+    after 3 tiny updates), as a sweep's seed is `train --seed` up to float rounding.
+    `experiments.tune` trains its arms one after another instead, each its own sweep: on a
+    2-core CPU the seeds' lanes already fill the cores (`benchmarks.bench_grid`: 0.98x;
+    docs/reproducibility.md)."""
 
     # Adam's settings other than the rate stay Python constants: traced, eps alone moves
     # the parameters by ~1e-7 in 6 tiny updates (measured); static, nothing moves.

@@ -49,5 +49,5 @@ def test_bench_grid_times_the_arms_and_the_grid_over_the_same_frames(monkeypatch
 def test_bench_grid_refuses_an_empty_grid_before_any_compile():
     from benchmarks import bench_grid
 
-    with pytest.raises(ValueError, match="at least one rate"):
+    with pytest.raises(ValueError, match="--rates: give at least one positive"):
         bench_grid.main(bench_grid.BenchGrid(rates=(), preset="tiny"))

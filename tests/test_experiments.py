@@ -1046,11 +1046,18 @@ def test_every_config_field_is_a_flag_of_train_and_sweep():
 
 def test_each_config_field_flag_is_helped_by_its_docstring_on_one_line(capsys):
     """The help of a Config field's flag is the docstring under the field, its source line
-    breaks joined (presets._field_docs, read with tyro's docstring_parser)."""
+    breaks joined (presets._field_docs, read with tyro's docstring_parser): what each
+    flag's annotation carries, and what `--help` prints."""
+    import typing
+
     docs = presets._field_docs(Config)
     assert set(docs) == {f.name for f in dataclasses.fields(Config)}
     assert docs["gamma"] == "Discount factor."
     assert all("\n" not in d and "  " not in d for d in docs.values())
+    for fields in (presets.TrainConfigFields, presets.SweepConfigFields):
+        for name, hint in typing.get_type_hints(fields, include_extras=True).items():
+            (arg,) = [m for m in hint.__metadata__ if isinstance(m, type(tyro.conf.arg()))]
+            assert arg.help == docs[name], name
     with pytest.raises(SystemExit):
         tyro.cli(train_cli.Args, args=["--help"])
     shown = " ".join(re.sub("[\u2500-\u257f]", " ", capsys.readouterr().out).split())  # box drawing out
