@@ -289,3 +289,33 @@ def test_docs_quote_the_study_in_rooms_with_priors(tmp_path, capsys):
     for a, b in pairs:
         row = study_data.pair_row(out, results, a, b)
         assert row in doc, row
+
+
+def test_docs_quote_the_probes_in_rooms_with_priors():
+    """docs/priors.md's probe table and intervals are those of docs/data/priors_probe_savn.json
+    (what `experiments.probe` wrote for the study's a3c+foresit@3e-4 seeds)."""
+    import json
+    from pathlib import Path
+
+    from experiments.reporting import stats
+    from study_data import interval
+
+    repo = Path(__file__).resolve().parents[1]
+    per_seed = json.loads((repo / "docs" / "data" / "priors_probe_savn.json").read_text())["methods"][
+        "a3c+foresit@learning_rate=3e-4"]
+    doc = (repo / "docs" / "priors.md").read_text()
+    flat = " ".join(doc.split())
+    assert [r["seed"] for r in per_seed] == [0, 1, 2, 3, 4]
+    for r in per_seed:
+        f, sub = r["items"]["fit"], r["items"]["subgoal"]
+        cells = [f"{100 * sub['shares'][0]:.0f}%"] + [f"{f[k]:.2f}" for k in (
+            "r2_over_mean", "category_r2_over_mean", "identity_r2_over_mean", "ridge_r2_over_mean", "offline_r2_over_mean")]
+        row = f"| {r['seed']} | " + " | ".join(cells) + " |"
+        assert row in doc, row
+    gain = [r["items"]["fit"]["ridge_r2_over_mean"] - r["items"]["fit"]["category_r2_over_mean"] for r in per_seed]
+    assert f"by {min(gain):+.2f} to {max(gain):+.2f} R^2" in flat
+    trained = [r["sr"]["trained"] for r in per_seed]
+    for condition, text in (("shuffled, noise off", "noise off {} SR"), ("untrained f_w", "untrained f_w {},"),
+                            ("noise off", "with the noise off {}.")):  # fmt: skip
+        quoted = text.format(interval(stats.paired(trained, [r["sr"][condition] for r in per_seed])))
+        assert quoted in flat, quoted
