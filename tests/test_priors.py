@@ -289,6 +289,8 @@ def test_docs_quote_the_study_in_rooms_with_priors(tmp_path, capsys):
     for a, b in pairs:
         row = study_data.pair_row(out, results, a, b)
         assert row in doc, row
+    long_paths = study_data.interval(out["pairs"][f"{arms[2]} - {arms[1]}"]["SR>=5"])
+    assert f"(L^g >= 5): {long_paths} SR" in " ".join(doc.split())
 
 
 def test_docs_quote_the_probes_in_rooms_with_priors():
