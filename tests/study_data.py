@@ -84,3 +84,13 @@ def best_vs_best_line(name: str, pair: dict) -> str:
     poi, iqm = r["probability_of_improvement"], r["iqm_b"]
     return (f"| {name} | {interval(pair['SR'])} | {interval(pair['SPL'])} | {iqm[0]:.1f} [{iqm[1]:.1f}, {iqm[2]:.1f}] | "
             f"{poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | {r['p_holm']:.3f} / {spl_r['p_holm']:.3f} | {r['mde']:.1f} |")
+
+
+def probe_fit_row(r: dict) -> str:
+    """The docs' row of one seed of `experiments.probe`'s data: the share of sub-goals in the
+    first fifth of the episode, then R^2 of the online f_w, the category mean, s_0, ridge on
+    [s_0 : g] and the offline f_w."""
+    f, sub = r["items"]["fit"], r["items"]["subgoal"]
+    cells = [f"{100 * sub['shares'][0]:.0f}%"] + [f"{f[k]:.2f}" for k in (
+        "r2_over_mean", "category_r2_over_mean", "identity_r2_over_mean", "ridge_r2_over_mean", "offline_r2_over_mean")]
+    return f"| {r['seed']} | " + " | ".join(cells) + " |"

@@ -76,10 +76,7 @@ def test_results_md_quotes_the_probe_of_the_3e4_foresit_seeds():
     per_seed = report["methods"]["a3c+foresit@learning_rate=3e-4"]
     assert [r["seed"] for r in per_seed] == [0, 1, 2, 3, 4] and report["fit_passes"] == 5
     for r in per_seed:
-        f, sub = r["items"]["fit"], r["items"]["subgoal"]
-        cells = [f"{100 * sub['shares'][0]:.0f}%"] + [f"{f[k]:.2f}" for k in (
-            "r2_over_mean", "category_r2_over_mean", "identity_r2_over_mean", "ridge_r2_over_mean", "offline_r2_over_mean")]
-        row = f"| {r['seed']} | " + " | ".join(cells) + " |"
+        row = study_data.probe_fit_row(r)
         assert row in results, row
         options = r["items"]["fit_options"]
         assert list(options) == list(probing.FIT_OPTIONS)

@@ -300,6 +300,7 @@ def test_docs_quote_the_probes_in_rooms_with_priors():
     from pathlib import Path
 
     from experiments.reporting import stats
+    import study_data
     from study_data import interval
 
     repo = Path(__file__).resolve().parents[1]
@@ -309,10 +310,7 @@ def test_docs_quote_the_probes_in_rooms_with_priors():
     flat = " ".join(doc.split())
     assert [r["seed"] for r in per_seed] == [0, 1, 2, 3, 4]
     for r in per_seed:
-        f, sub = r["items"]["fit"], r["items"]["subgoal"]
-        cells = [f"{100 * sub['shares'][0]:.0f}%"] + [f"{f[k]:.2f}" for k in (
-            "r2_over_mean", "category_r2_over_mean", "identity_r2_over_mean", "ridge_r2_over_mean", "offline_r2_over_mean")]
-        row = f"| {r['seed']} | " + " | ".join(cells) + " |"
+        row = study_data.probe_fit_row(r)
         assert row in doc, row
     gain = [r["items"]["fit"]["ridge_r2_over_mean"] - r["items"]["fit"]["category_r2_over_mean"] for r in per_seed]
     assert f"by {min(gain):+.2f} to {max(gain):+.2f} R^2" in flat
