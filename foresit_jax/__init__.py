@@ -5,6 +5,8 @@ The entry points (what the README uses):
     from foresit_jax import Config, make_train, Trainer, Agent, evaluate
     train = make_train(Config(method="a3c+foresit", num_lanes=16, num_updates=100))
     state, metrics = jax.jit(jax.vmap(train))(keys)     # a seed sweep in one program
+    grid = GridTrainer(config)                           # learning rates vmapped too
+    state, metrics = jax.jit(jax.vmap(grid.train))(*grid_inputs(seeds, [3e-4, 1e-3]))
 
 The modules hold the pieces: `config` (Config), `methods` (base x encoder x imagination),
 `networks` (flax modules), `lstm` (the encoder LSTM's split form), `agent` (acting),
@@ -17,6 +19,7 @@ from foresit_jax.agent import Agent
 from foresit_jax.config import Config
 from foresit_jax.evaluate import evaluate
 from foresit_jax.methods import Method, parse_method
-from foresit_jax.train import Trainer, make_train, make_trainer
+from foresit_jax.train import GridTrainer, Trainer, grid_inputs, make_train, make_trainer
 
-__all__ = ["Agent", "Config", "Method", "Trainer", "evaluate", "make_train", "make_trainer", "parse_method"]
+__all__ = ["Agent", "Config", "GridTrainer", "Method", "Trainer", "evaluate", "grid_inputs", "make_train", "make_trainer",
+           "parse_method"]
