@@ -267,9 +267,14 @@ def test_the_view_table_equals_the_ray_cast_at_every_step():
     assert obs_t["view"][..., C.furniture_sem("savn", 0) : -1].any()  # furniture kinds are in view
 
 
-def test_docs_quote_the_study_in_rooms_with_priors(tmp_path, capsys):
+@pytest.mark.parametrize("archive, arms", [
+    ("priors_savn.tar.xz", ("a3c", "a3c+critic@learning_rate=3e-4", "a3c+foresit@learning_rate=3e-4")),
+    ("priors_org.tar.xz", ("a3c+org", "a3c+org+critic", "a3c+org+foresit")),
+])  # fmt: skip
+def test_docs_quote_the_study_in_rooms_with_priors(tmp_path, capsys, archive, arms):
     """docs/priors.md's pairs are what experiments.compare computes from the study's files
-    (docs/data/priors_savn.tar.xz: the sweep folder without checkpoints)."""
+    (docs/data/priors_<setup>.tar.xz: the sweep folder without checkpoints), the pairs on
+    the long paths too."""
     from pathlib import Path
 
     import study_data
@@ -277,45 +282,69 @@ def test_docs_quote_the_study_in_rooms_with_priors(tmp_path, capsys):
     from experiments.reporting import report
     from experiments import compare
 
-    arms = ("a3c", "a3c+critic@learning_rate=3e-4", "a3c+foresit@learning_rate=3e-4")
-    root = study_data.unpack("priors_savn.tar.xz", tmp_path, arms)
+    root = study_data.unpack(archive, tmp_path, arms)
     assert rundir.read_json(root / "sweep.json")["config"]["priors"] is True
     pairs = [(arms[0], arms[1]), (arms[0], arms[2]), (arms[1], arms[2])]
     out = compare.main(compare.Args(run=root, pairs=tuple(f"{a}:{b}" for a, b in pairs)))
     capsys.readouterr()
     results = report.load(root)
     doc = (Path(__file__).resolve().parents[1] / "docs" / "priors.md").read_text()
+    flat = " ".join(doc.split())
 
     for a, b in pairs:
         row = study_data.pair_row(out, results, a, b)
         assert row in doc, row
-    long_paths = study_data.interval(out["pairs"][f"{arms[2]} - {arms[1]}"]["SR>=5"])
-    assert f"(L^g >= 5): {long_paths} SR" in " ".join(doc.split())
+    long_paths = {(a, b): study_data.interval(out["pairs"][f"{b} - {a}"]["SR>=5"]) for a, b in pairs}
+    if archive == "priors_savn.tar.xz":
+        assert f"(L^g >= 5): {long_paths[arms[1], arms[2]]} SR" in flat
+    else:
+        assert f"(L^g >= 5) by {long_paths[arms[0], arms[2]]}" in flat
+        assert f"on the long paths {long_paths[arms[1], arms[2]]}" in flat
+    readme = " ".join((Path(__file__).resolve().parents[1] / "README.md").read_text().split())
+    for a, b, text in ((arms[0], arms[2], "{b} - {a} {sr} SR"), (arms[1], arms[2], "{sr} over the critic")
+                       if archive == "priors_org.tar.xz" else (arms[1], arms[2], "{b} - {a} {sr} SR, {spl} SPL")):  # fmt: skip
+        pair = out["pairs"][f"{b} - {a}"]
+        quoted = text.format(a=a.split("@")[0], b=b.split("@")[0], sr=study_data.interval(pair["SR"]),
+                             spl=study_data.interval(pair["SPL"]))  # fmt: skip
+        assert quoted in readme, quoted
 
 
-def test_docs_quote_the_probes_in_rooms_with_priors():
-    """docs/priors.md's probe table and intervals are those of docs/data/priors_probe_savn.json
-    (what `experiments.probe` wrote for the study's a3c+foresit@3e-4 seeds)."""
+@pytest.mark.parametrize("data, method", [("priors_probe_savn.json", "a3c+foresit@learning_rate=3e-4"),
+                                          ("priors_probe_org.json", "a3c+org+foresit")])
+def test_docs_quote_the_probes_in_rooms_with_priors(data, method):
+    """docs/priors.md's probe tables and intervals are those of docs/data/priors_probe_<setup>.json
+    (what `experiments.probe` wrote for the studies' ForeSIT seeds)."""
     import json
     from pathlib import Path
 
-    from experiments.reporting import stats
     import study_data
+    from experiments.reporting import stats
     from study_data import interval
 
     repo = Path(__file__).resolve().parents[1]
-    per_seed = json.loads((repo / "docs" / "data" / "priors_probe_savn.json").read_text())["methods"][
-        "a3c+foresit@learning_rate=3e-4"]
+    per_seed = json.loads((repo / "docs" / "data" / data).read_text())["methods"][method]
     doc = (repo / "docs" / "priors.md").read_text()
     flat = " ".join(doc.split())
     assert [r["seed"] for r in per_seed] == [0, 1, 2, 3, 4]
     for r in per_seed:
         row = study_data.probe_fit_row(r)
         assert row in doc, row
-    gain = [r["items"]["fit"]["ridge_r2_over_mean"] - r["items"]["fit"]["category_r2_over_mean"] for r in per_seed]
-    assert f"by {min(gain):+.2f} to {max(gain):+.2f} R^2" in flat
+    fit = [r["items"]["fit"] for r in per_seed]
+    gain = [f["ridge_r2_over_mean"] - f["category_r2_over_mean"] for f in fit]
+    online = [f["r2_over_mean"] - f["category_r2_over_mean"] for f in fit]
     trained = [r["sr"]["trained"] for r in per_seed]
-    for condition, text in (("shuffled, noise off", "noise off {} SR"), ("untrained f_w", "untrained f_w {},"),
-                            ("noise off", "with the noise off {}.")):  # fmt: skip
-        quoted = text.format(interval(stats.paired(trained, [r["sr"][condition] for r in per_seed])))
-        assert quoted in flat, quoted
+
+    def quoted(condition):
+        return interval(stats.paired(trained, [r["sr"][condition] for r in per_seed]))
+
+    if method.startswith("a3c+foresit"):
+        assert f"by {min(gain):+.2f} to {max(gain):+.2f} R^2" in flat
+        texts = [f"noise off {quoted('shuffled, noise off')} SR", f"untrained f_w {quoted('untrained f_w')},",
+                 f"with the noise off {quoted('noise off')}."]  # fmt: skip
+    else:
+        assert sum(g > 0 for g in gain) == 4 and f"(by up to {max(gain):+.2f})" in flat
+        assert max(online) < 0 and f"every seed ({max(online):+.2f} to {min(online):+.2f})" in flat
+        texts = [f"noise off {quoted('shuffled, noise off')} SR", f"untrained f_w {quoted('untrained f_w')}.",
+                 f"scores {quoted('sampled actions')} SR higher"]  # fmt: skip
+    for text in texts:
+        assert text in flat, text
