@@ -298,7 +298,7 @@ def test_docs_quote_the_study_in_rooms_with_priors(tmp_path, capsys, archive, ar
     if archive == "priors_savn.tar.xz":
         assert f"(L^g >= 5): {long_paths[arms[1], arms[2]]} SR" in flat
     else:
-        assert f"(L^g >= 5) by {long_paths[arms[0], arms[2]]}" in flat
+        assert f"(L^g >= 5): {long_paths[arms[0], arms[2]]}." in flat
         assert f"on the long paths {long_paths[arms[1], arms[2]]}" in flat
     readme = " ".join((Path(__file__).resolve().parents[1] / "README.md").read_text().split())
     for a, b, text in ((arms[0], arms[2], "{b} - {a} {sr} SR"), (arms[1], arms[2], "{sr} over the critic")
