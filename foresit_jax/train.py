@@ -344,8 +344,9 @@ class GridTrainer(Trainer):
     2-core CPU the seeds' lanes already fill the cores (`benchmarks.bench_grid`: 0.98x;
     docs/reproducibility.md)."""
 
-    # Adam's settings other than the rate stay Python constants: traced, eps alone moves
-    # the parameters by ~1e-7 in 6 tiny updates (measured); static, nothing moves.
+    # Adam's settings other than the rate stay Python constants: with all of them traced,
+    # the parameters moved by up to 6e-8 (a3c) and 2e-7 (a3c+foresit) in 6 tiny updates;
+    # with the rate alone traced, not at all (measured, the 2-core Xeon).
     STATIC_ADAM_ARGS = ("b1", "b2", "eps", "eps_root", "mu_dtype", "nesterov")
 
     def __init__(self, config: Config, env=None, env_params=None):
