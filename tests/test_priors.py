@@ -301,11 +301,12 @@ def test_docs_quote_the_study_in_rooms_with_priors(tmp_path, capsys, archive, ar
         assert f"(L^g >= 5): {long_paths[arms[0], arms[2]]}." in flat
         assert f"on the long paths {long_paths[arms[1], arms[2]]}" in flat
     readme = " ".join((Path(__file__).resolve().parents[1] / "README.md").read_text().split())
-    for a, b, text in ((arms[0], arms[2], "{b} - {a} {sr} SR"), (arms[1], arms[2], "{sr} over the critic")
-                       if archive == "priors_org.tar.xz" else (arms[1], arms[2], "{b} - {a} {sr} SR, {spl} SPL")):  # fmt: skip
-        pair = out["pairs"][f"{b} - {a}"]
-        quoted = text.format(a=a.split("@")[0], b=b.split("@")[0], sr=study_data.interval(pair["SR"]),
-                             spl=study_data.interval(pair["SPL"]))  # fmt: skip
+    base, critic, foresit = (a.split("@")[0] for a in arms)
+    vs_base, vs_critic = (out["pairs"][f"{arms[2]} - {a}"] for a in arms[:2])
+    sr, spl = study_data.interval(vs_critic["SR"]), study_data.interval(vs_critic["SPL"])
+    quotes = [f"{foresit} - {base} {study_data.interval(vs_base['SR'])} SR",
+              f"{sr} over the critic" if archive == "priors_org.tar.xz" else f"{foresit} - {critic} {sr} SR, {spl} SPL"]
+    for quoted in quotes:
         assert quoted in readme, quoted
 
 
