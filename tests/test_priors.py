@@ -349,3 +349,52 @@ def test_docs_quote_the_probes_in_rooms_with_priors(data, method):
                  f"scores {quoted('sampled actions')} SR higher"]  # fmt: skip
     for text in texts:
         assert text in flat, text
+
+
+def test_docs_quote_the_org_control_in_both_layouts(tmp_path):
+    """docs/priors.md's control for ORG's graph is what its files give
+    (docs/data/priors_org_control.tar.xz: a3c on the org setup in today's rooms and in rooms
+    with priors, without checkpoints, and a3c+org's selected models played with sampled
+    actions): per layout the graph's gain paired by seed, and Welch's interval on the two
+    layouts' per-seed gains; the README quotes the last."""
+    import json
+    from pathlib import Path
+
+    from scipy import stats as scipy_stats
+
+    import study_data
+    from experiments.reporting import stats
+    from experiments.running import rundir
+
+    study_data.extract("priors_org_control.tar.xz", tmp_path)
+    root = tmp_path / "priors_org_control"
+    sampled = json.loads((root / "org_sampled.json").read_text())
+    repo = Path(__file__).resolve().parents[1]
+    doc = (repo / "docs" / "priors.md").read_text()
+    gains = {}
+    for layout, folder, priors in (("today", "org_control", None), ("priors", "org_control_priors", True)):
+        spec = rundir.read_json(root / folder / "sweep.json")
+        assert (spec["setup"], spec["methods"], spec["seeds"], spec["config"].get("priors")) == ("org", ["a3c"], 5, priors)
+        base = {r["seed"]: r["selected"]["overall"] for r in rundir.read_json(root / folder / "methods" / "a3c" / "results.json")["results"]}
+        graph = {r["seed"]: r["overall"] for r in sampled[layout]}
+        assert sorted(base) == sorted(graph) == [0, 1, 2, 3, 4]
+        cells = []
+        for col in ("SR", "SPL", "SR>=5"):
+            a, b = [base[s][col] for s in range(5)], [graph[s][col] for s in range(5)]
+            gains.setdefault(col, []).append(np.subtract(b, a))
+            cells.append(study_data.interval(stats.paired(a, b)))
+        sr = [[base[s]["SR"] for s in range(5)], [graph[s]["SR"] for s in range(5)]]
+        means = " | ".join(f"{np.mean(x):.1f} ± {np.std(x, ddof=1):.1f}" for x in sr)
+        name = "today's rooms" if layout == "today" else "rooms with priors"
+        row = f"| {name} | {means} | " + " | ".join(cells) + " |"
+        assert row in doc, row
+    welch = []
+    for col in ("SR", "SPL", "SR>=5"):
+        today, priors = gains[col]
+        r = scipy_stats.ttest_ind(priors, today, equal_var=False)
+        ci = r.confidence_interval(0.95)
+        welch.append(study_data.interval({"diff": priors.mean() - today.mean(), "ci_low": ci.low, "ci_high": ci.high}))
+    row = "| priors - today (Welch) | | | " + " | ".join(welch) + " |"
+    assert row in doc, row
+    readme = " ".join((repo / "README.md").read_text().split())
+    assert f"no more over a3c than in today's rooms ({welch[0]} SR;" in readme
