@@ -19,7 +19,8 @@ from pathlib import Path
 import jax
 
 from experiments.reporting import cvae_comparison
-from experiments.running import checkpoint, errors, rundir
+from experiments.running import errors, rundir
+from experiments.running.models import read_trained
 
 
 @dataclasses.dataclass(frozen=True)
@@ -40,7 +41,6 @@ class Args:
 
 def main(args: Args) -> dict:
     from foresit_jax.config import Config
-    from foresit_jax.train import make_trainer
 
     info = rundir.read_run_info(args.run)
     config = Config(**info["config"])
@@ -52,13 +52,11 @@ def main(args: Args) -> dict:
     out = args.run / "cvae_comparison.json"
     if out.exists() and not args.overwrite:
         raise errors.UserError(f"{out} exists; pass --overwrite to replace it")
-    trainer = make_trainer(config)
-    like = trainer.init(jax.random.PRNGKey(args.seed))
-    manager = checkpoint.checkpoint_manager(args.run / "checkpoints", 100)
-    step = manager.latest_step()
-    if step is None:
-        raise errors.UserError(f"{args.run / 'checkpoints'} holds no checkpoint; was the run interrupted before its first chunk?")
-    items = cvae_comparison.collect_items(trainer, checkpoint.restore(manager, step, like), args.windows, args.seed)
+    trained = read_trained(args.run)
+    if len(trained.seeds) != 1:
+        raise errors.UserError(f"{args.run} holds {len(trained.seeds)} seeds; cvae_compare reads a run of one (train's)")
+    step, state = trained.update, jax.tree.map(lambda x: x[0], trained.states)
+    items = cvae_comparison.collect_items(trained.trainer, state, args.windows, args.seed)
     result = cvae_comparison.compare(config, items, args.epochs, args.seed)
     if "direct" not in result:
         raise errors.UserError(f"only {result['items']} successful episodes in {args.windows} windows (at least {cvae_comparison.MIN_ITEMS} "

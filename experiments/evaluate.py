@@ -1,7 +1,7 @@
 """Re-evaluate a trained run: `python -m experiments.evaluate --run runs/x --split test`.
 
-Loads the model selected on validation (`best/`) or, with `--which last`, the last
-checkpoint, and writes results_<split>.json and .md into the run folder (refusing to
+Loads the model selected on validation or, with `--which last`, the training state of the
+last checkpoint (of a run folder of `train`, or of one written before its present format), and writes results_<split>.json and .md into the run folder (refusing to
 replace existing ones without --overwrite).
 """
 
@@ -15,7 +15,8 @@ from typing import Literal, Optional
 import jax
 
 from experiments.reporting import tables
-from experiments.running import checkpoint, errors, rundir, selection
+from experiments.running import errors, rundir, selection
+from experiments.running.models import read_trained
 
 
 @dataclasses.dataclass(frozen=True)
@@ -23,7 +24,7 @@ class Args:
     """Evaluate a trained agent on the validation or test split."""
 
     run: Path
-    """Run folder written by experiments.train."""
+    """Run folder written by experiments.train (one seed)."""
     split: str = "test"
     """Split: val or test."""
     which: Literal["best", "last"] = "best"
@@ -45,7 +46,6 @@ def main(args: Args) -> dict:
     """Evaluate and write the results; returns them as written (NaN as None)."""
     from foresit_jax.config import Config
     from foresit_jax.evaluate import agent_params, evaluate
-    from foresit_jax.train import make_trainer
 
     if args.split not in ("val", "test"):
         raise errors.UserError(f"--split must be val or test, got {args.split!r}")
@@ -63,28 +63,26 @@ def main(args: Args) -> dict:
         raise errors.UserError(f"{out_json} exists; pass --overwrite to replace it")
     rundir.claim(args.run)  # the one writer of the run folder, and writable, before any work
 
-    trainer = make_trainer(config)
-    like_state = trainer.init(jax.random.PRNGKey(0))
-    like = agent_params(like_state, config.sigma2_max, config.evaluation_noise)
-    folder = args.run / ("best" if args.which == "best" else "checkpoints")
-    manager = checkpoint.checkpoint_manager(folder, 100)
-    step = manager.latest_step()
-    if step is None:
-        raise errors.UserError(f"{folder} holds no checkpoint; was the run interrupted before its first chunk?")
+    trained = read_trained(args.run)
+    if len(trained.seeds) != 1:
+        raise errors.UserError(f"{args.run} holds {len(trained.seeds)} seeds; evaluate reads a run of one (train's); "
+                               "for a sweep's arms use experiments.compare or experiments.paper")  # fmt: skip
     if args.which == "best":
-        chosen = checkpoint.restore(manager, step, like)
+        step, chosen = trained.selected_updates[0], jax.tree.map(lambda x: x[0], trained.selected)
     else:
-        chosen = agent_params(checkpoint.restore(manager, step, like_state), config.sigma2_max, config.evaluation_noise)
+        step = trained.update
+        chosen = agent_params(jax.tree.map(lambda x: x[0], trained.states), config.sigma2_max, config.evaluation_noise)
+    seed = trained.seeds[0]
     if args.seed is not None:
         key = jax.random.PRNGKey(args.seed)
     elif args.split == "test":
-        key = selection.test_key(info["seed"])
+        key = selection.test_key(seed)
     else:
-        key = selection.validation_key(info["seed"])
+        key = selection.validation_key(seed)
     results = evaluate(chosen, config, args.split, key, episodes, greedy=greedy)
     rundir.write_json(out_json, {"selected_update": step, "which": args.which, "results": results})
     results = rundir.jsonable(results)  # as written: an empty L>=5 bucket is None (JSON null)
-    title = f"{config.method}, seed {info['seed']}: {args.split} split ({args.which} model, update {step})"
+    title = f"{config.method}, seed {seed}: {args.split} split ({args.which} model, update {step})"
     md = tables.results_markdown(results, title)
     out_json.with_suffix(".md").write_text(md)
     print(md)

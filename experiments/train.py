@@ -1,19 +1,24 @@
 """Train one agent: `python -m experiments.train --method a3c+foresit --preset quick --seed 0 --out runs/x`.
 
-Shows a progress bar (updates, frames/s, success rate, ETA); writes per-update metrics
-(JSONL and CSV), an orbax checkpoint after each chunk, a validation evaluation after each
-chunk (the best model by validation SR is kept: model selection), and at the end the test
-evaluation of the selected model (JSON and Markdown) and a learning-curve PNG.
+A run of one seed (`experiments.running.run.Run`: the folder format a sweep's arms have too):
+shows a progress bar (updates, frames/s, success rate, ETA); validates after each chunk of
+updates and keeps the model with the best validation SR (model selection); checkpoints the
+training state and that model after each chunk (checkpoints/, progress.json); at the end
+tests the selected and the last model (results.json). Beside them it writes a row of
+metrics per update (metrics.jsonl and .csv, and TensorBoard or W&B with --track) and, at the
+end, the selected model's test results beside the random policy's (results_test.json and
+.md) and a learning-curve PNG.
 
 `--resume` continues an interrupted run from its last intact checkpoint (a corrupt one is
 skipped, saying so) and ends bit-identical to an uninterrupted run with the same seed on the
-same platform (run.json records the platform of each stretch of updates, and a resume on
-another one warns: `experiments.running.numerics`).  With `--resume`, `--num-updates` beyond the
-run's extends it; any other flag that differs from the run's is refused (`resume_conflicts`);
-a finished run is left as it is.  An existing run folder is never overwritten without
-`--resume` or `--overwrite`, and one process at a time writes it (`rundir.claim`).  The loop
-(chunks, the non-finite stop, where a resume continues) is the one `sweep` runs too:
-`experiments.running.loop`.
+same platform (progress.json records the platform of each stretch of updates, and a resume
+on another one warns: `experiments.running.numerics`). With `--resume`, `--num-updates`
+beyond the run's extends it (`Run.extend`; the earlier report is kept in
+report_<n>_updates/); any other flag that differs from the run's is refused
+(`resume_conflicts`); a finished run is left as it is. An existing run folder is never
+overwritten without `--resume` or `--overwrite`, and one process at a time writes it
+(`rundir.claim`). A run folder written by train before this format (best/,
+validation.jsonl) still reads (evaluate, probe, failures, cvae_compare) but does not resume.
 
 Parameters and optimiser state are checked finite before every checkpoint: a run that
 produced NaN or inf stops with an error naming its last finite checkpoint; a loss or
@@ -23,19 +28,18 @@ gradient norm far out of range, or a collapsed entropy, is warned of (`loop.dive
 from __future__ import annotations
 
 import dataclasses
-import functools
 import sys
 import time
 from pathlib import Path
 from typing import Literal, Optional
 
-import jax
 import numpy as np
 
 from experiments.reporting import figures, tables
-from experiments.running import checkpoint, errors, loop, numerics, rundir, selection, tracking
-from experiments.running.presets import Schedule, TrainConfigFields, config_flag, given, preset
+from experiments.running import errors, loop, rundir, selection, tracking
+from experiments.running.presets import TrainConfigFields, config_flag, given, preset
 from experiments.running.progress import progress_bar
+from experiments.running.run import Run, read
 
 
 @dataclasses.dataclass(frozen=True)
@@ -100,8 +104,8 @@ def resume_conflicts(args: Args, info: dict) -> list[str]:
     cannot be told from one not given) whose values differ from the run's, as
     `--flag value (the run has ...)`; --num-updates is not one (it extends the run)."""
     config, schedule = info["config"], info["schedule"]
-    run = {"method": info.get("arm", info["method"]), "setup": config["setup"], "preset": info["preset"],
-           "seed": info["seed"], "num_lanes": config["num_lanes"], "learning_rate": config["learning_rate"],
+    run = {"method": info["arm"], "setup": config["setup"], "preset": info["preset"], "seed": info["seeds"][0],
+           "num_lanes": config["num_lanes"], "learning_rate": config["learning_rate"],
            **{k: schedule[k] for k in ("chunk_updates", "test_episodes_per_room", "val_episodes_per_room")}}  # fmt: skip
     defaults = Args()
     clash = [f"--{k.replace('_', '-')} {getattr(args, k)} (the run has {v})" for k, v in run.items()
@@ -110,142 +114,114 @@ def resume_conflicts(args: Args, info: dict) -> list[str]:
                     if rundir.jsonable(v) != config[k]]  # fmt: skip
 
 
-def main(args: Args) -> dict:
-    from foresit_jax.config import Config
-    from foresit_jax.evaluate import Evaluator, agent_params
-    from foresit_jax.train import make_trainer
+class Metrics:
+    """train's recorder (`run.Recorder`): a row per update (metrics.jsonl and .csv, with
+    running totals: `rundir.metric_rows`) and the tracker's rows (metrics, and each
+    validation under `validation/`)."""
 
+    def __init__(self, out: Path, tracker, rows: list[dict]):
+        self.out, self.tracker, self.rows, self.last_row = out, tracker, rows, None  # rows: those in the folder
+
+    def resume(self, done: int) -> None:
+        rows = [r for r in self.rows if r["update"] <= done]  # not those written after the checkpoint it continues from
+        rundir.truncate_rows(self.out / "metrics", done, rows)
+        self.last_row = rows[-1] if rows else None
+
+    def record(self, chunk: loop.Chunk, validations: list[dict]) -> None:
+        rows = rundir.metric_rows({k: v[0] for k, v in chunk.metrics.items()}, chunk.done - chunk.n, self.last_row)
+        self.last_row = rows[-1]
+        rundir.append_rows(self.out / "metrics", rows)
+        self.tracker.log(rows)
+        self.tracker.log(validations, prefix="validation/")
+
+
+def start(args: Args) -> tuple[Run, bool]:
+    """The run of --out, checked and ready to train (new, or resumed and perhaps extended:
+    `Run.extend`), and whether it was resumed."""
     out = args.out
-    tracking.check(args.track)
     if not args.resume:
         # Validate the arguments before touching --out (with --overwrite, a typo must not
         # delete the existing run and then fail).
         config, schedule = build(args)
-    rundir.prepare_run_dir(out, args.resume, args.overwrite)
-    if args.resume:
-        info = rundir.read_run_info(out)
-        selection.check_resumable(info.get("selection_protocol"), str(out))
-        clash = resume_conflicts(args, info)
-        if clash:
-            raise errors.UserError(f"--resume continues {out} with its own settings; drop {', '.join(clash)} "
-                                   "(only --num-updates may differ: it extends the run)")  # fmt: skip
-        config = Config(**info["config"])
-        schedule = Schedule(**info["schedule"])
-        seed = info["seed"]
-        if args.num_updates is not None and args.num_updates < config.num_updates:
-            raise errors.UserError(f"--num-updates {args.num_updates} would shorten {out} ({config.num_updates} updates); "
-                                   "--resume can only extend a run")  # fmt: skip
-        if args.num_updates is not None and args.num_updates != config.num_updates:
-            config = dataclasses.replace(config, num_updates=args.num_updates)
-            print(f"extending {out} to {config.num_updates} updates (it had {info['config']['num_updates']})")
-            info = {**info, "config": dataclasses.asdict(config)}
-            rundir.write_run_info(out, info)
-    else:
-        seed = args.seed
-        info = {"method": config.method, "arm": args.method, "preset": args.preset, "seed": seed,
-                "config": dataclasses.asdict(config), "schedule": dataclasses.asdict(schedule),
-                "selection_protocol": selection.PROTOCOL_VERSION, "numerics": numerics.extend(None, 0)[0]}  # fmt: skip
-        rundir.write_run_info(out, info)
+        rundir.prepare_run_dir(out, resume=False, overwrite=args.overwrite)
+        run = Run(out, config, schedule, (args.seed,), args.method, args.preset)
+        rundir.write_run_info(out, run.info())
+        return run, False
+    rundir.prepare_run_dir(out, resume=True, overwrite=args.overwrite)
+    run = read(out)  # refuses a folder of before `run.RUN_FORMAT`, in one line
+    if len(run.seeds) != 1:
+        raise errors.UserError(f"{out} is a run of {len(run.seeds)} seeds (a sweep's arm); continue its sweep with "
+                               "experiments.sweep --resume --out <the sweep folder>")  # fmt: skip
+    info = rundir.read_run_info(out)
+    selection.check_resumable(run.progress().get("selection_protocol"), str(out))
+    clash = resume_conflicts(args, info)
+    if clash:
+        raise errors.UserError(f"--resume continues {out} with its own settings; drop {', '.join(clash)} "
+                               "(only --num-updates may differ: it extends the run)")  # fmt: skip
+    if args.num_updates is not None and args.num_updates != run.config.num_updates:
+        had = run.config.num_updates
+        kept = out / f"report_{had}_updates"
+        run = run.extend(args.num_updates, keep=REPORT_FILES)
+        print(f"extending {out} to {run.config.num_updates} updates (it had {had})"
+              + (f"; its {had}-update report is kept in {kept.name}/" if kept.is_dir() else ""))  # fmt: skip
+    return run, True
 
-    trainer = make_trainer(config)
-    env_params = trainer.env_params
-    evaluator = Evaluator.for_config(config)  # held for the run: validation compiles once
-    state = trainer.init(selection.run_key(seed))
-    manager = checkpoint.checkpoint_manager(out / "checkpoints", schedule.keep_checkpoints)
-    best_manager = checkpoint.checkpoint_manager(out / "best", 1)
-    done = 0
-    if args.resume and (out / "results_test.json").is_file() and (manager.latest_step() or 0) >= config.num_updates:
+
+# What train writes at the end beside results.json (an extension keeps the earlier ones).
+REPORT_FILES = ("results_test.json", "results_test.md", "learning_curve.png")
+
+
+def main(args: Args) -> dict:
+    from foresit_jax.evaluate import Evaluator
+
+    out = args.out
+    tracking.check(args.track)
+    run, resumed = start(args)
+    config, seed = run.config, run.seeds[0]
+    if resumed and run.results() is not None and (out / "results_test.json").is_file():
         print(f"{out} is finished ({config.num_updates} updates) and its results are written; nothing to do "
               "(pass --num-updates N to extend it)")  # fmt: skip
         return rundir.read_json(out / "results_test.json")["results"]
-    if args.resume:
-        done = loop.resume_point(manager, out / "checkpoints")
-        if done:
-            state = checkpoint.restore(manager, done, state)
-            print(f"resuming {out} from update {done}")
-        checkpoint.drop_steps_after(best_manager, done)  # a best model of those updates is chosen again
-        # The platform of the updates still to come (experiments.running.numerics)
-        history, warning = numerics.extend(numerics.rewind(info.get("numerics"), done), done)
-        if history != info.get("numerics"):
-            rundir.write_run_info(out, {**info, "numerics": history})
-        if warning:
-            print(f"warning: {warning}", file=sys.stderr, flush=True)
-    rundir.truncate_rows(out / "metrics", done)
-    rundir.truncate_rows(out / "validation", done)
-    tracker = tracking.make(args.track, out, info)
-    best = selection.Selection()
-    for r in rundir.read_rows(out / "validation"):
-        best.offer(r["SR"], r["update"])
-
-    def validate_and_select(state, done: int) -> dict:
-        """Validate after `done` updates; keep the model if it is the best so far."""
-        params = agent_params(state, config.sigma2_max, config.evaluation_noise)
-        val = selection.validate(evaluator, params, config, seed, schedule.val_episodes_per_room)
-        rundir.append_rows(out / "validation", [{"update": done, **val["overall"]}])
-        tracker.log([{"update": done, **val["overall"]}], prefix="validation/")
-        if best.offer(val["overall"]["SR"], done):
-            checkpoint.save(best_manager, done, params)
-        return val
-
-    # A run killed between a chunk's checkpoint and its validation, or between the
-    # validation and saving the best model, is completed here (the keys depend only on
-    # the seed: the same numbers as uninterrupted).
-    if done and not any(r["update"] == done for r in rundir.read_rows(out / "validation")):
-        validate_and_select(state, done)
-    elif done and best.update == done and best_manager.latest_step() != done:
-        checkpoint.save(best_manager, done, agent_params(state, config.sigma2_max, config.evaluation_noise))
-
-    previous_rows = rundir.read_rows(out / "metrics")
-    last_row = previous_rows[-1] if previous_rows else None
-    total = config.num_updates
-    bar = progress_bar(total, done, args.progress)
-    # With the bar shown, the chunk moves it after every update (a host callback that reads
-    # the update counter only: the same numbers).
-    run_chunk = jax.jit(functools.partial(trainer.run, on_update=bar.at) if args.progress else trainer.run,
-                        static_argnums=2)  # fmt: skip
+    evaluator = Evaluator.for_config(config)  # held for the run: validation compiles once
     t_start = time.time()
+    if run.results() is None:
+        rows = rundir.read_rows(out / "metrics")  # a damaged file is named here, before anything starts
+        tracker = tracking.make(args.track, out, f"{config.method} seed {seed}", run.info()["config"])
+        metrics = Metrics(out, tracker, rows)
+        bar = progress_bar(config.num_updates, 0, args.progress)
+        finished = run.train(evaluator, bar, [args.stop_after_chunks], [metrics])
+        bar(0, None)
+        tracker.close()
+        if not finished:
+            done = run.progress()["done"]
+            print(f"stopped after {args.stop_after_chunks} chunks at update {done} (resume with --resume)")
+            return {"stopped_at": done}
+        done = run.test(evaluator)
+    else:  # killed after results.json, before the report
+        done = run.results()
+    return report(run, done, evaluator, time.time() - t_start)
 
-    def after_chunk(state, chunk: loop.Chunk) -> None:
-        """Record the chunk, checkpoint it, validate and select, move the bar."""
-        nonlocal last_row
-        rows = rundir.metric_rows(chunk.metrics, chunk.done - chunk.n, last_row)
-        last_row = rows[-1]
-        rundir.append_rows(out / "metrics", rows)
-        tracker.log(rows)
-        checkpoint.save(manager, chunk.done, state)
-        val = validate_and_select(state, chunk.done)  # model selection on the validation split
-        useful = float(np.sum(chunk.metrics["frames/useful"]))  # steps that entered the loss
-        bar(chunk.n, {"useful fps": f"{useful / (time.time() - chunk.started):,.0f}",
-                      "SR": f"{chunk.metrics['charts/success_rate'].mean():.3f}", "val SR": f"{val['overall']['SR']:.1f}%",
-                      **({"warning": "diverging"} if chunk.warning else {})})  # fmt: skip
 
-    state, done = loop.run_chunks(run_chunk, state, env_params, done=done, total=total,
-                                  chunk_updates=schedule.chunk_updates, after_chunk=after_chunk, manager=manager,
-                                  checkpoints=out / "checkpoints", budget=[args.stop_after_chunks])  # fmt: skip
-    bar(0, None)
-    tracker.close()
-    if done < total:
-        print(f"stopped after {args.stop_after_chunks} chunks at update {done} (resume with --resume)")
-        return {"stopped_at": done}
-
-    # Final test evaluation of the model selected on validation.
-    best_step = best_manager.latest_step()
-    chosen = checkpoint.restore(best_manager, best_step, agent_params(state, config.sigma2_max, config.evaluation_noise))
-    test = evaluator.evaluate(chosen, config, "test", selection.test_key(seed), schedule.test_episodes_per_room)
-    random = evaluator.evaluate_random_policy(config, "test", selection.test_key(seed), schedule.test_episodes_per_room)
-    rundir.write_json(out / "results_test.json", {"selected_update": best_step, "results": test, "random_policy": random})
-    title = f"{config.method}, preset {info['preset']}, seed {seed}: test split (model of update {best_step}, best validation SR)"
-    report = tables.results_markdown(test, title) + "\n" + tables.results_markdown(random, "Uniformly random policy, same rooms", level=2)
-    (out / "results_test.md").write_text(report)
-    rows = rundir.read_rows(out / "metrics")
-    x = np.array([r["update"] for r in rows])
-    y = figures.smooth([r["charts/success_rate"] for r in rows])
-    vals = [(r["update"], r["SR"] / 100.0) for r in rundir.read_rows(out / "validation")]
-    figures.learning_curve_png(out / "learning_curve.png", {config.method: (x, y)}, val_points=vals)
-    print(report)
-    print(f"wrote {out}/results_test.md, results_test.json, learning_curve.png, metrics.csv "
-          f"({time.time() - t_start:.0f} s)")  # fmt: skip
-    return test
+def report(run: Run, done: dict, evaluator, seconds: float) -> dict:
+    """train's report of a finished run of one seed: results_test.json and .md (the selected
+    model's test results, beside the uniformly random policy's on the same episodes) and
+    learning_curve.png (training SR, smoothed, and the validations)."""
+    out, config, seed = run.folder, run.config, run.seeds[0]
+    (result,) = done["results"]
+    step = result["selected_update"]
+    test = {room: m for room, m in result["selected"].items() if room != "by_length"}
+    random = evaluator.evaluate_random_policy(config, "test", selection.test_key(seed), run.schedule.test_episodes_per_room)
+    rundir.write_json(out / "results_test.json", {"selected_update": step, "results": test, "random_policy": random})
+    title = f"{config.method}, preset {run.preset}, seed {seed}: test split (model of update {step}, best validation SR)"
+    text = tables.results_markdown(test, title) + "\n" + tables.results_markdown(random, "Uniformly random policy, same rooms", level=2)
+    (out / "results_test.md").write_text(text)
+    y = np.array(result["training_success_rate"], float)
+    vals = [(v["update"], v["SR"] / 100.0) for v in result["validation"]]
+    figures.learning_curve_png(out / "learning_curve.png", {config.method: (np.arange(1, len(y) + 1), figures.smooth(y))},
+                               val_points=vals)  # fmt: skip
+    print(text)
+    print(f"wrote {out}/results_test.md, results_test.json, learning_curve.png, metrics.csv ({seconds:.0f} s)")
+    return rundir.read_json(out / "results_test.json")["results"]
 
 
 def cli(argv=None) -> None:

@@ -30,6 +30,7 @@ from experiments import sweep
 from experiments import train as train_cli
 from experiments.reporting import cvae_comparison, figures, report, tables
 from experiments.running import checkpoint, errors, numerics, presets, progress, rundir, selection, sweeps
+from experiments.running.run import COUNTS, RUN_FORMAT, initial_states
 from foresit_jax.config import Config
 
 REPO = Path(__file__).resolve().parents[1]
@@ -56,15 +57,22 @@ def run_config(out: Path) -> Config:
     return Config(**rundir.read_run_info(out)["config"])
 
 
-def restore_latest(out: Path, folder: str = "checkpoints"):
-    manager = checkpoint.checkpoint_manager(out / folder, 100)
-    like = H.cached_trainer(run_config(out)).init(jax.random.PRNGKey(0))
-    if folder == "best":
-        from foresit_jax.evaluate import agent_params
-
-        like = agent_params(like, run_config(out).sigma2_max)
+def restore_latest(out: Path):
+    """(latest step, every step kept, the training state and the selected model there) of a
+    one-seed run folder."""
+    config = run_config(out)
+    manager = checkpoint.checkpoint_manager(out / "checkpoints", 100)
     step = manager.latest_step()
-    return step, manager.all_steps(), checkpoint.restore(manager, step, like)
+    like = initial_states(H.cached_trainer(config), [SEED])
+    restored = checkpoint.restore(manager, step, {"states": like[0], "best": like[1]})
+    state, best = jax.tree.map(lambda x: x[0], (restored["states"], restored["best"]))
+    return step, manager.all_steps(), state, best
+
+
+def validations(out: Path) -> list[dict]:
+    """A one-seed run's validations (progress.json)."""
+    (history,) = rundir.read_json(out / "progress.json")["history"]
+    return history
 
 
 def snapshot(folder: Path) -> dict:
@@ -88,68 +96,66 @@ def cli_error(cli, argv, capsys) -> str:
 @pytest.mark.slow
 def test_finished_run_folder(finished_run):
     info = rundir.read_run_info(finished_run)
-    assert (info["method"], info["preset"], info["seed"]) == ("a3c+foresit", "tiny", SEED)
-    assert info["numerics"] == [{"from_update": 0, "platform": numerics.fingerprint()}]
+    assert (info["method"], info["preset"], info["seeds"], info["format"]) == ("a3c+foresit", "tiny", [SEED], RUN_FORMAT)
+    progress = rundir.read_json(finished_run / "progress.json")
+    assert progress["numerics"] == [{"from_update": 0, "platform": numerics.fingerprint()}]
     rows = rundir.read_rows(finished_run / "metrics")
     assert [r["update"] for r in rows] == [1, 2, 3, 4]
     assert all(np.isfinite(r["losses/total_loss"]) for r in rows)
     # Running totals: ended episodes, useful frames (packed windows: every step is useful).
     assert rows[-1]["episodes"] == sum(r["charts/episodes"] for r in rows) > 0
     assert rows[-1]["frames"] == rows[-1]["stepped_frames"] == 4 * 4 * 30
-    assert [r["update"] for r in rundir.read_rows(finished_run / "validation")] == [2, 4]
+    assert [v["update"] for v in validations(finished_run)] == [2, 4]
+    (result,) = rundir.read_json(finished_run / "results.json")["results"]
+    assert [v["SR"] for v in result["validation"]] == [v["SR"] for v in validations(finished_run)]
+    assert result["training_success_rate"] == [r["charts/success_rate"] for r in rows]
     results = json.loads((finished_run / "results_test.json").read_text())
+    assert results["selected_update"] == result["selected_update"]
+    assert results["results"] == {k: v for k, v in result["selected"].items() if k != "by_length"}
     assert results["selected_update"] in (2, 4)
     assert set(results["results"]) == {"bathroom", "overall"}
     assert results["results"]["overall"]["episodes"] == 2
     for name in ("results_test.md", "learning_curve.png", "metrics.csv"):
         assert (finished_run / name).stat().st_size > 0
-    step, steps, state = restore_latest(finished_run)
+    step, steps, state, best = restore_latest(finished_run)
     assert (step, steps) == (4, [2, 4])
     assert int(state.update) == 4
-    H.assert_tree_finite(state)
+    H.assert_tree_finite((state, best))
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("killed", ["before_a_checkpoint", "before_its_validation", "before_the_best_was_saved"])
-def test_resume_after_a_kill_ends_bit_identical_to_an_uninterrupted_run(finished_run, tmp_path, killed):
+def test_resume_after_a_kill_ends_bit_identical_to_an_uninterrupted_run(finished_run, tmp_path):
+    """train's own part of a resume (the run's is tests/test_run.py): its metrics rows."""
     out = tmp_path / "interrupted"
     assert train_cli.main(tiny_args(out, stop_after_chunks=1)) == {"stopped_at": 2}
     assert not (out / "results_test.json").exists()
-    if killed == "before_a_checkpoint":
-        # After the metrics of update 3 were written but before its checkpoint: the
-        # resumed run must drop that row and redo update 3.
-        stale = dict(rundir.read_rows(out / "metrics")[-1], update=3)
-        rundir.append_rows(out / "metrics", [stale])
-    else:
-        # After update 2's checkpoint, before its validation row (and so before its best
-        # model), or after the row but before the best model was saved.
-        if killed == "before_its_validation":
-            rundir.truncate_rows(out / "validation", 0)
-        shutil.rmtree(out / "best")
+    # After the metrics of update 3 were written but before its checkpoint: the resumed
+    # run must drop that row and redo update 3.
+    stale = dict(rundir.read_rows(out / "metrics")[-1], update=3)
+    rundir.append_rows(out / "metrics", [stale])
     # The run folder alone says what to resume (method, preset and seed are not repeated).
     train_cli.main(train_cli.Args(out=out, resume=True, progress=False))
 
-    for name in ("metrics.csv", "metrics.jsonl", "validation.jsonl", "validation.csv", "results_test.json"):
+    for name in ("metrics.csv", "metrics.jsonl", "progress.json", "results.json", "results_test.json"):
         assert (out / name).read_text() == (finished_run / name).read_text(), name
-    for folder in ("checkpoints", "best"):
-        step, steps, resumed = restore_latest(out, folder)
-        ref_step, ref_steps, reference = restore_latest(finished_run, folder)
-        assert (step, steps) == (ref_step, ref_steps)
-        H.assert_trees_bitwise_equal(resumed, reference)
+    step, steps, *resumed = restore_latest(out)
+    ref_step, ref_steps, *reference = restore_latest(finished_run)
+    assert (step, steps) == (ref_step, ref_steps)
+    H.assert_trees_bitwise_equal(resumed, reference)
 
 
 @pytest.mark.slow
 def test_a_run_resumed_on_another_platform_says_so_and_records_where_each_stretch_ran(finished_run, tmp_path, capsys):
     out = tmp_path / "moved"
     train_cli.main(tiny_args(out, stop_after_chunks=1))
-    info = rundir.read_run_info(out)
+    progress = rundir.read_json(out / "progress.json")
     elsewhere = {**numerics.fingerprint(), "jaxlib": "0.0.1"}  # as if started on another machine
-    rundir.write_run_info(out, {**info, "numerics": [{"from_update": 0, "platform": elsewhere}]})
+    rundir.write_json(out / "progress.json", {**progress, "numerics": [{"from_update": 0, "platform": elsewhere}]})
     capsys.readouterr()
     train_cli.main(train_cli.Args(out=out, resume=True, progress=False))
     err = capsys.readouterr().err
-    assert "warning: continuing on another platform than updates 0-2 were trained on" in err
-    assert rundir.read_run_info(out)["numerics"] == [{"from_update": 0, "platform": elsewhere},
+    assert "warning: a3c+foresit: continuing on another platform than updates 0-2 were trained on" in err
+    assert rundir.read_json(out / "progress.json")["numerics"] == [{"from_update": 0, "platform": elsewhere},
                                                      {"from_update": 2, "platform": numerics.fingerprint()}]  # fmt: skip
     # (Here it is this machine all along: the numbers are still the uninterrupted run's.)
     assert (out / "results_test.json").read_text() == (finished_run / "results_test.json").read_text()
@@ -189,11 +195,11 @@ def test_existing_folders_are_never_overwritten_without_a_flag(finished_run, tmp
 
 @pytest.mark.slow
 def test_a_run_validated_under_another_selection_protocol_is_not_resumed(finished_run, tmp_path, capsys):
-    assert rundir.read_run_info(finished_run)["selection_protocol"] == selection.PROTOCOL_VERSION
+    assert rundir.read_json(finished_run / "progress.json")["selection_protocol"] == selection.PROTOCOL_VERSION
     out = tmp_path / "older"
     shutil.copytree(finished_run, out)
-    info = rundir.read_run_info(out)
-    rundir.write_run_info(out, {**info, "selection_protocol": selection.PROTOCOL_VERSION - 1})
+    progress = rundir.read_json(out / "progress.json")
+    rundir.write_json(out / "progress.json", {**progress, "selection_protocol": selection.PROTOCOL_VERSION - 1})
     before = snapshot(out)
     line = cli_error(train_cli.cli, ["--out", out, "--resume"], capsys)
     assert f"validated under selection protocol {selection.PROTOCOL_VERSION - 1}" in line and "start it again" in line
@@ -218,7 +224,7 @@ def test_non_finite_loss_stops_training_naming_the_update_and_keeps_the_last_goo
     assert exc.value.code == 1
     message = capsys.readouterr().err.strip().splitlines()[-1]
     assert "non-finite loss at update 3" in message and "last checkpoint (update 2, finite)" in message
-    step, steps, state = restore_latest(out)
+    step, steps, *state = restore_latest(out)
     assert (step, steps) == (2, [2])
     H.assert_tree_finite(state)
     assert [r["update"] for r in rundir.read_rows(out / "metrics")] == [1, 2]
@@ -236,11 +242,10 @@ def strict_json(text: str):
 
 @pytest.mark.slow
 def test_run_files_are_strict_json(finished_run):
-    for path in [finished_run / "run.json", *finished_run.glob("results_*.json")]:
+    for path in [finished_run / "run.json", finished_run / "progress.json", *finished_run.glob("results*.json")]:
         strict_json(path.read_text())
-    for name in ("metrics.jsonl", "validation.jsonl"):
-        for line in (finished_run / name).read_text().splitlines():
-            strict_json(line)
+    for line in (finished_run / "metrics.jsonl").read_text().splitlines():
+        strict_json(line)
 
 
 # ---------------------------------------------------------------------- shared pieces
@@ -569,9 +574,9 @@ def test_sweep_seed_i_is_the_run_train_makes_with_seed_i(tiny_sweep, tmp_path):
         rows = list(rundir.read_rows(run / "metrics"))
         curve = [row["charts/success_rate"] for row in rows]
         np.testing.assert_allclose(r["training_success_rate"], curve, atol=1e-6)  # the same episodes were trained on
-        for name in sweeps.COUNTS:  # the experience counted is train's, update by update
+        for name in COUNTS:  # the experience counted is train's, update by update
             assert r["counts"][name] == pytest.approx(sum(row[name] for row in rows)) and r["counts"][name] > 0
-        validation = rundir.read_rows(run / "validation")
+        validation = validations(run)
         assert [v["update"] for v in r["validation"]] == [v["update"] for v in validation] == [2, 4]
         np.testing.assert_allclose([v["SR"] for v in r["validation"]], [v["SR"] for v in validation])
         for col in ("SR", "SPL", "episodes"):
@@ -693,9 +698,7 @@ def test_a_killed_sweep_resumes_where_it_stopped_and_ends_with_the_same_numbers(
     assert (finished / "results.json").exists() and not (started / "results.json").exists()
     assert json.loads((started / "progress.json").read_text())["done"] == 2
     kept = (finished / "results.json").stat().st_mtime_ns
-    # As if killed after the next chunk's checkpoint but before its progress.json: a newer
-    # checkpoint that nothing records (dropped on resume, the chunk runs again).
-    shutil.copytree(started / "checkpoints" / "2", started / "checkpoints" / "4")
+    # (How an arm's run resumes from each state a kill leaves: tests/test_run.py.)
     # A method validated under another selection protocol is not continued under this one.
     progress = json.loads((started / "progress.json").read_text())
     assert progress["selection_protocol"] == selection.PROTOCOL_VERSION
@@ -847,7 +850,7 @@ def test_evaluate_cli_reproduces_the_test_results_of_training(finished_run, tmp_
     out = tmp_path / "run"
     shutil.copytree(finished_run, out)
     trained = json.loads((out / "results_test.json").read_text())
-    # The model selected on validation, loaded from best/, on the run's own test episodes.
+    # The model selected on validation, from the last checkpoint, on the run's own test episodes.
     results = evaluate_cli.main(evaluate_cli.Args(run=out, overwrite=True))
     np.testing.assert_equal(results, trained["results"])  # (NaN == NaN here)
     written = json.loads((out / "results_test.json").read_text())
@@ -855,7 +858,7 @@ def test_evaluate_cli_reproduces_the_test_results_of_training(finished_run, tmp_
     assert written["which"] == "best"
     # On val, the validation episodes of the selected model's update: its row again.
     val = evaluate_cli.main(evaluate_cli.Args(run=out, split="val"))
-    row = next(r for r in rundir.read_rows(out / "validation") if r["update"] == trained["selected_update"])
+    row = next(r for r in validations(out) if r["update"] == trained["selected_update"])
     assert val["overall"]["episodes"] == row["episodes"] and val["overall"]["SR"] == pytest.approx(row["SR"])
     # The last checkpoint goes to its own files and leaves the others alone.
     last = evaluate_cli.main(evaluate_cli.Args(run=out, which="last", split="val", episodes_per_room=2))
@@ -864,6 +867,44 @@ def test_evaluate_cli_reproduces_the_test_results_of_training(finished_run, tmp_
     # Another protocol than the method's own, from the command line, to its own files.
     evaluate_cli.cli(["--run", str(out), "--split", "val", "--episodes-per-room", "2", "--actions", "greedy"])
     assert (out / "results_val_best_greedy.json").exists()
+
+
+def as_legacy_train_folder(run: Path, out: Path) -> None:
+    """The folder train wrote before runs had one format, made from a run of this one: run.json
+    with one "seed", checkpoints/ of the bare training state, best/ of the selected model."""
+    info = rundir.read_run_info(run)
+    step, _, state, best = restore_latest(run)
+    (result,) = rundir.read_json(run / "results.json")["results"]
+    out.mkdir()
+    old = {k: v for k, v in info.items() if k not in ("format", "seeds", "arm")}
+    rundir.write_run_info(out, {**old, "arm": info["arm"], "seed": info["seeds"][0]})
+    checkpoint.save(checkpoint.checkpoint_manager(out / "checkpoints", 2), step, state)
+    checkpoint.save(checkpoint.checkpoint_manager(out / "best", 1), result["selected_update"], best)
+    shutil.copy(run / "results_test.json", out / "results_test.json")
+
+
+@pytest.mark.slow
+def test_a_train_folder_of_the_format_before_still_reads_and_is_refused_a_resume(finished_run, tmp_path, capsys):
+    from experiments import probe
+
+    out = tmp_path / "legacy"
+    as_legacy_train_folder(finished_run, out)
+    trained = json.loads((out / "results_test.json").read_text())
+    np.testing.assert_equal(evaluate_cli.main(evaluate_cli.Args(run=out, overwrite=True)), trained["results"])
+    (seed,) = probe.models_of_run(out)["a3c+foresit"]
+    (new,) = probe.models_of_run(finished_run)["a3c+foresit"]
+    assert seed.seed == new.seed == SEED
+    H.assert_trees_bitwise_equal((seed.state, seed.selected), (new.state, new.selected))
+    before = snapshot(out)
+    line = cli_error(train_cli.cli, ["--out", out, "--resume"], capsys)
+    assert "before runs had one format" in line and "train it anew" in line, line
+    arm = tmp_path / "arm"  # a run folder of two seeds: a sweep's arm, not train's
+    info = rundir.read_run_info(finished_run)
+    arm.mkdir()
+    rundir.write_run_info(arm, {**info, "seeds": [SEED, SEED + 1]})
+    assert "a sweep's arm" in cli_error(train_cli.cli, ["--out", arm, "--resume"], capsys)
+    assert {k: v for k, v in snapshot(out).items() if k != rundir.LOCK_FILE} == {
+        k: v for k, v in before.items() if k != rundir.LOCK_FILE}
 
 
 # ---------------------------------------------------------------------- the README

@@ -9,7 +9,6 @@ range; a metrics line cut by a kill.
 
 from __future__ import annotations
 
-import dataclasses
 import errno
 import os
 import shutil
@@ -30,7 +29,8 @@ from benchmarks import search_learner
 from experiments import evaluate as evaluate_cli
 from experiments import sweep
 from experiments import train as train_cli
-from experiments.running import checkpoint, errors, loop, rundir, sweeps
+from experiments.running import checkpoint, errors, loop, rundir
+from experiments.running.run import counts_of, initial_states, rewind
 from foresit_jax.config import Config
 
 REPO = Path(__file__).resolve().parents[1]
@@ -186,7 +186,8 @@ def test_nan_weights_in_a_later_chunk_stop_the_run_naming_a_checkpoint_that_exis
     assert "non-finite parameters after update 4" in line and "last checkpoint (update 2, finite)" in line, line
     manager = checkpoint.checkpoint_manager(out / "checkpoints", 10)
     assert manager.all_steps() == [2]
-    assert loop.finite_seeds(checkpoint.restore(manager, 2, trainer.init(jax.random.PRNGKey(0))))
+    states, best = initial_states(trainer, [1])
+    assert loop.finite_seeds(checkpoint.restore(manager, 2, {"states": states, "best": best}))
     assert [r["update"] for r in rundir.read_rows(out / "metrics")] == [1, 2]
 
 
@@ -208,58 +209,14 @@ def test_divergence_short_of_nan_is_warned_of():
 
 
 # ---------------------------------------------------------------------- 4. checkpoints verified
-def corrupt(folder: Path, how: str) -> None:
-    """Damage a checkpoint as a bad disk or a killed copy would."""
-    data = sorted((p for p in folder.rglob("*") if p.is_file() and p.name != checkpoint.CHECKSUM_FILE),
-                  key=lambda p: p.stat().st_size)[-1]  # fmt: skip
-    raw = bytearray(data.read_bytes())
-    if how == "flipped":
-        rng = np.random.default_rng(0)
-        at = rng.integers(0, len(raw) - 16)
-        raw[at:at + 16] = rng.integers(0, 256, 16, dtype=np.uint8).tobytes()
-    else:
-        raw = raw[: len(raw) // 2]
-    data.write_bytes(bytes(raw))
-
-
 @pytest.mark.slow
-@pytest.mark.parametrize("how", ["flipped", "truncated"])
-def test_resume_skips_a_corrupt_checkpoint_and_ends_as_the_uninterrupted_run(run6, tmp_path, capsys, how):
-    out = tmp_path / how
-    train_cli.main(tiny(out, num_updates=6, stop_after_chunks=2))
-    corrupt(out / "checkpoints" / "4", how)
-    capsys.readouterr()
-    train_cli.main(train_cli.Args(out=out, resume=True, progress=False))
-    err = capsys.readouterr().err
-    assert f"checkpoint {out / 'checkpoints' / '4'} is corrupt or truncated" in err and "skipped" in err, err
-    for name in ("metrics.jsonl", "validation.jsonl", "results_test.json"):
-        assert (out / name).read_bytes() == (run6 / name).read_bytes(), name
-
-
-@pytest.mark.slow
-def test_a_sweep_resumes_past_a_corrupt_checkpoint_to_the_same_numbers(tmp_path, capsys):
-    args = sweep.Args(methods=("a3c",), seeds=2, preset="tiny", seed=1, num_updates=6, progress=False,
-                      val_episodes_per_room=4, test_episodes_per_room=4)  # fmt: skip
-    whole, killed = tmp_path / "whole", tmp_path / "killed"
-    sweep.main(dataclasses.replace(args, out=whole))
-    assert sweep.main(dataclasses.replace(args, out=killed, stop_after_chunks=2)) is None
-    corrupt(killed / "methods" / "a3c" / "checkpoints" / "4", "flipped")
-    capsys.readouterr()
-    sweep.cli(["--out", str(killed), "--resume", "--no-progress"])
-    err = capsys.readouterr().err
-    assert "is corrupt or truncated" in err and "continuing from update 2" in err, err
-    for name in ("results_per_seed.json", "table1.csv"):
-        assert (killed / name).read_text() == (whole / name).read_text(), name
-
-
-@pytest.mark.slow
-def test_a_corrupt_best_model_is_one_line_and_the_good_results_stay(run6, tmp_path, capsys):
+def test_a_corrupt_checkpoint_is_one_line_and_the_good_results_stay(run6, tmp_path, capsys):
     out = tmp_path / "corrupt_best"
     shutil.copytree(run6, out)
     (out / rundir.LOCK_FILE).unlink()
     good = (out / "results_test.json").read_bytes()
-    (step,) = [p for p in (out / "best").iterdir() if p.name.isdigit()]
-    corrupt(step, "flipped")
+    step = out / "checkpoints" / "6"  # the one evaluate reads the selected model from
+    H.corrupt_checkpoint(step, "flipped")
     line = one_line_error(evaluate_cli.cli, ["--run", out, "--overwrite"], capsys)
     assert f"checkpoint {step} is corrupt or truncated" in line
     assert (out / "results_test.json").read_bytes() == good
@@ -269,7 +226,8 @@ def test_a_corrupt_best_model_is_one_line_and_the_good_results_stay(run6, tmp_pa
 def test_a_checkpoint_saved_before_checksums_still_restores(run6, tmp_path):
     manager = checkpoint.checkpoint_manager(run6 / "checkpoints", 10)
     step = manager.latest_step()
-    like = H.cached_trainer(Config(**rundir.read_run_info(run6)["config"])).init(jax.random.PRNGKey(0))
+    states, best = initial_states(H.cached_trainer(Config(**rundir.read_run_info(run6)["config"])), [1])
+    like = {"states": states, "best": best}
     copy = tmp_path / "old"
     shutil.copytree(run6 / "checkpoints", copy)
     (copy / str(step) / checkpoint.CHECKSUM_FILE).unlink()
@@ -293,8 +251,19 @@ def test_resume_refuses_flags_that_contradict_the_run_and_extends_with_num_updat
     assert "would shorten" in line
     capsys.readouterr()
     train_cli.main(train_cli.Args(out=out, resume=True, num_updates=6, progress=False))
-    assert "extending" in capsys.readouterr().out
+    said = capsys.readouterr().out
+    assert "extending" in said and "its 4-update report is kept in report_4_updates/" in said, said
     assert rundir.read_run_info(out)["config"]["num_updates"] == 6
+    assert rundir.read_json(out / "results_4_updates.json")["updates"] == 4
+    assert sorted(p.name for p in (out / "report_4_updates").iterdir()) == sorted(train_cli.REPORT_FILES)
+    # An extension whose report would replace one kept before is refused before anything moves.
+    (out / "report_6_updates").mkdir()
+    (out / "report_6_updates" / "results_test.json").write_text("mine")
+    before = snapshot(out)
+    line = one_line_error(train_cli.cli, ["--out", out, "--resume", "--num-updates", 8], capsys)
+    assert "already holds report_6_updates/results_test.json; move them first" in line, line
+    assert {k: v for k, v in snapshot(out).items() if k != rundir.LOCK_FILE} == {
+        k: v for k, v in before.items() if k != rundir.LOCK_FILE}
     # The same updates as a run of 6 from the start (the validation follows the chunks:
     # here too they end at 2, 4, 6).
     assert (out / "metrics.jsonl").read_bytes() == (run6 / "metrics.jsonl").read_bytes()
@@ -466,13 +435,13 @@ def test_sweep_rewind_drops_the_chunks_after_a_step_and_reselects():
                 "counts": {"charts/episodes": [[5.0, 6.0], [7.0, 8.0], [9.0, 10.0]]},
                 "best_sr": [50.0, 40.0], "best_update": [6, 4],
                 "numerics": [{"from_update": 0, "platform": "a"}, {"from_update": 6, "platform": "b"}]}  # fmt: skip
-    back = sweeps.rewind(progress, 2)
+    back = rewind(progress, 2)
     assert back["done"] == 2 and len(back["curves"]) == 1 and back["diagnostics"]["losses/entropy"] == [[1.0, 1.1]]
     assert back["counts"] == {"charts/episodes": [[5.0, 6.0]]}
-    assert sweeps.counts_of(back, 1) == {"charts/episodes": 6.0}
-    assert sweeps.counts_of({**back, "counts": {}}, 1) == {}  # recorded in no chunk: no count, not 0
-    assert sweeps.counts_of({**progress, "counts": back["counts"]}, 0) == {}  # in some chunks only: no undercount
+    assert counts_of(back, 1) == {"charts/episodes": 6.0}
+    assert counts_of({**back, "counts": {}}, 1) == {}  # recorded in no chunk: no count, not 0
+    assert counts_of({**progress, "counts": back["counts"]}, 0) == {}  # in some chunks only: no undercount
     assert back["best_sr"] == [10.0, 40.0] and back["best_update"] == [2, 2]
     assert [len(h) for h in back["history"]] == [1, 1] and back["numerics"] == [{"from_update": 0, "platform": "a"}]
-    back = sweeps.rewind(progress, 4)
+    back = rewind(progress, 4)
     assert back["best_sr"] == [30.0, 40.0] and back["best_update"] == [4, 4]  # a tie: the later model

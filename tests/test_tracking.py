@@ -49,7 +49,7 @@ def test_tensorboard_gets_every_metric_and_validation_row_of_the_csv(tmp_path):
     rows = rundir.read_rows(out / "metrics")
     for name in ("losses/total_loss", "charts/success_rate", "frames", "losses/explained_variance"):
         assert scalars[name] == pytest.approx({r["update"]: r[name] for r in rows}, rel=1e-6), name
-    validation = rundir.read_rows(out / "validation")
+    (validation,) = rundir.read_json(out / "progress.json")["history"]
     assert scalars["validation/SR"] == pytest.approx({r["update"]: r["SR"] for r in validation})
 
 

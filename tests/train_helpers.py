@@ -140,6 +140,23 @@ def assert_tree_finite(tree) -> None:
             assert np.isfinite(leaf).all(), f"non-finite values in {jax.tree_util.keystr(path)}"
 
 
+def corrupt_checkpoint(folder, how: str = "flipped") -> None:
+    """Damage a checkpoint (its biggest file) as a bad disk (16 bytes flipped) or a killed
+    copy (truncated to half) would."""
+    from experiments.running import checkpoint
+
+    data = sorted((p for p in folder.rglob("*") if p.is_file() and p.name != checkpoint.CHECKSUM_FILE),
+                  key=lambda p: p.stat().st_size)[-1]  # fmt: skip
+    raw = bytearray(data.read_bytes())
+    if how == "flipped":
+        rng = np.random.default_rng(0)
+        at = rng.integers(0, len(raw) - 16)
+        raw[at:at + 16] = rng.integers(0, 256, 16, dtype=np.uint8).tobytes()
+    else:
+        raw = raw[: len(raw) // 2]
+    data.write_bytes(bytes(raw))
+
+
 def subtree(params, *names):
     """params['params'][names[0]][names[1]]..."""
     node = params["params"]

@@ -1,6 +1,4 @@
-"""The run loop `train` and `running.sweeps` share (and so sweep, tune and paper, which run sweeps).
-
-A run, of one seed (`train`) or of several vmapped (`sweeps.run_method`), is the same loop:
+"""The run loop of `experiments.running.run.Run` (train's run of one seed, each arm of a sweep's):
 
     resume_point       where a resumed run continues: its newest intact checkpoint
     run_chunks         run a chunk of updates; stop, naming the update and the seed, on a
@@ -8,10 +6,6 @@ A run, of one seed (`train`) or of several vmapped (`sweeps.run_method`), is the
                        the chunk to the caller's `after_chunk` (which records its metrics,
                        checkpoints, validates and selects the model, moves the bar); stop
                        early when the invocation's chunk budget (--stop-after-chunks) is spent
-
-What differs between the two is only what they record, and lives in their `after_chunk`:
-`train` writes one run's files (metrics.jsonl, validation.jsonl, best/), a sweep an
-arm's progress.json and one checkpoint of every seed's state and selected model.
 """
 
 from __future__ import annotations

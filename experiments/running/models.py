@@ -1,4 +1,4 @@
-"""Trained models read back from a run folder (`train`) or a sweep folder (`sweep`): one
+"""Trained models read back from a run folder (`train`, or a sweep's arm) or a sweep folder (`sweep`): one
 `Model` per seed, with the training state at its end and the model selected on validation,
 for the programs that play or probe them (probe, failures, paper)."""
 
@@ -9,7 +9,7 @@ from pathlib import Path
 
 import jax
 
-from experiments.running import checkpoint, errors, rundir, selection, sweeps
+from experiments.running import checkpoint, errors, run, rundir, selection, sweeps
 
 
 @dataclasses.dataclass
@@ -23,24 +23,59 @@ class Model:
     selected: object  # AgentParams of the selected model
 
 
-def models_of_run(run: Path) -> dict[str, list[Model]]:
-    """{method: [Model]} of a train run folder."""
+@dataclasses.dataclass
+class Trained:
+    """A run folder's models, stacked over its seeds: the training states at its last
+    checkpoint and the models selected on validation by then."""
+
+    config: object
+    schedule: dict
+    seeds: list[int]
+    trainer: object
+    states: object  # RunnerState, leaves [seeds, ...]
+    selected: object  # AgentParams, leaves [seeds, ...]
+    selected_updates: list[int]
+    update: int  # the updates the states have trained
+
+
+def read_trained(folder: Path) -> Trained:
+    """The models of a run folder (`train`'s, or an arm's in a sweep: `experiments.running.run`),
+    or of a train folder of before that format (run.json with one seed, best/)."""
     from foresit_jax.config import Config
     from foresit_jax.evaluate import agent_params
     from foresit_jax.train import make_trainer
 
-    info = rundir.read_run_info(run)
+    info = rundir.read_run_info(folder)
+    if not run.is_legacy_train_folder(info):
+        one = run.read(folder)
+        done = one.progress()["done"]
+        if not done:
+            raise errors.UserError(f"{folder} has no checkpoint yet (no chunk finished); train it first")
+        trainer, states, selected = one.load_checkpoint(done)
+        return Trained(one.config, info["schedule"], list(one.seeds), trainer, states, selected,
+                       one.progress()["best_update"], done)  # fmt: skip
     config = Config(**info["config"])
     trainer = make_trainer(config)
     like = trainer.init(selection.run_key(info["seed"]))
-    steps = [checkpoint.checkpoint_manager(run / name, 100).latest_step() for name in ("checkpoints", "best")]
+    managers = [checkpoint.checkpoint_manager(folder / name, 100) for name in ("checkpoints", "best")]
+    steps = [m.latest_step() for m in managers]
     if None in steps:
-        raise errors.UserError(f"{run} has no finished checkpoint (checkpoints/ and best/); train it to the end first")
-    state = checkpoint.restore(checkpoint.checkpoint_manager(run / "checkpoints", 100), steps[0], like)
-    selected = checkpoint.restore(checkpoint.checkpoint_manager(run / "best", 100), steps[1],
-                                  agent_params(like, config.sigma2_max, config.evaluation_noise))  # fmt: skip
-    state = state._replace(params=selected.params, imagination_params=selected.imagination_params)
-    return {config.method: [Model(config, trainer, info["seed"], state, selected)]}
+        raise errors.UserError(f"{folder} has no finished checkpoint (checkpoints/ and best/); train it to the end first")
+    state = checkpoint.restore(managers[0], steps[0], like)
+    selected = checkpoint.restore(managers[1], steps[1], agent_params(like, config.sigma2_max, config.evaluation_noise))
+    states, selected = jax.tree.map(lambda x: x[None], (state, selected))
+    return Trained(config, info["schedule"], [info["seed"]], trainer, states, selected, [steps[1]], steps[0])
+
+
+def models_of_run(folder: Path) -> dict[str, list[Model]]:
+    """{method: [Model per seed]} of a run folder (`read_trained`)."""
+    trained = read_trained(folder)
+    models = []
+    for i, seed in enumerate(trained.seeds):
+        state, selected = jax.tree.map(lambda x: x[i], (trained.states, trained.selected))
+        state = state._replace(params=selected.params, imagination_params=selected.imagination_params)
+        models.append(Model(trained.config, trained.trainer, seed, state, selected))
+    return {trained.config.method: models}
 
 
 def models_of_sweep(folder: Path, methods: tuple[str, ...]) -> dict[str, list[Model]]:

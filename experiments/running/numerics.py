@@ -13,8 +13,8 @@ episodes" no longer pairs like with like when its two methods were trained on di
 platforms, and a run resumed on another platform does not end with the numbers an
 uninterrupted one would have.
 
-So every run records the platform of each stretch of its updates (`extend`: run.json of
-`train`, progress.json and results.json of each method of a sweep), a run continued on
+So every run records the platform of each stretch of its updates (`extend`: progress.json
+and results.json of every run folder, `train`'s and each arm's of a sweep), a run continued on
 another platform says so, and reports list the platforms their methods were trained on
 (`markdown`), naming the compared pairs that mix two.
 

@@ -20,7 +20,8 @@ def progress_bar(total: int, initial: int, enabled: bool):
     """A tqdm bar over `total` updates starting at `initial`; returns `advance(n, postfix)`:
     call it with (n, {name: value}) after each chunk of n updates and with (0, None) to
     close the bar. `advance.at(position)` moves the bar to `position` updates within a
-    chunk (never back; a vmapped chunk passes every seed's count, the furthest is taken)."""
+    chunk (never back; a vmapped chunk passes every seed's count, the furthest is taken);
+    `advance.skip(position)` moves it to where a resumed run starts, logging nothing."""
     from tqdm import tqdm
 
     bar = tqdm(total=total, initial=initial, unit="upd", disable=not enabled, dynamic_ncols=True,
@@ -43,7 +44,14 @@ def progress_bar(total: int, initial: int, enabled: bool):
         if position > bar.n:
             bar.update(position - bar.n)
 
+    def skip(position: int) -> None:
+        """Move to `position` updates (a resumed run's start) without logging a line."""
+        chunk_end[0] = max(chunk_end[0], int(position))
+        if chunk_end[0] > bar.n:
+            bar.update(chunk_end[0] - bar.n)
+
     advance.at = at
+    advance.skip = skip
     advance.position = lambda: chunk_end[0]  # where the last chunk ended
     advance.enabled = enabled
     return advance

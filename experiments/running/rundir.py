@@ -1,14 +1,10 @@
 """Run folders: one writer at a time, the arguments a run started with, JSON and metric rows.
 
-A run folder of `train` holds:
-  run.json            what was run (method, preset, seed, config, schedule)
-  metrics.jsonl/.csv  one row per update
-  validation.jsonl    one row per validation (after each chunk)
-  checkpoints/        orbax checkpoints of the whole training state (latest few; `checkpoint`)
-  best/               the agent with the best validation SR (model selection)
-  results_<split>.json/.md, learning_curve.png
-  .lock               held (an OS lock, `claim`) by the one process writing the folder
-A sweep's folder holds sweep.json and one folder per arm (`experiments.running.sweeps`).
+A run folder (`train`'s, or a sweep's arm's: `experiments.running.run`) holds run.json,
+progress.json, checkpoints/ and results.json, and train adds metrics.jsonl/.csv (one row
+per update), results_<split>.json/.md and learning_curve.png; a sweep's folder holds
+sweep.json and one run folder per arm (`experiments.running.sweeps`). Every folder a
+program writes has a `.lock`, held (an OS lock, `claim`) by the one process writing it.
 """
 
 from __future__ import annotations
@@ -251,11 +247,11 @@ def read_rows(path: Path) -> list[dict]:
     return rows
 
 
-def truncate_rows(path: Path, last_update: int) -> None:
+def truncate_rows(path: Path, last_update: int, rows: list[dict] | None = None) -> None:
     """Drop rows after `last_update` (written after the checkpoint a resume starts from)
-    and a cut last line (`read_rows`); each file is replaced whole (written, then renamed:
-    a kill leaves the old file or the new one)."""
-    rows = [r for r in read_rows(path) if r["update"] <= last_update]
+    and a cut last line (`read_rows`, or `rows` it returned); each file is replaced whole
+    (written, then renamed: a kill leaves the old file or the new one)."""
+    rows = [r for r in (read_rows(path) if rows is None else rows) if r["update"] <= last_update]
     for suffix in (".jsonl", ".csv"):
         target = path.with_suffix(suffix)
         if not rows:

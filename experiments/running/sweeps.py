@@ -5,15 +5,17 @@ over the local devices along the seed axis (experiments.running.devices).  The p
 `train`'s (experiments.running.selection): seed i of the sweep is seed `seed + i`,
 initialised from the key `train --seed <seed + i>` uses; after each chunk each seed is
 validated on the episodes that run would validate on, and the model with the best
-validation SR is the one tested, on that run's test episodes.  So a seed's numbers are those
-of its `train` run with the same preset and schedule, up to the float rounding of a vmapped
-program (the batched matmuls differ in the last bits); over many updates that rounding
+validation SR is the one tested, on that run's test episodes: each arm is a
+`experiments.running.run.Run` of the sweep's seeds, the folder format train's run of one
+seed has.  So a seed's numbers are those of its `train` run with the same preset and
+schedule (exactly, in a sweep of one seed, which runs train's unvmapped program), up to
+the float rounding of a vmapped program (the batched matmuls differ in the last bits); over many updates that rounding
 grows into another trajectory (at quick: the same training curve for the first ~100
 updates, then apart), so long runs agree in distribution, not in value.  The last model is
 tested too, for comparison.
 
 `run(Sweep(...))` trains (or continues) a sweep and writes its report; `run_method` one
-arm's seeds, resumable after a kill (its progress.json and checkpoints); `copy_finished`
+arm's `Run`, resumable after a kill (its progress.json and checkpoints); `copy_finished`
 takes arms other sweeps of the same protocol finished (`reuse_sources`), seed by seed;
 `load_method` reads a finished arm back. The program `experiments.sweep` is this with flags.
 """
@@ -28,15 +30,15 @@ from pathlib import Path
 from typing import Optional
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from experiments.reporting import figures
 from experiments.reporting.report import (
-    DIAGNOSTICS, by_length_markdown, diagnostics_markdown, paired_markdown, selection_markdown, table, table_markdown,
+    by_length_markdown, diagnostics_markdown, paired_markdown, selection_markdown, table, table_markdown,
 )  # fmt: skip
 from experiments.reporting.tables import write_csv
-from experiments.running import checkpoint, devices, errors, loop, numerics, rundir, selection
+from experiments.running import checkpoint, devices, errors, numerics, rundir, selection
+from experiments.running.run import Run, check_continuable, finished_seeds, set_aside
 from experiments.running.presets import SweepConfigFields, config_flag, given, preset
 from experiments.running.progress import progress_bar
 
@@ -76,21 +78,6 @@ class Sweep:
     """Override the preset's validation episodes per room type."""
     config: config_flag(SweepConfigFields) = dataclasses.field(default_factory=SweepConfigFields)
     """Every other Config field for every method, e.g. --learning-rate 3e-4: the preset's (or the arm's) unless given."""
-
-
-# What each seed trained on, summed over its updates (results.json, `counts`): the frames
-# that entered the loss and the episodes that ended, so that arms of different rollout
-# layouts or budgets can be compared at equal experience (docs/mechanism.md, Study 8).
-COUNTS = ("frames/useful", "charts/episodes")
-
-
-def counts_of(progress: dict, i: int) -> dict:
-    """Seed i's `COUNTS` summed over its training; empty where some chunk went unrecorded
-    (a sweep begun before they were kept and resumed since), rather than an undercount."""
-    counts = progress.get("counts", {})
-    chunks = len(progress["curves"])
-    return {name: float(np.sum([chunk[i] for chunk in counts[name]]))
-            for name in COUNTS if len(counts.get(name, ())) == chunks}  # fmt: skip
 
 
 def seeds_of(spec: Sweep) -> list[int]:
@@ -184,13 +171,6 @@ def check_started(spec: Sweep) -> None:
         selection.check_resumable(method_protocol(folder), f"{method} in {folder}")
 
 
-def finished_seeds(folder: Path) -> list[int]:
-    """The seeds a sweep's method folder has finished (none when it has not finished)."""
-    if not (folder / "results.json").is_file():
-        return []
-    return [r["seed"] for r in rundir.read_json(folder / "results.json")["results"]]
-
-
 def _seed_ranges(seeds) -> str:
     """'0-1, 4' for [0, 1, 4]."""
     seeds, out = sorted(seeds), []
@@ -275,15 +255,6 @@ def assemble(method: str, spec: Sweep, parts: dict[int, Path], target: Path) -> 
                                                 "assembled_from": {str(s): str(parts[s]) for s in seeds}})  # fmt: skip
 
 
-def initial_states(trainer, seeds: list[int]):
-    """(the seeds' training states, stacked; the selected models (`AgentParams`), stacked:
-    at first the initial ones): what a sweep's checkpoints hold, as `checkpoint.restore` needs it."""
-    from foresit_jax.evaluate import agent_params
-
-    states = jax.vmap(trainer.init)(jnp.stack([selection.run_key(s) for s in seeds]))
-    return states, jax.vmap(lambda s: agent_params(s, trainer.config.sigma2_max, trainer.config.evaluation_noise))(states)
-
-
 def assembled_markdown(folders: dict[str, Path]) -> str:
     """For a report's "Platforms" section: a line per method (of `folders`: method -> its
     folder in a sweep) whose seeds were assembled from several sweeps (`assemble`), naming
@@ -305,163 +276,28 @@ def assembled_markdown(folders: dict[str, Path]) -> str:
 def load_method(method: str, spec: Sweep, folder: Path):
     """A finished method of a sweep read back: (Config, trainer, the seeds' last training
     states, their selected models), stacked over the seeds it finished (`finished_seeds`,
-    in its results' order) on the first local device (`checkpoint.restore`). `spec` gives the
+    in its results' order) on the first local device (`Run.load`). `spec` gives the
     protocol, not the seeds."""
-    from foresit_jax.train import make_trainer
-
-    config, _ = method_schedule(method, spec)
-    trainer = make_trainer(config)
-    done = rundir.read_json(folder / "results.json")["updates"]
-    states, best = initial_states(trainer, finished_seeds(folder))
-    restored = checkpoint.restore(checkpoint.checkpoint_manager(folder / "checkpoints", 2), done, {"states": states, "best": best})
-    return config, trainer, restored["states"], restored["best"]
-
-
-def rewind(progress: dict, step: int) -> dict:
-    """`progress` (a method's progress.json) as it was after update `step`, a chunk's end
-    (for a resume whose newer checkpoints are corrupt): the chunks after it are dropped,
-    and each seed's best model is chosen again from its validations up to `step`."""
-    lengths = np.cumsum([len(c[0]) if c else 0 for c in progress["curves"]])
-    chunks = int(np.searchsorted(lengths, step, side="right"))
-    history = [[h for h in seed_history if h["update"] <= step] for seed_history in progress["history"]]
-    best = [selection.Selection() for _ in history]
-    for b, seed_history in zip(best, history):
-        for h in seed_history:
-            b.offer(h["SR"], h["update"])
-    diagnostics, counts = ({name: chunks_[:chunks] for name, chunks_ in progress.get(kind, {}).items()}
-                           for kind in ("diagnostics", "counts"))  # fmt: skip
-    return {**progress, "done": step, "history": history, "curves": progress["curves"][:chunks],
-            "diagnostics": diagnostics, "counts": counts, "best_sr": [b.sr for b in best], "best_update": [b.update for b in best],
-            "numerics": numerics.rewind(progress.get("numerics"), step)}  # fmt: skip
-
-
-def check_continuable(folder: Path) -> None:
-    """Refuse (one line) to train on a finished method folder that cannot continue: one
-    assembled from other sweeps' seeds (`assemble` keeps no progress.json), or one without
-    the checkpoint of its last update (a folder kept without checkpoints, as docs/data's)."""
-    if not (folder / "results.json").is_file():
-        return
-    where = f"{folder.name} in {folder.parent.parent}"
-    if not (folder / "progress.json").is_file():
-        raise errors.UserError(f"{where} was assembled from other sweeps' seeds (--reuse) and keeps no progress to "
-                               "continue from; extend those sweeps and assemble it again")  # fmt: skip
-    done = rundir.read_json(folder / "progress.json")["done"]
-    if not (folder / "checkpoints" / str(done)).is_dir():
-        raise errors.UserError(f"{where} keeps no checkpoint of its update {done} to continue from")
-
-
-def set_aside(folder: Path, updates: int) -> None:
-    """Keep a method's results.json of `updates` updates as `results_<updates>_updates.json`
-    before it trains on (an extended sweep); one that keeps no progress.json to continue
-    from (assembled), or whose name is taken, is refused in one line."""
-    kept = folder / f"results_{updates}_updates.json"
-    check_continuable(folder)
-    if kept.exists():
-        raise errors.UserError(f"{folder} holds both results.json and {kept.name}, both of {updates} updates; "
-                               "move one of them first")  # fmt: skip
-    (folder / "results.json").rename(kept)
-    print(f"{folder.name}: its {updates}-update results are kept as {kept.name}; it trains on", flush=True)
+    config, schedule = method_schedule(method, spec)
+    trainer, states, best = Run(folder, config, schedule, tuple(finished_seeds(folder)), method).load()
+    return config, trainer, states, best
 
 
 def run_method(method: str, spec: Sweep, bar, evaluator, folder: Path, budget: list) -> tuple | None:
-    """Train `spec.seeds` seeds of one method vmapped, selecting each seed's model on
-    validation after each chunk; returns (per seed: seed, selected update, test results of
-    the selected and of the last model, validation history, training success rate per
-    update; updates [n]; training success rate [seeds, n]), or None when `budget` (chunks
-    this invocation may still run, a one-item list, or [None]) ran out first.
-
-    `folder` keeps the method's progress: after each chunk an orbax checkpoint of the
-    seeds' training states and selected models, then `progress.json` (updates done,
-    validation history, curves); at the end `results.json`.  A finished method is read
-    back; a started one continues from its last checkpoint, bit for bit on the same platform
-    (progress.json records the platform of each stretch, `experiments.running.numerics`). The
-    loop is `train`'s (`experiments.running.loop`); what differs is what a chunk records."""
-    from foresit_jax.evaluate import agent_params
-    from foresit_jax.train import make_trainer
-
-    if (folder / "results.json").exists():
-        done = rundir.read_json(folder / "results.json")
-        if spec.num_updates is None or done["updates"] >= spec.num_updates:  # (an extension sets num_updates)
-            bar(done["updates"], {"method": method})
-            return done["results"], np.arange(1, done["updates"] + 1), np.array(done["curves"], float)
-        set_aside(folder, done["updates"])  # the sweep was extended (`extend`): this method trains on
+    """Train (or continue, or read back) one arm of the sweep: its `Run` of the sweep's
+    seeds in `folder`. Returns (per seed: its results.json entry; updates [n]; training
+    success rate [seeds, n]), or None when `budget` (chunks this invocation may still run,
+    a one-item list, or [None]) ran out first."""
     config, schedule = method_schedule(method, spec)
-    seeds = seeds_of(spec)
-    trainer = make_trainer(config)
-    env_params = trainer.env_params
-    mesh = devices.seed_mesh(len(seeds))
-    states, best_params = initial_states(trainer, seeds)
-    seed_params_of = jax.vmap(lambda s: agent_params(s, config.sigma2_max, config.evaluation_noise))
-    manager = checkpoint.checkpoint_manager(folder / "checkpoints", 2)
-    progress = {"done": 0, "best_sr": [-1.0] * len(seeds), "best_update": [None] * len(seeds),
-                "history": [[] for _ in seeds], "curves": [], "selection_protocol": selection.PROTOCOL_VERSION}  # fmt: skip
-    if (folder / "progress.json").exists():
-        progress = rundir.read_json(folder / "progress.json")  # its protocol: see check_started
-    # A kill between a chunk's checkpoint and its progress.json leaves a newer checkpoint
-    # that nothing else records: it is dropped, and that chunk runs again (to the same result).
-    intact = loop.resume_point(manager, folder / "checkpoints", progress["done"], label=f"{method}: ")
-    if intact != progress["done"]:
-        progress = rewind(progress, intact)
-    # The platform of the updates still to come (experiments.running.numerics).
-    progress["numerics"], warning = numerics.extend(progress.get("numerics"), progress["done"])
-    if warning:
-        print(f"warning: {method}: {warning}", file=sys.stderr, flush=True)
-    if progress["done"]:
-        restored = checkpoint.restore(manager, progress["done"], {"states": states, "best": best_params})
-        states, best_params = restored["states"], restored["best"]
-        bar(progress["done"], {"method": method})
-    states = devices.shard_seeds(states, mesh)
-    best = [selection.Selection(sr, update, devices.seed_slice(best_params, i))
-            for i, (sr, update) in enumerate(zip(progress["best_sr"], progress["best_update"]))]  # fmt: skip
-    # With the bar shown, the chunk moves it after every update (`Trainer.run`'s on_update;
-    # the state's update count is this method's, the bar counts every method's).
-    offset = bar.position() - progress["done"]
-    run = trainer.seeds_runner(lambda update: bar.at(offset + np.max(update))) if bar.enabled else trainer.run_seeds
-    history = progress["history"]
-
-    def after_chunk(states, chunk: loop.Chunk) -> None:
-        """Record the chunk, select each seed's model on validation (as train does),
-        checkpoint the states and the selected models, then progress.json; move the bar."""
-        metrics = chunk.metrics  # [seeds, n]
-        progress["curves"].append(metrics["charts/success_rate"].tolist())
-        for name in filter(metrics.__contains__, DIAGNOSTICS):  # each seed's mean over the chunk
-            progress.setdefault("diagnostics", {}).setdefault(name, []).append(metrics[name].mean(axis=1).tolist())
-        for name in COUNTS:  # each seed's total over the chunk
-            progress.setdefault("counts", {}).setdefault(name, []).append(metrics[name].sum(axis=1).tolist())
-        seed_params = seed_params_of(states)
-        for i, seed in enumerate(seeds):
-            params = devices.seed_slice(seed_params, i)
-            val = selection.validate(evaluator, params, config, seed, schedule.val_episodes_per_room)
-            history[i].append({"update": chunk.done, **val["overall"]})
-            best[i].offer(val["overall"]["SR"], chunk.done, params)
-        best_params = jax.tree.map(lambda *x: np.stack(x), *[b.params for b in best])
-        checkpoint.save(manager, chunk.done, {"states": states, "best": best_params})
-        progress.update(done=chunk.done, best_sr=[b.sr for b in best], best_update=[b.update for b in best])
-        rundir.write_json(folder / "progress.json", progress)
-        val_sr = np.mean([h[-1]["SR"] for h in history])
-        bar(chunk.n, {"method": method, "SR": f"{metrics['charts/success_rate'].mean():.3f}", "val SR": f"{val_sr:.1f}%"})
-
-    states, done = loop.run_chunks(run, states, env_params, done=progress["done"], total=config.num_updates,
-                                   chunk_updates=schedule.chunk_updates, after_chunk=after_chunk, manager=manager,
-                                   checkpoints=folder / "checkpoints", seeds=seeds, budget=budget,
-                                   label=f"{method}: ")  # fmt: skip
-    if done < config.num_updates:
-        return None
-    curves = np.concatenate([np.array(c, float) for c in progress["curves"]], axis=1)
-    last_params = seed_params_of(states)
-    results = []
-    for i, seed in enumerate(seeds):
-        last = devices.seed_slice(last_params, i)
-        test = [evaluator.evaluate(p, config, "test", selection.test_key(seed), schedule.test_episodes_per_room,
-                                   by_length=True) for p in (best[i].params, last)]  # fmt: skip
-        results.append({"seed": seed, "selected_update": best[i].update, "selected": test[0], "last": test[1],
-                        "validation": history[i], "training_success_rate": curves[i].tolist(),
-                        "diagnostics": {name: [chunk[i] for chunk in chunks]
-                                        for name, chunks in progress.get("diagnostics", {}).items()},
-                        "numerics": progress["numerics"], "counts": counts_of(progress, i)})  # fmt: skip
-    rundir.write_json(folder / "results.json", {"updates": done, "results": results, "curves": curves.tolist(),
-                                                "selection_protocol": selection.PROTOCOL_VERSION})  # fmt: skip
-    return results, np.arange(1, done + 1), curves
+    run = Run(folder, config, schedule, tuple(seeds_of(spec)), method, spec.preset)
+    done = run.results()
+    if done is None:
+        if not run.train(evaluator, bar, budget):
+            return None
+        done = run.test(evaluator)
+    else:
+        bar(done["updates"], {"method": method})
+    return done["results"], np.arange(1, done["updates"] + 1), np.array(done["curves"], float)
 
 
 def check(spec: Sweep) -> None:

@@ -1,7 +1,7 @@
 """Experiment tracking beside the CSV: `train --track tensorboard` or `--track wandb`.
 
 A tracker gets the rows the run folder's files get, as they are written: each update's
-metrics (metrics.csv) and each validation (validation.csv, its columns prefixed
+metrics (metrics.csv) and each validation (progress.json's, its columns prefixed
 `validation/`), keyed by the update. Both backends are optional extras (`pip install
 "foresit_jax[track]"`); asking for one that is not installed is a one-line error before
 any training.
@@ -11,7 +11,7 @@ any training.
 - `wandb` logs to Weights & Biases; it works without a network in offline mode
   (`WANDB_MODE=offline`, the default when no `WANDB_API_KEY` is set), writing into
   `<run>/wandb` for a later `wandb sync`. A resumed run continues the same wandb run (its
-  id is kept in run.json).
+  id is a hash of the folder's path).
 """
 
 from __future__ import annotations
@@ -79,12 +79,12 @@ class WandB(Tracker):
         self.run.finish()
 
 
-def make(kind: str, out: Path, info: dict) -> Tracker:
-    """The tracker of a run folder `out` (`info`: its run.json)."""
+def make(kind: str, out: Path, name: str, config: dict) -> Tracker:
+    """The tracker of the run folder `out`, named `name`, of the Config `config` (as JSON)."""
     check(kind)
     if kind == "tensorboard":
         return TensorBoard(out / "tensorboard")
     if kind == "wandb":
         run_id = hashlib.sha256(str(Path(out).resolve()).encode()).hexdigest()[:16]  # the same on resume
-        return WandB(out / "wandb", run_id, f"{info['method']} seed {info['seed']}", info["config"])
+        return WandB(out / "wandb", run_id, name, config)
     return Tracker()

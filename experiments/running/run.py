@@ -1,0 +1,390 @@
+"""A run: one arm trained over seeds s_1..s_N in one folder, the one format `train` and `sweep` write.
+
+`train` is a run of one seed; a sweep is one run per arm (in `methods/<arm>/`). A run folder holds:
+
+  run.json        what was run: the arm, its preset, Config and Schedule, the seeds, the
+                  selection protocol (`RUN_FORMAT`); it reads alone
+  progress.json   updates done; per seed its validations and its best model's SR and update;
+                  per chunk the training SR of every update, diagnostics and counts; the
+                  platform of each stretch of updates (`numerics`)
+  checkpoints/    orbax checkpoints of {"states", "best"}: every seed's training state and
+                  the model selected on validation, stacked over the seeds (the latest few)
+  results.json    at the end: per seed the test results of the selected and the last model
+                  (with SR and SPL by path length), its validations and training curve
+
+and what the program adds through its recorders (`Recorder`: train's metrics.jsonl/csv
+and tracking). `Run.train` continues from the last intact checkpoint (a kill at any point
+costs at most a chunk, which runs again to the same numbers), `Run.extend` makes it longer,
+`Run.test` writes results.json, `Run.load` reads a finished run back.
+
+One seed runs the unvmapped program (`jax.jit(trainer.run)`): a seed vmapped alone rounds
+differently (docs/design.md), and so `train --seed i` gives the numbers it always gave;
+several seeds run vmapped in one program, spread over the local devices.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import sys
+import time
+from pathlib import Path
+from typing import Optional, Protocol, Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from experiments.reporting.report import DIAGNOSTICS
+from experiments.running import checkpoint, devices, errors, loop, numerics, rundir, selection
+
+# run.json's "format": 2 is this one. A `train` folder written before (run.json with one
+# "seed", best/ and validation.jsonl) still reads (`models`, evaluate), but does not resume.
+RUN_FORMAT = 2
+
+# What each seed trained on, summed over its updates (results.json, `counts`): the frames
+# that entered the loss and the episodes that ended, so that arms of different rollout
+# layouts or budgets can be compared at equal experience (docs/mechanism.md, Study 8).
+COUNTS = ("frames/useful", "charts/episodes")
+
+
+class Recorder(Protocol):
+    """What a program records beside a run's own files (train: its metrics rows, tracking)."""
+
+    def resume(self, done: int) -> None:
+        """The run continues after update `done` (0: from the start): forget what was recorded after it."""
+
+    def record(self, chunk: loop.Chunk, validations: list[dict]) -> None:
+        """A chunk's metrics ({name: [seeds, n]}) and each seed's validation ({"update", SR, SPL, ...});
+        called before the chunk's checkpoint, so that a kill between the two repeats the chunk."""
+
+
+def counts_of(progress: dict, i: int) -> dict:
+    """Seed i's `COUNTS` summed over its training; empty where some chunk went unrecorded
+    (a sweep begun before they were kept and resumed since), rather than an undercount."""
+    counts = progress.get("counts", {})
+    chunks = len(progress["curves"])
+    return {name: float(np.sum([chunk[i] for chunk in counts[name]]))
+            for name in COUNTS if len(counts.get(name, ())) == chunks}  # fmt: skip
+
+
+def rewind(progress: dict, step: int) -> dict:
+    """`progress` (a run's progress.json) as it was after update `step`, a chunk's end
+    (for a resume whose newer checkpoints are corrupt): the chunks after it are dropped,
+    and each seed's best model is chosen again from its validations up to `step`."""
+    lengths = np.cumsum([len(c[0]) if c else 0 for c in progress["curves"]])
+    chunks = int(np.searchsorted(lengths, step, side="right"))
+    history = [[h for h in seed_history if h["update"] <= step] for seed_history in progress["history"]]
+    best = [selection.Selection() for _ in history]
+    for b, seed_history in zip(best, history):
+        for h in seed_history:
+            b.offer(h["SR"], h["update"])
+    diagnostics, counts = ({name: chunks_[:chunks] for name, chunks_ in progress.get(kind, {}).items()}
+                           for kind in ("diagnostics", "counts"))  # fmt: skip
+    return {**progress, "done": step, "history": history, "curves": progress["curves"][:chunks],
+            "diagnostics": diagnostics, "counts": counts, "best_sr": [b.sr for b in best], "best_update": [b.update for b in best],
+            "numerics": numerics.rewind(progress.get("numerics"), step)}  # fmt: skip
+
+
+def initial_states(trainer, seeds: Sequence[int]):
+    """(the seeds' training states, stacked; the selected models (`AgentParams`), stacked:
+    at first the initial ones): what a run's checkpoints hold, as `checkpoint.restore` needs
+    it. One seed is initialised unvmapped (as `train` always was) and given the seed axis."""
+    from foresit_jax.evaluate import agent_params
+
+    select = functools.partial(agent_params, sigma2_max=trainer.config.sigma2_max,
+                               evaluation_noise=trainer.config.evaluation_noise)  # fmt: skip
+    if len(seeds) == 1:
+        state = trainer.init(selection.run_key(seeds[0]))
+        return jax.tree.map(lambda x: x[None], (state, select(state)))
+    states = jax.vmap(trainer.init)(jnp.stack([selection.run_key(s) for s in seeds]))
+    return states, jax.vmap(select)(states)
+
+
+def finished_seeds(folder: Path) -> list[int]:
+    """The seeds a run folder has finished (none when it has not finished)."""
+    if not (folder / "results.json").is_file():
+        return []
+    return [r["seed"] for r in rundir.read_json(folder / "results.json")["results"]]
+
+
+def check_continuable(folder: Path) -> None:
+    """Refuse (one line) to train on a finished run folder that cannot continue: one
+    assembled from other sweeps' seeds (`sweeps.assemble` keeps no progress.json), or one
+    without the checkpoint of its last update (a folder kept without checkpoints, as docs/data's)."""
+    if not (folder / "results.json").is_file():
+        return
+    where = f"{folder.name} in {folder.parent.parent}"
+    if not (folder / "progress.json").is_file():
+        raise errors.UserError(f"{where} was assembled from other sweeps' seeds (--reuse) and keeps no progress to "
+                               "continue from; extend those sweeps and assemble it again")  # fmt: skip
+    done = rundir.read_json(folder / "progress.json")["done"]
+    if not (folder / "checkpoints" / str(done)).is_dir():
+        raise errors.UserError(f"{where} keeps no checkpoint of its update {done} to continue from")
+
+
+def set_aside(folder: Path, updates: int) -> None:
+    """Keep a run's results.json of `updates` updates as `results_<updates>_updates.json`
+    before it trains on (an extended run); one that keeps no progress.json to continue
+    from (assembled), or whose name is taken, is refused in one line."""
+    kept = folder / f"results_{updates}_updates.json"
+    check_continuable(folder)
+    if kept.exists():
+        raise errors.UserError(f"{folder} holds both results.json and {kept.name}, both of {updates} updates; "
+                               "move one of them first")  # fmt: skip
+    (folder / "results.json").rename(kept)
+    print(f"{folder.name}: its {updates}-update results are kept as {kept.name}; it trains on", flush=True)
+
+
+@dataclasses.dataclass
+class Run:
+    """The seeds `seeds` of one arm (`config`, `schedule`) in `folder`; `label` names the
+    arm in messages and on the progress bar, `preset` is recorded in run.json."""
+
+    folder: Path
+    config: object  # foresit_jax.config.Config
+    schedule: object  # presets.Schedule
+    seeds: tuple[int, ...]
+    label: str = ""
+    preset: str = ""
+
+    def __post_init__(self):
+        self.folder = Path(self.folder)
+        self.seeds = tuple(int(s) for s in self.seeds)
+        if not self.seeds:
+            raise errors.UserError("a run needs at least one seed")
+
+    # ------------------------------------------------------------------ its files
+    def info(self) -> dict:
+        """What run.json records."""
+        return {"format": RUN_FORMAT, "arm": self.label or self.config.method, "method": self.config.method,
+                "preset": self.preset, "seeds": list(self.seeds), "config": dataclasses.asdict(self.config),
+                "schedule": dataclasses.asdict(self.schedule), "selection_protocol": selection.PROTOCOL_VERSION}  # fmt: skip
+
+    def results(self) -> dict | None:
+        """results.json when the run has finished its `config.num_updates` updates, else None."""
+        path = self.folder / "results.json"
+        if not path.is_file():
+            return None
+        done = rundir.read_json(path)
+        return done if done["updates"] >= self.config.num_updates else None
+
+    def progress(self) -> dict:
+        """progress.json, or that of a run not yet started."""
+        if (self.folder / "progress.json").is_file():
+            return rundir.read_json(self.folder / "progress.json")
+        n = len(self.seeds)
+        return {"done": 0, "best_sr": [-1.0] * n, "best_update": [None] * n, "history": [[] for _ in self.seeds],
+                "curves": [], "selection_protocol": selection.PROTOCOL_VERSION}  # fmt: skip
+
+    def manager(self):
+        return checkpoint.checkpoint_manager(self.folder / "checkpoints", self.schedule.keep_checkpoints)
+
+    def extend(self, num_updates: int, keep: Sequence[str] = ()) -> "Run":
+        """This run made one of `num_updates` updates, to be trained on by `train` (from its
+        checkpoint: nothing in training depends on the total, so where its updates are a
+        whole number of chunks it ends as a run of `num_updates` from the start would). A
+        finished run's results.json is kept as results_<n>_updates.json (`set_aside`), and the
+        files of the folder named in `keep` (a program's report) move into report_<n>_updates/.
+        Refused in one line, before anything moves: fewer updates than it has, a run that
+        cannot continue, or a report already kept there."""
+        had = self.config.num_updates
+        if num_updates < had:
+            raise errors.UserError(f"--num-updates {num_updates} would shorten {self.folder} ({had} updates); a run can "
+                                   "only be extended (or trained anew in another --out)")  # fmt: skip
+        if num_updates == had:
+            return self
+        check_continuable(self.folder)
+        kept = self.folder / f"report_{had}_updates"
+        moved = [self.folder / name for name in keep if (self.folder / name).is_file()]
+        taken = [f"{kept.name}/{path.name}" for path in moved if (kept / path.name).exists()]
+        if (self.folder / "results.json").is_file():
+            updates = rundir.read_json(self.folder / "results.json")["updates"]
+            taken += [f"results_{updates}_updates.json"] * (self.folder / f"results_{updates}_updates.json").exists()
+        if taken:
+            raise errors.UserError(f"{self.folder} already holds {', '.join(taken)}; move them first")
+        for path in moved:
+            kept.mkdir(exist_ok=True)
+            path.rename(kept / path.name)
+        if had % self.schedule.chunk_updates:
+            print(f"warning: {self.folder} has {had} updates, not a whole number of chunks ({self.schedule.chunk_updates}): "
+                  f"extended, it validates at {had}, where a run of {num_updates} from the start does not, so it will "
+                  "not end as one", file=sys.stderr, flush=True)  # fmt: skip
+        longer = dataclasses.replace(self, config=dataclasses.replace(self.config, num_updates=num_updates))
+        if (self.folder / "run.json").is_file():
+            rundir.write_json(self.folder / "run.json", longer.info())
+        if (self.folder / "results.json").is_file():
+            set_aside(self.folder, rundir.read_json(self.folder / "results.json")["updates"])
+        return longer
+
+    # ------------------------------------------------------------------ training
+    def train(self, evaluator, bar, budget: Optional[list] = None, recorders: Sequence[Recorder] = ()) -> bool:
+        """Train the seeds to `config.num_updates` from where the folder stopped, selecting each
+        seed's model on validation after every chunk; True when done, False when `budget`
+        (a one-item list of the chunks this invocation may still run, or [None]) ran out
+        first. After each chunk: the recorders, then a checkpoint of the states and the
+        selected models, then progress.json. `bar` is `progress.progress_bar`'s, over every
+        update it counts (a sweep's bar counts all its arms)."""
+        from foresit_jax.evaluate import agent_params
+        from foresit_jax.train import make_trainer
+
+        config, schedule, seeds, folder = self.config, self.schedule, list(self.seeds), self.folder
+        label = f"{self.label}: " if self.label else ""
+        done_results = folder / "results.json"
+        if done_results.is_file() and rundir.read_json(done_results)["updates"] < config.num_updates:
+            set_aside(folder, rundir.read_json(done_results)["updates"])  # extended, killed before it trained on
+        folder.mkdir(parents=True, exist_ok=True)
+        if not (folder / "run.json").is_file() or rundir.read_json(folder / "run.json") != rundir.jsonable(self.info()):
+            rundir.write_json(folder / "run.json", self.info())
+        trainer = make_trainer(config)
+        env_params = trainer.env_params
+        single = len(seeds) == 1
+        mesh = devices.seed_mesh(len(seeds))
+        states, best_params = initial_states(trainer, seeds)
+        select = functools.partial(agent_params, sigma2_max=config.sigma2_max, evaluation_noise=config.evaluation_noise)
+        seed_params_of = jax.vmap(select)
+        manager = self.manager()
+        progress = self.progress()  # its protocol: checked by the program (`selection.check_resumable`)
+        # A kill between a chunk's checkpoint and its progress.json leaves a newer checkpoint
+        # that nothing else records: it is dropped, and that chunk runs again (to the same result).
+        intact = loop.resume_point(manager, folder / "checkpoints", progress["done"], label=label)
+        if intact != progress["done"]:
+            progress = rewind(progress, intact)
+        # The platform of the updates still to come (experiments.running.numerics).
+        progress["numerics"], warning = numerics.extend(progress.get("numerics"), progress["done"])
+        if warning:
+            print(f"warning: {label}{warning}", file=sys.stderr, flush=True)
+        if progress["done"]:
+            restored = checkpoint.restore(manager, progress["done"], {"states": states, "best": best_params})
+            states, best_params = restored["states"], restored["best"]
+            print(f"{label}resuming {folder} from update {progress['done']}", flush=True)
+            bar.skip(bar.position() + progress["done"])
+        for recorder in recorders:
+            recorder.resume(progress["done"])
+        best = [selection.Selection(sr, update, devices.seed_slice(best_params, i))
+                for i, (sr, update) in enumerate(zip(progress["best_sr"], progress["best_update"]))]  # fmt: skip
+        # With the bar shown, the chunk moves it after every update (`Trainer.run`'s on_update;
+        # the state's update count is this run's, the bar may count several runs').
+        offset = bar.position() - progress["done"]
+        on_update = (lambda update: bar.at(offset + np.max(update))) if bar.enabled else None
+        if single:  # the unvmapped program, the seed axis outside it
+            states = jax.tree.map(lambda x: x[0], states)
+            jitted = jax.jit(functools.partial(trainer.run, on_update=on_update), static_argnums=2)
+
+            def run(state, env_params, n):
+                state, metrics = jitted(state, env_params, n)
+                return state, jax.tree.map(lambda x: x[None], metrics)
+
+            seed_params = lambda states: jax.tree.map(lambda x: x[None], select(states))  # noqa: E731
+            stacked = lambda tree: jax.tree.map(lambda x: x[None], tree)  # noqa: E731
+        else:
+            states = devices.shard_seeds(states, mesh)
+            run = trainer.seeds_runner(on_update) if on_update else trainer.run_seeds
+            seed_params, stacked = seed_params_of, lambda tree: tree
+        history = progress["history"]
+
+        def after_chunk(states, chunk: loop.Chunk) -> None:
+            """Select each seed's model on validation, record the chunk, checkpoint the states
+            and the selected models, then progress.json; move the bar."""
+            metrics = chunk.metrics  # [seeds, n]
+            params_now = seed_params(states)
+            validations = []
+            for i, seed in enumerate(seeds):
+                params = devices.seed_slice(params_now, i)
+                val = selection.validate(evaluator, params, config, seed, schedule.val_episodes_per_room)
+                validations.append({"update": chunk.done, **val["overall"]})
+                best[i].offer(val["overall"]["SR"], chunk.done, params)
+            for recorder in recorders:
+                recorder.record(chunk, validations)
+            progress["curves"].append(metrics["charts/success_rate"].tolist())
+            for name in filter(metrics.__contains__, DIAGNOSTICS):  # each seed's mean over the chunk
+                progress.setdefault("diagnostics", {}).setdefault(name, []).append(metrics[name].mean(axis=1).tolist())
+            for name in COUNTS:  # each seed's total over the chunk
+                progress.setdefault("counts", {}).setdefault(name, []).append(metrics[name].sum(axis=1).tolist())
+            for h, val in zip(history, validations):
+                h.append(val)
+            best_params = jax.tree.map(lambda *x: np.stack(x), *[b.params for b in best])
+            checkpoint.save(manager, chunk.done, {"states": stacked(states), "best": best_params})
+            progress.update(done=chunk.done, best_sr=[b.sr for b in best], best_update=[b.update for b in best])
+            rundir.write_json(folder / "progress.json", progress)
+            useful = float(np.sum(metrics["frames/useful"]))  # steps that entered the loss, every seed's
+            bar(chunk.n, {**({"method": self.label} if self.label else {}),
+                          "useful fps": f"{useful / (time.time() - chunk.started):,.0f}",
+                          "SR": f"{metrics['charts/success_rate'].mean():.3f}",
+                          "val SR": f"{np.mean([v['SR'] for v in validations]):.1f}%",
+                          **({"warning": "diverging"} if chunk.warning else {})})  # fmt: skip
+
+        states, done = loop.run_chunks(run, states, env_params, done=progress["done"], total=config.num_updates,
+                                       chunk_updates=schedule.chunk_updates, after_chunk=after_chunk, manager=manager,
+                                       checkpoints=folder / "checkpoints", seeds=seeds, budget=budget, label=label)  # fmt: skip
+        return done >= config.num_updates
+
+    def test(self, evaluator) -> dict:
+        """Test each seed's selected and last model (on the test episodes of its seed, with SR
+        and SPL by path length) and write results.json; returns it. The run must have trained
+        to its end (`train`)."""
+        progress = self.progress()
+        if progress["done"] < self.config.num_updates:
+            raise errors.UserError(f"{self.folder} has trained {progress['done']} of {self.config.num_updates} updates; "
+                                   "train it to the end first (--resume)")  # fmt: skip
+        trainer, states, best = self.load_checkpoint(progress["done"])
+        last_params = self._params_of(trainer, states)
+        curves = np.concatenate([np.array(c, float) for c in progress["curves"]], axis=1)
+        results = []
+        for i, seed in enumerate(self.seeds):
+            chosen, last = devices.seed_slice(best, i), devices.seed_slice(last_params, i)
+            test = [evaluator.evaluate(p, self.config, "test", selection.test_key(seed), self.schedule.test_episodes_per_room,
+                                       by_length=True) for p in (chosen, last)]  # fmt: skip
+            results.append({"seed": seed, "selected_update": progress["best_update"][i], "selected": test[0],
+                            "last": test[1], "validation": progress["history"][i],
+                            "training_success_rate": curves[i].tolist(),
+                            "diagnostics": {name: [chunk[i] for chunk in chunks]
+                                            for name, chunks in progress.get("diagnostics", {}).items()},
+                            "numerics": progress["numerics"], "counts": counts_of(progress, i)})  # fmt: skip
+        done = {"updates": progress["done"], "results": results, "curves": curves.tolist(),
+                "selection_protocol": progress.get("selection_protocol", selection.PROTOCOL_VERSION)}  # fmt: skip
+        rundir.write_json(self.folder / "results.json", done)
+        return rundir.read_json(self.folder / "results.json")  # as written (NaN as None)
+
+    # ------------------------------------------------------------------ reading back
+    def _params_of(self, trainer, states):
+        from foresit_jax.evaluate import agent_params
+
+        return jax.vmap(lambda s: agent_params(s, trainer.config.sigma2_max, trainer.config.evaluation_noise))(states)
+
+    def load_checkpoint(self, step: int, seeds: Sequence[int] | None = None):
+        """(trainer, the seeds' training states, their selected models) of checkpoint `step`,
+        stacked over `seeds` (the run's, unless given: a finished run's in results' order)."""
+        from foresit_jax.train import make_trainer
+
+        trainer = make_trainer(self.config)
+        states, best = initial_states(trainer, list(seeds or self.seeds))
+        restored = checkpoint.restore(checkpoint.checkpoint_manager(self.folder / "checkpoints", self.schedule.keep_checkpoints),
+                                      step, {"states": states, "best": best})  # fmt: skip
+        return trainer, restored["states"], restored["best"]
+
+    def load(self):
+        """A finished run read back: (trainer, the seeds' last training states, their selected
+        models), stacked over the seeds it finished (`finished_seeds`, in its results' order)
+        on the first local device."""
+        done = rundir.read_json(self.folder / "results.json")["updates"]
+        return self.load_checkpoint(done, finished_seeds(self.folder))
+
+
+def is_legacy_train_folder(info: dict) -> bool:
+    """Whether run.json is that of a `train` folder from before runs had one format (`RUN_FORMAT`)."""
+    return "format" not in info
+
+
+def read(folder: Path) -> Run:
+    """The run a folder's run.json describes (one of this format: `RUN_FORMAT`)."""
+    from foresit_jax.config import Config
+    from experiments.running.presets import Schedule
+
+    info = rundir.read_run_info(folder)
+    if is_legacy_train_folder(info):
+        raise errors.UserError(f"{folder} was written by experiments.train before runs had one format (it keeps best/ "
+                               "and validation.jsonl): evaluate, probe and failures read it, but it cannot be trained "
+                               "on; train it anew into another --out")  # fmt: skip
+    return Run(folder, Config(**info["config"]), Schedule(**info["schedule"]), tuple(info["seeds"]), info.get("arm", ""),
+               info.get("preset", ""))  # fmt: skip
