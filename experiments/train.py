@@ -149,8 +149,8 @@ def start(args: Args) -> tuple[Run, bool]:
         return run, False
     rundir.prepare_run_dir(out, resume=True, overwrite=args.overwrite)
     run = read(out)  # refuses a folder of before `run.RUN_FORMAT`, in one line
-    if len(run.seeds) != 1:
-        raise errors.UserError(f"{out} is a run of {len(run.seeds)} seeds (a sweep's arm); continue its sweep with "
+    if len(run.seeds) != 1 or (out.parent.name == "methods" and (out.parent.parent / "sweep.json").is_file()):
+        raise errors.UserError(f"{out} is a sweep's arm ({len(run.seeds)} seed(s)); continue its sweep with "
                                "experiments.sweep --resume --out <the sweep folder>")  # fmt: skip
     info = rundir.read_run_info(out)
     selection.check_resumable(run.progress().get("selection_protocol"), str(out))

@@ -378,6 +378,18 @@ def test_progress_bar_is_shared_and_without_the_bar_logs_a_line_per_chunk(capsys
     assert re.fullmatch(r"\[\d\d:\d\d:\d\d\] 5/5 updates, 0\.0 min: method a3c, val SR 12\.5%", lines[1]), lines[1]
     assert not hasattr(train_cli, "_progress")
     assert train_cli.progress_bar is sweeps.progress_bar is progress.progress_bar
+    # Where a resumed run starts: no line, and not counted in the rate (tqdm's `initial`).
+    for enabled in (True, False):
+        capsys.readouterr()
+        advance = progress.progress_bar(total=10, initial=0, enabled=enabled)
+        advance.skip(6)
+        advance.skip(4)  # never back
+        assert advance.position() == 6
+        advance(2, {"method": "a3c"})
+        assert advance.position() == 8
+        advance(0, None)
+    lines = capsys.readouterr().err.splitlines()  # without the bar: the chunk's line, none for the skip
+    assert len(lines) == 1 and " 8/10 updates" in lines[0], lines
 
 
 @pytest.mark.slow
@@ -898,11 +910,16 @@ def test_a_train_folder_of_the_format_before_still_reads_and_is_refused_a_resume
     before = snapshot(out)
     line = cli_error(train_cli.cli, ["--out", out, "--resume"], capsys)
     assert "before runs had one format" in line and "train it anew" in line, line
-    arm = tmp_path / "arm"  # a run folder of two seeds: a sweep's arm, not train's
     info = rundir.read_run_info(finished_run)
+    arm = tmp_path / "arm"  # a run folder of two seeds: a sweep's arm, not train's
     arm.mkdir()
     rundir.write_run_info(arm, {**info, "seeds": [SEED, SEED + 1]})
-    assert "a sweep's arm" in cli_error(train_cli.cli, ["--out", arm, "--resume"], capsys)
+    assert "a sweep's arm (2 seed(s))" in cli_error(train_cli.cli, ["--out", arm, "--resume"], capsys)
+    arm = tmp_path / "sweep" / "methods" / "a3c+foresit"  # one seed, but its sweep's to continue
+    arm.mkdir(parents=True)
+    rundir.write_run_info(arm, info)
+    (tmp_path / "sweep" / "sweep.json").write_text("{}")
+    assert "a sweep's arm (1 seed(s))" in cli_error(train_cli.cli, ["--out", arm, "--resume"], capsys)
     assert {k: v for k, v in snapshot(out).items() if k != rundir.LOCK_FILE} == {
         k: v for k, v in before.items() if k != rundir.LOCK_FILE}
 

@@ -256,6 +256,10 @@ def test_resume_refuses_flags_that_contradict_the_run_and_extends_with_num_updat
     assert rundir.read_run_info(out)["config"]["num_updates"] == 6
     assert rundir.read_json(out / "results_4_updates.json")["updates"] == 4
     assert sorted(p.name for p in (out / "report_4_updates").iterdir()) == sorted(train_cli.REPORT_FILES)
+    # The same updates as a run of 6 from the start (the validation follows the chunks:
+    # here too they end at 2, 4, 6).
+    assert (out / "metrics.jsonl").read_bytes() == (run6 / "metrics.jsonl").read_bytes()
+    assert (out / "results_test.json").read_bytes() == (run6 / "results_test.json").read_bytes()
     # An extension whose report would replace one kept before is refused before anything moves.
     (out / "report_6_updates").mkdir()
     (out / "report_6_updates" / "results_test.json").write_text("mine")
@@ -264,10 +268,12 @@ def test_resume_refuses_flags_that_contradict_the_run_and_extends_with_num_updat
     assert "already holds report_6_updates/results_test.json; move them first" in line, line
     assert {k: v for k, v in snapshot(out).items() if k != rundir.LOCK_FILE} == {
         k: v for k, v in before.items() if k != rundir.LOCK_FILE}
-    # The same updates as a run of 6 from the start (the validation follows the chunks:
-    # here too they end at 2, 4, 6).
-    assert (out / "metrics.jsonl").read_bytes() == (run6 / "metrics.jsonl").read_bytes()
-    assert (out / "results_test.json").read_bytes() == (run6 / "results_test.json").read_bytes()
+    # The same bytes kept there (an extension killed after moving them, the report then
+    # written again by a resume) are this report: the extension goes on.
+    shutil.copy(out / "results_test.json", out / "report_6_updates" / "results_test.json")
+    train_cli.main(train_cli.Args(out=out, resume=True, num_updates=8, progress=False))
+    assert rundir.read_json(out / "report_6_updates" / "results_test.json") == rundir.read_json(run6 / "results_test.json")
+    assert rundir.read_json(out / "results.json")["updates"] == 8
 
 
 @pytest.mark.slow

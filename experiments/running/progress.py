@@ -45,10 +45,16 @@ def progress_bar(total: int, initial: int, enabled: bool):
             bar.update(position - bar.n)
 
     def skip(position: int) -> None:
-        """Move to `position` updates (a resumed run's start) without logging a line."""
-        chunk_end[0] = max(chunk_end[0], int(position))
-        if chunk_end[0] > bar.n:
-            bar.update(chunk_end[0] - bar.n)
+        """Move to `position` updates (where a resumed run starts) without logging a line,
+        and without counting them in the rate (and so the ETA): as tqdm's `initial` would."""
+        delta = int(position) - chunk_end[0]
+        if delta > 0:
+            chunk_end[0] += delta
+            bar.n += delta
+            if not bar.disable:
+                bar.initial += delta
+                bar.last_print_n = bar.n
+                bar.refresh()
 
     advance.at = at
     advance.skip = skip

@@ -114,7 +114,7 @@ def check_continuable(folder: Path) -> None:
     without the checkpoint of its last update (a folder kept without checkpoints, as docs/data's)."""
     if not (folder / "results.json").is_file():
         return
-    where = f"{folder.name} in {folder.parent.parent}"
+    where = f"{folder.name} in {folder.parent.parent}" if folder.parent.name == "methods" else str(folder)
     if not (folder / "progress.json").is_file():
         raise errors.UserError(f"{where} was assembled from other sweeps' seeds (--reuse) and keeps no progress to "
                                "continue from; extend those sweeps and assemble it again")  # fmt: skip
@@ -197,7 +197,9 @@ class Run:
         check_continuable(self.folder)
         kept = self.folder / f"report_{had}_updates"
         moved = [self.folder / name for name in keep if (self.folder / name).is_file()]
-        taken = [f"{kept.name}/{path.name}" for path in moved if (kept / path.name).exists()]
+        # (a file kept there already with the same bytes is this report, kept by an extension killed part-way)
+        taken = [f"{kept.name}/{path.name}" for path in moved
+                 if (kept / path.name).exists() and (kept / path.name).read_bytes() != path.read_bytes()]  # fmt: skip
         if (self.folder / "results.json").is_file():
             updates = rundir.read_json(self.folder / "results.json")["updates"]
             taken += [f"results_{updates}_updates.json"] * (self.folder / f"results_{updates}_updates.json").exists()
@@ -205,8 +207,8 @@ class Run:
             raise errors.UserError(f"{self.folder} already holds {', '.join(taken)}; move them first")
         for path in moved:
             kept.mkdir(exist_ok=True)
-            path.rename(kept / path.name)
-        if had % self.schedule.chunk_updates:
+            path.replace(kept / path.name)
+        if had % self.schedule.chunk_updates and self.progress()["done"] == had:
             print(f"warning: {self.folder} has {had} updates, not a whole number of chunks ({self.schedule.chunk_updates}): "
                   f"extended, it validates at {had}, where a run of {num_updates} from the start does not, so it will "
                   "not end as one", file=sys.stderr, flush=True)  # fmt: skip
@@ -234,6 +236,10 @@ class Run:
         if done_results.is_file() and rundir.read_json(done_results)["updates"] < config.num_updates:
             set_aside(folder, rundir.read_json(done_results)["updates"])  # extended, killed before it trained on
         folder.mkdir(parents=True, exist_ok=True)
+        if len(seeds) == 1 and not (folder / "run.json").is_file() and (folder / "progress.json").is_file():
+            print(f"warning: {label}{folder} was started by a version that ran a seed alone vmapped; it continues with "
+                  "the unvmapped program train runs, which rounds differently, so it will not end with the numbers of "
+                  "either", file=sys.stderr, flush=True)  # fmt: skip
         if not (folder / "run.json").is_file() or rundir.read_json(folder / "run.json") != rundir.jsonable(self.info()):
             rundir.write_json(folder / "run.json", self.info())
         trainer = make_trainer(config)
@@ -340,7 +346,7 @@ class Run:
                             "training_success_rate": curves[i].tolist(),
                             "diagnostics": {name: [chunk[i] for chunk in chunks]
                                             for name, chunks in progress.get("diagnostics", {}).items()},
-                            "numerics": progress["numerics"], "counts": counts_of(progress, i)})  # fmt: skip
+                            "numerics": progress.get("numerics"), "counts": counts_of(progress, i)})  # fmt: skip
         done = {"updates": progress["done"], "results": results, "curves": curves.tolist(),
                 "selection_protocol": progress.get("selection_protocol", selection.PROTOCOL_VERSION)}  # fmt: skip
         rundir.write_json(self.folder / "results.json", done)
