@@ -181,3 +181,38 @@ def test_results_md_quotes_the_org_tune(tmp_path):
         per_seed = [r["selected"]["overall"]["SR"] for r in tuned["results"][by_point["learning_rate=1e-3"]]]
         joined = " / ".join(f"{x:.1f}" for x in per_seed)
         assert f"| {method} | {joined} |" in mechanism and joined in " ".join(doc.split()), joined
+
+
+def test_results_md_quotes_the_noise_placement_arm_and_its_probe(tmp_path, capsys):
+    """results.md's rows for Algorithm 1's noise placement are what experiments.compare
+    computes from docs/data/fair_noise.tar.xz, and its probe quotes are
+    docs/data/fair_probe_noise.json's (beside Eq. 6's, fair_probe_lr3e-4.json)."""
+    import json
+
+    from experiments.reporting import stats
+
+    arm = "a3c+foresit@learning_rate=3e-4,imagination_noise=input"
+    bases = ("a3c+foresit@learning_rate=3e-4", "a3c+critic@learning_rate=3e-4", "a3c")
+    root = study_data.unpack("fair_noise.tar.xz", tmp_path, ("a3c", bases[1], bases[0], arm))
+    out = compare.main(compare.Args(run=root, pairs=tuple(f"{a}:{arm}" for a in bases)))
+    capsys.readouterr()
+    results, doc = report.load(root), (REPO / "docs" / "results.md").read_text()
+    flat = " ".join(doc.split())
+    for a in bases:
+        row = study_data.pair_row(out, results, a, arm)
+        assert row in doc, row
+    vs_base = out["pairs"][f"{arm} - a3c"]
+    assert vs_base["robust"]["SPL"]["p_holm"] < 0.01 and vs_base["robust"]["SPL"]["probability_of_improvement"][0] == 0
+    assert f"by {-vs_base['SPL']['diff']:.1f} SPL on every seed" in flat
+
+    def shifts(data: str, method: str) -> dict:
+        seeds = json.loads((study_data.DATA / data).read_text())["methods"][method]
+        trained = [r["sr"]["trained"] for r in seeds]
+        return {c: study_data.interval(stats.paired(trained, [r["sr"][c] for r in seeds]))
+                for c in ("shuffled, noise off", "untrained f_w")}  # fmt: skip
+
+    mine, eq6 = shifts("fair_probe_noise.json", arm), shifts("fair_probe_lr3e-4.json", bases[0])
+    assert (f"noise off costs {mine['shuffled, noise off']} SR (Eq. 6's placement: {eq6['shuffled, noise off']}), "
+            f"an untrained f_w {mine['untrained f_w']} (Eq. 6's: {eq6['untrained f_w']})") in flat
+    readme = " ".join((REPO / "README.md").read_text().split())
+    assert f"noise inside f_w's input ({study_data.interval(out['pairs'][f'{arm} - {bases[0]}']['SR'])} SR over Eq. 6's)" in readme
