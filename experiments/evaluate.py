@@ -1,8 +1,9 @@
 """Re-evaluate a trained run: `python -m experiments.evaluate --run runs/x --split test`.
 
 Loads the model selected on validation or, with `--which last`, the training state of the
-last checkpoint (of a run folder of `train`, or of one written before its present format), and writes results_<split>.json and .md into the run folder (refusing to
-replace existing ones without --overwrite).
+last checkpoint (of a run folder of `train`, or of one written before its present format),
+and writes results_<split>.json and .md into the run folder (refusing to replace existing
+ones without --overwrite).
 """
 
 from __future__ import annotations

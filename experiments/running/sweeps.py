@@ -9,10 +9,10 @@ validation SR is the one tested, on that run's test episodes: each arm is a
 `experiments.running.run.Run` of the sweep's seeds, the folder format train's run of one
 seed has.  So a seed's numbers are those of its `train` run with the same preset and
 schedule (exactly, in a sweep of one seed, which runs train's unvmapped program), up to
-the float rounding of a vmapped program (the batched matmuls differ in the last bits); over many updates that rounding
-grows into another trajectory (at quick: the same training curve for the first ~100
-updates, then apart), so long runs agree in distribution, not in value.  The last model is
-tested too, for comparison.
+the float rounding of a vmapped program (the batched matmuls differ in the last bits);
+over many updates that rounding grows into another trajectory (at quick: the same
+training curve for the first ~100 updates, then apart), so long runs agree in
+distribution, not in value.  The last model is tested too, for comparison.
 
 `run(Sweep(...))` trains (or continues) a sweep and writes its report; `run_method` one
 arm's `Run`, resumable after a kill (its progress.json and checkpoints); `copy_finished`
