@@ -1,7 +1,8 @@
 """The fairness study (issue 44: a3c, a3c+critic and a3c+foresit at Adam 3e-4 and 1e-3,
-seeds 0-4, quick; and ORG's three arms likewise on org): the figures docs/results.md and the
-README quote are those of its files, kept without checkpoints as docs/data/fair_lr3e-4.tar.xz,
-fair_tune.tar.xz and fair_tune_org.tar.xz, recomputed here by
+seeds 0-4, quick; ORG's three arms likewise on org; the 3e-4 arms at 3x the budget): the
+figures docs/results.md and the README quote are those of its files, kept without checkpoints
+as docs/data/fair_lr3e-4.tar.xz, fair_tune.tar.xz, fair_tune_org.tar.xz, fair_3x.tar.xz and
+others, recomputed here by
 `experiments.compare` and `experiments.tune`, as results.md's commands make them."""
 
 from __future__ import annotations
@@ -216,3 +217,66 @@ def test_results_md_quotes_the_noise_placement_arm_and_its_probe(tmp_path, capsy
             f"an untrained f_w {mine['untrained f_w']} (Eq. 6's: {eq6['untrained f_w']})") in flat
     readme = " ".join((REPO / "README.md").read_text().split())
     assert f"noise inside f_w's input ({study_data.interval(out['pairs'][f'{arm} - {bases[0]}']['SR'])} SR over Eq. 6's)" in readme
+
+
+def _three_x_rows(tmp_path) -> tuple[list[str], dict]:
+    """results.md's rows of the 3x study (docs/data/fair_3x.tar.xz: the 3e-4 sweep extended to
+    9000 updates, each arm's 3000-update results kept beside): per arm, 3000 against 9000
+    updates on the same seeds; the pairs at 9000 as experiments.compare computes them; each
+    pair's gap at 3000, at 9000 and its change, seed by seed. Also returns the per-arm results."""
+    import json
+
+    from experiments.reporting import stats
+
+    root = study_data.unpack("fair_3x.tar.xz", tmp_path, ARMS.values())
+    out = compare.main(compare.Args(run=root, pairs=tuple(f"{ARMS[a]}:{ARMS[b]}" for a, b in PAIRS)))
+    at = {n: {short: json.loads((root / "methods" / arm / name).read_text())["results"] for short, arm in ARMS.items()}
+          for n, name in ((3000, "results_3000_updates.json"), (9000, "results.json"))}  # fmt: skip
+    values = {n: {a: {m: report.values(r, m) for m in ("SR", "SPL")} for a, r in arms.items()} for n, arms in at.items()}
+
+    def mean_std(v) -> str:
+        return f"{v.mean():.1f} ± {v.std(ddof=1):.1f}"
+
+    rows = []
+    for a in ("a3c", "a3c+critic", "a3c+foresit"):
+        cells = []
+        for m in ("SR", "SPL"):
+            before, after = values[3000][a][m], values[9000][a][m]
+            cells += [mean_std(before), mean_std(after), study_data.interval(stats.paired(before, after))]
+        updates = " / ".join(str(r["selected_update"]) for r in at[9000][a])
+        rows.append(f"| {a} | " + " | ".join(cells) + f" | {updates} |")
+    results_9000 = report.load(root)
+    rows += [study_data.pair_row(out, results_9000, ARMS[a], ARMS[b]) for a, b in PAIRS]
+    for a, b in PAIRS:
+        cells = []
+        for m in ("SR", "SPL"):
+            gaps = {n: values[n][b][m] - values[n][a][m] for n in (3000, 9000)}
+            cells += [study_data.interval(stats.paired(values[n][a][m], values[n][b][m])) for n in (3000, 9000)]
+            cells.append(study_data.interval(stats.paired(gaps[3000], gaps[9000])))
+        rows.append(f"| {b} - {a} | " + " | ".join(cells) + " |")
+    return rows, {"at": at, "root": root, "out": out}
+
+
+def test_results_md_quotes_the_3x_study(tmp_path, capsys):
+    """The 3x study's rows in results.md and the README's clause are what its files compute,
+    and the extension is the first sweep's runs continued: each arm's 3000-update results are
+    fair_lr3e-4.tar.xz's, and its validation history begins with that sweep's."""
+    import json
+
+    rows, found = _three_x_rows(tmp_path / "3x")
+    capsys.readouterr()
+    doc = (REPO / "docs" / "results.md").read_text()
+    for row in rows:
+        assert row in doc, row
+    first = study_data.unpack("fair_lr3e-4.tar.xz", tmp_path / "1x", ARMS.values())
+    for short, arm in ARMS.items():
+        assert found["at"][3000][short] == json.loads((first / "methods" / arm / "results.json").read_text())["results"]
+        history = json.loads((found["root"] / "methods" / arm / "progress.json").read_text())["history"]
+        history_3000 = json.loads((first / "methods" / arm / "progress.json").read_text())["history"]
+        assert [h[:6] for h in history] == history_3000 and {len(h) for h in history} == {18}
+    pair = found["out"]["pairs"][f"{ARMS['a3c+foresit']} - {ARMS['a3c']}"]
+    mde = pair["robust"]["SR"]["mde"]
+    assert pair["SR"]["ci_high"] < 3.8  # the paper's gain is outside the interval
+    readme = " ".join((REPO / "README.md").read_text().split())
+    quote = f"a3c+foresit - a3c is {study_data.interval(pair['SR'])} SR (five seeds detect {mde:.1f} points here)"
+    assert quote in readme, quote
