@@ -48,12 +48,13 @@ def read_trained(folder: Path) -> Trained:
     info = rundir.read_run_info(folder)
     if not run.is_legacy_train_folder(info):
         one = run.read(folder)
-        done = one.progress()["done"]
+        progress = one.progress()
+        done = progress["done"]
         if not done:
             raise errors.UserError(f"{folder} has no checkpoint yet (no chunk finished); train it first")
         trainer, states, selected = one.load_checkpoint(done)
         return Trained(one.config, info["schedule"], list(one.seeds), trainer, states, selected,
-                       one.progress()["best_update"], done)  # fmt: skip
+                       progress["best_update"], done)  # fmt: skip
     config = Config(**info["config"])
     trainer = make_trainer(config)
     like = trainer.init(selection.run_key(info["seed"]))
@@ -67,15 +68,21 @@ def read_trained(folder: Path) -> Trained:
     return Trained(config, info["schedule"], [info["seed"]], trainer, states, selected, [steps[1]], steps[0])
 
 
+def _models(config, trainer, seeds, states, selected) -> list[Model]:
+    """One `Model` per seed of states and selected models stacked on a seed axis: each seed's
+    state carries its selected model's parameters."""
+    models = []
+    for i, seed in enumerate(seeds):
+        state, chosen = jax.tree.map(lambda x: x[i], (states, selected))
+        state = state._replace(params=chosen.params, imagination_params=chosen.imagination_params)
+        models.append(Model(config, trainer, seed, state, chosen))
+    return models
+
+
 def models_of_run(folder: Path) -> dict[str, list[Model]]:
     """{method: [Model per seed]} of a run folder (`read_trained`)."""
     trained = read_trained(folder)
-    models = []
-    for i, seed in enumerate(trained.seeds):
-        state, selected = jax.tree.map(lambda x: x[i], (trained.states, trained.selected))
-        state = state._replace(params=selected.params, imagination_params=selected.imagination_params)
-        models.append(Model(trained.config, trained.trainer, seed, state, selected))
-    return {trained.config.method: models}
+    return {trained.config.method: _models(trained.config, trained.trainer, trained.seeds, trained.states, trained.selected)}
 
 
 def models_of_sweep(folder: Path, methods: tuple[str, ...]) -> dict[str, list[Model]]:
@@ -91,10 +98,5 @@ def models_of_sweep(folder: Path, methods: tuple[str, ...]) -> dict[str, list[Mo
         if not methods and not (config.pieces.imagination_variant.uses_imagination or config.pieces.attention_critic):
             continue
         config, trainer, states, best = sweeps.load_method(method, args, folder / "methods" / method)
-        seeds = sweeps.finished_seeds(folder / "methods" / method)
-        out[method] = []
-        for i, seed in enumerate(seeds):
-            state, selected = jax.tree.map(lambda x: x[i], (states, best))
-            state = state._replace(params=selected.params, imagination_params=selected.imagination_params)
-            out[method].append(Model(config, trainer, seed, state, selected))
+        out[method] = _models(config, trainer, sweeps.finished_seeds(folder / "methods" / method), states, best)
     return out
