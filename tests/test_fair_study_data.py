@@ -280,3 +280,25 @@ def test_results_md_quotes_the_3x_study(tmp_path, capsys):
     readme = " ".join((REPO / "README.md").read_text().split())
     quote = f"a3c+foresit - a3c is {study_data.interval(pair['SR'])} SR (five seeds detect {mde:.1f} points here)"
     assert quote in readme, quote
+
+
+def test_results_md_quotes_a3cs_rate_at_3x(tmp_path):
+    """At 9000 updates a3c's learning rate is chosen on validation (docs/data/fair_tune_3x.tar.xz:
+    the tune report over the two extended sweeps): results.md's grid rows and the paired
+    differences it quotes are what its files compute."""
+    from experiments.reporting.tuning import selection_sr
+    from experiments.running import rundir
+
+    tuned = study_data.tune_report("fair_tune_3x.tar.xz", tmp_path)
+    assert tuned["chosen"] == {"a3c": "learning_rate=3e-4"}
+    doc = (REPO / "docs" / "results.md").read_text()
+    for row in tuned["grid_rows"]:
+        assert study_data.grid_line(row) in doc, study_data.grid_line(row)
+    fast, slow = tuned["results"]["a3c@learning_rate=1e-3"], tuned["results"]["a3c@learning_rate=3e-4"]
+    for arm in ("a3c@learning_rate=1e-3", "a3c@learning_rate=3e-4"):  # both trained 9000 updates
+        assert rundir.read_json(tmp_path / "tune" / "sweep" / "methods" / arm / "results.json")["updates"] == 9000
+    val = study_data.interval(stats.paired(selection_sr(fast), selection_sr(slow)))
+    sr, spl = (study_data.interval(stats.paired(report.values(fast, m), report.values(slow, m))) for m in ("SR", "SPL"))
+    flat = " ".join(doc.split())
+    quote = f"3e-4 - 1e-3 is {val} in validation SR, {sr} in test SR and {spl} in test SPL"
+    assert quote in flat, quote
