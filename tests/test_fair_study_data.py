@@ -226,12 +226,12 @@ def _three_x_rows(tmp_path) -> tuple[list[str], dict]:
     pair's gap at 3000, at 9000 and its change, seed by seed. Also returns the per-arm results."""
     import json
 
-    from experiments.reporting import stats
-
     root = study_data.unpack("fair_3x.tar.xz", tmp_path, ARMS.values())
     out = compare.main(compare.Args(run=root, pairs=tuple(f"{ARMS[a]}:{ARMS[b]}" for a, b in PAIRS)))
-    at = {n: {short: json.loads((root / "methods" / arm / name).read_text())["results"] for short, arm in ARMS.items()}
-          for n, name in ((3000, "results_3000_updates.json"), (9000, "results.json"))}  # fmt: skip
+    results_9000 = report.load(root)
+    at = {3000: {short: json.loads((root / "methods" / arm / "results_3000_updates.json").read_text())["results"]
+                 for short, arm in ARMS.items()},
+          9000: {short: results_9000[arm] for short, arm in ARMS.items()}}  # fmt: skip
     values = {n: {a: {m: report.values(r, m) for m in ("SR", "SPL")} for a, r in arms.items()} for n, arms in at.items()}
 
     def mean_std(v) -> str:
@@ -245,7 +245,6 @@ def _three_x_rows(tmp_path) -> tuple[list[str], dict]:
             cells += [mean_std(before), mean_std(after), study_data.interval(stats.paired(before, after))]
         updates = " / ".join(str(r["selected_update"]) for r in at[9000][a])
         rows.append(f"| {a} | " + " | ".join(cells) + f" | {updates} |")
-    results_9000 = report.load(root)
     rows += [study_data.pair_row(out, results_9000, ARMS[a], ARMS[b]) for a, b in PAIRS]
     for a, b in PAIRS:
         cells = []
