@@ -1,5 +1,5 @@
-"""Wrappers (gymnax style): a flat observation vector, the five-value legacy step API and
-episode statistics.
+"""Wrappers (gymnax style): a flat observation vector, the five-value legacy step API,
+episode statistics, and (privileged, for diagnostics) each episode's goal view.
 
 A PureJaxRL-style stack over GridNav (``envs.make_gymnax`` gives the first two layers in
 one call, with gymnax's space classes)::
@@ -180,3 +180,85 @@ class LogWrapper(Wrapper):
         info["returned_episode_spl"] = state.returned_episode_spl
         info["timestep"] = state.timestep
         return (obs, state, reward, *flags, info)
+
+
+@struct.dataclass
+class GoalViewState:
+    """The wrapped env's state and the running episode's goal observation (its parts as
+    ``GoalViewWrapper.GOAL_KEYS`` names them)."""
+
+    env_state: object
+    goal: dict
+
+
+class GoalViewWrapper(Wrapper):
+    """Privileged: every observation also carries its episode's *goal view*, the view at the
+    end of the oracle's shortest path from the episode's start (the pose where Done
+    succeeds): ``obs["goal_view"]`` (and ``obs["goal_detections"]`` in the org setup).
+
+    Built from the wrapped env's public API only: from the start, ``optimal_action`` then
+    ``step_env`` until ``target_in_view``, then ``get_obs``. The path is walked once per
+    episode, at ``reset`` and where ``step`` auto-resets (a ``while_loop`` whose lanes stop
+    at their goal; a lane that did not reset walks no step, so under ``vmap`` a step costs
+    the longest path among the lanes that reset there, and nothing where none did). The
+    view of a pose is a table gather, so the walk moves poses only (the observation of each
+    step of the walk is dead code). For the ``oracle`` imagination (foresit_jax.methods),
+    a diagnostic of how much a perfect imagination of success could give: no agent sees
+    this in a real home."""
+
+    GOAL_KEYS = {"view": "goal_view", "detections": "goal_detections"}
+
+    def _params(self, params):
+        return self._env.default_params if params is None else params
+
+    def goal_observation(self, state, params=None, walk=None):
+        """The goal parts ``{"goal_view": ..., ...}`` of the episode starting at ``state``;
+        ``walk`` (bool ``[]``, default True): whether to walk at all (False: the parts of
+        ``state``'s own view, cheap)."""
+        params = self._params(params)
+        env = self._env
+        walk = jnp.asarray(True) if walk is None else walk
+        # A shortest path is at most L^g - 1 moves; the bound only guards a broken table.
+        limit = env.shortest_path_length(state, params)
+
+        def cond(carry):
+            s, moved = carry
+            return walk & ~env.target_in_view(s, params) & (moved < limit)
+
+        def body(carry):
+            s, moved = carry
+            _, s, *_ = env.step_env(jax.random.PRNGKey(0), s, env.optimal_action(s, params), params)  # deterministic
+            return s, moved + 1
+
+        end, _ = jax.lax.while_loop(cond, body, (state, jnp.zeros((), jnp.int32)))
+        obs = env.get_obs(end, params)
+        return {goal: obs[key] for key, goal in self.GOAL_KEYS.items() if key in obs}
+
+    def observation_space(self, params=None):
+        inner = self._env.observation_space(params)
+        parts = dict(inner.spaces)
+        for key, goal in self.GOAL_KEYS.items():
+            if key in parts:
+                parts[goal] = parts[key]
+        return spaces.Dict(parts)
+
+    def reset(self, key, params=None):
+        params = self._params(params)
+        obs, env_state = self._env.reset(key, params)
+        goal = self.goal_observation(env_state, params)
+        return {**obs, **goal}, GoalViewState(env_state, goal)
+
+    def step(self, key, state, action, params=None):
+        params = self._params(params)
+        obs, env_state, reward, terminated, truncated, info = self._env.step(key, state.env_state, action, params)
+        done = terminated | truncated  # the returned state is the next episode's start there
+        fresh = self.goal_observation(env_state, params, walk=done)
+        goal = jax.tree.map(lambda f, g: jnp.where(done, f, g), fresh, state.goal)
+        return {**obs, **goal}, GoalViewState(env_state, goal), reward, terminated, truncated, info
+
+    @staticmethod
+    def goal_of(obs: dict) -> dict:
+        """The goal view as an observation of the wrapped env (its view and detections
+        replaced by the goal's; the target kept), for an encoder that reads those keys."""
+        goal = {key: obs[goal] for key, goal in GoalViewWrapper.GOAL_KEYS.items() if goal in obs}
+        return {key: value for key, value in obs.items() if key not in GoalViewWrapper.GOAL_KEYS.values()} | goal

@@ -212,7 +212,8 @@ def report(run: Run, done: dict, evaluator, seconds: float) -> dict:
     test = {room: m for room, m in result["selected"].items() if room != "by_length"}
     random = evaluator.evaluate_random_policy(config, "test", selection.test_key(seed), run.schedule.test_episodes_per_room)
     rundir.write_json(out / "results_test.json", {"selected_update": step, "results": test, "random_policy": random})
-    title = f"{config.method}, preset {run.preset}, seed {seed}: test split (model of update {step}, best validation SR)"
+    title = (f"{tables.arm_label(config.method)}, preset {run.preset}, seed {seed}: test split (model of update {step}, "
+             "best validation SR)")
     text = tables.results_markdown(test, title) + "\n" + tables.results_markdown(random, "Uniformly random policy, same rooms", level=2)
     (out / "results_test.md").write_text(text)
     y = np.array(result["training_success_rate"], float)

@@ -26,7 +26,8 @@ it (`rollout`), and so does training with `Config.rollout='episodes'` (the refer
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple, Optional
+import functools
+from typing import Any, Callable, NamedTuple, Optional
 
 import chex
 import jax
@@ -34,6 +35,7 @@ import jax.numpy as jnp
 from flax import struct
 
 import envs.metrics
+from envs.wrappers import GoalViewWrapper
 from foresit_jax import distributions, imagination
 from foresit_jax.config import Config
 from foresit_jax.lstm import LowRankUpdate, LSTMCarry, LSTMKernels, initial_carry, lstm_step, reset_carry
@@ -227,6 +229,7 @@ class Agent:
         if isinstance(num_lanes, bool) or not isinstance(num_lanes, int) or num_lanes < 1:
             raise ValueError(f"num_lanes must be a positive int, got {num_lanes!r}")
         cfg = self.config
+        env = self.bind(env)
         reset_keys = jax.random.split(key, num_lanes) if reset_keys is None else reset_keys
         obs, env_state = env.reset(reset_keys)
         hidden = cfg.hidden_size
@@ -246,7 +249,29 @@ class Agent:
             tracker=tracker,
         )
 
+    def bind(self, env: BoundEnv) -> BoundEnv:
+        """The environment this agent acts in: `env` itself, or, for an imagination that
+        reads the goal view (the privileged `oracle`), `env` wrapped to carry it
+        (`envs.wrappers.GoalViewWrapper`; built for that method alone, so no other
+        program changes)."""
+        if not self.imagination_variant.reads_goal_view or isinstance(env.env, GoalViewWrapper):
+            return env
+        return BoundEnv(GoalViewWrapper(env.env), env.params)
+
     # ------------------------------------------------------------------ acting
+    def goal_latent(self, params, kernels: LSTMKernels, obs) -> chex.Array:
+        """The agent's own latent of its episodes' goal views `[B, H]` (privileged; the
+        `oracle` imagination's i_tau before noise): the encoder and one LSTM step from a
+        fresh carry (zero carry and previous action probabilities, as at an episode's
+        first step) on `obs`'s goal view (`GoalViewWrapper.goal_of`), under `kernels`."""
+        lanes = obs["target"].shape[:-1]
+        hidden = self.config.hidden_size
+        probs = jnp.zeros(lanes + (self.config.num_actions,), jnp.float32)
+        encoder_imagined = jnp.zeros(lanes + (hidden,), jnp.float32) if self.imagination_in_encoder else None
+        gates = self.input_gates(params, GoalViewWrapper.goal_of(obs), probs, kernels, encoder_imagined)
+        _, latent = lstm_step(kernels, initial_carry(lanes, hidden), gates)
+        return latent
+
     def lstm_inputs(self, params, obs, prev_action_probs, encoder_imagined=None):
         """The encoder's output, the LSTM's input x_t `[..., F]` (encoder_imagined: the
         encoder's i_tau `[..., H]`, with `imagination_in_encoder`)."""
@@ -288,12 +313,14 @@ class Agent:
                                           options)  # fmt: skip
 
     def imagined_at_step(self, acting: AgentParams, actor: ActorState, s_t: chex.Array,
-                         key: chex.PRNGKey) -> chex.Array:  # fmt: skip
+                         key: chex.PRNGKey, goal_latent: Optional[Callable[[], chex.Array]] = None) -> chex.Array:  # fmt: skip
         """i_tau for a step `[B, H]` (Eq. 6-7): renewed where the ImaginationVariant piece says (an
         episode's first step; every K steps for `int`) from s_t (= s_0 at the first step)
         by f_w (`acting.imagination_params`), with noise of each lane's variance
         (`acting.noise_variance` `[B]`, or Eq. 7 from its success tracker), else the
-        running episode's. Unchanged without imagination."""
+        running episode's. Unchanged without imagination. goal_latent: `() -> [B, H]`,
+        the goal view's latent (`goal_latent`), for an imagination that reads it (called
+        only where i_tau is renewed)."""
         cfg, variant = self.config, self.imagination_variant  # the method's ImaginationVariant piece
         if not variant.uses_imagination:
             return actor.imagined
@@ -306,7 +333,8 @@ class Agent:
         def renewed():
             mask = renew[:, None]  # [B, 1], before the imagination (the order of the lowered program's ops)
             return jnp.where(mask, variant.imagine(self.imagine, acting.imagination_params, s_t, goal, key, noise_variance,
-                                                    cfg.rnd_variance, cfg.imagination_noise == "input"),
+                                                    cfg.rnd_variance, cfg.imagination_noise == "input",
+                                                    None if goal_latent is None else goal_latent()),
                              actor.imagined)  # fmt: skip
 
         return jax.lax.cond(jnp.any(renew), renewed, lambda: actor.imagined)
@@ -324,6 +352,7 @@ class Agent:
           kernels, `foresit_jax.maml`); gate_offsets: `[num_steps, B, 4H]` added to each
           step's gate pre-activations (zeros whose gradient is the pre-activations')."""
         params, lanes = acting.params, jnp.arange(actor.episode_step.shape[0])
+        env = self.bind(env)
         kernels = self.lstm_kernels(params, lstm_update)  # once, outside the loop
 
         def step(carry, xs):
@@ -337,7 +366,10 @@ class Agent:
                 input_gates = input_gates + gate_offset
             lstm, s_t = lstm_step(kernels, actor.lstm, input_gates)
             s_0 = jnp.where(first[:, None], s_t, actor.s_0)
-            imagined = self.imagined_at_step(acting, actor, s_t, k_imag)  # [B, H]
+            goal_latent = None  # the oracle's: computed only where i_tau is renewed
+            if self.imagination_variant.reads_goal_view:
+                goal_latent = functools.partial(self.goal_latent, params, kernels, actor.obs)
+            imagined = self.imagined_at_step(acting, actor, s_t, k_imag, goal_latent)  # [B, H]
             policy_input = imagined if self.imagination_in_head else None
             logits = self.model.apply(params, s_t, policy_input, method=ActorCritic.policy_logits)
             action = distributions.greedy(logits) if options.greedy else distributions.sample(k_act, logits)

@@ -206,6 +206,9 @@ class Config:
                             ("attention_key_gradient", ATTENTION_KEY_GRADIENTS)):  # fmt: skip
             if getattr(self, name) not in valid:
                 raise ValueError(f"{name} must be one of {valid}, got {getattr(self, name)!r}.")
+        if pieces.imagination_variant.reads_goal_view and self.imagination_noise != "output":
+            raise ValueError(f"method {self.method!r} takes i_tau from the goal view, not from f_w: its noise is "
+                             "Eq. 6's, on i_tau; drop imagination_noise (or set it to 'output').")  # fmt: skip
         if self.imagination_optimizer not in IMAGINATION_OPTIMIZERS:
             raise ValueError(
                 f"imagination_optimizer must be one of {IMAGINATION_OPTIMIZERS}, "

@@ -14,7 +14,10 @@ A method is a base learner x an encoder x a critic x an imagination variant:
   no imagination and `a3c+foresit+plaincritic` ForeSIT without it;
 * imagination: `none`, `foresit` (Sections 4.2-4.4), or a Table 3 ablation: `rnd`
   (i_tau = tanh(z)), `att` (imagine the attention-weighted average state), `int`
-  (re-imagine from s_t every K steps).
+  (re-imagine from s_t every K steps); and `oracle`, a privileged diagnostic, never a
+  method: i_tau is the agent's own latent of its episode's goal view (the view where the
+  oracle's shortest path ends, `envs.wrappers.GoalViewWrapper`), the ceiling of a
+  perfect imagination of success (docs/ceiling.md).
 
 Which state f_w learns to imagine depends on the critic: with the attention critic the
 sub-goal is s_{t*}, t* the argmax of the Done step's attention row (Section 4.2); the plain
@@ -61,7 +64,9 @@ class ImaginationVariant:
     """An imagination variant: where i_tau comes from, when it is renewed, what f_w learns.
 
     source: 'none' (the policy sees s_t only), 'learned' (f_w([s_0 : g_tau]) + noise,
-      Eq. 6-7), 'random' (tanh(z), z ~ N(0, rnd_variance I)).
+      Eq. 6-7), 'random' (tanh(z), z ~ N(0, rnd_variance I)), 'goal_view' (privileged: the
+      network's encoder and one LSTM step from a fresh carry on the episode's goal view,
+      + noise as Eq. 6-7; f_w is not trained).
     critic: the critic a method with this variant gets unless its name says otherwise
       ('attention' for every variant of the paper, 'plain' for none).
     subgoal_mode: what f_w learns to imagine: 'argmax' (s_{argmax alpha}) or
@@ -81,6 +86,12 @@ class ImaginationVariant:
         return self.source != "none"
 
     @property
+    def reads_goal_view(self) -> bool:
+        """Whether i_tau comes from the episode's goal view (privileged: the environment is
+        wrapped in `envs.wrappers.GoalViewWrapper`)."""
+        return self.source == "goal_view"
+
+    @property
     def trains_imagination(self) -> bool:
         """Whether buffers are filled and f_w is trained."""
         return self.source == "learned"
@@ -94,13 +105,16 @@ class ImaginationVariant:
     def imagine(
         self, imagine_fn: Callable, w_params, s_t: chex.Array, goal: chex.Array, key: chex.PRNGKey,
         noise_variance: chex.Array, rnd_variance: float, noise_on_input: bool = False,
+        goal_latent: Optional[chex.Array] = None,
     ) -> chex.Array:  # fmt: skip
         """i_tau `[B, H]` for the policy (stop-gradient: the policy loss never trains f_w
         or, through it, s_0). learned: f_w([s_t : g]) + N(0, sigma2) (Eq. 6), or with
         `noise_on_input` f_w([s_t : g] + N(0, sigma2)) (Algorithm 1; Config.imagination_noise);
-        random: tanh(N(0, v))."""
+        random: tanh(N(0, v)); goal_view: `goal_latent` `[B, H]` + N(0, sigma2)."""
         if self.source == "random":
             return imagination.random_imagination(key, s_t.shape, rnd_variance)
+        if self.reads_goal_view:
+            return jax.lax.stop_gradient(imagination.add_imagination_noise(key, goal_latent, noise_variance))
         if noise_on_input:
             s_in, goal_in = imagination.add_input_noise(key, jax.lax.stop_gradient(s_t), goal, noise_variance)
             return jax.lax.stop_gradient(imagine_fn(w_params, s_in, goal_in))
@@ -116,6 +130,8 @@ IMAGINATION_VARIANTS: dict[str, ImaginationVariant] = {
     "rnd": dataclasses.replace(_FORESIT, name="rnd", source="random"),
     "att": dataclasses.replace(_FORESIT, name="att", subgoal_mode="attention_average"),
     "int": dataclasses.replace(_FORESIT, name="int", renew_every_k=True),
+    # Privileged, a diagnostic (docs/ceiling.md): ForeSIT with i_tau from the goal view.
+    "oracle": dataclasses.replace(_FORESIT, name="oracle", source="goal_view"),
 }
 
 
@@ -278,6 +294,12 @@ class Method:
         return {"rollout": "episodes", "gradient": "through_rollout"} if self.base_piece.adapts_in_episode else {}
 
     @property
+    def privileged(self) -> bool:
+        """Whether the method reads what no agent can see (the `oracle` imagination): a
+        diagnostic, labelled privileged wherever it is reported."""
+        return self.imagination_variant.reads_goal_view
+
+    @property
     def greedy_evaluation(self) -> bool:
         """Whether evaluation takes the argmax action: ORG's own protocol (its evaluation
         is greedy); SAVN's (and the paper's other rows) sample from the policy."""
@@ -302,6 +324,7 @@ IMPLEMENTED_METHODS: tuple[str, ...] = (
     "a3c+maml", "a3c+maml+foresit",
     "a3c+org", "a3c+org+foresit", "a3c+org+rnd", "a3c+org+att", "a3c+org+int",
     "a3c+critic", "a3c+org+critic",
+    "a3c+oracle", "a3c+org+oracle",  # privileged diagnostics, not methods (docs/ceiling.md)
 )  # fmt: skip
 
 

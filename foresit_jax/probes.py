@@ -39,6 +39,11 @@ class ShuffledImagination(Agent):
     def imagine(self, w_params, s_0: chex.Array, goal: chex.Array) -> chex.Array:
         return super().imagine(w_params, jnp.roll(s_0, 1, axis=0), jnp.roll(goal, 1, axis=0))
 
+    def goal_latent(self, params, kernels, obs) -> chex.Array:
+        """The privileged oracle's i_tau shuffled the same way: lane b gets lane b - 1's
+        goal view's latent (its episode, its target)."""
+        return jnp.roll(super().goal_latent(params, kernels, obs), 1, axis=0)
+
 
 def r_squared(predicted: np.ndarray, target: np.ndarray, reference: np.ndarray) -> float:
     """1 - SSE(predicted) / SSE(reference), summed over items and dimensions: the share of

@@ -59,7 +59,8 @@ def sr_conditions(model: Model, evaluator, episodes: int, shuffled) -> dict[str,
     out = {"trained": sr(trained)}
     if config.pieces.imagination_variant.uses_imagination:
         out["noise off"] = sr(trained._replace(noise_variance=jnp.zeros_like(training_end)))
-        out["untrained f_w"] = sr(trained._replace(imagination_params=untrained_w))
+        if config.pieces.imagination_variant.trains_imagination:  # the oracle's i_tau owes nothing to f_w
+            out["untrained f_w"] = sr(trained._replace(imagination_params=untrained_w))
         out["shuffled"] = sr(trained, agent=shuffled)
         # At the training-end noise most of i_tau's variance can be noise: shuffling then
         # changes little of what the policy sees. Without the noise, only i_tau's content moves.

@@ -52,8 +52,10 @@ def mean_std_ci(row: dict, col: str) -> str:
 
 def table_markdown(rows: list[dict], title: str) -> str:
     columns = [c for c in COLUMNS + HOUSE_COLUMNS if rows and f"{c} mean" in rows[0]]
-    cells = [[row["method"], *(mean_std_ci(row, c) for c in columns)] for row in rows]
+    cells = [[tables.arm_label(row["method"]), *(mean_std_ci(row, c) for c in columns)] for row in rows]
     note = "mean ± sample std [95% confidence interval, Student t] over seeds"
+    if any(tables.arm_label(row["method"]) != row["method"] for row in rows):
+        note += "; " + tables.PRIVILEGED_NOTE
     return f"# {title}\n\n" + markdown_table(cells, ["Method", *columns]) + f"\n({note})\n"
 
 
@@ -63,7 +65,7 @@ def paired_markdown(results_by_method: dict[str, list[dict]], room: str = "overa
     methods = list(results_by_method)
     cells = []
     for method in methods[1:]:
-        cell = [f"{method} - {methods[0]}"]
+        cell = [f"{tables.arm_label(method)} - {tables.arm_label(methods[0])}"]
         for col in ("SR", "SPL"):
             base, other = ([r[room][col] for r in results_by_method[m]] for m in (methods[0], method))
             p = stats.paired(base, other)

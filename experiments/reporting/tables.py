@@ -11,6 +11,8 @@ import math
 from pathlib import Path
 from typing import Optional, Sequence
 
+from foresit_jax.methods import parse_method
+
 
 def markdown_table(rows: Sequence[Sequence], columns: Sequence[str], align: Optional[str] = None) -> str:
     """A Markdown table: the header `columns`, a rule, and one line per row of cells
@@ -61,6 +63,20 @@ def _csv_cell(value):
 
 RESULT_COLUMNS = ("SPL", "SR", "SPL>=5", "SR>=5")  # Table 1's columns
 HOUSE_COLUMNS = ("SPL>=10", "SR>=10", "SPL>=20", "SR>=20")  # and the houses' longer buckets (envs.metrics)
+
+
+PRIVILEGED_NOTE = ("privileged: i_tau is the agent's latent of its episode's goal view, which no agent can see; "
+                   "a diagnostic of the ceiling of a perfect imagination (docs/ceiling.md), never a method")
+
+
+def arm_label(arm: str) -> str:
+    """An arm's name as reports print it: `a3c+oracle (privileged)` for a method that reads
+    what no agent can see (`Method.privileged`), else the name itself."""
+    try:
+        privileged = parse_method(arm.split("@")[0]).privileged
+    except ValueError:  # not a method name (a pair's label, a condition)
+        privileged = False
+    return f"{arm} (privileged)" if privileged else arm
 
 
 def results_markdown(results: dict, title: str, level: int = 1) -> str:
