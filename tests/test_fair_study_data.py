@@ -277,7 +277,7 @@ def test_results_md_quotes_the_3x_study(tmp_path, capsys):
     mde = pair["robust"]["SR"]["mde"]
     assert pair["SR"]["ci_high"] < 3.8  # the paper's gain is outside the interval
     readme = " ".join((REPO / "README.md").read_text().split())
-    quote = f"a3c+foresit - a3c is {study_data.interval(pair['SR'])} SR (five seeds detect {mde:.1f} points here)"
+    quote = f"a3c+foresit - a3c is {study_data.interval(pair['SR'])} SR (five seeds detect {mde:.1f} points here,"
     assert quote in readme, quote
 
 
@@ -301,3 +301,14 @@ def test_results_md_quotes_a3cs_rate_at_3x(tmp_path):
     flat = " ".join(doc.split())
     quote = f"3e-4 - 1e-3 is {val} in validation SR, {sr} in test SR and {spl} in test SPL"
     assert quote in flat, quote
+
+
+def test_readme_quotes_the_archived_replicate_of_its_first_table(tmp_path):
+    """The README's first table has no archive; it quotes the same pair's archived replicate
+    (the tune study's 1e-3 arms, docs/data/fair_tune.tar.xz) beside it."""
+    tuned = study_data.tune_report("fair_tune.tar.xz", tmp_path)
+    base, arm = (tuned["results"][f"{m}@learning_rate=1e-3"] for m in ("a3c", "a3c+foresit"))
+    sr, spl = (stats.paired(report.values(base, m), report.values(arm, m)) for m in ("SR", "SPL"))
+    readme = " ".join((REPO / "README.md").read_text().split())
+    quote = f"a3c+foresit - a3c {study_data.interval(sr)} SR and {study_data.interval(spl)} SPL"
+    assert quote in readme, quote

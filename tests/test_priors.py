@@ -397,4 +397,4 @@ def test_docs_quote_the_org_control_in_both_layouts(tmp_path):
     row = "| priors - today (Welch) | | | " + " | ".join(welch) + " |"
     assert row in doc, row
     readme = " ".join((repo / "README.md").read_text().split())
-    assert f"no more over a3c than in today's rooms ({welch[0]} SR;" in readme
+    assert f"over a3c than in today's rooms cannot be told ({welch[0]} SR;" in readme

@@ -52,7 +52,8 @@ def test_minimum_detectable_effect_has_the_power_it_claims_in_a_simulation():
     assert math.isnan(stats.minimum_detectable_effect(sd, 1)) and math.isnan(stats.minimum_detectable_effect(0.0, 5))
 
 
-def test_bootstrap_interval_covers_the_point_and_shrinks_with_more_runs():
+def test_bootstrap_interval_covers_the_point_and_shrinks_with_more_runs(monkeypatch):
+    monkeypatch.setattr(stats, "MIN_MONTE_CARLO", 500)  # SCORES' tasks are beyond the exact limit
     point, low, high = stats.stratified_bootstrap_ci(stats.iqm, SCORES, reps=500)
     assert low <= point <= high
     many = np.tile(SCORES, (20, 1))
@@ -88,3 +89,48 @@ def test_bootstrap_intervals_equal_rliables_up_to_resampling_noise():
     point, low, high = stats.stratified_bootstrap_ci(stats.probability_of_improvement, SCORES, OTHER, reps=8000)
     assert point == pytest.approx(RLIABLE_POI[0], rel=1e-12)
     assert low == pytest.approx(RLIABLE_POI[1], abs=0.015) and high == pytest.approx(RLIABLE_POI[2], abs=0.015)
+
+
+def test_multisets_and_their_probabilities_count_every_ordered_resample():
+    """Brute force: all n^n ordered draws, grouped by their counts."""
+    import itertools
+    from collections import Counter
+
+    for n in (1, 3, 5):
+        counts, probs = stats.multisets(n)
+        assert len(counts) == math.comb(2 * n - 1, n) and (counts.sum(1) == n).all()
+        brute = Counter(tuple(np.bincount(draw, minlength=n)) for draw in itertools.product(range(n), repeat=n))
+        assert len(brute) == len(counts)
+        for row, p in zip(counts, probs):
+            assert p == pytest.approx(brute[tuple(row)] / n**n, rel=1e-12)
+
+
+def brute_force_interval(statistic, *arrays, level=0.95):
+    """Every ordered resample of every array (n^n each), equally weighted, inverted-CDF quantiles."""
+    import itertools
+
+    draws = [list(itertools.product(range(len(a)), repeat=len(a))) for a in arrays]
+    values = np.sort([statistic(*(np.asarray(a)[list(d)] for a, d in zip(arrays, ds))) for ds in itertools.product(*draws)])
+    cdf = np.arange(1, len(values) + 1) / len(values)
+    return tuple(float(values[np.searchsorted(cdf, q - 1e-12)]) for q in ((1 - level) / 2, (1 + level) / 2))
+
+
+def test_exact_bootstrap_intervals_equal_a_brute_force_enumeration_and_ignore_the_seed():
+    x, y = np.array([66.0, 70.5, 61.0, 68.0]), np.array([62.0, 71.0, 60.5, 66.0])
+    for statistic, arrays in ((stats.iqm, (x,)), (stats.probability_of_improvement, (y, x)), (np.mean, (x,))):
+        point, low, high = stats.stratified_bootstrap_ci(statistic, *arrays, seed=1)
+        assert (low, high) == pytest.approx(brute_force_interval(statistic, *arrays), abs=1e-12)
+        assert stats.stratified_bootstrap_ci(statistic, *arrays, seed=2) == (point, low, high)
+    # Five seeds: the IQM's 126 and P(B > A)'s 126^2 resamples, enumerated (fast path = generic).
+    x5, y5 = np.array([66.0, 70.0, 61.0, 68.0, 64.0]), np.array([62.0, 71.0, 60.0, 66.0, 65.0])
+    assert stats.stratified_bootstrap_ci(stats.iqm, x5) == stats.stratified_bootstrap_ci(lambda a: stats.iqm(a), x5)
+    assert stats.stratified_bootstrap_ci(stats.probability_of_improvement, y5, x5) == stats.stratified_bootstrap_ci(
+        lambda a, b: stats.probability_of_improvement(a, b), y5, x5)
+
+
+def test_monte_carlo_beyond_the_exact_limit_is_close_to_the_exact_interval(monkeypatch):
+    x5 = np.array([66.0, 70.0, 61.0, 68.0, 64.0])
+    exact = stats.stratified_bootstrap_ci(stats.iqm, x5)
+    monkeypatch.setattr(stats, "EXACT_LIMIT", 0)
+    sampled = stats.stratified_bootstrap_ci(stats.iqm, x5, reps=10)  # at least MIN_MONTE_CARLO all the same
+    assert sampled[0] == exact[0] and sampled[1:] == pytest.approx(exact[1:], abs=0.5)

@@ -99,24 +99,104 @@ def probability_of_improvement(x, y) -> float:
     return float(np.mean(per_task))
 
 
-def stratified_bootstrap_ci(statistic, *scores, reps: int = 2000, level: float = LEVEL, seed: int = 0):
+# Up to this many distinct resamples, `stratified_bootstrap_ci` enumerates them exactly:
+# 126 multisets for one method's 5 seeds, 92,378 for 10, 126^2 = 15,876 for a pair's 5 and 5.
+EXACT_LIMIT = 100_000
+# Beyond it, at least this many Monte Carlo resamples.
+MIN_MONTE_CARLO = 20_000
+
+
+def multisets(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every multiset of size n drawn from n items, as counts `[K, n]` (K = C(2n - 1, n)),
+    and its probability under n draws with replacement `[K]` (the multinomial
+    n! / prod(c_i!) / n^n; they sum to 1)."""
+    counts = []
+
+    def fill(prefix, left, slots):
+        if slots == 1:
+            counts.append(prefix + [left])
+            return
+        for c in range(left, -1, -1):
+            fill(prefix + [c], left - c, slots - 1)
+
+    fill([], n, n)
+    counts = np.asarray(counts, np.int64)
+    log_p = math.lgamma(n + 1) - np.sum([[math.lgamma(c + 1) for c in row] for row in counts], axis=1) - n * math.log(n)
+    return counts, np.exp(log_p)
+
+
+def weighted_quantiles(values, weights, qs) -> list[float]:
+    """The inverted-CDF quantiles of a discrete distribution: for each q, the smallest value
+    v whose cumulative weight reaches q (numpy's `method="inverted_cdf"` for equal weights,
+    Hyndman and Fan's definition 1). Both ends of an interval are attained values, so an
+    interval never reports a value no resample gives."""
+    order = np.argsort(values, kind="stable")
+    v, cdf = np.asarray(values, float)[order], np.cumsum(np.asarray(weights, float)[order])
+    cdf /= cdf[-1]
+    return [float(v[min(np.searchsorted(cdf, q - 1e-12, side="left"), len(v) - 1)]) for q in qs]
+
+
+def _exact_one_task(statistic, arrays, per_stratum):
+    """(values, weights) of every resample for the two statistics the reports use on one
+    task, without a Python loop over the resamples: the IQM of one array (each multiset's
+    runs built at once) and P(X > Y) of two (C_x S C_y^T / (n_x n_y), S the pairwise win
+    matrix); None for anything else (the generic enumeration then runs)."""
+    if any(a.shape[1] != 1 for a in arrays):
+        return None
+    if statistic is iqm and len(arrays) == 1:
+        (counts, probs), x = per_stratum[0], arrays[0][:, 0]
+        runs = np.repeat(np.tile(x, len(counts)), counts.ravel()).reshape(len(counts), len(x))
+        return _stats.trim_mean(runs, proportiontocut=0.25, axis=1), probs
+    if statistic is probability_of_improvement and len(arrays) == 2:
+        (cx, px), (cy, py) = per_stratum
+        x, y = arrays[0][:, 0], arrays[1][:, 0]
+        wins = (x[:, None] > y[None, :]) + 0.5 * (x[:, None] == y[None, :])
+        values = cx @ wins @ cy.T / (len(x) * len(y))
+        return values.ravel(), np.outer(px, py).ravel()
+    return None
+
+
+def stratified_bootstrap_ci(statistic, *scores, reps: int = MIN_MONTE_CARLO, level: float = LEVEL, seed: int = 0):
     """Percentile interval of `statistic(*scores)` under the stratified bootstrap: each
     array's runs are resampled with replacement within each task, the arrays independently
     (rliable's StratifiedBootstrap, and StratifiedIndependentBootstrap for several).
-    Returns (point, low, high)."""
+    Returns (point, low, high).
+
+    Exact where cheap: when the distinct resamples (a multiset of runs per task and array)
+    number at most `EXACT_LIMIT`, each is enumerated with its multinomial probability, so
+    the interval does not move with a random seed (the statistic must not depend on the
+    runs' order, as the IQM, the mean and P(B > A) do not). Otherwise `max(reps,
+    MIN_MONTE_CARLO)` Monte Carlo resamples from `seed`. Either way the ends are the
+    inverted-CDF quantiles (`weighted_quantiles`) at (1 - level) / 2 and (1 + level) / 2."""
     arrays = [_runs_by_tasks(s) for s in scores]
-    rng = np.random.default_rng(seed)
     point = float(statistic(*arrays))
-    values = np.empty(reps)
-    for r in range(reps):
+    qs = ((1 - level) / 2, (1 + level) / 2)
+    strata = [(i, t) for i, a in enumerate(arrays) for t in range(a.shape[1])]
+    sizes = [math.comb(2 * arrays[i].shape[0] - 1, arrays[i].shape[0]) for i, _ in strata]
+    if math.prod(sizes) <= EXACT_LIMIT:
+        per_stratum = [multisets(arrays[i].shape[0]) for i, _ in strata]
+        fast = _exact_one_task(statistic, arrays, per_stratum)
+        if fast is not None:
+            return (point, *weighted_quantiles(*fast, qs))
+        values, weights = [], []
+        for choice in np.ndindex(*sizes):
+            resampled = [a.copy() for a in arrays]
+            weight = 1.0
+            for (i, t), k, (counts, probs) in zip(strata, choice, per_stratum):
+                resampled[i][:, t] = np.repeat(arrays[i][:, t], counts[k])
+                weight *= probs[k]
+            values.append(statistic(*resampled))
+            weights.append(weight)
+        return (point, *weighted_quantiles(values, weights, qs))
+    rng = np.random.default_rng(seed)
+    values = np.empty(max(reps, MIN_MONTE_CARLO))
+    for r in range(len(values)):
         resampled = []
         for a in arrays:
             rows = rng.integers(0, a.shape[0], size=a.shape)  # per task (column) its own draw
             resampled.append(np.take_along_axis(a, rows, axis=0))
         values[r] = statistic(*resampled)
-    tail = 100 * (1 - level) / 2
-    low, high = np.percentile(values, [tail, 100 - tail])
-    return point, float(low), float(high)
+    return (point, *weighted_quantiles(values, np.ones(len(values)), qs))
 
 
 def holm(p_values) -> np.ndarray:

@@ -214,7 +214,8 @@ class Run:
                   "not end as one", file=sys.stderr, flush=True)  # fmt: skip
         longer = dataclasses.replace(self, config=dataclasses.replace(self.config, num_updates=num_updates))
         if (self.folder / "run.json").is_file():
-            rundir.write_json(self.folder / "run.json", longer.info())
+            rundir.write_json(self.folder / "run.json", {**longer.info(), "commits": rundir.read_json(
+                self.folder / "run.json").get("commits", [])})
         if (self.folder / "results.json").is_file():
             set_aside(self.folder, rundir.read_json(self.folder / "results.json")["updates"])
         return longer
@@ -240,8 +241,10 @@ class Run:
             print(f"warning: {label}{folder} was started by a version that ran a seed alone vmapped; it continues with "
                   "the unvmapped program train runs, which rounds differently, so it will not end with the numbers of "
                   "either", file=sys.stderr, flush=True)  # fmt: skip
-        if not (folder / "run.json").is_file() or rundir.read_json(folder / "run.json") != rundir.jsonable(self.info()):
-            rundir.write_json(folder / "run.json", self.info())
+        previous = rundir.read_json(folder / "run.json") if (folder / "run.json").is_file() else None
+        info = rundir.with_commit(self.info(), previous)
+        if previous != rundir.jsonable(info):
+            rundir.write_json(folder / "run.json", info)
         trainer = make_trainer(config)
         env_params = trainer.env_params
         single = len(seeds) == 1

@@ -15,6 +15,7 @@ import json
 import math
 import os
 import shutil
+import subprocess
 import sys
 from pathlib import Path
 
@@ -136,6 +137,33 @@ def args_from_saved(cls, saved: dict, **given):
             value = type(default)(**{k: tuple(v) if isinstance(v, list) else v for k, v in value.items()})
         values[f.name] = tuple(value) if isinstance(value, list) else value
     return cls(**{**values, **given})
+
+
+def code_commit() -> str | None:
+    """The commit of the checkout this code runs from (`git rev-parse HEAD` beside the
+    `experiments` package), with "+dirty" where tracked files differ from it; None outside a
+    git checkout (an installed wheel). Runs record it (run.json's "commits"), so a study's
+    plan can be checked to precede them (docs/plans/)."""
+    root = Path(__file__).resolve().parents[2]
+    try:
+        head = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True, timeout=30)
+        if head.returncode != 0:
+            return None
+        dirty = subprocess.run(["git", "-C", str(root), "diff", "--quiet", "HEAD", "--", "."], timeout=30).returncode
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return head.stdout.strip() + ("+dirty" if dirty else "")
+
+
+def with_commit(info: dict, previous: dict | None) -> dict:
+    """run.json's `info` with "commits": the commits that trained the run, in order (those
+    `previous`, the run.json on disk, lists, then this checkout's where it differs from the
+    last)."""
+    commits = list((previous or {}).get("commits", []))
+    commit = code_commit()
+    if commit is not None and (not commits or commits[-1] != commit):
+        commits.append(commit)
+    return {**info, "commits": commits}
 
 
 def write_run_info(path: Path, info: dict) -> None:
