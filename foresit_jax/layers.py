@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import chex
 import flax.linen as nn
+import jax
 import jax.numpy as jnp
 
 
@@ -56,3 +57,31 @@ class GridDense(nn.Module):
         per_sample = jnp.concatenate([jnp.reshape(v, (-1, v.shape[-1])) for v in vectors], axis=-1)
         per_sample = jnp.reshape(jnp.dot(per_sample, kernel[sizes[0] :]) + bias, (*batch_shape, self.features))
         return cells + per_sample[..., None, None, :]
+
+
+def orthogonal(scale: float = 1.0):
+    """`nn.initializers.orthogonal(scale)` drawn one sample at a time under `vmap`.
+
+    Vmapped (several seeds initialised in one program), flax's initialiser is one batched
+    QR (LAPACK geqrf/orgqr) per parameter. jaxlib 0.10's CPU LAPACK kernels split a batch
+    over XLA:CPU's intra-op thread pool and block a pool thread until its chunks are done;
+    two such QRs running side by side (the LSTM's recurrent kernels and the actor) can
+    occupy every thread of a 2-thread pool and wait on each other forever. Here a batch of
+    keys is drawn by `lax.map`, one unbatched QR after another: the same per-sample
+    values (LAPACK factors each matrix of a batch on its own), nothing batched to split."""
+    base = nn.initializers.orthogonal(scale)
+
+    def init(key, shape, dtype=jnp.float32):
+        @jax.custom_batching.custom_vmap
+        def draw(key):
+            return base(key, shape, dtype)
+
+        @draw.def_vmap
+        def _(axis_size, in_batched, key):
+            del axis_size
+            (batched,) = in_batched
+            return (jax.lax.map(draw, key), True) if batched else (draw(key), False)
+
+        return draw(key)
+
+    return init

@@ -30,6 +30,8 @@ import jax.numpy as jnp
 import numpy as np
 from flax import traverse_util
 
+from foresit_jax.layers import orthogonal
+
 LSTMCarry = tuple[chex.Array, chex.Array]  # (c, h), each [..., hidden_size]
 
 LSTM_GATES: tuple[str, ...] = ("i", "f", "g", "o")
@@ -219,6 +221,9 @@ class EncoderLSTM(nn.OptimizedLSTMCell):
       episode (`episode_step` `[T, B]` 0), and `readout(s_t, x_t)` of each step (the
       replay: `ActorCritic.replay`).
     A step of acting runs `lstm_step` on `kernels` made once per window (outside the loop)."""
+
+    # flax's orthogonal initialiser, drawn a sample at a time under vmap (see `layers.orthogonal`)
+    recurrent_kernel_init: Any = orthogonal()
 
     def kernels(self, update: Optional[LowRankUpdate] = None) -> LSTMKernels:
         return lstm_kernels(self.variables["params"])._replace(update=update)

@@ -26,7 +26,7 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
-from foresit_jax.layers import Dense, GridDense
+from foresit_jax.layers import Dense, GridDense, orthogonal
 from foresit_jax.lstm import (  # noqa: F401 (initial_carry, reset_carry: re-exported)
     EncoderLSTM, LowRankUpdate, LSTMCarry, LSTMKernels, initial_carry, reset_carry,
 )
@@ -132,7 +132,7 @@ class PolicyHead(nn.Module):
         if self.hidden:
             x = nn.relu(Dense(self.hidden, name="hidden")(x))  # [..., hidden]
         return Dense(
-            self.num_actions, kernel_init=nn.initializers.orthogonal(0.01), name="actor"
+            self.num_actions, kernel_init=orthogonal(0.01), name="actor"
         )(x)  # [..., A]
 
 

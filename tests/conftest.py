@@ -50,6 +50,8 @@ def pytest_configure(config):
     user's own `JAX_COMPILATION_CACHE_DIR` is left as it is."""
     config.addinivalue_line("markers", f"{SLOW}: trains, runs a CLI end to end or compiles many programs "
                                        "(the slow tier: python -m pytest -m slow; docs/testing.md)")
+    config.addinivalue_line("markers", "readme_snippet: the README's library snippet at its own sizes (.ci/run runs "
+                                       "it again on the unconstrained resolution of Python 3.11)")
     if not hasattr(config, "workerinput") and _CACHE not in os.environ:
         folder = xla_cache_dir()
         if folder is None:

@@ -37,12 +37,13 @@ _ORACLES = {}
 
 
 def oracle_key(kit, scene):
-    return kit.env.setup, kit.env.view_width, int(kit.bank["numbers"][scene])
+    return kit.env.setup, kit.env.layout, kit.env.priors, kit.env.view_width, int(kit.bank["numbers"][scene])
 
 
 def cached_oracle(kit, scene):
     """reference_oracle(kit, scene)[0], computed once per session (keyed by the scene's own
-    number, not its index in the kit's bank, so that banks of other splits or layouts
+    number, not its index in the kit's bank, and by the layout family, so that banks of other
+    splits, layouts or of rooms with priors
     never share an entry)."""
     key = oracle_key(kit, scene)
     if key not in _ORACLES:
