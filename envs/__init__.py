@@ -9,7 +9,8 @@
 time; it is then cached on disk (``envs.bank_cache``: ``$FORESIT_CACHE_DIR``, default
 ``~/.cache/foresit_jax``; ``FORESIT_NO_CACHE=1`` turns that off).  gymnax-style code:
 ``envs.make_gymnax`` returns ``(env, params)`` as ``gymnax.make`` does (flat float32
-observations, gymnax's spaces, the installed gymnax's step convention: ``envs.gymnax_compat``),
+observations, gymnax's spaces, a five-value step whatever is installed, six with
+``step_api="terminated_truncated"``: ``envs.gymnax_compat``),
 and registers GridNav with gymnax's registry when gymnax has been imported before ``envs``
 (else ``envs.register_gymnax()``).  ``envs.spaces`` mirrors gymnax's space classes
 (``envs.spaces.to_gymnax`` converts them), ``envs.wrappers`` has

@@ -11,17 +11,27 @@ What it returns is what ``gymnax.make`` returns for one of gymnax's own environm
   ``observation_space`` a ``Box`` of that size; ``action_space`` is ``Discrete(6)``.  The
   space classes are gymnax's own (``gymnax.environments.spaces``) when gymnax is installed,
   so its wrappers' ``isinstance`` checks pass, and ``envs.spaces``' look-alikes otherwise.
-- ``step`` resets automatically and follows the step convention of the gymnax that is
-  installed, which is what code written for that gymnax unpacks (``step_api``):
+- ``step`` resets automatically and returns the values of one fixed step convention,
+  ``step_api``, whatever is installed (it never changes under a user who installs gymnax 1.x,
+  e.g. with the ``rejax`` extra):
 
-  - ``"done"``, five values ``obs, state, reward, done, info`` with
-    ``done = terminated | truncated``: gymnax before 1.0, and PureJaxRL's ``ppo.py`` and
-    wrappers, which unpack five.  Chosen too when gymnax is not installed.
-    ``info`` has no ``final_observation`` unless ``final_observation=True``.
+  - ``"done"`` (the default), five values ``obs, state, reward, done, info`` with
+    ``done = terminated | truncated``: gymnax before 1.0, and what PureJaxRL's ``ppo.py``
+    and wrappers and rejax 0.1.3 unpack.  ``info`` has no ``final_observation`` unless
+    ``final_observation=True``.
   - ``"terminated_truncated"``, six values ``obs, state, reward, terminated, truncated,
-    info``: gymnax 1.0 and later.  ``info["final_observation"]`` (the flat observation
-    before the reset) is there by default, since gymnax 1.x's own
-    ``FlattenObservationWrapper`` reads it at every step.
+    info``: gymnax 1.0 and later (``step_api="terminated_truncated"`` for code written
+    against gymnax 1.x, e.g. gymnax 1.x's own ``gymnax.wrappers.purerl``).
+    ``info["final_observation"]`` (the flat observation before the reset) is there by
+    default, since gymnax 1.x's own ``FlattenObservationWrapper`` reads it at every step.
+  - ``"auto"``: the installed gymnax's convention (six values from gymnax 1.0 on, five
+    before it or without it: ``installed_step_api()``), the default of version 0.1.0; never
+    the default now.
+
+  Version 0.1.0's default was ``"auto"``: six values where gymnax >= 1 is installed.  The
+  default became ``"done"`` in 0.2.0, and a call that does not pass ``step_api`` where
+  gymnax >= 1 is installed (the one case whose result changed) emits a ``FutureWarning``
+  saying so (one per call); passing ``step_api`` silences it.
 
   Either way ``info`` holds GridNav's facts about the step (``success``,
   ``episode_length``, ``optimal_length``, ``room_type``, ``scene``, ``target``,
@@ -32,12 +42,25 @@ What it returns is what ``gymnax.make`` returns for one of gymnax's own environm
   a static ``jit`` argument needs (GridNav's params hold the scene bank as device arrays,
   which cannot be hashed), and copied as themselves (they are immutable: ``copy.deepcopy``
   of a client's config shares the bank instead of copying it, and stays the same key).
-- ``name``, ``num_actions``, ``reset_env``, ``step_env`` (no automatic reset; the same
-  number of values as ``step``) and ``get_obs``, as gymnax's ``Environment`` has them.
+- gymnax 1.x ``Environment``'s other members, which do not depend on what is installed:
+  ``name``, ``num_actions``, ``reset_env``, ``get_obs``; ``step_env`` (no automatic reset;
+  five values as gymnax 1.x's: ``obs, state, reward, terminated, info`` under
+  ``"terminated_truncated"``, ``obs, state, reward, done, info`` under ``"done"``);
+  ``is_terminated`` (always False: GridNav's episodes end by the Done action, which the
+  state does not record), ``is_truncated`` (GridNav's own time limit,
+  ``state.time >= params.max_steps[state.room_type]``), ``discount`` (0 where terminated,
+  else 1, as gymnax's) and ``state_space`` (a ``Dict`` of ``EnvState``'s fields).
 
 ``register_gymnax()`` adds GridNav-v0 to gymnax's registry (gymnax 1.0 and later have
 one; it returns False for an older gymnax or none), after which
-``gymnax.make("GridNav-v0", **kwargs)`` is ``make_gymnax`` with those keywords.
+``gymnax.make("GridNav-v0", **kwargs)`` is ``make_gymnax`` with those keywords, with the
+same defaults: ``gymnax.make("GridNav-v0")`` returns the five-value env (and warns as
+``make_gymnax`` does), ``gymnax.make("GridNav-v0", step_api="terminated_truncated")`` the
+six-value one.  rejax's string path goes through it too:
+``PPO.create(env="GridNav-v0", env_params={"room_types": ["bathroom"]}, ...)`` (after
+``envs.register_gymnax()``) calls ``gymnax.make("GridNav-v0", room_types=["bathroom"])``
+(rejax 0.1.3 passes ``env_params`` as ``gymnax.make``'s keywords), so it trains on the
+five-value env rejax unpacks; ``env_params={..., "step_api": "done"}`` silences the warning.
 ``import envs`` registers it when gymnax has been imported already; importing gymnax takes
 seconds, so ``envs`` never imports it itself.  gymnax is an optional dependency: nothing
 here needs it.
@@ -47,17 +70,22 @@ from __future__ import annotations
 
 import functools
 import importlib.util
+import warnings
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
+from envs import catalog as C
 from envs import spaces
+from envs.bank import UNREACHABLE
 from envs.gridnav import EnvParams, GridNav
 from envs.versions import installed_version
 from envs.wrappers import FlattenObservationWrapper
 
 STEP_APIS = ("auto", "done", "terminated_truncated")
+DEFAULT_STEP_API = "done"  # fixed, whatever is installed (0.1.0's default was "auto")
 
 
 def installed_gymnax_version() -> tuple[int, ...] | None:
@@ -68,10 +96,39 @@ def installed_gymnax_version() -> tuple[int, ...] | None:
 
 
 def default_step_api() -> str:
-    """The step convention of the installed gymnax: six values from 1.0 on, five before
-    (and without gymnax, PureJaxRL's five)."""
+    """The step convention ``make_gymnax`` uses when ``step_api`` is not passed: ``"done"``
+    (five values), whatever is installed.  (Before 0.2.0 it was the installed gymnax's,
+    which ``installed_step_api`` gives.)"""
+    return DEFAULT_STEP_API
+
+
+def installed_step_api() -> str:
+    """The step convention of the installed gymnax (what ``step_api="auto"`` chooses): six
+    values from 1.0 on, five before (and without gymnax, PureJaxRL's five)."""
     version = installed_gymnax_version()
     return "terminated_truncated" if version is not None and version >= (1,) else "done"
+
+
+def _resolve_step_api(step_api: str | None, stacklevel: int) -> str:
+    """"done" or "terminated_truncated" for a ``step_api`` argument (None: not passed).
+
+    Not passed where gymnax >= 1 is installed, the one case whose result changed in 0.2.0
+    (0.1.0 chose six values there), is a ``FutureWarning``, raised ``stacklevel`` frames up
+    (this function counts as one)."""
+    if step_api is not None and step_api not in STEP_APIS:
+        raise ValueError(f"step_api must be one of {STEP_APIS}, got {step_api!r}")
+    if step_api is None:
+        version = installed_gymnax_version()
+        if version is not None and version >= (1,):
+            warnings.warn(
+                f"envs.make_gymnax / gymnax.make('GridNav-v0'): the default step_api changed in 0.2.0 from six "
+                f"values (obs, state, reward, terminated, truncated, info: gymnax 1.x's convention, which 0.1.0 "
+                f"chose where gymnax >= 1 is installed, as here: gymnax {'.'.join(map(str, version))}) to five "
+                f"(obs, state, reward, done, info), whatever is installed. Pass step_api=\"terminated_truncated\" "
+                f"for gymnax 1.x's convention, or step_api=\"done\" to silence this warning.",
+                FutureWarning, stacklevel=stacklevel)  # fmt: skip
+        return DEFAULT_STEP_API
+    return installed_step_api() if step_api == "auto" else step_api
 
 
 def _import_gymnax(module: str = "gymnax"):
@@ -140,6 +197,8 @@ class GymnaxGridNav:
     """
 
     def __init__(self, env: GridNav, params, step_api: str):
+        if step_api not in ("done", "terminated_truncated"):
+            raise ValueError(f"GymnaxGridNav takes step_api 'done' or 'terminated_truncated', got {step_api!r}")
         self._flat = FlattenObservationWrapper(env)
         self.gridnav = env
         self.step_api = step_api
@@ -183,12 +242,61 @@ class GymnaxGridNav:
         return self._flat.reset(key, params)
 
     def step_env(self, key: jax.Array, state, action, params):
+        """One step without automatic reset, five values as gymnax 1.x's ``step_env``:
+        ``obs, state, reward, terminated, info`` under step_api "terminated_truncated"
+        (gymnax 1.x's ``step`` adds ``truncated`` from ``is_truncated``), ``obs, state,
+        reward, done, info`` with ``done = terminated | truncated`` under "done" (gymnax
+        0.x's).  ``info`` is GridNav's (with ``terminated`` and ``truncated``)."""
         obs, state, reward, terminated, truncated, info = self.gridnav.step_env(key, state, action, params)
-        return self._in_convention(self._flat.flatten(obs, params), state, reward, terminated, truncated, info)
+        flag = terminated | truncated if self.step_api == "done" else terminated
+        return self._flat.flatten(obs, params), state, reward, flag, info
 
     def get_obs(self, state, params=None):
         params = self.default_params if params is None else params
         return self._flat.flatten(self.gridnav.get_obs(state, params), params)
+
+    def is_terminated(self, state, params=None) -> jax.Array:
+        """Always False: GridNav's episodes end by the Done action, which the state does not
+        record (``step`` and ``step_env`` return ``terminated``; the state after a Done is not
+        itself terminal)."""
+        return jnp.zeros_like(state.time, dtype=bool)
+
+    def is_truncated(self, state, params=None) -> jax.Array:
+        """Whether the state has reached GridNav's own time limit, that of its room type:
+        ``state.time >= params.max_steps[state.room_type]`` (not gymnax's
+        ``max_steps_in_episode``, the longest of them)."""
+        params = self.default_params if params is None else params
+        return state.time >= params.max_steps[state.room_type]
+
+    def discount(self, state, params=None) -> jax.Array:
+        """0 where ``is_terminated``, else 1 (so always 1), as gymnax's."""
+        terminated = self.is_terminated(state, params)
+        return jax.lax.select(terminated, jnp.zeros(terminated.shape, jnp.float32),
+                              jnp.ones(terminated.shape, jnp.float32))
+
+    def state_space(self, params=None):
+        """A ``Dict`` space of ``EnvState``'s fields, in its order (the space classes of
+        ``observation_space``), bounds from ``params``: ``agent_pos`` in [0, grid_size),
+        ``heading`` 8, ``horizon`` 2, ``scene`` the bank's scene count, ``room_type`` 4,
+        ``target`` the setup's category count, ``target_slot`` the bank's targets per scene,
+        ``time`` in [0, the longest time limit], ``optimal_length`` in [1, the bank's longest
+        finite distance]."""
+        params = self.default_params if params is None else params
+        sp, bank, grid = _space_classes(), params.bank, self.gridnav.grid_size
+        distance = bank.distance.astype(jnp.int32)
+        longest = jnp.max(jnp.where(distance < UNREACHABLE, distance, 0))
+        parts = {
+            "agent_pos": sp.Box(0, grid - 1, (2,), jnp.int32),
+            "heading": sp.Discrete(C.NUM_HEADINGS),
+            "horizon": sp.Discrete(C.NUM_HORIZONS),
+            "scene": sp.Discrete(int(bank.numbers.shape[0])),
+            "room_type": sp.Discrete(len(C.ROOM_TYPES)),
+            "target": sp.Discrete(self.gridnav.num_categories),
+            "target_slot": sp.Discrete(int(bank.targets.shape[1])),
+            "time": sp.Box(0, jnp.max(params.max_steps), (), jnp.int32),
+            "optimal_length": sp.Box(1, longest, (), jnp.int32),
+        }
+        return sp.Dict(parts)
 
     def _in_convention(self, obs, state, reward, terminated, truncated, info):
         if self.step_api == "done":
@@ -199,24 +307,32 @@ class GymnaxGridNav:
         return f"GymnaxGridNav({self.gridnav.setup!r}, step_api={self.step_api!r})"
 
 
-def make_gymnax(env_id: str = "GridNav-v0", *, step_api: str = "auto", final_observation: bool | None = None,
+def make_gymnax(env_id: str = "GridNav-v0", *, step_api: str | None = None, final_observation: bool | None = None,
                 setup: str = "savn", split: str = "train", room_types=None, training: bool | None = None,
                 **env_kwargs):
     """``(env, params)`` as ``gymnax.make`` returns them (see the module docstring).
 
     Args:
       env_id: "GridNav-v0".
-      step_api: "auto" (the installed gymnax's convention: ``default_step_api()``),
-        "done" (five values) or "terminated_truncated" (six).
+      step_api: the step convention, fixed whatever is installed:
+        "done" (the default: five values ``obs, state, reward, done, info``, what
+        PureJaxRL's ``ppo.py`` and rejax 0.1.3 unpack), "terminated_truncated" (six,
+        gymnax 1.x's ``obs, state, reward, terminated, truncated, info``) or "auto" (the
+        installed gymnax's: ``installed_step_api()``).  Not passing it where gymnax >= 1
+        is installed emits a ``FutureWarning``: 0.1.0's default there was six values.
       final_observation: put the flat observation before the automatic reset in
         ``info["final_observation"]``; by default only with the six-value step.
       setup, split, room_types, training, env_kwargs: as ``envs.make``.
+
+    ``gymnax.make("GridNav-v0", **kwargs)`` (after ``envs.register_gymnax()``) is this
+    function with those keywords and the same defaults: five values unless ``step_api`` is
+    passed.  So is rejax's string path, ``PPO.create(env="GridNav-v0",
+    env_params={"room_types": ["bathroom"]}, ...)``: rejax 0.1.3 passes ``env_params`` to
+    ``gymnax.make`` as keywords, and trains on the five-value env.
     """
     from envs import make  # envs/__init__ imports this module
 
-    if step_api not in STEP_APIS:
-        raise ValueError(f"step_api must be one of {STEP_APIS}, got {step_api!r}")
-    step_api = default_step_api() if step_api == "auto" else step_api
+    step_api = _resolve_step_api(step_api, stacklevel=3)  # the warning points at the caller
     if final_observation is None:
         final_observation = step_api == "terminated_truncated"
     env, params = make(env_id, setup=setup, split=split, room_types=room_types, training=training,
@@ -226,6 +342,9 @@ def make_gymnax(env_id: str = "GridNav-v0", *, step_api: str = "auto", final_obs
 
 
 def _gymnax_factory(env_id: str, **kwargs) -> GymnaxGridNav:
+    """``gymnax.make(env_id, **kwargs)``'s env: ``make_gymnax``'s, with its defaults (and its
+    warning, pointed at ``gymnax.make``'s caller)."""
+    kwargs["step_api"] = _resolve_step_api(kwargs.get("step_api"), stacklevel=4)
     return make_gymnax(env_id, **kwargs)[0]
 
 
@@ -247,5 +366,5 @@ def register_gymnax() -> bool:
     return True
 
 
-__all__ = ["STEP_APIS", "GymnaxEnvParams", "GymnaxGridNav", "default_step_api", "installed_gymnax_version", "make_gymnax",
-           "register_gymnax"]
+__all__ = ["DEFAULT_STEP_API", "STEP_APIS", "GymnaxEnvParams", "GymnaxGridNav", "default_step_api",
+           "installed_gymnax_version", "installed_step_api", "make_gymnax", "register_gymnax"]

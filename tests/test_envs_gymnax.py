@@ -1,11 +1,14 @@
 """envs.make_gymnax: GridNav as gymnax.make returns an environment (flat float32
-observations, gymnax's spaces, the installed gymnax's step convention, cached default
-params), checked against GridNav itself; and the registration with gymnax's registry.  The
+observations, gymnax's spaces, one fixed step convention by default, five values, whatever
+is installed, cached default params, gymnax 1.x Environment's members), checked against
+GridNav itself; and the registration with gymnax's registry.  The
 tests that need gymnax are skipped with a reason without it (CI installs it on both stacks: the dev extra on Python 3.11, without its jax cap on 3.13).
 The PPO loops over it are tests/test_envs_purejaxrl_ppo.py."""
 
+import contextlib
 import subprocess
 import sys
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -21,6 +24,24 @@ GYMNAX = gymnax_compat.installed_gymnax_version()
 needs_gymnax = pytest.mark.skipif(GYMNAX is None, reason="gymnax is not installed (pip install -e '.[gymnax]')")
 needs_gymnax_1 = pytest.mark.skipif(GYMNAX is None or GYMNAX < (1,), reason="needs gymnax >= 1.0 (its registry)")
 ROOMS = ("bathroom",)
+DEFAULT_CHANGED = "default step_api changed in 0.2.0"
+
+
+@contextlib.contextmanager
+def default_warning(gymnax_version=GYMNAX):
+    """Expects the FutureWarning of a make_gymnax call without step_api exactly where it is
+    due (gymnax >= 1 installed, here ``gymnax_version``), and no FutureWarning otherwise."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        yield
+    future = [w for w in caught if issubclass(w.category, FutureWarning)]
+    if gymnax_version is not None and gymnax_version >= (1,):
+        assert len(future) == 1 and DEFAULT_CHANGED in str(future[0].message), [str(w.message) for w in future]
+        message = str(future[0].message)
+        assert 'step_api="terminated_truncated"' in message and 'step_api="done"' in message
+        assert future[0].filename == __file__, future[0].filename  # it points at the caller
+    else:
+        assert not future, [str(w.message) for w in future]
 
 
 @pytest.fixture(scope="module")
@@ -91,15 +112,132 @@ def test_final_observation_by_default_only_with_six_values():
     assert "final_observation" not in info5 and info6["final_observation"].shape == six.observation_space().shape
 
 
-def test_step_env_does_not_reset(pair):
+def test_step_env_does_not_reset_and_has_five_values_in_both_apis(pair):
+    """gymnax 1.x's step_env returns five values (obs, state, reward, terminated, info);
+    under "done" the flag is done = terminated | truncated (gymnax 0.x's)."""
     five, six, params = pair
     _, state = five.reset(jax.random.key(0), params)
-    for env, n in ((five, 5), (six, 6)):
+    for env in (five, six):
         out = env.step_env(jax.random.key(1), state, jnp.int32(5), params)  # Done: the episode ends
-        assert len(out) == n
-        obs, new_state = out[0], out[1]
+        assert len(out) == 5
+        obs, new_state, _, flag, info = out
         assert int(new_state.time) == 1, "step_env must not reset"
+        assert bool(flag) and bool(info["terminated"]) and not bool(info["truncated"])
         np.testing.assert_array_equal(obs, env.get_obs(new_state, params))
+
+
+def test_step_env_agrees_with_step_where_no_reset_happens(pair):
+    """A walk of 29 steps (no Done, below the 30-step limit): step and step_env return the
+    same observation, state, reward and flag; on the 30th step_env truncates without a reset,
+    its "done" flag set, its "terminated_truncated" flag (terminated) not."""
+    five, six, params = pair
+    _, start = five.reset(jax.random.key(0), params)
+    for env in (five, six):
+        state = start
+        for t, action in enumerate([0, 1, 0, 2, 3, 4] * 5):
+            key = jax.random.key(100 + t)
+            obs_e, state_e, reward_e, flag_e, info_e = env.step_env(key, state, jnp.int32(action), params)
+            if t == 29:
+                assert int(state_e.time) == 30 and bool(info_e["truncated"]) and bool(env.is_truncated(state_e, params))
+                assert bool(flag_e) == (env.step_api == "done")
+                break
+            obs, state, reward, *flags, _ = env.step(key, state, jnp.int32(action), params)
+            np.testing.assert_array_equal(np.asarray(obs_e), np.asarray(obs))
+            for a, b in zip(jax.tree.leaves(state_e), jax.tree.leaves(state)):
+                np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+            assert float(reward_e) == float(reward) and not bool(flag_e) and not any(bool(f) for f in flags)
+
+
+@pytest.mark.parametrize("gymnax_installed", [True, False], ids=["as_installed", "hidden"])
+def test_the_gymnax_environment_members_give_gridnavs_values(pair, monkeypatch, gymnax_installed):
+    """is_terminated (always False), discount (1), is_truncated (the room type's time limit)
+    and state_space (EnvState's fields) as gymnax 1.x's Environment has them, whatever is
+    installed (with gymnax hidden the spaces are envs.spaces')."""
+    if not gymnax_installed:
+        monkeypatch.setattr(gymnax_compat, "installed_gymnax_version", lambda: None)
+    five, six, params = pair
+    _, state = five.reset(jax.random.key(0), params)
+    limit = int(params.max_steps[int(state.room_type)])
+    assert limit == 30
+    for env in (five, six):
+        for time, truncated in ((0, False), (limit - 1, False), (limit, True)):
+            at = state.replace(time=jnp.int32(time))
+            assert bool(env.is_truncated(at, params)) is truncated
+            assert bool(env.is_terminated(at, params)) is False
+            assert float(env.discount(at, params)) == 1.0
+        # batched states work too, and under jit
+        batch = jax.tree.map(lambda x: jnp.stack([x, x]), state.replace(time=jnp.int32(limit)))
+        np.testing.assert_array_equal(np.asarray(jax.vmap(env.is_truncated, (0, None))(batch, params)), [True, True])
+        assert float(jax.jit(env.discount)(state, params)) == 1.0
+    space = five.state_space(params)
+    assert list(space.spaces) == list(envs.EnvState.__dataclass_fields__)
+    classes = own_spaces if not gymnax_installed else gymnax_compat._space_classes()
+    assert type(space) is classes.Dict and type(space.spaces["heading"]) is classes.Discrete
+    assert type(space.spaces["agent_pos"]) is classes.Box
+    assert space.spaces["heading"].n == 8 and space.spaces["horizon"].n == 2 and space.spaces["room_type"].n == 4
+    assert space.spaces["scene"].n == params.bank.numbers.shape[0]
+    assert space.spaces["target"].n == five.gridnav.num_categories == 18
+    assert space.spaces["target_slot"].n == params.bank.targets.shape[1]
+    assert int(space.spaces["agent_pos"].high) == five.gridnav.grid_size - 1
+    assert int(space.spaces["time"].high) == 30
+    for key in range(8):
+        _, reset = five.reset(jax.random.key(key), params)
+        assert bool(space.contains(reset)), reset
+        assert 1 <= int(reset.optimal_length) <= int(space.spaces["optimal_length"].high)
+    assert not bool(space.contains(state.replace(agent_pos=jnp.array([0, five.gridnav.grid_size], jnp.int32))))
+    assert not bool(space.contains(state.replace(time=jnp.int32(31))))
+
+
+@needs_gymnax_1
+def test_gymnax_1s_own_step_over_step_env_and_is_truncated_is_the_six_value_step(pair):
+    """gymnax 1.x's Environment.step (step_env, then is_truncated, then its auto-reset) run
+    on the env steps as its own six-value step does (no Done on a time limit's last step,
+    where GridNav leaves truncated unset)."""
+    from gymnax.environments.environment import Environment
+
+    _, six, params = pair
+    _, state = six.reset(jax.random.key(0), params)
+    state_g = state
+    for t, action in enumerate([0, 5] + [0, 1, 0, 2, 3, 4] * 6):
+        key = jax.random.key(200 + t)
+        ours = six.step(key, state, jnp.int32(action), params)
+        theirs = Environment.step(six, key, state_g, jnp.int32(action), params)
+        assert len(theirs) == 6
+        for a, b in zip(jax.tree.leaves(ours[:5]), jax.tree.leaves(theirs[:5])):
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+        for name in ("terminated", "truncated", "final_observation", "success"):
+            np.testing.assert_array_equal(np.asarray(ours[5][name]), np.asarray(theirs[5][name]))
+        state, state_g = ours[1], theirs[1]
+
+
+@pytest.mark.parametrize("gymnax_installed", [True, False], ids=["as_installed", "hidden"])
+def test_without_step_api_the_step_has_five_values_whatever_is_installed(monkeypatch, gymnax_installed):
+    version = GYMNAX if gymnax_installed else None
+    if not gymnax_installed:
+        monkeypatch.setattr(gymnax_compat, "installed_gymnax_version", lambda: None)
+    with default_warning(version):
+        env, params = envs.make_gymnax(room_types=ROOMS)
+    assert env.step_api == "done" and not env.final_observation
+    obs, state = env.reset(jax.random.key(0), params)
+    out = env.step(jax.random.key(1), state, jnp.int32(0), params)
+    assert len(out) == 5 and out[3].dtype == jnp.bool_ and "final_observation" not in out[4]
+    assert len(env.step_env(jax.random.key(1), state, jnp.int32(0), params)) == 5
+
+
+@pytest.mark.parametrize("version", [(1, 0, 1), (1, 1, 0), (0, 0, 9), None], ids=str)
+def test_the_default_warning_fires_only_with_gymnax_1_and_no_step_api(monkeypatch, version):
+    """The one case whose result changed from 0.1.0 (six values then): gymnax >= 1
+    installed and step_api not passed.  Passing any step_api, "auto" included, is silent."""
+    monkeypatch.setattr(gymnax_compat, "installed_gymnax_version", lambda: version)
+    with default_warning(version):
+        env, _ = envs.make_gymnax(room_types=ROOMS)
+    assert env.step_api == "done"
+    for step_api, expected in (("done", "done"), ("terminated_truncated", "terminated_truncated"),
+                               ("auto", "terminated_truncated" if version and version >= (1,) else "done")):
+        with default_warning(None):  # none expected
+            env, _ = envs.make_gymnax(room_types=ROOMS, step_api=step_api)
+        assert env.step_api == expected and env.final_observation == (expected == "terminated_truncated")
+    assert gymnax_compat.default_step_api() == "done"
 
 
 def test_default_params_are_built_once(monkeypatch):
@@ -108,7 +246,7 @@ def test_default_params_are_built_once(monkeypatch):
     calls = []
     real = gridnav.make_bank
     monkeypatch.setattr(gridnav, "make_bank", lambda *a, **k: calls.append(a) or real(*a, **k))
-    env, params = envs.make_gymnax(room_types=ROOMS)
+    env, params = envs.make_gymnax(room_types=ROOMS, step_api="done")
     assert len(calls) == 1
     assert env.default_params is env.default_params is params
     grid = envs.GridNav()
@@ -127,9 +265,10 @@ def test_a_wrong_step_api_is_refused():
 
 def test_without_gymnax_the_step_has_five_values_and_the_spaces_are_envs_own(monkeypatch):
     monkeypatch.setattr(gymnax_compat, "installed_gymnax_version", lambda: None)
-    assert gymnax_compat.default_step_api() == "done"
+    assert gymnax_compat.default_step_api() == gymnax_compat.installed_step_api() == "done"
     assert gymnax_compat.register_gymnax() is False
-    env, params = envs.make_gymnax(room_types=ROOMS)
+    with default_warning(None):
+        env, params = envs.make_gymnax(room_types=ROOMS)
     assert env.step_api == "done" and not env.final_observation
     assert type(env.observation_space(params)) is own_spaces.Box
     assert type(env.action_space(params)) is own_spaces.Discrete
@@ -139,10 +278,15 @@ def test_without_gymnax_the_step_has_five_values_and_the_spaces_are_envs_own(mon
 def test_with_gymnax_the_spaces_are_gymnax_own():
     from gymnax.environments import spaces as gymnax_spaces
 
-    env, params = envs.make_gymnax(room_types=ROOMS)
+    with default_warning():
+        env, params = envs.make_gymnax(room_types=ROOMS)
     assert isinstance(env.observation_space(params), gymnax_spaces.Box)
     assert isinstance(env.action_space(params), gymnax_spaces.Discrete)
-    assert env.step_api == ("terminated_truncated" if GYMNAX >= (1,) else "done")
+    assert isinstance(env.state_space(params), gymnax_spaces.Dict)
+    # the default is five values whatever is installed; "auto" is the installed gymnax's
+    assert env.step_api == "done"
+    auto, _ = envs.make_gymnax(room_types=ROOMS, step_api="auto")
+    assert auto.step_api == ("terminated_truncated" if GYMNAX >= (1,) else "done")
 
 
 @needs_gymnax_1
@@ -154,15 +298,26 @@ def test_gymnax_make_builds_it_with_keywords_once_registered():
     assert isinstance(env, gymnax_compat.GymnaxGridNav) and env.step_api == "done"
     assert env.gridnav.setup == "org" and params is env.default_params
     assert "GridNav-v0" in gymnax.registered_envs
+    # the same defaults as make_gymnax: five values unless step_api is passed (and the warning)
+    with default_warning():
+        env, params = gymnax.make("GridNav-v0", room_types=ROOMS)
+    assert env.step_api == "done" and not env.final_observation
+    _, state = env.reset(jax.random.key(0), params)
+    assert len(env.step(jax.random.key(1), state, jnp.int32(0), params)) == 5
+    env, params = gymnax.make("GridNav-v0", room_types=ROOMS, step_api="terminated_truncated")
+    assert env.step_api == "terminated_truncated" and env.final_observation
+    assert len(env.step(jax.random.key(1), state, jnp.int32(0), params)) == 6
 
 
 @needs_gymnax_1
 def test_importing_envs_after_gymnax_registers_it():
+    """gymnax.make without step_api: the five-value env, and the FutureWarning on stderr."""
     code = ("import gymnax, envs; env, p = gymnax.make('GridNav-v0', room_types=('bathroom',)); "
             "print(type(env).__name__, env.step_api)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
-    assert out.stdout.split() == ["GymnaxGridNav", "terminated_truncated"]
+    assert out.stdout.split() == ["GymnaxGridNav", "done"]
+    assert "FutureWarning" in out.stderr and DEFAULT_CHANGED in out.stderr, out.stderr
 
 
 def test_an_installed_gymnax_that_cannot_be_imported_is_one_clear_line(monkeypatch):
@@ -173,7 +328,7 @@ def test_an_installed_gymnax_that_cannot_be_imported_is_one_clear_line(monkeypat
 
     monkeypatch.setattr(gymnax_compat, "installed_gymnax_version", lambda: (1, 0, 1))
     monkeypatch.setattr(gymnax_compat.importlib, "import_module", broken)
-    env, params = envs.make_gymnax(room_types=ROOMS)
+    env, params = envs.make_gymnax(room_types=ROOMS, step_api="done")
     with pytest.raises(ImportError, match=r"gymnax 1\.0\.1 is installed but cannot be imported .*pip install six"):
         env.observation_space(params)
     with pytest.raises(ImportError, match="pip install six"):
@@ -204,8 +359,8 @@ def test_env_and_params_survive_deepcopy_and_pickle_and_step_the_same():
 
 
 def test_params_carry_gymnaxs_max_steps_in_episode_as_a_static_int():
-    train_env, train_params = envs.make_gymnax(room_types=ROOMS)
-    _, eval_params = envs.make_gymnax(room_types=ROOMS, split="test", training=False)
+    train_env, train_params = envs.make_gymnax(room_types=ROOMS, step_api="done")
+    _, eval_params = envs.make_gymnax(room_types=ROOMS, split="test", training=False, step_api="done")
     assert train_params.max_steps_in_episode == 30 and type(train_params.max_steps_in_episode) is int
     assert eval_params.max_steps_in_episode == int(np.max(np.asarray(eval_params.max_steps))) == 200
     # static: a Python int inside jit, as a loop bound needs (rejax's evaluator)
@@ -216,7 +371,7 @@ def test_params_carry_gymnaxs_max_steps_in_episode_as_a_static_int():
 
 
 def test_params_hash_by_identity_so_they_can_be_a_static_jit_argument():
-    env, params = envs.make_gymnax(room_types=ROOMS)
+    env, params = envs.make_gymnax(room_types=ROOMS, step_api="done")
     assert hash(params) == hash(params) and params == params
     other = gymnax_compat.GymnaxEnvParams.of(env.gridnav.make_params("train", room_types=ROOMS))
     assert params != other  # equal contents, another object: another static key

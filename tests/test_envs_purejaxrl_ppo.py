@@ -6,9 +6,10 @@ no adapter of its own, through three wrapper stacks:
 - ``envs``: ``envs.wrappers.LogWrapper`` over ``envs.make_gymnax(step_api="done")``;
 - ``purejaxrl``: PureJaxRL's own ``LogWrapper(FlattenObservationWrapper(env))``
   (tests/purejaxrl_wrappers.py, verbatim; five-value step) over the same;
-- ``gymnax``: ``gymnax.make("GridNav-v0")`` (the registry) under gymnax's own
-  ``gymnax.wrappers.purerl`` ``LogWrapper(FlattenObservationWrapper(env))`` (gymnax 1.x:
-  six-value step, ``info["final_observation"]``).
+- ``gymnax``: ``gymnax.make("GridNav-v0", step_api="terminated_truncated")`` (the
+  registry) under gymnax's own ``gymnax.wrappers.purerl``
+  ``LogWrapper(FlattenObservationWrapper(env))`` (gymnax 1.x: six-value step,
+  ``info["final_observation"]``).
 
 The last two need gymnax (the ``gymnax`` extra, which CI installs) and are skipped with a
 reason without it.  The episode statistics each stack logs are checked against the
@@ -201,7 +202,9 @@ def gymnax_stack():
     from gymnax.wrappers.purerl import LogWrapper as GLog
 
     assert envs.register_gymnax()
-    env, params = gymnax.make("GridNav-v0", room_types=ROOMS)
+    # gymnax 1.x's own wrappers unpack six values: its convention, one step_api away (the
+    # default is five whatever is installed)
+    env, params = gymnax.make("GridNav-v0", room_types=ROOMS, step_api="terminated_truncated")
     return GLog(GFlatten(env)), params
 
 

@@ -451,3 +451,23 @@ def test_sweep_rewind_drops_the_chunks_after_a_step_and_reselects():
     assert [len(h) for h in back["history"]] == [1, 1] and back["numerics"] == [{"from_update": 0, "platform": "a"}]
     back = rewind(progress, 4)
     assert back["best_sr"] == [30.0, 40.0] and back["best_update"] == [4, 4]  # a tie: the later model
+
+
+def test_without_fcntl_the_folder_lock_is_filelocks(tmp_path, monkeypatch):
+    """Native Windows has no fcntl: claim() falls back to filelock on the same .lock file,
+    and a second holder is refused in one line."""
+    filelock = pytest.importorskip("filelock")
+    from experiments.running import errors
+
+    monkeypatch.setattr(rundir, "fcntl", None)
+    monkeypatch.setattr(rundir, "_held", {})
+    rundir.claim(tmp_path / "a")
+    assert (tmp_path / "a" / rundir.LOCK_FILE).exists()
+    rundir.claim(tmp_path / "a")  # this process holds it: a no-op
+    other = filelock.FileLock(str(tmp_path / "b" / rundir.LOCK_FILE))
+    (tmp_path / "b").mkdir()
+    with other:  # another holder (filelock's locks are per object, as a second process's would be)
+        with pytest.raises(errors.UserError, match="being written by another process"):
+            rundir.claim(tmp_path / "b")
+    for lock in rundir._held.values():
+        lock.release()

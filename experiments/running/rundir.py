@@ -10,7 +10,6 @@ program writes has a `.lock`, held (an OS lock, `claim`) by the one process writ
 from __future__ import annotations
 
 import dataclasses
-import fcntl
 import json
 import math
 import os
@@ -24,11 +23,16 @@ import numpy as np
 from experiments.reporting.tables import write_csv
 from experiments.running.errors import UserError
 
+try:  # POSIX: flock on the folder's .lock, which also names the holder's pid
+    import fcntl
+except ImportError:  # native Windows (jax runs there on the CPU): filelock's msvcrt lock
+    fcntl = None
+
 RUN_FILE = "run.json"
 
 # ---------------------------------------------------------------------- one writer per folder
 LOCK_FILE = ".lock"
-_held: dict[Path, int] = {}  # folder -> file descriptor of its lock, for this process's life
+_held: dict[Path, object] = {}  # folder -> its lock (a file descriptor, or filelock's), for this process's life
 
 
 def claim(path: Path) -> None:
@@ -43,6 +47,9 @@ def claim(path: Path) -> None:
     key = path.resolve()
     if key in _held:
         return
+    if fcntl is None:
+        _held[key] = _claim_with_filelock(path)
+        return
     fd = os.open(path / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -54,6 +61,20 @@ def claim(path: Path) -> None:
     os.ftruncate(fd, 0)
     os.write(fd, str(os.getpid()).encode())
     _held[key] = fd
+
+
+def _claim_with_filelock(path: Path):
+    """`claim` where there is no fcntl (native Windows): filelock's lock on the same .lock
+    file (a dependency there only: pyproject.toml), held by the returned object."""
+    import filelock  # installed on Windows alone (pyproject.toml's marker)
+
+    lock = filelock.FileLock(str(path / LOCK_FILE))
+    try:
+        lock.acquire(timeout=0)
+    except filelock.Timeout:
+        raise UserError(f"{path} is being written by another process; wait for it to finish, or choose another "
+                        "--out") from None  # fmt: skip
+    return lock
 
 
 def _contents(path: Path) -> list[Path]:
