@@ -18,7 +18,11 @@ finished methods (`methods/<method>/results.json`) this prints, as Markdown:
   over these seeds detects with 80% power (beside a "cannot tell", the effect it could
   have seen);
 * per `--did A:B:C:D`: (D - C) - (B - A) seed by seed on test SR, SPL and SR>=5, e.g. the
-  critic's cost in one layout against its cost in another.
+  critic's cost in one layout against its cost in another;
+* per `--ceiling A:B:C`: the ceiling C - A (C a privileged arm, e.g. the oracle
+  imagination over the critic alone A) and the share of it B closes, (B - A) / (C - A),
+  with a paired bootstrap interval, only where the ceiling's interval excludes 0
+  (`stats.share_closed`; docs/ceiling.md); otherwise "ceiling not resolved".
 
 Pairs need the same seeds in both methods (a sweep's methods have them).
 """
@@ -46,6 +50,8 @@ class Args:
     """'A:B' for B - A (method names as the sweep's methods/ folder has them)."""
     did: tuple[str, ...] = ()
     """'A:B:C:D' for the difference of differences (D - C) - (B - A)."""
+    ceiling: tuple[str, ...] = ()
+    """'A:B:C': the ceiling C - A and the share of it B closes, (B - A) / (C - A), on SR and SPL."""
     last: int = 250
     """The training success rate is the mean over this many last updates."""
 
@@ -72,6 +78,7 @@ def main(args: Args) -> dict:
     results = load(args.run)
     pairs = [_split(s, 2, "--pairs", results) for s in args.pairs]
     dids = [_split(s, 4, "--did", results) for s in args.did]
+    ceilings = [_split(s, 3, "--ceiling", results) for s in args.ceiling]
     shown = shown_columns(results, args.last)
 
     rows = []
@@ -87,7 +94,7 @@ def main(args: Args) -> dict:
           + markdown_table(rows, ["method", "seeds", "SR per seed", *names, "frames / episodes per seed"]) + "\n"
           + f"(training SR: the last {args.last} updates; diagnostics: the last chunk's mean)\n")  # fmt: skip
 
-    out: dict = {"pairs": {}, "did": {}}
+    out: dict = {"pairs": {}, "did": {}, "ceiling": {}}
     if pairs:
         text, out["pairs"] = paired_report(results, pairs, shown, args.last)
         md += text
@@ -101,8 +108,28 @@ def main(args: Args) -> dict:
                           *(f"{out['did'][name][col]['p']:.3f}" for col in TEST)])  # fmt: skip
         md += ("\n## Difference of differences, seed by seed [95% CI]\n\n"
                + markdown_table(cells, ["differences", *TEST, *(f"p ({c})" for c in TEST)]) + "\n")  # fmt: skip
+    if ceilings:
+        md += ceiling_markdown(results, ceilings, out["ceiling"])
     print(md)
     return out
+
+
+def ceiling_markdown(results: dict, ceilings: list, out: dict) -> str:
+    """The `--ceiling` table; fills out["C - A"] = {column: stats.share_closed}."""
+    cells = []
+    for a, b, c in ceilings:
+        name = f"{c} - {a}"
+        out[name] = {}
+        for col in ("SR", "SPL"):
+            base = values(results[a], col)
+            share = stats.share_closed(values(results[b], col) - base, values(results[c], col) - base)
+            out[name][col] = {**share, "arm": b}
+            top = f"{share['ceiling']:+.1f} [{share['ceiling_low']:+.1f}, {share['ceiling_high']:+.1f}]"
+            closed = (f"{share['share']:.2f} [{share['share_low']:.2f}, {share['share_high']:.2f}]"
+                      if share["resolved"] else "ceiling not resolved")  # fmt: skip
+            cells.append([name, col, top, b, closed])
+    return ("\n## The ceiling and the share of it an arm closes (paired seeds; share: exact paired bootstrap [95%])\n\n"
+            + markdown_table(cells, ["ceiling", "", "C - A [95% CI]", "arm B", "(B - A) / (C - A)"]) + "\n")
 
 
 def cli(argv=None) -> None:

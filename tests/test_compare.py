@@ -99,3 +99,28 @@ def test_the_robust_table_of_the_pairs_matches_a_hand_computation(tmp_path, caps
         assert robust["mde"] == pytest.approx(stats.minimum_detectable_effect(d.std(ddof=1), len(d)))
     assert "What these seeds can tell" in printed and "P(B > A)" in printed
 
+
+
+def test_the_ceiling_and_the_share_closed_are_reported_only_where_the_ceiling_is_resolved(tmp_path, capsys):
+    """`--ceiling A:B:C`: C - A with its interval and (B - A) / (C - A) with its bootstrap
+    interval where C - A is resolved, "ceiling not resolved" where not."""
+    import json
+
+    from experiments import compare
+
+    srs = {"crit": [50.0, 52.0, 48.0, 51.0, 49.0], "fore": [52.0, 55.0, 49.0, 53.0, 51.0],
+           "orac": [60.0, 64.0, 56.0, 62.0, 58.0]}  # fmt: skip
+    spls = {"crit": [20.0] * 5, "fore": [21.0] * 5, "orac": [20.5, 19.0, 21.0, 19.5, 20.0]}
+    for arm in srs:
+        folder = tmp_path / "methods" / arm
+        folder.mkdir(parents=True)
+        per_seed = [{"seed": s, "selected": {"overall": {"SR": srs[arm][s], "SPL": spls[arm][s], "SR>=5": 0.0}},
+                     "training_success_rate": [0.5] * 10} for s in range(5)]  # fmt: skip
+        (folder / "results.json").write_text(json.dumps({"updates": 10, "results": per_seed}))
+    out = compare.main(compare.Args(run=tmp_path, ceiling=("crit:fore:orac",)))
+    sr, spl = out["ceiling"]["orac - crit"]["SR"], out["ceiling"]["orac - crit"]["SPL"]
+    assert sr["resolved"] and sr["ceiling"] == pytest.approx(10.0) and sr["share"] == pytest.approx(10 / 50)
+    assert sr["share_low"] <= sr["share"] <= sr["share_high"]
+    assert not spl["resolved"] and "share" not in spl
+    md = capsys.readouterr().out
+    assert "ceiling not resolved" in md and "0.20 [" in md

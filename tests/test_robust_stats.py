@@ -134,3 +134,21 @@ def test_monte_carlo_beyond_the_exact_limit_is_close_to_the_exact_interval(monke
     monkeypatch.setattr(stats, "EXACT_LIMIT", 0)
     sampled = stats.stratified_bootstrap_ci(stats.iqm, x5, reps=10)  # at least MIN_MONTE_CARLO all the same
     assert sampled[0] == exact[0] and sampled[1:] == pytest.approx(exact[1:], abs=0.5)
+
+
+def test_share_closed_is_a_paired_ratio_with_an_exact_bootstrap_and_refuses_an_unresolved_ceiling():
+    import itertools
+
+    ceiling = np.array([10.0, 12.0, 8.0, 11.0, 9.0])
+    gap = np.array([2.0, 5.0, 1.0, 3.0, 4.0])
+    out = stats.share_closed(gap, ceiling)
+    assert out["resolved"] and out["share"] == pytest.approx(15 / 50)
+    ratios = sorted(gap[list(d)].sum() / ceiling[list(d)].sum() for d in itertools.product(range(5), repeat=5))
+    cdf = np.arange(1, len(ratios) + 1) / len(ratios)
+    expected = [ratios[np.searchsorted(cdf, q - 1e-12)] for q in (0.025, 0.975)]
+    assert [out["share_low"], out["share_high"]] == pytest.approx(expected, abs=1e-12)
+    unresolved = stats.share_closed(gap, np.array([3.0, -2.0, 1.0, -1.0, 0.5]))
+    assert not unresolved["resolved"] and "share" not in unresolved
+    assert unresolved["ceiling_low"] < 0 < unresolved["ceiling_high"]
+    with pytest.raises(ValueError, match="one value per seed"):
+        stats.share_closed([1.0], [2.0])

@@ -236,3 +236,31 @@ def minimum_detectable_effect(sd_diff: float, n: int, level: float = LEVEL, powe
     while power_at(high) < power:
         high *= 2
     return float(brentq(lambda e: power_at(e) - power, 0.0, high, xtol=1e-10))
+
+
+def share_closed(gap_closed, ceiling, level: float = LEVEL) -> dict:
+    """The share of a ceiling an arm closes, mean(gap_closed) / mean(ceiling), over paired
+    seeds (gap_closed[i] = B_i - A_i, ceiling[i] = C_i - A_i for the same seed i), with a
+    paired bootstrap interval: the seeds resampled together (exact, every multiset with its
+    multinomial weight, up to `EXACT_LIMIT`; else Monte Carlo), inverted-CDF quantiles.
+    The share is defined only where the ceiling is resolved: its Student-t interval
+    (`paired`) excludes 0; otherwise {"resolved": False} and no share (a ratio over a
+    denominator that may be 0 has no interval)."""
+    gap, top = np.asarray(gap_closed, float), np.asarray(ceiling, float)
+    if gap.shape != top.shape or gap.ndim != 1 or len(gap) < 2:
+        raise ValueError(f"share_closed: one value per seed of each, at least two, got {gap.shape} and {top.shape}")
+    d = summary(top, level)
+    resolved = bool(d["ci_low"] > 0 or d["ci_high"] < 0)
+    out = {"resolved": resolved, "ceiling": d["mean"], "ceiling_low": d["ci_low"], "ceiling_high": d["ci_high"]}
+    if not resolved:
+        return out
+    n = len(top)
+    qs = ((1 - level) / 2, (1 + level) / 2)
+    if math.comb(2 * n - 1, n) <= EXACT_LIMIT:
+        counts, weights = multisets(n)
+    else:
+        counts = np.random.default_rng(0).multinomial(n, np.full(n, 1 / n), size=MIN_MONTE_CARLO)
+        weights = np.ones(len(counts))
+    ratios = (counts @ gap) / (counts @ top)
+    low, high = weighted_quantiles(ratios, weights, qs)
+    return {**out, "share": float(gap.mean() / top.mean()), "share_low": low, "share_high": high}
