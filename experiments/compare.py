@@ -36,7 +36,7 @@ from experiments.reporting import stats
 from experiments.reporting.report import (
     TEST, diagnostic_label, format_mean_std, format_pair, load, paired_report, shown_columns, values,
 )  # fmt: skip
-from experiments.reporting.tables import markdown_table
+from experiments.reporting.tables import arm_label, markdown_table
 from experiments.running import errors
 
 
@@ -87,7 +87,7 @@ def main(args: Args) -> dict:
         counts = [r.get("counts") or {} for r in per_seed]
         experience = ("" if not all("frames/useful" in c for c in counts) else
                       ", ".join(f"{c['frames/useful'] / 1e6:.2f}M / {int(c['charts/episodes'])}" for c in counts))  # fmt: skip
-        rows.append([method, ", ".join(str(r["seed"]) for r in per_seed), per,
+        rows.append([arm_label(method), ", ".join(str(r["seed"]) for r in per_seed), per,
                      *(format_mean_std(values(per_seed, c, args.last)) for c in shown), experience])  # fmt: skip
     names = [diagnostic_label(c) for c in shown]
     md = (f"# {args.run}: per method (mean ± sample std over seeds)\n\n"

@@ -229,7 +229,7 @@ class Agent:
         if isinstance(num_lanes, bool) or not isinstance(num_lanes, int) or num_lanes < 1:
             raise ValueError(f"num_lanes must be a positive int, got {num_lanes!r}")
         cfg = self.config
-        env = self.bind(env)
+        env = self.acting_env(env)
         reset_keys = jax.random.split(key, num_lanes) if reset_keys is None else reset_keys
         obs, env_state = env.reset(reset_keys)
         hidden = cfg.hidden_size
@@ -249,7 +249,7 @@ class Agent:
             tracker=tracker,
         )
 
-    def bind(self, env: BoundEnv) -> BoundEnv:
+    def acting_env(self, env: BoundEnv) -> BoundEnv:
         """The environment this agent acts in: `env` itself, or, for an imagination that
         reads the goal view (the privileged `oracle`), `env` wrapped to carry it
         (`envs.wrappers.GoalViewWrapper`; built for that method alone, so no other
@@ -352,7 +352,7 @@ class Agent:
           kernels, `foresit_jax.maml`); gate_offsets: `[num_steps, B, 4H]` added to each
           step's gate pre-activations (zeros whose gradient is the pre-activations')."""
         params, lanes = acting.params, jnp.arange(actor.episode_step.shape[0])
-        env = self.bind(env)
+        env = self.acting_env(env)
         kernels = self.lstm_kernels(params, lstm_update)  # once, outside the loop
 
         def step(carry, xs):

@@ -242,7 +242,8 @@ def paired_report(results: dict, pairs: list, columns: list[str], last: int = 25
     for a, b in pairs:
         name = f"{b} - {a}"
         out["pairs"][name] = {c: stats.paired(values(results[a], c, last), values(results[b], c, last)) for c in columns}
-        cells.append([name, *(format_pair(out["pairs"][name][c]) for c in columns), stats.verdict(out["pairs"][name]["SR"])])
+        cells.append([f"{tables.arm_label(b)} - {tables.arm_label(a)}", *(format_pair(out["pairs"][name][c]) for c in columns),
+                      stats.verdict(out["pairs"][name]["SR"])])  # fmt: skip
     names = [diagnostic_label(c) for c in columns]
     md = (f"\n{level} Paired seed by seed: difference [95% CI]\n\n"
           + markdown_table(cells, ["methods", *names, "higher SR"]) + "\n")  # fmt: skip

@@ -1,0 +1,38 @@
+"""docs/ceiling.md's numbers are what its archived study computes (docs/data/ceiling_savn.tar.xz:
+the oracle arm and the reused critic and ForeSIT arms, without checkpoints)."""
+
+from pathlib import Path
+
+import study_data
+
+from experiments import compare
+from experiments.reporting import report, stats
+
+REPO = Path(__file__).resolve().parents[1]
+CRITIC, FORESIT, ORACLE = ("a3c+critic@learning_rate=3e-4", "a3c+foresit@learning_rate=3e-4",
+                           "a3c+oracle@learning_rate=3e-4")  # fmt: skip
+
+
+def test_ceiling_md_quotes_the_ceiling_in_todays_rooms(tmp_path, capsys):
+    root = study_data.unpack("ceiling_savn.tar.xz", tmp_path, (CRITIC, FORESIT, ORACLE))
+    out = compare.main(compare.Args(run=root, pairs=(f"{CRITIC}:{ORACLE}", f"{CRITIC}:{FORESIT}"),
+                                    ceiling=(f"{CRITIC}:{FORESIT}:{ORACLE}",)))  # fmt: skip
+    capsys.readouterr()
+    doc = (REPO / "docs" / "ceiling.md").read_text()
+    results = report.load(root)
+    for arm, label in ((CRITIC, "a3c+critic"), (FORESIT, "a3c+foresit"), (ORACLE, "a3c+oracle (privileged)")):
+        sr, spl = (report.values(results[arm], c) for c in ("SR", "SPL"))
+        row = (f"| {label} | {' / '.join(f'{x:.1f}' for x in sr)} | {sr.mean():.1f} ± {sr.std(ddof=1):.1f} | "
+               f"{spl.mean():.1f} ± {spl.std(ddof=1):.1f} |")
+        assert row in doc, row
+    for (a, b), label in (((CRITIC, ORACLE), "the ceiling: a3c+oracle (privileged) - a3c+critic"),
+                          ((CRITIC, FORESIT), "a3c+foresit - a3c+critic")):  # fmt: skip
+        pair = out["pairs"][f"{b} - {a}"]
+        row = (f"| {label} | {study_data.interval(pair['SR'])} | {study_data.interval(pair['SPL'])} | "
+               f"{pair['robust']['SR']['mde']:.1f} |")
+        assert row in doc, row
+    ceiling = out["ceiling"][f"{ORACLE} - {CRITIC}"]
+    assert not ceiling["SR"]["resolved"] and not ceiling["SPL"]["resolved"]
+    assert "ceiling not resolved" in doc
+    sr = stats.paired(report.values(results[CRITIC], "SR"), report.values(results[ORACLE], "SR"))
+    assert f"moves test SR by {study_data.interval(sr)} points over the critic alone" in " ".join(doc.split())
