@@ -36,3 +36,5 @@ def test_ceiling_md_quotes_the_ceiling_in_todays_rooms(tmp_path, capsys):
     assert "ceiling not resolved" in doc
     sr = stats.paired(report.values(results[CRITIC], "SR"), report.values(results[ORACLE], "SR"))
     assert f"moves test SR by {study_data.interval(sr)} points over the critic alone" in " ".join(doc.split())
+    readme = " ".join((REPO / "README.md").read_text().split())
+    assert f"moves SR by {study_data.interval(sr)} over the critic alone" in readme

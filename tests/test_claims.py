@@ -10,7 +10,7 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 CLAIM_FILES = ("README.md", "docs/results.md", "docs/mechanism.md", "docs/priors.md", "docs/houses.md",
-               "docs/deviations.md", "docs/foresight.md", "docs/ceiling.md")  # fmt: skip
+               "docs/deviations.md", "docs/foresight.md", "docs/ceiling.md", "docs/usage.md")  # fmt: skip
 
 MARGIN = 3.8  # SR points: the paper's effect, the margin declared for "level" unless a sentence names another
 # Equivalence: the interval inside [-margin, +margin]. Only verdict uses: "end level", "level
@@ -83,3 +83,9 @@ def test_every_claim_sentence_follows_the_rule(name):
         pytest.skip(f"{name} is not there")
     bad = [f"{v}: {s.strip()[:160]}" for s in sentences(path.read_text()) for v in violations(s)]
     assert not bad, f"{name}: words stronger than their intervals (docs/results.md's rule):\n" + "\n".join(bad)
+
+
+def test_the_readme_is_a_page_a_newcomer_reads_in_two_minutes():
+    """At most 110 lines and 1,000 words (issue 61): everything else lives in docs/."""
+    text = (REPO / "README.md").read_text()
+    assert len(text.splitlines()) <= 110 and len(text.split()) <= 1000, (len(text.splitlines()), len(text.split()))

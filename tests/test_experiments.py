@@ -1,5 +1,5 @@
 """experiments: run folders, resume, overwrite protection, non-finite losses, one-line
-errors, and every command of the README at a tiny size.
+errors, and every command of the README and docs/usage.md at a tiny size.
 
 The CLIs are called in-process (`main(Args(...))`, `cli(argv)`): a subprocess re-imports
 jax and recompiles everything.  `train_helpers.patch_for_experiments` keeps them cheap
@@ -926,7 +926,9 @@ def test_a_train_folder_of_the_format_before_still_reads_and_is_refused_a_resume
 
 # ---------------------------------------------------------------------- the README
 README = (REPO / "README.md").read_text()
+USAGE = (REPO / "docs" / "usage.md").read_text()  # the README's command line, environment and methods
 BLOCKS = re.findall(r"```(\w+)\n(.*?)```", README, flags=re.S)
+USAGE_BLOCKS = re.findall(r"```(\w+)\n(.*?)```", USAGE, flags=re.S)
 CLI_MODULES = {"experiments.train": train_cli, "experiments.evaluate": evaluate_cli, "experiments.sweep": sweep,
                "experiments.probe": importlib.import_module("experiments.probe"),
                "experiments.failures": importlib.import_module("experiments.failures")}  # fmt: skip
@@ -957,6 +959,8 @@ def readme_commands(text: str = README) -> list[list[str]]:
             continue
         for line in body.replace("\\\n", " ").splitlines():
             for part in line.split("&&"):
+                if "python -m" not in part:  # `git clone <this repository's URL> ...`: not shell-quoted
+                    continue
                 words = shlex.split(part, comments=True)
                 if words[:2] == ["python", "-m"] and words[2].startswith(("experiments.", "benchmarks.")):
                     commands.append(words[2:])
@@ -965,9 +969,10 @@ def readme_commands(text: str = README) -> list[list[str]]:
 
 def test_readme_commands_parse():
     """Every documented experiments command (code blocks and inline) names a module that
-    exists, and the flags of the train/evaluate/sweep ones are accepted."""
+    exists, and the flags of the train/evaluate/sweep ones are accepted. The README and
+    docs/usage.md, where its command line went, show every CLI between them."""
     commands = readme_commands()
-    assert {c[0] for c in commands} >= set(CLI_MODULES)
+    assert {c[0] for c in commands + readme_commands(USAGE)} >= set(CLI_MODULES)
     for module, *argv in commands:
         parser = CLI_MODULES[module].Args if module in CLI_MODULES else BENCH_ARGS[module]()
         args = tyro.cli(parser, args=argv)
@@ -1009,8 +1014,13 @@ def tiny_argv(module: str, argv: list[str], folder: Path) -> list[str]:
 
 @pytest.mark.slow
 @pytest.mark.timeout(600)
-def test_readme_commands_run_at_a_tiny_size(tmp_path, capsys):
-    for module, *argv in readme_commands():
+@pytest.mark.parametrize("source", ["README.md", "docs/usage.md"])
+def test_readme_commands_run_at_a_tiny_size(tmp_path, capsys, source):
+    """The commands of the README and of docs/usage.md (its command line), each page's in
+    order in a folder of its own, at a tiny size."""
+    commands = readme_commands((REPO / source).read_text())
+    assert any(module in CLI_MODULES for module, *_ in commands), source
+    for module, *argv in commands:
         if module not in CLI_MODULES:  # benchmarks: parsed above, run by their own tests
             continue
         args = tyro.cli(CLI_MODULES[module].Args, args=tiny_argv(module, argv, tmp_path))
@@ -1036,10 +1046,13 @@ def csv_rows(path: Path):
 
 @pytest.mark.slow
 def test_readme_python_blocks_run_at_a_tiny_size():
-    """The README's Python examples, executed with smaller sizes substituted (bathrooms
-    only, 2 lanes, 1 update, a small network): the API calls are the documented ones."""
-    python_blocks = [body for lang, body in BLOCKS if lang == "python"]
+    """The Python examples of the README and of docs/usage.md (where its environment block
+    went), executed with smaller sizes substituted (bathrooms only, 2 lanes, 1 update, a small
+    network): the API calls are the documented ones."""
+    python_blocks = [body for lang, body in BLOCKS + USAGE_BLOCKS if lang == "python"]
     assert len(python_blocks) >= 2
+    assert any("make_train" in body for lang, body in BLOCKS if lang == "python")  # the README's library snippet
+    assert any("envs.make" in body for lang, body in USAGE_BLOCKS if lang == "python")  # usage.md's environment
     small = ('num_lanes=2, num_updates=1, room_types=("bathroom",), hidden_size=16, attention_size=16, '
              "value_hidden=16, imagination_layer_sizes=(16, 8, 4, 8, 16, 16)")  # fmt: skip
     for body in python_blocks:

@@ -134,12 +134,17 @@ def test_results_md_quotes_the_tuned_comparison(tmp_path):
     for name, pair in best_vs_best.items():
         assert study_data.best_vs_best_line(name, pair) in doc, study_data.best_vs_best_line(name, pair)
     headline = best_vs_best["a3c+foresit - a3c"]
-    readme = (REPO / "README.md").read_text()
+    summary = " ".join(doc.split())  # results.md's "In brief" (once the README's Results)
     iqm = headline["robust"]["SR"]
     for quoted in (f"{interval(headline['SR'])} SR and {interval(headline['SPL'])} SPL",
                    f"IQM of SR is {iqm['iqm_b'][0]:.1f} against {iqm['iqm_a'][0]:.1f}",
                    f"a3c+foresit - a3c+critic is {interval(best_vs_best['a3c+foresit - a3c+critic']['SR'])} SR"):
-        assert quoted in readme, quoted
+        assert quoted in summary, quoted
+    readme = " ".join((REPO / "README.md").read_text().split())
+    quoted = (f"a3c+foresit - a3c is {interval(headline['SR'])} SR, where we cannot tell (five seeds detect "
+              f"{iqm['mde']:.1f} points), and it costs {interval(headline['SPL'])} SPL")
+    assert quoted in readme, quoted
+    assert headline["SR"]["ci_low"] < 0 < headline["SR"]["ci_high"] and headline["SPL"]["ci_high"] < 0  # the words
 
 
 def test_results_md_quotes_the_bases_with_savns_head_and_one_step_td(tmp_path, capsys):
@@ -215,8 +220,8 @@ def test_results_md_quotes_the_noise_placement_arm_and_its_probe(tmp_path, capsy
     mine, eq6 = shifts("fair_probe_noise.json", arm), shifts("fair_probe_lr3e-4.json", bases[0])
     assert (f"noise off costs {mine['shuffled, noise off']} SR (Eq. 6's placement: {eq6['shuffled, noise off']}), "
             f"an untrained f_w {mine['untrained f_w']} (Eq. 6's: {eq6['untrained f_w']})") in flat
-    readme = " ".join((REPO / "README.md").read_text().split())
-    assert f"noise inside f_w's input ({study_data.interval(out['pairs'][f'{arm} - {bases[0]}']['SR'])} SR over Eq. 6's)" in readme
+    # results.md's "In brief" (once the README's Results)
+    assert f"noise inside f_w's input ({study_data.interval(out['pairs'][f'{arm} - {bases[0]}']['SR'])} SR over Eq. 6's)" in flat
 
 
 def _three_x_rows(tmp_path) -> tuple[list[str], dict]:
@@ -279,6 +284,7 @@ def test_results_md_quotes_the_3x_study(tmp_path, capsys):
     readme = " ".join((REPO / "README.md").read_text().split())
     quote = f"a3c+foresit - a3c is {study_data.interval(pair['SR'])} SR (five seeds detect {mde:.1f} points here,"
     assert quote in readme, quote
+    assert quote in " ".join(doc.split()), quote  # results.md's "In brief" too
 
 
 def test_results_md_quotes_a3cs_rate_at_3x(tmp_path):
@@ -301,14 +307,25 @@ def test_results_md_quotes_a3cs_rate_at_3x(tmp_path):
     flat = " ".join(doc.split())
     quote = f"3e-4 - 1e-3 is {val} in validation SR, {sr} in test SR and {spl} in test SPL"
     assert quote in flat, quote
+    # ForeSIT at 3e-4 against a3c at 1e-3, both at 9000 updates (the 3x sweep's ForeSIT), paired
+    # by seed: the pair results.md and the README quote beside the exclusion of +3.8.
+    foresit = report.load(study_data.unpack("fair_3x.tar.xz", tmp_path / "3x", ARMS.values()))[ARMS["a3c+foresit"]]
+    assert [r["seed"] for r in foresit] == [r["seed"] for r in fast] == [0, 1, 2, 3, 4]
+    pair = stats.paired(report.values(fast, "SR"), report.values(foresit, "SR"))
+    assert pair["ci_low"] < 3.8 < pair["ci_high"]  # "does not exclude the paper's +3.8"
+    assert f"ForeSIT - a3c at 9000 updates is {study_data.interval(pair)}, which does not exclude it" in flat
+    readme = " ".join((REPO / "README.md").read_text().split())
+    quote = f"that pair is {study_data.interval(pair)} SR, which does not exclude the paper's +3.8"
+    assert quote in readme, quote
 
 
-def test_readme_quotes_the_archived_replicate_of_its_first_table(tmp_path):
-    """The README's first table has no archive; it quotes the same pair's archived replicate
-    (the tune study's 1e-3 arms, docs/data/fair_tune.tar.xz) beside it."""
+def test_results_md_quotes_the_archived_replicate_of_its_first_table(tmp_path):
+    """The first table of results.md's "In brief" (once the README's) has no archive; it quotes
+    the same pair's archived replicate (the tune study's 1e-3 arms, docs/data/fair_tune.tar.xz)
+    beside it."""
     tuned = study_data.tune_report("fair_tune.tar.xz", tmp_path)
     base, arm = (tuned["results"][f"{m}@learning_rate=1e-3"] for m in ("a3c", "a3c+foresit"))
     sr, spl = (stats.paired(report.values(base, m), report.values(arm, m)) for m in ("SR", "SPL"))
-    readme = " ".join((REPO / "README.md").read_text().split())
+    summary = " ".join((REPO / "docs" / "results.md").read_text().split())
     quote = f"a3c+foresit - a3c {study_data.interval(sr)} SR and {study_data.interval(spl)} SPL"
-    assert quote in readme, quote
+    assert quote in summary, quote

@@ -1,9 +1,9 @@
-"""The house study's figures in the README and docs/houses.md are those of its files.
+"""The house study's figures in docs/results.md and docs/houses.md are those of its files.
 
 The study (three arms, seeds 0-4, `--preset house`) trained on a lent GPU; its sweep folder,
 without checkpoints, is kept as docs/data/house_study.tar.xz. This reads it back as
 `experiments.compare` and the sweep's tables do, recomputes the quoted means and paired
-intervals with `experiments.reporting.stats`, and checks that the README and houses.md print them.
+intervals with `experiments.reporting.stats`, and checks that results.md and houses.md print them.
 """
 
 from __future__ import annotations
@@ -40,16 +40,22 @@ def test_the_archive_holds_five_paired_seeds_of_each_arm(study):
         assert all(r["selected"]["overall"]["episodes"] == 1000 for r in results)
 
 
-def test_the_readme_and_houses_md_quote_the_study(study):
-    readme = (REPO / "README.md").read_text()
+def test_results_md_and_houses_md_quote_the_study(study):
+    """results.md's summary table of the houses (once the README's) and houses.md's print the
+    study's means and paired intervals."""
+    summary = (REPO / "docs" / "results.md").read_text()
+    readme = " ".join((REPO / "README.md").read_text().split())
     houses = (REPO / "docs" / "houses.md").read_text()
     for method in METHODS:
         s = stats.summary(sr(study[method]))
-        assert f"{s['mean']:.1f} ± {s['std']:.1f}" in readme, method
+        assert f"{s['mean']:.1f} ± {s['std']:.1f}" in summary, method
         assert f"| {method} | {s['mean']:.1f} ± {s['std']:.1f} |" in houses, method
     for base, other in (("a3c", "a3c+critic"), ("a3c", "a3c+foresit"), ("a3c+critic", "a3c+foresit")):
         pair = interval(stats.paired(sr(study[base]), sr(study[other])))
-        assert pair in readme and pair in houses, (other, base, pair)
+        assert pair in summary and pair in houses, (other, base, pair)
+    # The README's Results keep the imagination's own effect in houses.
+    imagination = interval(stats.paired(sr(study["a3c+critic"]), sr(study["a3c+foresit"])))
+    assert f"ForeSIT over the same critic gives {imagination} SR" in readme, imagination
 
 
 def test_houses_md_by_length_pairs_are_the_sweeps(study):
@@ -77,3 +83,6 @@ def test_houses_md_quotes_the_robust_statistics_of_the_archive(study, tmp_path, 
         row = (f"| {b} - {a} | {cells[0]} | {cells[1]} | {poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | "
                f"{r['p_holm']:.3f} | {r['mde']:.1f} |")
         assert row in houses, row
+    mde = out["pairs"]["a3c+foresit - a3c+critic"]["robust"]["SR"]["mde"]
+    readme = " ".join((REPO / "README.md").read_text().split())
+    assert f"cannot tell (five seeds detect {mde:.1f} points;" in readme, mde  # the README's houses sentence

@@ -300,14 +300,15 @@ def test_docs_quote_the_study_in_rooms_with_priors(tmp_path, capsys, archive, ar
     else:
         assert f"(L^g >= 5): {long_paths[arms[0], arms[2]]}." in flat
         assert f"on the long paths {long_paths[arms[1], arms[2]]}" in flat
-    readme = " ".join((Path(__file__).resolve().parents[1] / "README.md").read_text().split())
+    # results.md's "In brief" (once the README's Results) quotes the pairs.
+    summary = " ".join((Path(__file__).resolve().parents[1] / "docs" / "results.md").read_text().split())
     base, critic, foresit = (a.split("@")[0] for a in arms)
     vs_base, vs_critic = (out["pairs"][f"{arms[2]} - {a}"] for a in arms[:2])
     sr, spl = study_data.interval(vs_critic["SR"]), study_data.interval(vs_critic["SPL"])
     quotes = [f"{foresit} - {base} {study_data.interval(vs_base['SR'])} SR",
               f"{sr} over the critic" if archive == "priors_org.tar.xz" else f"{foresit} - {critic} {sr} SR, {spl} SPL"]
     for quoted in quotes:
-        assert quoted in readme, quoted
+        assert quoted in summary, quoted
 
 
 @pytest.mark.parametrize("data, method", [("priors_probe_savn.json", "a3c+foresit@learning_rate=3e-4"),
@@ -356,7 +357,7 @@ def test_docs_quote_the_org_control_in_both_layouts(tmp_path):
     (docs/data/priors_org_control.tar.xz: a3c on the org setup in today's rooms and in rooms
     with priors, without checkpoints, and a3c+org's selected models played with sampled
     actions): per layout the graph's gain paired by seed, and Welch's interval on the two
-    layouts' per-seed gains; the README quotes the last."""
+    layouts' per-seed gains; results.md's "In brief" (once the README's Results) quotes the last."""
     import json
     from pathlib import Path
 
@@ -396,5 +397,5 @@ def test_docs_quote_the_org_control_in_both_layouts(tmp_path):
         welch.append(study_data.interval({"diff": priors.mean() - today.mean(), "ci_low": ci.low, "ci_high": ci.high}))
     row = "| priors - today (Welch) | | | " + " | ".join(welch) + " |"
     assert row in doc, row
-    readme = " ".join((repo / "README.md").read_text().split())
-    assert f"over a3c than in today's rooms cannot be told ({welch[0]} SR;" in readme
+    summary = " ".join((repo / "docs" / "results.md").read_text().split())
+    assert f"over a3c than in today's rooms cannot be told ({welch[0]} SR;" in summary
