@@ -38,3 +38,21 @@ def test_ceiling_md_quotes_the_ceiling_in_todays_rooms(tmp_path, capsys):
     assert f"moves test SR by {study_data.interval(sr)} points over the critic alone" in " ".join(doc.split())
     readme = " ".join((REPO / "README.md").read_text().split())
     assert f"moves SR by {study_data.interval(sr)} over the critic alone" in readme
+
+
+def test_ceiling_md_quotes_the_probe_of_the_oracle():
+    import json
+
+    seeds = json.loads((study_data.DATA / "ceiling_probe_savn.json").read_text())["methods"][ORACLE]
+    assert [r["seed"] for r in seeds] == [0, 1, 2, 3, 4]
+    trained = [r["sr"]["trained"] for r in seeds]
+    assert set(seeds[0]["sr"]) == {"trained", "noise off", "shuffled", "shuffled, noise off"}  # no f_w conditions
+    doc = (REPO / "docs" / "ceiling.md").read_text()
+    for condition, label in (("noise off", "noise off"), ("shuffled", "shuffled (another episode's goal view)"),
+                             ("shuffled, noise off", "shuffled, noise off")):  # fmt: skip
+        values = [r["sr"][condition] for r in seeds]
+        s = stats.summary(values)
+        row = f"| {label} | {s['mean']:.1f} ± {s['std']:.1f} | {study_data.interval(stats.paired(trained, values))} |"
+        assert row in doc, row
+    s = stats.summary(trained)
+    assert f"| trained | {s['mean']:.1f} ± {s['std']:.1f} | |" in doc
