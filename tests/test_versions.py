@@ -1,8 +1,12 @@
 """envs.versions: the jax/flax pair pip cannot express is refused in one line."""
 
+from pathlib import Path
+
 import pytest
 
 from envs import versions
+
+REPO = Path(__file__).resolve().parents[1]
 
 
 @pytest.mark.parametrize("jax_version, flax_version, refused", [
@@ -25,3 +29,44 @@ def test_the_installed_pair_imports_and_a_bad_one_is_an_import_error(monkeypatch
     monkeypatch.setattr(versions, "installed_version", lambda package: {"jax": (0, 12, 0), "flax": (0, 12, 3)}[package])
     with pytest.raises(ImportError, match=r"flax 0\.12\.3 does not run on jax 0\.12\.0"):
         versions.check_jax_flax()
+
+
+def test_constraints_txt_pins_every_package_the_dev_install_brings():
+    """A full freeze: every distribution that `pip install -e ".[dev]"` brings in (followed
+    through the installed packages' requirements, markers evaluated here) has a pin in
+    constraints.txt, so CI installs exactly what the README's figures were measured with."""
+    from importlib import metadata
+
+    from packaging.requirements import Requirement
+    from packaging.utils import canonicalize_name
+
+    def pinned(name):
+        lines = (REPO / name).read_text().splitlines()
+        return {canonicalize_name(l.split("==")[0]): l.split("==")[1].strip() for l in lines if l and not l.startswith("#")}
+
+    # Only where constraints.txt's stack is installed (Python 3.11; constraints-latest.txt, the
+    # newest stack's, is a freeze of its own venv already).
+    pins = pinned("constraints.txt")
+    if pins.get("jax") != metadata.version("jax"):
+        pytest.skip(f"jax {metadata.version('jax')} is not constraints.txt's: another stack is installed")
+    seen, todo, unpinned = set(), [("foresit_jax", ("dev",))], []
+    while todo:
+        name, extras = todo.pop()
+        try:
+            dist = metadata.distribution(name)
+        except metadata.PackageNotFoundError:
+            continue  # not installed here (an optional dependency of a dependency)
+        for text in dist.requires or ():
+            req = Requirement(text)
+            if req.marker is not None and not any(req.marker.evaluate({"extra": e}) for e in (*extras, "")):
+                continue
+            key = canonicalize_name(req.name)
+            if key == "foresit-jax":
+                todo.append((req.name, tuple(req.extras)))
+                continue
+            if key not in pins and key not in unpinned:
+                unpinned.append(key)
+            if (key, tuple(sorted(req.extras))) not in seen:
+                seen.add((key, tuple(sorted(req.extras))))
+                todo.append((req.name, tuple(req.extras)))
+    assert not unpinned, f"constraints.txt lacks pins for {unpinned}: refreeze it (its header says how)"
