@@ -40,7 +40,7 @@ import numpy as np
 import tyro
 
 from envs.gridnav import TRAIN_TIME_LIMIT
-from experiments.running import errors
+from experiments import errors
 from experiments.running.presets import preset
 from foresit_jax.methods import parse_method
 from foresit_jax.train import Trainer

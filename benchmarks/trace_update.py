@@ -6,6 +6,9 @@ For each method (at a preset's sizes, tiny by default):
 * the functions of `foresit_jax` that lowering one `Trainer.update` runs through, per file,
   counted in lines (each outermost function once; nested ones are inside it): what a reader
   crosses to follow one update;
+* the project's files (experiments/, foresit_jax/, envs/) a reader crosses from the CLI's
+  entry (`python -m experiments.train --method M --preset P`) to the first update's
+  `optax.apply_updates`, in the order first entered (`files_from_cli`; `--cli-path`);
 * a short sha256 of each lowered program: a chunk of training (`Trainer.run`), the
   evaluation rollout (`Evaluator.agent_rollout`) and the sub-goal collection
   (`Trainer.collect_subgoal_items`). Equal hashes before and after a refactor mean the
@@ -19,13 +22,22 @@ import dataclasses
 import hashlib
 import inspect
 import os
+import runpy
 import sys
+import tempfile
+import threading
+import warnings
 
 import jax
 import jax.numpy as jnp
 import tyro
 
+import experiments
+import foresit_jax
 from experiments.running.presets import preset
+from foresit_jax.evaluate import Evaluator
+from foresit_jax.methods import parse_method
+from foresit_jax.train import make_trainer
 
 
 @dataclasses.dataclass(frozen=True)
@@ -36,6 +48,9 @@ class Args:
     """methods (see foresit_jax.methods); the object-graph ones run on the org setup"""
     preset: str = "tiny"
     """preset giving the sizes (the path and the hashes depend on the sizes only through shapes)"""
+    cli_path: bool = False
+    """also count the project files from `python -m experiments.train`'s entry to the optax update (trains one
+    tiny run per method in a temporary folder: about a minute each)"""
 
 
 def _short(text: str) -> str:
@@ -45,8 +60,6 @@ def _short(text: str) -> str:
 def functions_crossed(fn, *args) -> dict[str, tuple[int, int]]:
     """{file name: (functions, lines)} of `foresit_jax`'s functions that lowering
     `jax.jit(fn)(*args)` calls, each outermost function counted once."""
-    import foresit_jax
-
     root = os.path.dirname(foresit_jax.__file__)
     seen = {}
 
@@ -78,11 +91,48 @@ def functions_crossed(fn, *args) -> dict[str, tuple[int, int]]:
     return out
 
 
+def files_from_cli(method: str, preset: str = "tiny") -> list[str]:
+    """The project's files (paths under the checkout: experiments/, foresit_jax/, envs/)
+    whose functions run (a module's import-time code and a package's lazy `__getattr__` not
+    counted) from `python -m experiments.train --method M --preset P`'s entry until
+    the first call of `optax.apply_updates` (while the first chunk's update is traced), in
+    the order first entered: what a reader follows from the command to the optimiser step.
+    Runs the CLI in a temporary folder; what runs after that call is not counted."""
+    root = os.path.dirname(os.path.dirname(os.path.abspath(experiments.__file__)))
+    packages = tuple(os.path.join(root, p) + os.sep for p in ("experiments", "foresit_jax", "envs"))
+    seen: list[str] = []
+    on = [True]
+
+    def tracer(frame, event, arg):
+        if on[0] and event == "call":
+            path = frame.f_code.co_filename
+            if frame.f_code.co_name == "apply_updates" and f"{os.sep}optax{os.sep}" in path:
+                on[0] = False
+            elif frame.f_code.co_name not in ("<module>", "__getattr__") and path.startswith(packages) \
+                    and os.path.relpath(path, root) not in seen:
+                seen.append(os.path.relpath(path, root))
+        return None
+
+    with tempfile.TemporaryDirectory() as out:
+        argv = sys.argv
+        sys.argv = ["experiments.train", "--method", method, "--preset", preset, "--out", os.path.join(out, "run"),
+                    "--no-progress"]  # fmt: skip
+        sys.settrace(tracer)
+        threading.settrace(tracer)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                runpy.run_module("experiments.train", run_name="__main__", alter_sys=True)
+        finally:
+            sys.settrace(None)
+            threading.settrace(None)
+            sys.argv = argv
+    return seen
+
+
 def program_hashes(trainer, state) -> dict[str, str]:
     """Short hashes of the lowered training chunk (2 updates), evaluation rollout and
     sub-goal collection (2 windows) of `trainer` from `state`."""
-    from foresit_jax.evaluate import Evaluator
-
     config = trainer.config
     train = jax.jit(trainer.run, static_argnums=2).lower(state, trainer.env_params, 2).as_text()
     evaluator = Evaluator.for_config(config)
@@ -94,9 +144,6 @@ def program_hashes(trainer, state) -> dict[str, str]:
 
 
 def main(args: Args) -> dict:
-    from foresit_jax.methods import parse_method
-    from foresit_jax.train import make_trainer
-
     report = {}
     for method in args.methods:
         setup = parse_method(method).encoder_piece.required_setup or "savn"
@@ -112,6 +159,10 @@ def main(args: Args) -> dict:
         for name, (f, n) in crossed.items():
             print(f"  {name:18s} {f:3d} functions {n:5d} lines")
         print("  lowered programs: " + ", ".join(f"{k} {v}" for k, v in report[method]["hashes"].items()))
+        if args.cli_path:
+            path = files_from_cli(method, args.preset)
+            report[method]["cli_files"] = path
+            print(f"  from `python -m experiments.train` to optax.apply_updates: {len(path)} project files: " + ", ".join(path))
     return report
 
 

@@ -2,8 +2,24 @@
 `python -m experiments.<name>`), beside the machinery they share:
 
 experiments/            the programs: train, evaluate, sweep, tune, paper, compare, probe,
-                        failures, foresight, demo, cvae_compare (none imports another)
-experiments/running/    the run machinery: presets, sweeps (a sweep's spec and run), the
-                        run loop, selection, run folders, checkpoints, trained models
-experiments/reporting/  statistics, tables, figures, the probes' and the C-VAE's reports
+                        failures, foresight, demo, cvae_compare (none imports another);
+                        errors, the one-line user errors every layer raises (a leaf)
+experiments/running/    the run machinery: presets, the run flags, sweeps (a sweep's spec
+                        and run), the run loop, selection, run folders, checkpoints,
+                        trained models and the probes run over them
+experiments/reporting/  statistics, tables, figures, the probes' and the C-VAE's reports:
+                        below running/, which imports it, never the other way
+
+`experiments.load(run_dir, seed=0, which="best")` gives a trained policy to act with in a
+user's own code (docs/extending.md).
 """
+
+
+def __getattr__(name: str):
+    """`experiments.load` (a trained policy from a run folder, `running.models.load`),
+    imported on first use: `python -m experiments.<program>` does not load it."""
+    if name in ("load", "Policy"):
+        from experiments.running import models  # deferred: jax and the library, for this name alone
+
+        return getattr(models, name)
+    raise AttributeError(f"module 'experiments' has no attribute {name!r}")

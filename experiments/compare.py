@@ -32,12 +32,12 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+from experiments import errors
 from experiments.reporting import stats
 from experiments.reporting.report import (
     TEST, diagnostic_label, format_mean_std, format_pair, load, paired_report, shown_columns, values,
 )  # fmt: skip
 from experiments.reporting.tables import arm_label, markdown_table
-from experiments.running import errors
 
 
 @dataclasses.dataclass(frozen=True)

@@ -18,9 +18,11 @@ from pathlib import Path
 
 import jax
 
+from experiments import errors
 from experiments.reporting import cvae_comparison
-from experiments.running import errors, rundir
+from experiments.running import rundir
 from experiments.running.models import read_trained
+from foresit_jax.config import Config
 
 
 @dataclasses.dataclass(frozen=True)
@@ -40,8 +42,6 @@ class Args:
 
 
 def main(args: Args) -> dict:
-    from foresit_jax.config import Config
-
     info = rundir.read_run_info(args.run)
     config = Config(**info["config"])
     if not config.pieces.imagination_variant.trains_imagination:

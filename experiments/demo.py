@@ -42,7 +42,7 @@ from envs import catalog as C
 from envs import render
 from envs.metrics import LONG_PATH_MIN
 from experiments.reporting.tables import markdown_table
-from foresit_jax.agent import EpisodeStats
+from foresit_jax.rollout import EpisodeStats
 from foresit_jax.evaluate import outcome_metrics, random_policy_rollout
 
 RANDOM_SR_MAX = 10.0  # %

@@ -15,9 +15,12 @@ from typing import Literal, Optional
 
 import jax
 
+from experiments import errors
 from experiments.reporting import tables
-from experiments.running import errors, rundir, selection
+from experiments.running import rundir, selection
 from experiments.running.models import read_trained
+from foresit_jax.config import Config
+from foresit_jax.evaluate import agent_params, evaluate
 
 
 @dataclasses.dataclass(frozen=True)
@@ -45,9 +48,6 @@ class Args:
 
 def main(args: Args) -> dict:
     """Evaluate and write the results; returns them as written (NaN as None)."""
-    from foresit_jax.config import Config
-    from foresit_jax.evaluate import agent_params, evaluate
-
     if args.split not in ("val", "test"):
         raise errors.UserError(f"--split must be val or test, got {args.split!r}")
     info = rundir.read_run_info(args.run)

@@ -31,9 +31,15 @@ import jax.numpy as jnp
 import numpy as np
 
 from envs.catalog import ROOM_TYPES
+from experiments import errors
 from experiments.reporting.tables import markdown_table
-from experiments.running import errors, rundir, selection, sweeps
+from experiments.running import rundir, selection, sweeps
 from experiments.running.models import models_of_run, models_of_sweep
+from foresit_jax import rollout as rollout_lib
+from foresit_jax.networks import build
+from foresit_jax.rollout import ActOptions, BoundEnv
+from foresit_jax.evaluate import Evaluator
+from foresit_jax.probes import EARLY_STEPS, episode_endings, replay_oracle
 
 
 @dataclasses.dataclass(frozen=True)
@@ -60,16 +66,13 @@ def play(model, split: str, episodes: int, compiled: dict) -> dict:
     room types as `Evaluator` splits it, its actions rule): `[B, T]` arrays of every room
     type's episodes, back to back, for `probes.episode_endings`. `compiled` keeps the
     Evaluator and the jitted functions of a config across calls (pass the same dict)."""
-    from foresit_jax.agent import Agent, BoundEnv
-    from foresit_jax.evaluate import Evaluator
-    from foresit_jax.probes import replay_oracle
-
     config, params = model.config, model.selected
     if config not in compiled:
         where = Evaluator.scenes_of(config)
         evaluator = compiled.get(where) or Evaluator(*where)
         compiled[where] = evaluator
-        rollout = jax.jit(functools.partial(Agent(config).rollout, greedy=config.pieces.greedy_evaluation),
+        rollout = jax.jit(functools.partial(rollout_lib.rollout, build(config),
+                                            options=ActOptions(greedy=config.pieces.greedy_evaluation)),
                           static_argnames="num_steps")  # fmt: skip
         compiled[config] = (evaluator, rollout, jax.jit(functools.partial(replay_oracle, evaluator.env)))
     evaluator, rollout, replay = compiled[config]
@@ -80,7 +83,7 @@ def play(model, split: str, episodes: int, compiled: dict) -> dict:
     for room, k in zip(rooms, jax.random.split(key, len(rooms))):
         env_params = evaluator.room_params(split, room)
         num_steps = int(jnp.max(env_params.max_steps))
-        reset_keys = jax.random.split(jax.random.split(k)[0], episodes)  # those Agent.rollout draws from k
+        reset_keys = jax.random.split(jax.random.split(k)[0], episodes)  # those rollout.rollout draws from k
         traj = rollout(acting, BoundEnv(evaluator.env, env_params), k, num_steps=num_steps, reset_keys=reset_keys)
         d, in_room = replay(env_params, reset_keys, traj.actions.T)
         p_done = jax.nn.softmax(traj.logits, -1)[..., -1]
@@ -102,8 +105,6 @@ def _num(x, digits: int = 0) -> str:
 
 def markdown(report: dict[str, list[dict]], split: str, episodes: int) -> str:
     """One row per method and seed: how its episodes end, its failed Dones, its P(Done)."""
-    from foresit_jax.probes import EARLY_STEPS
-
     ends, dones, starts = [], [], []
     for method, per_seed in report.items():
         for r in per_seed:
@@ -149,8 +150,6 @@ def models_of(args: Args) -> tuple[dict, int]:
 
 
 def main(args: Args) -> dict:
-    from foresit_jax.probes import episode_endings
-
     if args.split not in ("val", "test"):
         raise errors.UserError(f"--split must be val or test, got {args.split!r}")
     folder = args.run if args.out is None else args.out

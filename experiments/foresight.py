@@ -39,10 +39,16 @@ import time
 from pathlib import Path
 from typing import Optional
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
+import envs
+from envs import catalog as C
+from envs.priors import RELATIONS
+from experiments import errors
 from experiments.reporting.tables import markdown_table
-from experiments.running import errors, rundir
+from experiments.running import rundir
 
 FEATURE_SETS = ("geometry", "view", "view + target")
 TURNS = ("left", "right")
@@ -146,12 +152,10 @@ def features(sem: np.ndarray, depth: np.ndarray, target: np.ndarray, num_semanti
              structural: int) -> dict[str, np.ndarray]:  # fmt: skip
     """The feature sets of first views: sem, depth [N, 3, W] (envs' `view`), the target
     category [N] (ints, the setup's category index)."""
-    from envs.catalog import SEM_FURNITURE
-
     n, width = sem.shape[0], sem.shape[-1]
     # Every object category -> one "object" class; every furniture kind (layouts with
     # priors: classes after the categories) -> furniture.
-    coarse = np.where(sem >= structural + num_targets, SEM_FURNITURE, np.minimum(sem, structural))
+    coarse = np.where(sem >= structural + num_targets, C.SEM_FURNITURE, np.minimum(sem, structural))
     geometry = np.concatenate([np.eye(structural + 1)[coarse].reshape(n, -1),
                                depth.reshape(n, -1) / max(float(depth.max()), 1e-9)], axis=1)  # fmt: skip
     half = width // 2
@@ -175,11 +179,6 @@ def collect(env, params, resets: int, key) -> dict[str, np.ndarray]:
     """From `resets` starts: the first views' feature sets, the turn and bearing labels (-1
     where a row is left out), the scene of each start (`group`) and whether the target is
     out of view (only those rows keep labels)."""
-    import jax
-    import jax.numpy as jnp
-
-    from envs import catalog as C
-
     def one(k):
         obs, state = env.reset(k, params)
         sem, depth = env.view(state, params)
@@ -214,9 +213,6 @@ def collect(env, params, resets: int, key) -> dict[str, np.ndarray]:
 def anchor_in_view(sem: np.ndarray, target: np.ndarray, setup: str) -> np.ndarray:
     """bool [N]: whether a first view (sem [N, 3, W]) shows furniture of a kind its target
     stands on or by (`envs.priors.RELATIONS`; False for targets placed by a zone)."""
-    from envs import catalog as C
-    from envs.priors import RELATIONS
-
     cats = C.categories(setup)
     classes = np.zeros((len(cats), C.num_semantic(setup, priors=True)), bool)
     for i, name in enumerate(cats):
@@ -253,10 +249,6 @@ def markdown(args: Args, results: dict, seconds: float) -> str:
 
 
 def main(args: Args) -> dict:
-    import jax
-
-    import envs
-
     if importlib.util.find_spec("sklearn") is None:
         raise errors.UserError("experiments.foresight needs scikit-learn: pip install -e '.[paper]'")
     if args.resets < 100:

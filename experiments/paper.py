@@ -47,22 +47,26 @@ import functools
 import sys
 import time
 from pathlib import Path
-from typing import Optional
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from envs.catalog import ROOM_TYPES
+from envs.catalog import ROOM_TYPES, categories
+from experiments import errors
 from experiments.reporting import cvae_comparison, probing, report, stats
 from experiments.reporting.paper_tables import (
     GROUPS, PAIRS, PROBED, SETUP_OF, TABLE3, by_length_png, by_length_rows, claims, claims_markdown, fmt_pair,
     sampled_markdown, table1, table2, table3,
 )  # fmt: skip
 from experiments.reporting.tables import markdown_table, write_csv
-from experiments.running import devices, errors, numerics, rundir, selection, sweeps
+from experiments.running import devices, flags, numerics, probes, rundir, selection, sweeps
 from experiments.running.models import models_of_sweep
 from experiments.running.presets import split_arm
+from foresit_jax import rollout as rollout_lib
+from foresit_jax.networks import build
+from foresit_jax.rollout import ActOptions, BoundEnv
+from foresit_jax.evaluate import Evaluator
 
 @dataclasses.dataclass(frozen=True)
 class Args:
@@ -83,21 +87,12 @@ class Args:
     e.g. each method at the learning rate `experiments.tune` chose for it on validation
     (a3c@learning_rate=1e-3 a3c+foresit@learning_rate=3e-4). Rows keep the method's name;
     the report lists the arms."""
-    resume: bool = False
-    """Continue a killed run in --out with the arguments it was started with."""
-    overwrite: bool = False
-    """Replace an existing run in --out."""
-    reuse: tuple[Path, ...] = ()
-    """Paper runs, or sweep folders (`experiments.sweep`, each lending its setup's sweep),
-    whose finished methods are taken instead of trained (same preset and overrides), seed
-    by seed: e.g. the MAML rows run elsewhere with --exclude, seeds 2-4 (--seed 2 --seeds
-    3) added to a run of seeds 0-1, or a sweep's rows, combined into one report."""
-    num_updates: Optional[int] = None
-    """Override the preset's number of updates."""
-    test_episodes_per_room: Optional[int] = None
-    """Override the preset's test episodes per room type."""
-    val_episodes_per_room: Optional[int] = None
-    """Override the preset's validation episodes per room type."""
+    resume: flags.Resume = False
+    overwrite: flags.Overwrite = False
+    reuse: flags.Reuse = ()  # a sweep folder lends the sweep of its own setup (`reuse_sweeps`)
+    num_updates: flags.NumUpdates = None
+    test_episodes_per_room: flags.TestEpisodes = None
+    val_episodes_per_room: flags.ValEpisodes = None
     cvae_windows: int = 100
     """Windows the C-VAE comparison collects its sub-goals from."""
     cvae_epochs: int = 50
@@ -108,10 +103,8 @@ class Args:
     """Figure 4: most sub-goal items embedded (each gives an imagined and a selected state)."""
     probe_episodes_per_room: int = 50
     """Test episodes per room type of each condition of the imagination probes."""
-    stop_after_chunks: Optional[int] = None
-    """Stop (as if killed) after this many chunks of a setup's sweep; for testing --resume."""
-    progress: bool = True
-    """Show the progress bar."""
+    stop_after_chunks: flags.StopAfterChunks = None
+    progress: flags.Progress = True
 
 
 def arm_of(args: Args, method: str) -> str:
@@ -180,9 +173,8 @@ def check(args: Args) -> None:
 def main(args: Args) -> dict | None:
     """Run (or continue) every sweep, then write the report; returns the claims
     ({claim: verdict line}), or None when stopped by --stop-after-chunks."""
-    keep = ("stop_after_chunks", "progress")
     if args.resume:
-        args = rundir.resumed_args(args, "paper.json", "paper run", keep=keep)
+        args = rundir.resumed_args(args, "paper.json", "paper run", keep=flags.INVOCATION)
     check(args)
     if importlib.util.find_spec("sklearn") is None:  # Figure 4's t-SNE, drawn after the training
         raise errors.UserError("the paper report needs scikit-learn (Figure 4's t-SNE): pip install 'foresit_jax[paper]'")
@@ -190,7 +182,7 @@ def main(args: Args) -> dict | None:
         sweeps.method_schedule(arm_of(args, method), sweeps.Sweep(preset=args.preset, setup=SETUP_OF[method]))
     if not args.resume:
         rundir.prepare_run_dir(args.out, resume=False, overwrite=args.overwrite, marker="paper.json", kind="paper run")
-        rundir.write_started_args(args.out / "paper.json", args, keep)
+        rundir.write_started_args(args.out / "paper.json", args, flags.INVOCATION)
     t0 = time.time()
     results = {}
     for setup, group in GROUPS.items():
@@ -249,9 +241,7 @@ def trajectories_figure(args: Args, base: str, other: str, path: Path) -> str:
     """Figure 3: both methods' first seeds (selected models) play the same test episodes,
     one per room type: the first of `trajectory_candidates` whose L^g >= 5 (a fixed rule,
     not a choice of good-looking ones); each method acts by its own evaluation protocol."""
-    from envs.render import render_topdown
-    from foresit_jax.agent import Agent, BoundEnv
-    from foresit_jax.evaluate import Evaluator
+    from envs.render import render_topdown  # matplotlib, imported at its top
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -260,7 +250,8 @@ def trajectories_figure(args: Args, base: str, other: str, path: Path) -> str:
     env, n = evaluator.env, args.trajectory_candidates
     key = selection.test_key(args.seed)
     rooms = next(iter(loaded.values()))[0].room_types or ROOM_TYPES
-    rollouts = {m: jax.jit(functools.partial(Agent(config).rollout, greedy=config.pieces.greedy_evaluation),
+    rollouts = {m: jax.jit(functools.partial(rollout_lib.rollout, build(config),
+                                            options=ActOptions(greedy=config.pieces.greedy_evaluation)),
                            static_argnames="num_steps") for m, (config, _) in loaded.items()}  # fmt: skip
     replay = jax.jit(functools.partial(_replay_positions, env))
     panels, lines = [], []
@@ -317,8 +308,6 @@ def tsne_figure(args: Args, config, trainer, state, items, path: Path) -> int:
     `items` (`cvae_comparison.collect_items`: successful training episodes of the first
     seed's last agent, what f_w learns from), coloured by target category; returns the
     number of items drawn."""
-    from envs.catalog import categories
-    from foresit_jax.agent import Agent
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     from sklearn.manifold import TSNE
@@ -328,7 +317,7 @@ def tsne_figure(args: Args, config, trainer, state, items, path: Path) -> int:
     n = len(s_0)
     if n < 5:
         return n
-    imagined = np.asarray(Agent(config).imagine(state.imagination_params, s_0, goal))
+    imagined = np.asarray(build(config).imagine(state.imagination_params, s_0, goal))
     vectors = np.asarray(trainer.env_params.bank.target_vectors)
     category = np.argmin(((goal[:, None, :] - vectors[None]) ** 2).sum(-1), axis=1)
     names = categories(config.setup)
@@ -356,8 +345,6 @@ def sampled_results(folder: Path, methods) -> dict[str, list[dict]]:
     episodes per room type) with actions sampled from the policy. For a method evaluated
     greedily (ORG's protocol) these are the episodes its report row played, with the other
     action rule; for one evaluated sampled, its row's own numbers again."""
-    from foresit_jax.evaluate import Evaluator
-
     args = sweeps.saved(folder)
     out, evaluators = {}, {}
     for method, models in models_of_sweep(folder, tuple(methods)).items():
@@ -401,7 +388,7 @@ def probe_section(args: Args, results: dict) -> str:
     models = {}
     for m in methods:
         models.update(by_method(args, models_of_sweep(args.out / SETUP_OF[m], (arm_of(args, m),))))
-    report = probing.probe(models, args.probe_episodes_per_room, args.cvae_windows)
+    report = probes.probe(models, args.probe_episodes_per_room, args.cvae_windows)
     rundir.write_json(args.out / "probe.json", report)
     return probing.markdown(report, args.probe_episodes_per_room, args.cvae_windows, level=2)
 

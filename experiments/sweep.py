@@ -28,30 +28,19 @@ from __future__ import annotations
 
 import dataclasses
 import sys
-from typing import Optional
 
-from experiments.running import devices, errors, rundir, sweeps
+from experiments import errors
+from experiments.running import devices, flags, rundir, sweeps
 
 
 @dataclasses.dataclass(frozen=True)
 class Args(sweeps.Sweep):
     """Train several methods over several seeds and tabulate them as in Table 1."""
 
-    resume: bool = False
-    """Continue the sweep in --out where it stopped, with the arguments it was started
-    with (finished methods are kept, a started one continues from its last checkpoint;
-    other values are refused, except a flag given at its default, which cannot be told
-    from one not given and is ignored). With --num-updates beyond the sweep's, every
-    method trains on to it (finished ones too; their earlier results are kept beside)."""
-    overwrite: bool = False
-    """Replace an existing sweep in --out."""
-    stop_after_chunks: Optional[int] = None
-    """Stop (as if killed) after this many chunks of this invocation; for testing --resume."""
-    progress: bool = True
-    """Show the progress bar."""
-
-
-KEEP = ("stop_after_chunks", "progress")  # this invocation's own: not saved, not resumed
+    resume: flags.Resume = False
+    overwrite: flags.Overwrite = False
+    stop_after_chunks: flags.StopAfterChunks = None
+    progress: flags.Progress = True
 
 
 def main(args: Args) -> list[dict] | None:
@@ -59,7 +48,8 @@ def main(args: Args) -> list[dict] | None:
     returns Table 1's rows (None when stopped by --stop-after-chunks)."""
     if args.resume:  # the sweep's own arguments; a flag given that contradicts them is refused
         wanted = args.num_updates  # more updates than the sweep has extend it, once the rest is checked
-        args = rundir.resumed_args(dataclasses.replace(args, num_updates=None), "sweep.json", "sweep", keep=KEEP)
+        args = rundir.resumed_args(dataclasses.replace(args, num_updates=None), "sweep.json", "sweep",
+                                   keep=flags.INVOCATION)  # fmt: skip
         if wanted is not None:
             extended = sweeps.extend(args.out, wanted)
             args = dataclasses.replace(args, num_updates=extended.num_updates, reuse=extended.reuse)

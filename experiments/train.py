@@ -35,11 +35,13 @@ from typing import Literal, Optional
 
 import numpy as np
 
+from experiments import errors
 from experiments.reporting import figures, tables
-from experiments.running import errors, loop, rundir, selection, tracking
+from experiments.running import flags, loop, rundir, selection, tracking
 from experiments.running.presets import TrainConfigFields, config_flag, given, preset
 from experiments.running.progress import progress_bar
 from experiments.running.run import Run, read
+from foresit_jax.evaluate import Evaluator
 
 
 @dataclasses.dataclass(frozen=True)
@@ -59,38 +61,27 @@ class Args:
     """Random seed (same seed, same result, bit for bit, on the same machine)."""
     out: Path = Path("runs/x")
     """Run folder."""
-    resume: bool = False
-    """Continue the run in --out from its last checkpoint."""
-    overwrite: bool = False
-    """Delete an existing run in --out and start again."""
-    num_updates: Optional[int] = None
-    """Override the preset's number of updates."""
-    num_lanes: Optional[int] = None
-    """Override the preset's number of parallel lanes."""
-    learning_rate: Optional[float] = None
-    """Override the preset's learning rate."""
+    resume: flags.Resume = False
+    overwrite: flags.Overwrite = False
+    num_updates: flags.NumUpdates = None
     chunk_updates: Optional[int] = None
     """Override the preset's updates per chunk (checkpoint/validation interval)."""
-    test_episodes_per_room: Optional[int] = None
-    """Override the preset's test episodes per room type."""
-    val_episodes_per_room: Optional[int] = None
-    """Override the preset's validation episodes per room type."""
-    stop_after_chunks: Optional[int] = None
-    """Stop (as if interrupted) after this many chunks of this invocation; for testing --resume."""
-    progress: bool = True
-    """Show the progress bar."""
+    test_episodes_per_room: flags.TestEpisodes = None
+    val_episodes_per_room: flags.ValEpisodes = None
+    stop_after_chunks: flags.StopAfterChunks = None
+    progress: flags.Progress = True
     track: Literal["none", "tensorboard", "wandb"] = "none"
     """Also log the metrics and validations to TensorBoard (<out>/tensorboard) or Weights & Biases
     (offline without WANDB_API_KEY, <out>/wandb); needs pip install 'foresit_jax[track]'."""
     config: config_flag(TrainConfigFields) = dataclasses.field(default_factory=TrainConfigFields)
-    """Every other Config field, e.g. --gamma 0.9 --room-types bathroom: the preset's value unless given."""
+    """Every other Config field, e.g. --learning-rate 3e-4 --num-lanes 16 --gamma 0.9 --room-types bathroom: the
+    preset's value (or the arm's, METHOD@field=value) unless given."""
 
 
 def build(args: Args):
     """Config and Schedule from the arguments (or from the run folder when resuming)."""
-    overrides = dict(num_updates=args.num_updates, num_lanes=args.num_lanes, learning_rate=args.learning_rate,
-                     setup=args.setup, **given(args.config))  # fmt: skip
-    config, schedule = preset(args.preset, args.method, **overrides)
+    config, schedule = preset(args.preset, args.method, num_updates=args.num_updates, setup=args.setup,
+                              **given(args.config))  # fmt: skip
     sched = {k: getattr(args, k) for k in ("chunk_updates", "test_episodes_per_room", "val_episodes_per_room")}
     schedule = dataclasses.replace(schedule, **{k: v for k, v in sched.items() if v is not None})
     for name in ("chunk_updates", "test_episodes_per_room", "val_episodes_per_room"):
@@ -105,7 +96,6 @@ def resume_conflicts(args: Args, info: dict) -> list[str]:
     `--flag value (the run has ...)`; --num-updates is not one (it extends the run)."""
     config, schedule = info["config"], info["schedule"]
     run = {"method": info["arm"], "setup": config["setup"], "preset": info["preset"], "seed": info["seeds"][0],
-           "num_lanes": config["num_lanes"], "learning_rate": config["learning_rate"],
            **{k: schedule[k] for k in ("chunk_updates", "test_episodes_per_room", "val_episodes_per_room")}}  # fmt: skip
     defaults = Args()
     clash = [f"--{k.replace('_', '-')} {getattr(args, k)} (the run has {v})" for k, v in run.items()
@@ -172,8 +162,6 @@ REPORT_FILES = ("results_test.json", "results_test.md", "learning_curve.png")
 
 
 def main(args: Args) -> dict:
-    from foresit_jax.evaluate import Evaluator
-
     out = args.out
     tracking.check(args.track)
     run, resumed = start(args)

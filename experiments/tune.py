@@ -34,14 +34,11 @@ import dataclasses
 import itertools
 import sys
 from pathlib import Path
-from typing import Optional
 
+from experiments import errors
 from experiments.reporting import tuning
-from experiments.running import devices, errors, rundir, sweeps
+from experiments.running import devices, flags, rundir, sweeps
 from experiments.running.presets import split_arm
-
-KEEP = ("stop_after_chunks", "progress")  # this invocation's own, not the tune's
-
 
 @dataclasses.dataclass(frozen=True)
 class Args:
@@ -61,23 +58,14 @@ class Args:
     """Base seed: seed i is the run `train --seed <seed + i>` would make."""
     out: Path = Path("runs/tune")
     """Output folder (the sweep of the arms goes to its sweep/)."""
-    resume: bool = False
-    """Continue the tune in --out where it stopped, with the arguments it was started with."""
-    overwrite: bool = False
-    """Replace an existing tune in --out."""
-    reuse: tuple[Path, ...] = ()
-    """Sweep or tune folders whose finished arms are taken instead of trained (same setup,
-    preset and overrides; see experiments.sweep's --reuse)."""
-    num_updates: Optional[int] = None
-    """Override the preset's number of updates."""
-    test_episodes_per_room: Optional[int] = None
-    """Override the preset's test episodes per room type."""
-    val_episodes_per_room: Optional[int] = None
-    """Override the preset's validation episodes per room type."""
-    stop_after_chunks: Optional[int] = None
-    """Stop (as if killed) after this many chunks of this invocation; for testing --resume."""
-    progress: bool = True
-    """Show the progress bar."""
+    resume: flags.Resume = False
+    overwrite: flags.Overwrite = False
+    reuse: flags.Reuse = ()
+    num_updates: flags.NumUpdates = None
+    test_episodes_per_room: flags.TestEpisodes = None
+    val_episodes_per_room: flags.ValEpisodes = None
+    stop_after_chunks: flags.StopAfterChunks = None
+    progress: flags.Progress = True
 
 
 def parse_grid(specs) -> list[tuple[str, list[str]]]:
@@ -148,7 +136,7 @@ def tune_report(args: Args, grid, table: dict, results: dict) -> tuple[str, dict
 def main(args: Args) -> dict | None:
     """Run (or continue) the tune; returns tune.json's numbers (None when stopped early)."""
     if args.resume:
-        args = rundir.resumed_args(args, "tune.json", "tune", keep=KEEP)
+        args = rundir.resumed_args(args, "tune.json", "tune", keep=flags.INVOCATION)
     if args.seeds < 1:
         raise errors.UserError(f"--seeds must be >= 1, got {args.seeds}")
     if not args.methods or len(set(args.methods)) != len(args.methods):
@@ -157,7 +145,7 @@ def main(args: Args) -> dict | None:
     table = arms(args, grid)
     if not args.resume:
         rundir.prepare_run_dir(args.out, resume=False, overwrite=args.overwrite, marker="tune.json", kind="tune")
-        rundir.write_started_args(args.out / "tune.json", args, KEEP)
+        rundir.write_started_args(args.out / "tune.json", args, flags.INVOCATION)
     names = tuple(a for by_point in table.values() for a in by_point.values())
     print(f"tuning {', '.join(f for f, _ in grid)}: {len(args.methods)} method(s) x {len(points(grid))} value(s) "
           f"= {len(names)} arms, {args.seeds} seed(s) each", flush=True)  # fmt: skip

@@ -2,19 +2,24 @@
 
 The entry points (what the README uses):
 
-    from foresit_jax import Config, make_train, Trainer, Agent, evaluate
+    from foresit_jax import Config, make_train, evaluate
     train = make_train(Config(method="a3c+foresit", num_lanes=16, num_updates=100))
     state, metrics = jax.jit(jax.vmap(train))(keys)     # a seed sweep in one program
     grid = GridTrainer(config)                           # learning rates vmapped too
     state, metrics = jax.jit(jax.vmap(grid.train))(*grid_inputs(seeds, [3e-4, 1e-3]))
 
-The modules hold the pieces: `config` (Config), `methods` (base x encoder x imagination),
-`networks` (flax modules), `lstm` (the encoder LSTM's split form), `agent` (acting),
-`replay` (the replay gradient), `losses`, `imagination` (buffers, f_w training, noise),
-`train` (the trainer), `evaluate` (SR/SPL on held-out scenes), `maml` (SAVN's inner loop),
-`org` (ORG's object graph), `cvae` (the paper's C-VAE comparison).
+The modules hold the pieces, from the ground up: `methods` (base x encoder x critic x
+imagination, as flags), `config` (Config), `lstm` (the encoder LSTM and its split form),
+`org` (ORG's object graph), `losses`, `imagination` (buffers, f_w training, noise),
+`maml` (SAVN's inner loop), `networks` (flax modules; `build(config)`), `rollout` (acting:
+records and plain functions), `train` (the learner: the replay loss, the update, Algorithm
+1's imagination step, Trainer), `evaluate` (SR/SPL on held-out scenes), `probes`, `cvae`
+(the paper's C-VAE comparison). `agent` keeps the old `Agent` class for one release.
 """
 
+import importlib as _importlib
+import sys as _sys
+import types as _types
 import importlib.util as _util
 from pathlib import Path as _Path
 
@@ -36,11 +41,47 @@ def _check_envs() -> None:
 
 _check_envs()
 
-from foresit_jax.agent import Agent  # noqa: E402 (after the check of what `envs` is)
-from foresit_jax.config import Config  # noqa: E402
-from foresit_jax.evaluate import evaluate  # noqa: E402
-from foresit_jax.methods import Method, parse_method  # noqa: E402
-from foresit_jax.train import GridTrainer, Trainer, grid_inputs, make_train, make_trainer  # noqa: E402
+# The package face is lazy (PEP 562): `from foresit_jax.config import Config` loads the
+# config and the method parser alone, and a name below loads its module when first used.
+_EXPORTS = {
+    "Agent": "foresit_jax.agent",  # deprecated: foresit_jax.rollout's functions and networks.build
+    "Config": "foresit_jax.config",
+    "evaluate": "foresit_jax.evaluate",
+    "evaluate_policy": "foresit_jax.evaluate",
+    "Method": "foresit_jax.methods",
+    "parse_method": "foresit_jax.methods",
+    "build": "foresit_jax.networks",
+    "Networks": "foresit_jax.networks",
+    "GridTrainer": "foresit_jax.train",
+    "Trainer": "foresit_jax.train",
+    "grid_inputs": "foresit_jax.train",
+    "make_train": "foresit_jax.train",
+    "make_trainer": "foresit_jax.train",
+}
+__all__ = sorted(_EXPORTS)
 
-__all__ = ["Agent", "Config", "GridTrainer", "Method", "Trainer", "evaluate", "grid_inputs", "make_train", "make_trainer",
-           "parse_method"]
+
+def __getattr__(name: str):
+    if name not in _EXPORTS:
+        raise AttributeError(f"module 'foresit_jax' has no attribute {name!r}")
+    value = getattr(_importlib.import_module(_EXPORTS[name]), name)
+    globals()[name] = value  # once loaded, a plain attribute
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))
+
+
+class _Face(_types.ModuleType):
+    """`foresit_jax.evaluate` is the function, as the eager face had it, even after the
+    submodule of that name is imported (which sets the package attribute to the module)."""
+
+    def __getattribute__(self, name: str):
+        if name in _SHADOWED:
+            return getattr(_importlib.import_module(_EXPORTS[name]), name)
+        return super().__getattribute__(name)
+
+
+_SHADOWED = frozenset(n for n, module in _EXPORTS.items() if module.rsplit(".", 1)[1] == n)
+_sys.modules[__name__].__class__ = _Face

@@ -182,7 +182,7 @@ class Config:
         self.validate()
 
     def validate(self) -> None:
-        """Raise ValueError on bad values."""
+        """Raise ValueError on bad values. The method is parsed here, once (`pieces`)."""
         pieces = parse_method(self.method)
         if self.setup not in SETUPS:
             raise ValueError(f"setup must be one of {SETUPS}, got {self.setup!r}.")
@@ -251,11 +251,13 @@ class Config:
                 f"imagination_layer_sizes[-1] ({sizes[-1]}) must equal hidden_size "
                 f"({self.hidden_size}): f_w imagines a state."
             )
+        object.__setattr__(self, "_pieces", pieces)  # not a field: equality and hashing ignore it
 
     @property
     def pieces(self) -> Method:
-        """The method's pieces (base, encoder, imagination), parsed from `method`."""
-        return parse_method(self.method)
+        """The method's pieces (base, encoder, critic, imagination), parsed from `method`
+        once, when the config was made."""
+        return self._pieces
 
     @property
     def frames_per_update(self) -> int:

@@ -14,7 +14,7 @@ functions `evaluate` and `evaluate_random_policy` make one when none is given.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable
 
 import chex
 import jax
@@ -25,8 +25,10 @@ import envs
 from envs.catalog import ROOM_TYPES
 from envs.metrics import summarize  # (also re-exported: foresit_jax.evaluate.summarize)
 from foresit_jax import imagination
-from foresit_jax.agent import Agent, AgentParams, BoundEnv, EpisodeStats, episode_stats
+from foresit_jax import rollout
 from foresit_jax.config import Config
+from foresit_jax.networks import Networks, build
+from foresit_jax.rollout import ActOptions, AgentParams, BoundEnv, EpisodeStats, episode_stats
 
 
 def agent_params(state, sigma2_max: float, evaluation_noise: str = "training_end") -> AgentParams:
@@ -129,21 +131,22 @@ class Evaluator:
             self.params[(split, room)] = self.env.make_params(split, room_types=(room,), training=False)
         return self.params[(split, room)]
 
-    def agent_rollout(self, config: Config, num_steps: int, greedy: bool, agent: Agent | None = None):
+    def agent_rollout(self, config: Config, num_steps: int, greedy: bool, nets: Networks | None = None):
         """Jitted (params, w_params, env_params, key, sigma2 [N]) -> EpisodeStats [N]
-        of `agent` (default `Agent(config)`; another one, e.g. a probe's, is compiled apart).
+        of `nets` (default `build(config)`; another one, e.g. a probe's, is compiled apart).
 
         The maml base keeps a copy of the parameters per episode (its inner loop adapts
         each one): its episodes run in groups of at most `MAX_ADAPTIVE_LANES` (`lax.map`),
         so that memory does not grow with the number of evaluation episodes; they are the
         episodes one rollout of all lanes would play (the same reset keys)."""
-        key = ("agent", config, num_steps, greedy, None if agent is None else id(agent))
+        key = ("agent", config, num_steps, greedy, None if nets is None else id(nets))
         if key not in self.compiled:
-            agent, env = Agent(config) if agent is None else agent, self.env
+            nets, env = build(config) if nets is None else nets, self.env
+            options = ActOptions(greedy=greedy, whole_episodes=True, record_inputs=False)
 
             def run_group(params, w_params, env_params, key, sigma2, reset_keys=None):
-                traj = agent.rollout(AgentParams(params, w_params, sigma2), BoundEnv(env, env_params), key, num_steps,
-                                     greedy, reset_keys=reset_keys)  # fmt: skip
+                traj = rollout.rollout(nets, AgentParams(params, w_params, sigma2), BoundEnv(env, env_params), key,
+                                       num_steps, options, reset_keys=reset_keys)  # fmt: skip
                 return episode_stats(traj)
 
             def run(params, w_params, env_params, key, sigma2):
@@ -210,14 +213,15 @@ class Evaluator:
     def evaluate(
         self, agent_params: AgentParams, config: Config, split: str = "test", key: chex.PRNGKey | None = None,
         episodes_per_room: int = 250, greedy: bool | None = None, room_types: tuple[str, ...] | None = None,
-        by_length: bool = False, agent: Agent | None = None,
+        by_length: bool = False, agent: Networks | None = None,
     ) -> dict[str, dict[str, float]]:  # fmt: skip
         """Run `episodes_per_room` episodes in each room type of `split` ("val" or "test").
 
         Returns {"overall": metrics, "kitchen": metrics, ...} with metrics from `summarize`,
         and with `by_length` also "by_length": SR/SPL by bucket of L^g (`envs.metrics.by_length`).
-        agent: the acting agent (default `Agent(config)`); keep the object for as long as
-        this Evaluator, its compiled rollout is cached under the object's id.
+        agent: the acting networks (default `networks.build(config)`; e.g. a probe's
+        `probes.shuffled`); keep the object for as long as this Evaluator, its compiled
+        rollout is cached under the object's id.
         """
         self._check(config, split, episodes_per_room)
         key = jax.random.PRNGKey(0) if key is None else key
@@ -262,3 +266,62 @@ def evaluate_random_policy(
     """`Evaluator.evaluate_random_policy` (with a new Evaluator unless one is given)."""
     evaluator = Evaluator.for_config(config) if evaluator is None else evaluator
     return evaluator.evaluate_random_policy(config, split, key, episodes_per_room)
+
+
+def policy_episodes(policy_fn: Callable, params, carry, env: BoundEnv, key: chex.PRNGKey, num_steps: int,
+                    num_lanes: int) -> EpisodeStats:  # fmt: skip
+    """One whole episode per lane of any batched policy function
+    `(params, carry, obs, first, key) -> (action [B], carry)`, padded to `num_steps`, as
+    `rollout.rollout` plays them: the lanes reset with `split(split(key)[0], B)`, step t gets
+    key `split(split(key)[1], num_steps)[t]`, and the environment steps with
+    `split(split(that key, 3)[2], B)`; only each lane's first episode counts."""
+    k_start, k_act = jax.random.split(key)
+    obs, env_state = env.reset(jax.random.split(k_start, num_lanes))
+
+    def step(state, step_key):
+        obs, env_state, carry, alive, first = state
+        action, carry = policy_fn(params, carry, obs, first, step_key)
+        k_env = jax.random.split(step_key, 3)[2]
+        obs, env_state, _, term, trunc, info = env.step(jax.random.split(k_env, num_lanes), env_state, action)
+        done = term | trunc
+        out = (alive, info["success"] & alive, (term | trunc) & alive, info["optimal_length"], info["room_type"])
+        return (obs, env_state, carry, alive & ~done, done), out
+
+    first = jnp.ones((num_lanes,), bool)
+    _, (valid, success, ended, optimal, room) = jax.lax.scan(
+        step, (obs, env_state, carry, first, first), jax.random.split(k_act, num_steps)
+    )
+    length = jnp.sum(valid.astype(jnp.int32), axis=0)
+    success = jnp.any(success, axis=0)
+    spl = envs.metrics.spl(success, length, optimal[0])
+    return EpisodeStats(success, length, optimal[0], jnp.any(ended, axis=0), spl, room[0])
+
+
+def evaluate_policy(
+    policy_fn: Callable, params, initial_carry: Callable[[int], Any], config: Config, split: str = "test",
+    key: chex.PRNGKey | None = None, episodes_per_room: int = 250, room_types: tuple[str, ...] | None = None,
+) -> dict[str, dict[str, float]]:  # fmt: skip
+    """SR, SPL and SR by path length of any policy, the user's own included, on the episodes
+    `Evaluator.evaluate` plays for `config`'s scenes (setup, layout, priors; its room types
+    unless `room_types`) with `key` (PRNGKey(0) by default; the reports' test episodes of
+    seed s: `experiments.load`'s `test_key(s)`): {"overall": ..., room: ..., "by_length": ...}.
+
+    policy_fn: `(params, carry, obs, first, key) -> (action [B], carry)`, batched over lanes
+    (`rollout.policy(nets)` is the agent's; see `policy_episodes` for the keys it gets);
+    initial_carry: `num_lanes -> carry`. The agent's own policy gives `Evaluator.evaluate`'s
+    numbers exactly (tests/test_policy.py). The privileged `oracle` reads the goal view: its
+    observations come from the environment wrapped as `rollout.acting_env` wraps it."""
+    evaluator = Evaluator.for_config(config)
+    evaluator._check(config, split, episodes_per_room)
+    key = jax.random.PRNGKey(0) if key is None else key
+    rooms = tuple(room_types or config.room_types or ROOM_TYPES)
+    env = rollout.acting_env(build(config), BoundEnv(evaluator.env, None)).env
+    compiled = {}
+
+    def run_room(env_params, num_steps, k):
+        if num_steps not in compiled:  # one program per time limit (room types share one in rooms)
+            compiled[num_steps] = jax.jit(lambda p, c, e, k: policy_episodes(policy_fn, p, c, BoundEnv(env, e), k,
+                                                                             num_steps, episodes_per_room))  # fmt: skip
+        return compiled[num_steps](params, initial_carry(episodes_per_room), env_params, k)
+
+    return evaluator._per_room(rooms, split, key, run_room, by_length=True)

@@ -220,7 +220,9 @@ class EncoderLSTM(nn.OptimizedLSTMCell):
       window of input gates `[T, B, 4H]`, the carry zeroed before each step that starts an
       episode (`episode_step` `[T, B]` 0), and `readout(s_t, x_t)` of each step (the
       replay: `ActorCritic.replay`).
-    A step of acting runs `lstm_step` on `kernels` made once per window (outside the loop)."""
+    step(kernels, carry, gates) -> one recurrent step from a step's input gates (acting:
+      `ActorCritic.act`, on `kernels` made once per window, outside the loop).
+    Nothing else in the package calls `lstm_step`: the cell owns its recurrence."""
 
     # flax's orthogonal initialiser, drawn a sample at a time under vmap (see `layers.orthogonal`)
     recurrent_kernel_init: Any = orthogonal()
@@ -230,6 +232,9 @@ class EncoderLSTM(nn.OptimizedLSTMCell):
 
     def input_gates(self, x: chex.Array, kernels: LSTMKernels) -> chex.Array:
         return lstm_input_gates(kernels, x)
+
+    def step(self, kernels: LSTMKernels, carry: LSTMCarry, gates: chex.Array) -> tuple[LSTMCarry, chex.Array]:
+        return lstm_step(kernels, carry, gates)
 
     def unroll(self, kernels: LSTMKernels, carry: LSTMCarry, gates: chex.Array, episode_step: chex.Array, readout,
                xs=None):  # fmt: skip

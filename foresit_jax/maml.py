@@ -26,7 +26,7 @@ runners/train_util.py, runners/savn_val.py, agents/agent.py) and kept as it is t
   the inner `jax.grad` runs inside the acting scan's segments and the outer gradient goes
   through it (exact second order; `Config.maml_first_order` stops the inner gradient's
   own gradient, MAML's first-order approximation, off by default).
-* Test time runs the same inner loop (`Agent.rollout` calls the same `adaptive_act`), with
+* Test time runs the same inner loop (`rollout.rollout` calls the same `adaptive_act`), with
   no meta-step; actions are sampled (SAVN's validation samples too).
 
 Adapted kernels. Each lane adapts its own theta_i, but the encoder LSTM's two kernels (the
@@ -76,7 +76,7 @@ import jax
 import jax.numpy as jnp
 from flax import traverse_util
 
-from foresit_jax import distributions, imagination
+from foresit_jax import distributions
 from foresit_jax.lstm import (
     LowRankUpdate,
     encoder_lstm_params,
@@ -203,6 +203,22 @@ def _unlane(tree):
     return jax.tree.map(lambda x: x[:, 0], tree)  # [B, 1, ...] -> [B, ...]
 
 
+class Adaptation(NamedTuple):
+    """What the maml base's inner loop gives a window it acts under adapted parameters
+    (`adaptive_act`; `foresit_jax.rollout.act_window` reads it); every field may be None.
+
+    alive: `[B]` bool, with `whole_episodes`, which lanes' counted episode is still running
+      at the window's start (None: all; a window that continues an earlier one of the same
+      whole-episode rollout passes what that one left);
+    lstm_update: a low-rank change of the LSTM's kernels (the lanes' adapted kernels);
+    gate_offsets: `[num_steps, B, 4H]` added to each step's gate pre-activations (zeros
+      whose gradient is the pre-activations')."""
+
+    alive: Optional[chex.Array] = None
+    lstm_update: Optional[LowRankUpdate] = None
+    gate_offsets: Optional[chex.Array] = None
+
+
 @dataclasses.dataclass(frozen=True)
 class InnerLoop:
     """SAVN's inner loop as `adaptive_act` runs it (the maml base's settings, from the
@@ -212,30 +228,28 @@ class InnerLoop:
     updates: int  # at most this many inner updates per episode (SAVN: 4)
     lr: float  # the inner SGD's step size
     first_order: bool  # drop the meta-gradient through the inner updates
-    sigma2_max: float  # Eq. 7's bound on the imagination noise (each lane's variance from its tracker)
 
     @classmethod
     def of(cls, config) -> "InnerLoop":
-        return cls(config.maml_segment, config.maml_inner_updates, config.maml_inner_lr, config.maml_first_order,
-                   config.sigma2_max)  # fmt: skip
+        return cls(config.maml_segment, config.maml_inner_updates, config.maml_inner_lr, config.maml_first_order)
 
 
 def adaptive_act(
-    fns, loop: InnerLoop, acting, env, actor, key: chex.PRNGKey, num_steps: int, options
+    nets, acting, env, actor, key: chex.PRNGKey, num_steps: int, options, act_window: Callable
 ) -> tuple[Any, Any, Any, list[AdaptedParams]]:
     """One whole episode per lane (from `actor`, every lane at an episode start) with
-    SAVN's inner loop (`loop`), acting as `acting` (`AgentParams`: theta_0, w, the noise
-    variance) in `env` (`BoundEnv`) with `options` (`ActOptions`: greedy, record_inputs;
-    whole episodes), through `fns` (`methods.BaseFunctions`: act_window, lstm_inputs,
-    interaction_loss). Returns (actor after the window, Trajectory `[num_steps, B]`, its
-    WindowEnd, the parameters each lane used: `AdaptedParams`, theta_0 first, then
-    theta_i after each update slot (unchanged in lanes whose episode had ended))."""
+    SAVN's inner loop (`InnerLoop.of(nets.config)`), acting as `acting` (`AgentParams`:
+    theta_0, w, the noise variance, `[]` or `[B]`, never None: `rollout.act` sets Eq. 7's)
+    in `env` (`BoundEnv`) with `options` (`ActOptions`: greedy, record_inputs; whole
+    episodes): each segment is one `act_window` (that of
+    `foresit_jax.rollout`, passed in: acting imports this module) under the lane's theta_i
+    (`rollout.Adaptation`), its L_phi and the encoder's inputs read through `nets.model`.
+    Returns (actor after the window, Trajectory `[num_steps, B]`, its WindowEnd, the
+    parameters each lane used: `AdaptedParams`, theta_0 first, then theta_i after each
+    update slot (unchanged in lanes whose episode had ended))."""
+    loop = InnerLoop.of(nets.config)
     num_lanes = actor.episode_step.shape[0]
-    noise_variance = acting.noise_variance
-    if noise_variance is None:  # Eq. 7 from each lane's tracker (it changes only when the episode ends)
-        rho = jax.vmap(imagination.success_rate)(actor.tracker)
-        noise_variance = imagination.noise_variance(rho, loop.sigma2_max)
-    variance = jnp.broadcast_to(jnp.asarray(noise_variance, jnp.float32), (num_lanes,))[:, None]  # [B, 1]
+    variance = jnp.broadcast_to(jnp.asarray(acting.noise_variance, jnp.float32), (num_lanes,))[:, None]  # [B, 1]
     shared, lanes = split_encoder_lstm_kernels(acting.params)
     lanes = jax.tree.map(lambda x: jnp.broadcast_to(x, (num_lanes,) + x.shape), lanes)
     kernel_dtype = jax.tree.leaves(shared)[0].dtype
@@ -245,19 +259,20 @@ def adaptive_act(
     def window(lanes, update, lane_actor, key, variance, alive, steps, record, gate_offsets=None):  # one lane
         lane_acting = acting._replace(params=join_partial_trees(shared, lanes), noise_variance=variance)
         lane_options = options._replace(whole_episodes=True, record_inputs=record)
-        return fns.act_window(lane_acting, env, lane_actor, key, steps, lane_options, alive=alive,
-                              lstm_update=update, gate_offsets=gate_offsets)  # fmt: skip
+        return act_window(nets, lane_acting, env, lane_actor, key, steps, lane_options,
+                          Adaptation(alive, update, gate_offsets))  # fmt: skip
 
     def segment(lanes, update, lane_actor, key, variance, alive):  # one lane
         def loss(lanes, gate_offsets):
             next_actor, traj, end = window(lanes, update, lane_actor, key, variance, alive, loop.segment, True,
                                           gate_offsets)  # fmt: skip
             inputs = interaction_inputs(traj.states[:, 0], traj.logits[:, 0])  # [segment, H + A]
-            return fns.interaction_loss(join_partial_trees(shared, lanes), inputs), (next_actor, traj, end)
+            loss = nets.model.apply(join_partial_trees(shared, lanes), inputs, method="interaction_loss")
+            return loss, (next_actor, traj, end)
 
         zeros = jnp.zeros((loop.segment, 1, 4 * actor.lstm[1].shape[-1]), kernel_dtype)  # [segment, 1, 4H]
         (_, (next_actor, traj, end)), (grads, gate_grads) = jax.value_and_grad(loss, (0, 1), has_aux=True)(lanes, zeros)
-        rows = _kernel_update(fns, loop, join_partial_trees(shared, lanes), lane_actor, traj, gate_grads)
+        rows = _kernel_update(nets, loop, join_partial_trees(shared, lanes), lane_actor, traj, gate_grads)
         if loop.first_order:
             grads, rows = jax.lax.stop_gradient((grads, rows))
         still_alive = traj.valid[-1] & ~(traj.terminated[-1] | traj.truncated[-1])  # [1] the episode runs on (alive next)
@@ -288,14 +303,15 @@ def adaptive_act(
     return _unlane(lane_actor), traj, end, thetas
 
 
-def _kernel_update(fns, loop: InnerLoop, params, lane_actor, traj, gate_grads) -> LowRankUpdate:
+def _kernel_update(nets, loop: InnerLoop, params, lane_actor, traj, gate_grads) -> LowRankUpdate:
     """The LSTM kernels' inner step of one lane's segment, as factors (module doc, "Adapted
     kernels"): the gradients sum_t x_t^T delta_t and sum_t h_{t-1}^T delta_t, kept as the
     segment's inputs x_t `[segment, F]` (under `params`, the lane's theta_i), carries
     h_{t-1} `[segment, H]` and -lr delta_t `[segment, 4H]` (`gate_grads`: d L_phi / d gates)."""
     seen = traj.inputs
     return LowRankUpdate(
-        inputs=fns.lstm_inputs(params, seen.obs, seen.prev_action_probs, seen.encoder_imagined)[:, 0],
+        inputs=nets.model.apply(params, seen.obs, seen.prev_action_probs, seen.encoder_imagined,
+                                method="encoder_features")[:, 0],
         hiddens=jnp.concatenate([lane_actor.lstm[1], traj.states[:-1, 0]]),
         deltas=-loop.lr * gate_grads[:, 0],
     )

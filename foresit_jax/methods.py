@@ -29,25 +29,19 @@ Names are '+'-joined pieces in any order, the base defaulting to a3c (and `a3c+m
 naming the maml base, A3C trained by MAML, as the paper does): `a3c`,
 `a3c+foresit`, `a3c+org+foresit`, `a3c+maml+foresit`, `org+rnd`, `a3c+critic`; the Table 3
 names alone (`rnd`, `att`, `int`) mean `a3c+rnd` etc. `parse_method` turns a name into a `Method`;
-`Config` validates it with the setup. Each piece is a small record of behaviour the agent
-calls (`Base`: how a window is acted and the network's extra module; `Encoder`: ORG's
-object graph and its evaluation protocol; `ImaginationVariant`: where i_tau comes from and what
-f_w learns); nothing outside this module tests a piece's name (tests/test_methods.py
-checks it).
+`Config` validates it with the setup. Each piece is a small record of flags (`Base`: whether
+the parameters adapt inside an episode; `Encoder`: ORG's object graph and its evaluation
+protocol; `ImaginationVariant`: where i_tau comes from and what f_w learns), turned into code
+in one place, `foresit_jax.networks.build` (the networks) and the functions of
+`foresit_jax.rollout` (acting) that read them; nothing outside this module tests a piece's
+name (tests/test_methods.py checks it). This module imports nothing of foresit_jax, so that
+`Config` (which imports it alone) sits near the ground of the package.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Callable, NamedTuple, Optional
-
-import chex
-import flax.linen as nn
-import jax
-
-from foresit_jax import imagination
-from foresit_jax import maml
-from foresit_jax.org import ObjectGraph
+from typing import Optional
 
 BASES: tuple[str, ...] = ("a3c", "maml")
 ENCODERS: tuple[str, ...] = ("plain", "org")
@@ -96,30 +90,12 @@ class ImaginationVariant:
         """Whether buffers are filled and f_w is trained."""
         return self.source == "learned"
 
-    def renews(self, episode_step: chex.Array, interval: int) -> chex.Array:
-        """Whether i_tau is (re)imagined at this step of the episode, `[...]` bool."""
+    def renews(self, episode_step, interval: int):
+        """Whether i_tau is (re)imagined at this step of the episode, `[...]` bool (an array
+        of steps in, an array out)."""
         if self.renew_every_k:
             return episode_step % interval == 0
         return episode_step == 0
-
-    def imagine(
-        self, imagine_fn: Callable, w_params, s_t: chex.Array, goal: chex.Array, key: chex.PRNGKey,
-        noise_variance: chex.Array, rnd_variance: float, noise_on_input: bool = False,
-        goal_latent: Optional[chex.Array] = None,
-    ) -> chex.Array:  # fmt: skip
-        """i_tau `[B, H]` for the policy (stop-gradient: the policy loss never trains f_w
-        or, through it, s_0). learned: f_w([s_t : g]) + N(0, sigma2) (Eq. 6), or with
-        `noise_on_input` f_w([s_t : g] + N(0, sigma2)) (Algorithm 1; Config.imagination_noise);
-        random: tanh(N(0, v)); goal_view: `goal_latent` `[B, H]` + N(0, sigma2)."""
-        if self.source == "random":
-            return imagination.random_imagination(key, s_t.shape, rnd_variance)
-        if self.reads_goal_view:
-            return jax.lax.stop_gradient(imagination.add_imagination_noise(key, goal_latent, noise_variance))
-        if noise_on_input:
-            s_in, goal_in = imagination.add_input_noise(key, jax.lax.stop_gradient(s_t), goal, noise_variance)
-            return jax.lax.stop_gradient(imagine_fn(w_params, s_in, goal_in))
-        imagined = imagine_fn(w_params, jax.lax.stop_gradient(s_t), goal)
-        return jax.lax.stop_gradient(imagination.add_imagination_noise(key, imagined, noise_variance))
 
 
 _FORESIT = ImaginationVariant("foresit", source="learned", critic="attention")
@@ -135,84 +111,44 @@ IMAGINATION_VARIANTS: dict[str, ImaginationVariant] = {
 }
 
 
-class BaseFunctions(NamedTuple):
-    """What a base's `act` uses of the agent: pure functions of its networks (`Agent`
-    builds them once, `Agent.base_functions`).
-
-    act_window: `(acting, env, actor, key, num_steps, options, *, alive=None,
-      lstm_update=None, gate_offsets=None) -> (actor, traj, end)`: a window under one
-      parameter set (`Agent.act_window`);
-    lstm_inputs: `(params, obs, prev_action_probs, encoder_imagined) -> x_t`, the encoder
-      LSTM's input (`Agent.lstm_inputs`);
-    interaction_loss: `(params, inputs) -> scalar`, the maml base's L_phi
-      (`Agent.interaction_loss`).
-    """
-
-    act_window: Callable
-    lstm_inputs: Callable
-    interaction_loss: Callable
-
-
-def act_in_windows(fns: BaseFunctions, settings, acting, env, actor, key, num_steps: int, options):
-    """The a3c base's acting: one parameter set for the whole window (`act_window`)."""
-    return fns.act_window(acting, env, actor, key, num_steps, options)
-
-
-def act_adapting(fns: BaseFunctions, settings: maml.InnerLoop, acting, env, actor, key, num_steps: int, options):
-    """The maml base's acting: SAVN's inner loop adapts each lane's parameters inside its
-    episode (`foresit_jax.maml.adaptive_act`, run as `settings` says); whole episodes only."""
-    if not options.whole_episodes or options.step_keys is not None:
-        raise ValueError("the maml base acts in whole episodes (rollout='episodes'), without step_keys")
-    actor, traj, end, _ = maml.adaptive_act(fns, settings, acting, env, actor, key, num_steps, options)
-    return actor, traj, end
-
-
 @dataclasses.dataclass(frozen=True)
 class Base:
-    """A base learner, as the agent uses it.
+    """A base learner, as flags (`foresit_jax.networks.build` turns them into code).
 
-    act: acts a window, `(fns: BaseFunctions, settings, acting: AgentParams, env: BoundEnv,
-      actor, key, num_steps, options: ActOptions) -> (actor, traj, end)` (the records of
-      `foresit_jax.agent`).
-    settings: what `act` needs of the Config (maml's `InnerLoop`), from the Config; None
-      for none.
-    learned_loss: the network's extra module for the base (maml's L_phi), from the Config;
-      None for none.
-    adapts_in_episode: the parameters change inside an episode (maml): acting must be
-      differentiated through (the replay re-runs a window under one parameter set), in
-      whole episodes (the inner loop counts steps from the start; the meta-loss spans the
-      episode), with the previous action probabilities carrying gradient (as in SAVN,
-      whose episode is one graph); evaluation holds a parameter copy per lane.
+    adapts_in_episode: the parameters change inside an episode (maml: SAVN's inner loop,
+      `foresit_jax.maml`, with its learned loss L_phi as the network's extra module):
+      acting must be differentiated through (the replay re-runs a window under one
+      parameter set), in whole episodes (the inner loop counts steps from the start; the
+      meta-loss spans the episode), with the previous action probabilities carrying
+      gradient (as in SAVN, whose episode is one graph); evaluation holds a parameter copy
+      per lane. False (a3c): one parameter set acts a whole window.
     """
 
     name: str
-    act: Callable = act_in_windows
-    settings: Callable[..., Any] = lambda config: None
-    learned_loss: Callable[..., Optional[nn.Module]] = lambda config: None
     adapts_in_episode: bool = False
 
 
 @dataclasses.dataclass(frozen=True)
 class Encoder:
-    """An observation encoder piece: `object_graph()` is the module ORG adds to SAVN's
-    encoder (None for none); `greedy_evaluation`: evaluate with the argmax action (ORG's
-    own protocol; SAVN and the paper's other rows sample); `required_setup`: the setup
-    whose observations it needs (ORG: the detector features of `org`)."""
+    """An observation encoder piece, as flags: `object_graph`, ORG's object-relation graph
+    joins SAVN's encoder (`foresit_jax.org.ObjectGraph`); `greedy_evaluation`: evaluate
+    with the argmax action (ORG's own protocol; SAVN and the paper's other rows sample);
+    `required_setup`: the setup whose observations it needs (ORG: the detector features
+    of `org`)."""
 
     name: str
-    object_graph: Callable[[], Optional[nn.Module]] = lambda: None
+    object_graph: bool = False
     greedy_evaluation: bool = False
     required_setup: Optional[str] = None
 
 
 BASE_PIECES: dict[str, Base] = {
     "a3c": Base("a3c"),
-    "maml": Base("maml", act=act_adapting, settings=maml.InnerLoop.of, adapts_in_episode=True,
-                 learned_loss=lambda config: maml.LearnedLoss(segment=config.maml_segment)),  # fmt: skip
+    "maml": Base("maml", adapts_in_episode=True),
 }
 ENCODER_PIECES: dict[str, Encoder] = {
     "plain": Encoder("plain"),
-    "org": Encoder("org", object_graph=ObjectGraph, greedy_evaluation=True, required_setup="org"),
+    "org": Encoder("org", object_graph=True, greedy_evaluation=True, required_setup="org"),
 }
 
 

@@ -6,8 +6,13 @@
   Eq. 3-4 over the current episode's states (MLP on s*_t, ForeSIT).
 * `ImaginationNet`: f_w, 6 tanh layers with a bottleneck, [s_0 : g_tau] -> imagined s.
 * `ActorCritic`: Encoder + PolicyHead + Critic under one parameter tree (theta, omega),
-  with methods `input_gates` and `policy_logits` (acting), `replay` (a recorded window's
-  states and logits, for the gradient), `critic` (values over a window).
+  with methods `act` (one acting step in one apply: input gates, the LSTM's step, i_tau's
+  entry, the policy), `replay` (a recorded window's states and logits, for the gradient,
+  through the same cell), `critic` (values over a window).
+* `build(config) -> Networks`: the one place where a method's pieces (flags,
+  `foresit_jax.methods`) become modules: ORG's object graph, SAVN's learned loss, the
+  attention critic, where i_tau enters. `Networks` is a record (the modules and the
+  Config), what `foresit_jax.rollout` acts with.
 * Pure helpers: `causal_episode_mask`, `window_attention_mask` (which states each step
   attends to), `masked_softmax`, `subgoals_of_rows` (the sub-goal each attention row
   selects). The LSTM cell's split form (used by acting and the replay gradient) is in
@@ -19,17 +24,22 @@ axis); the critic's time axis is the second to last of `states`.
 
 from __future__ import annotations
 
-from typing import Mapping, NamedTuple, Optional, Sequence
+import dataclasses
+from typing import Any, Callable, Mapping, NamedTuple, Optional, Sequence
 
 import chex
 import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
+from foresit_jax.config import Config
 from foresit_jax.layers import Dense, GridDense, orthogonal
 from foresit_jax.lstm import (  # noqa: F401 (initial_carry, reset_carry: re-exported)
     EncoderLSTM, LowRankUpdate, LSTMCarry, LSTMKernels, initial_carry, reset_carry,
 )
+from foresit_jax.maml import LearnedLoss
+from foresit_jax.methods import Method, ImaginationVariant
+from foresit_jax.org import ObjectGraph
 
 class Encoder(nn.Module):
     """SAVN encoder: observation, target and previous action probabilities -> s_t.
@@ -72,7 +82,7 @@ class Encoder(nn.Module):
         """The LSTM's input `[..., 3 * W * conv_features (+ F)]`: everything before the cell.
 
         It depends on no carry, so a whole window's features can be computed at once
-        (`foresit_jax.replay`). `imagined [..., H]`: i_tau, only with `imagination_features`."""
+        (`foresit_jax.train.replayed`). `imagined [..., H]`: i_tau, only with `imagination_features`."""
         view = obs["view"]  # [..., 3, W, Cv]
         target = obs["target"]  # [..., D]
         batch_shape = target.shape[:-1]
@@ -278,8 +288,12 @@ class ActorCritic(nn.Module):
       lstm_kernels(update) -> the encoder LSTM's kernels, for its split form (foresit_jax.lstm)
       input_gates(obs, prev_action_probs, imagined, kernels) -> the LSTM's input gates [..., 4H]
       replay(carry, obs, prev_action_probs, encoder_imagined, head_imagined, episode_step)
-        -> (states, logits) of a recorded window (foresit_jax.replay)
-      step(carry, obs, prev_action_probs, imagined) -> (carry, s_t, logits)  (encode, then policy_logits)
+        -> (states, logits) of a recorded window (foresit_jax.train.replayed)
+      act(kernels, carry, obs, prev_action_probs, encoder_imagined, gate_offset, imagine)
+        -> (carry, s_t, logits, extra): one acting step in one apply (foresit_jax.rollout)
+      next_state(kernels, carry, obs, prev_action_probs, encoder_imagined) -> s_t
+      step(carry, obs, prev_action_probs, imagined) -> (carry, s_t, logits)  (encode, then
+        policy_logits, through flax's own cell: the reference the split form is tested against)
       critic(states [..., T, H], valid [..., T]) -> CriticOutput
     `__call__` runs both once (for `init`).
 
@@ -354,7 +368,7 @@ class ActorCritic(nn.Module):
                episode_step: chex.Array) -> tuple[chex.Array, chex.Array]:  # fmt: skip
         """(states `[T, B, H]`, logits `[T, B, A]`) of a window from its recorded inputs
         (leaves `[T, B, ...]`) and the carry before it, as a differentiable function of the
-        parameters (`foresit_jax.replay`): the encoder up to the input gates over all T x B
+        parameters (`foresit_jax.train.replayed`): the encoder up to the input gates over all T x B
         steps at once (a few large matmuls), then the LSTM's recurrent part and the policy
         step by step (`EncoderLSTM.unroll`; the carry zeroed where `episode_step` is 0)."""
         num_steps, num_lanes = episode_step.shape
@@ -369,6 +383,32 @@ class ActorCritic(nn.Module):
         gates = gates.reshape(num_steps, num_lanes, -1)  # [T, B, 4H]: one matmul over the whole window
         _, (states, logits) = self.encoder.lstm.unroll(kernels, carry, gates, episode_step, self.policy, head_imagined)
         return states, logits
+
+    def act(self, kernels: LSTMKernels, carry: LSTMCarry, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array,
+            encoder_imagined: Optional[chex.Array], gate_offset: Optional[chex.Array], imagine: Callable):  # fmt: skip
+        """One acting step in one apply -> (carry, s_t, logits, extra): the encoder up to the
+        LSTM's input gates under `kernels` (made once per window, outside the loop; the
+        encoder's i_tau `encoder_imagined`, or None), `gate_offset` added to them (the maml
+        base's zeros whose gradient is the pre-activations'; None: none), the LSTM's step,
+        then `imagine(s_t) -> (i_tau [..., H] or None, extra)` (i_tau is imagined from s_0,
+        which this step computes at an episode's start; `foresit_jax.rollout`), then the
+        policy on [s_t : i_tau] (on s_t alone where the head takes no i_tau)."""
+        gates = self.input_gates(obs, prev_action_probs, encoder_imagined, kernels)
+        if gate_offset is not None:
+            gates = gates + gate_offset
+        carry, s_t = self.encoder.lstm.step(kernels, carry, gates)
+        imagined, extra = imagine(s_t)
+        return carry, s_t, self.policy(s_t, imagined if self.policy.use_imagination else None), extra
+
+    def next_state(self, kernels: LSTMKernels, carry: Optional[LSTMCarry], obs: Mapping[str, chex.Array],
+                   prev_action_probs: chex.Array, encoder_imagined: Optional[chex.Array]) -> chex.Array:  # fmt: skip
+        """s_t of one step from `carry` under `kernels`, without the policy `[..., H]`: the
+        state after a window (the critic's bootstrap) and, from a fresh carry (None), the
+        goal view's latent (the `oracle`'s i_tau)."""
+        gates = self.input_gates(obs, prev_action_probs, encoder_imagined, kernels)
+        if carry is None:
+            carry = initial_carry(gates.shape[:-1], self.hidden_size)
+        return self.encoder.lstm.step(kernels, carry, gates)[1]
 
     def step(
         self,
@@ -417,3 +457,71 @@ def subgoals_of_rows(keys: chex.Array, alpha: chex.Array, mode: str = "argmax") 
     if mode == "attention_average":
         return jnp.einsum("...rk,...kh->...rh", alpha, keys)
     raise ValueError(f"Unknown sub-goal mode {mode!r}; use 'argmax' or 'attention_average'.")
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Networks:
+    """What acts, as a record: a Config's networks (`build`) and the Config. The functions
+    of `foresit_jax.rollout` act with it; nothing here calls back into them.
+
+    imagine: f_w, `(w, s, goal) -> [..., H]` (`imagination_net.apply`); permute: a
+    reordering of the lanes applied to i_tau's inputs when acting (the probe's shuffle of
+    i_tau across episodes, `foresit_jax.probes.shuffled`; None: none). Compared by identity
+    (a jitted function built on one is compiled for it alone)."""
+
+    config: Config
+    model: ActorCritic
+    imagination_net: ImaginationNet
+    imagine: Callable
+    permute: Optional[Callable] = None
+
+    @property
+    def method(self) -> Method:
+        return self.config.pieces
+
+    @property
+    def imagination_variant(self) -> ImaginationVariant:
+        return self.config.pieces.imagination_variant
+
+    @property
+    def imagination_in_encoder(self) -> bool:
+        """Whether i_tau enters the encoder (`Config.imagination_input='encoder'`)."""
+        return self.model.imagination_in_encoder
+
+    @property
+    def imagination_in_head(self) -> bool:
+        """Whether i_tau enters the policy head (and is recorded for the replay)."""
+        return self.imagination_variant.uses_imagination and not self.model.imagination_in_encoder
+
+    def init(self, key: chex.PRNGKey, obs: dict) -> tuple[Any, Any]:
+        """(theta/omega params, f_w params) from one unbatched observation."""
+        k_model, k_imag = jax.random.split(key)
+        hidden = self.config.hidden_size
+        probs = jnp.zeros((self.config.num_actions,), jnp.float32)
+        imagined = jnp.zeros((hidden,), jnp.float32) if self.imagination_variant.uses_imagination else None
+        params = self.model.init(k_model, initial_carry((), hidden), obs, probs, imagined)
+        w_params = self.imagination_net.init(k_imag, jnp.zeros((hidden,)), obs["target"])
+        return params, w_params
+
+
+def build(config: Config) -> Networks:
+    """The networks of `config`: where a method's pieces (flags) become modules."""
+    method = config.pieces
+    model = ActorCritic(
+        # ORG's object-relation graph over the `org` setup's detector features (None: none).
+        object_graph=ObjectGraph() if method.encoder_piece.object_graph else None,
+        # SAVN's learned interaction loss (the maml base; params["params"]["learned_loss"]).
+        learned_loss=LearnedLoss(segment=config.maml_segment) if method.base_piece.adapts_in_episode else None,
+        num_actions=config.num_actions,
+        hidden_size=config.hidden_size,
+        use_imagination=method.imagination_variant.uses_imagination,
+        attention_critic=method.attention_critic,
+        attention_size=config.attention_size,
+        value_hidden=config.value_hidden,
+        linear_value_head=config.value_head == "linear",
+        imagination_input=config.imagination_input,
+        zero_value_init=config.attention_value_init == "zeros",
+        key_gradient=config.attention_key_gradient == "full",
+    )
+    imagination_net = ImaginationNet(config.imagination_layer_sizes)
+    return Networks(config, model, imagination_net, imagination_net.apply)

@@ -23,26 +23,31 @@ and time-outs, with the policy's probability of Done where it would succeed and 
 
 from __future__ import annotations
 
+import dataclasses
+
 import chex
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optax
 
-from foresit_jax.agent import Agent
+from foresit_jax import imagination, losses
+from foresit_jax.config import Config
+from foresit_jax.networks import Networks, build
 
 
-class ShuffledImagination(Agent):
-    """An `Agent` whose f_w imagines each lane's i_tau from the next lane's inputs (s_t and
-    target of lane b - 1, cyclically): i_tau shuffled across episodes, with the
-    distribution of f_w's outputs kept. Only for probing a trained model."""
+def shuffled(nets: Networks) -> Networks:
+    """`nets` acting with each lane's i_tau imagined from the previous lane's inputs (lane b
+    gets lane b - 1's s_t and target, cyclically; the privileged oracle's goal-view latent
+    the same way): i_tau shuffled across episodes, with the distribution of f_w's outputs
+    kept. Only for probing a trained model (`rollout`'s i_tau reads `Networks.permute`)."""
+    return dataclasses.replace(nets, permute=lambda x: jnp.roll(x, 1, axis=0))
 
-    def imagine(self, w_params, s_0: chex.Array, goal: chex.Array) -> chex.Array:
-        return super().imagine(w_params, jnp.roll(s_0, 1, axis=0), jnp.roll(goal, 1, axis=0))
 
-    def goal_latent(self, params, kernels, obs) -> chex.Array:
-        """The privileged oracle's i_tau shuffled the same way: lane b gets lane b - 1's
-        goal view's latent (its episode, its target)."""
-        return jnp.roll(super().goal_latent(params, kernels, obs), 1, axis=0)
+def ShuffledImagination(config: Config) -> Networks:  # noqa: N802 (the old class's name, kept for callers)
+    """`shuffled(build(config))`: the networks of `config` with i_tau shuffled across
+    episodes (was a subclass of the deprecated `Agent`)."""
+    return shuffled(build(config))
 
 
 def r_squared(predicted: np.ndarray, target: np.ndarray, reference: np.ndarray) -> float:
@@ -146,9 +151,7 @@ def fit_imagination_offline(imagine, w_init, s_0, goal, target, steps: int = 300
     per item. One even item in five is held back for early stopping (every
     `check_every` steps; the parameters of its lowest loss are returned), so the odd items
     the probe scores stay unseen. Returns (parameters, steps taken to the best)."""
-    import optax
-
-    from foresit_jax.losses import smooth_l1 as loss_of
+    loss_of = losses.smooth_l1
 
     fit, _ = halves(len(target))
     stop, train = fit[::5], np.setdiff1d(fit, fit[::5])
@@ -189,7 +192,6 @@ def replay_online_fit(imagine, w_start, s_0, goal, subgoal, add, optimizer, epoc
     steps offer their item), streamed `passes` times: how well the online procedure fits
     these items at a fixed encoder, to hold against `fit_imagination_offline` on the same
     items. Jitted per call; returns the parameters."""
-    from foresit_jax import imagination
 
     lanes = add.shape[1]
     buffers = jax.tree.map(lambda x: jnp.broadcast_to(x, (lanes,) + x.shape),

@@ -1,6 +1,6 @@
 """Synchronous batched actor-critic standing in for A3C (PureJaxRL shape).
 
-One update = every lane acts for a window of `num_steps` steps (`Agent.act`; with
+One update = every lane acts for a window of `num_steps` steps (`rollout.act`; with
 `Config.rollout='packed'` lanes never idle: episodes follow one another and an episode
 cut at the window's edge continues in the next update, its cut bootstrapped with
 V(s*_T), Eq. 8), then one gradient step on the mean A3C loss over the window (Eq. 8-9),
@@ -32,11 +32,12 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from foresit_jax import imagination, losses
-from foresit_jax.agent import ActOptions, ActorState, Agent, AgentParams, BoundEnv, Trajectory, WindowEnd, ended_episodes
+import envs
+from foresit_jax import imagination, losses, rollout
 from foresit_jax.config import Config
-from foresit_jax.networks import subgoals_of_rows
-from foresit_jax.replay import replayed
+from foresit_jax.lstm import LSTMCarry
+from foresit_jax.networks import CriticOutput, Networks, build, subgoals_of_rows, window_attention_mask
+from foresit_jax.rollout import ActOptions, ActorState, AgentParams, BoundEnv, Trajectory, WindowEnd, ended_episodes
 
 
 # How often `Trainer.run` reports progress to the host (a callback after every update
@@ -68,12 +69,92 @@ class WindowResult(NamedTuple):
 
 def make_env(config: Config, split: str = "train", room_types=None, training: bool | None = None):
     """The environment of a config (foresit_jax sees envs only through its public API)."""
-    import envs
-
     rooms = room_types if room_types is not None else (config.room_types or None)
     env, params = envs.make("GridNav-v0", setup=config.setup, split=split, room_types=rooms, training=training,
                             layout=config.layout, priors=config.priors)  # fmt: skip
     return env, params.replace(progress_reward=config.progress_reward)
+
+
+# ---------------------------------------------------------------------- the loss's inputs
+# The replay gradient. Acting runs without gradients and records, at every step, what the
+# encoder and the policy saw (`StepInputs`: observation, previous action probabilities,
+# i_tau). The loss then recomputes s_t and the logits from those inputs as a
+# differentiable function of the parameters, as PureJaxRL's `ppo_rnn.py` does in its
+# `_loss_fn`. The environment's outputs carry no gradient, so this is the same function of
+# the parameters as the acting pass, and its gradient equals differentiating through the
+# acting scan (`gradient='through_rollout'`, the reference; tests/test_replay.py checks
+# both agree). It is fast because the encoder up to the LSTM's input gates has no
+# recurrence: it runs once over all T x B steps of the window (a few large matmuls
+# instead of T small ones), and only the LSTM's recurrent step is sequential. Nothing is
+# reused from acting but the inputs, so it is right for any parameters fixed over the
+# window; it is NOT right where they change inside one (MAML's adapted parameters): such
+# methods declare `gradients = ('through_rollout',)` and `Config` refuses the replay.
+
+
+def replayed(nets: Networks, params, traj: Trajectory, initial_carry: LSTMCarry) -> Trajectory:
+    """`traj` (recorded with `record_inputs=True`) with its states `[T, B, H]` and logits
+    `[T, B, A]` recomputed as a differentiable function of `params`, in one `apply`
+    (`ActorCritic.replay`, through the same cell as acting).
+
+    initial_carry: the LSTM carry `(c, h)` `[B, H]` each before the window's first step
+    (`ActorState.lstm` at the window's start). The carry is zeroed before every step that
+    begins an episode (`traj.episode_step == 0`), as acting does.
+    """
+    if traj.inputs is None:
+        raise ValueError("replay needs a trajectory recorded with record_inputs=True")
+    seen = jax.lax.stop_gradient(traj.inputs)
+    states, logits = nets.model.apply(params, initial_carry, seen.obs, seen.prev_action_probs, seen.encoder_imagined,
+                                      seen.imagined, traj.episode_step, method="replay")  # fmt: skip
+    return traj._replace(states=states, logits=logits)
+
+
+def window_critic(nets: Networks, params, traj: Trajectory, end: WindowEnd,
+                  memory: chex.Array | None) -> tuple[CriticOutput, chex.Array]:  # fmt: skip
+    """The critic over a window, the state after it (`end`) included: (CriticOutput with
+    value `[T + 1, B]` (row T: V(s*_T), the bootstrap), alpha `[B, T + 1, M + T + 1]` or
+    None; keys `[B, M + T + 1, H]`, what alpha weighs).
+
+    Each step attends over the states of its own episode up to itself (Eq. 3-4): those of
+    earlier windows (`memory` `[B, M, H]`, the ActorState's at the window's start, without
+    gradient; None: no memory) and the window's."""
+    if memory is None:
+        memory = jnp.zeros((traj.states.shape[1], 0, traj.states.shape[2]), traj.states.dtype)
+    states = jnp.concatenate([traj.states, end.state[None]], axis=0)  # [T + 1, B, H]
+    steps = jnp.concatenate([traj.episode_step, end.episode_step[None]], axis=0)  # [T + 1, B]
+    states, steps = jnp.swapaxes(states, 0, 1), jnp.swapaxes(steps, 0, 1)  # [B, T + 1, ...]
+    keys = jnp.concatenate([jax.lax.stop_gradient(memory), states], axis=1)  # [B, M + T + 1, H]
+    mask = window_attention_mask(steps, memory.shape[1])
+    out = nets.model.apply(params, states, jnp.ones(steps.shape, bool), keys, mask, steps, method="critic")
+    return out._replace(value=jnp.swapaxes(out.value, 0, 1)), keys
+
+
+def subgoal_items(subgoal_mode: str, traj: Trajectory, alpha, key_states, success):
+    """What each step offers the buffers: (s_0 `[T, B, H]`, g_tau `[T, B, D]`, the
+    sub-goal ŝ_tau `[T, B, H]`, add `[T, B]`: an episode ended there successfully).
+    ŝ_tau is what the step's attention row selects (Section 4.2: at the Done step,
+    s_{t*}, t* = argmax alpha, over all the episode's states); the plain critic has no
+    attention (alpha None), and ŝ_tau is then the step's own state, the goal state.
+    subgoal_mode: the ImaginationVariant's ('argmax' or 'attention_average')."""
+    if alpha is None:
+        subgoals = jax.lax.stop_gradient(traj.states)
+    else:
+        subgoals = jnp.swapaxes(subgoals_of_rows(key_states, alpha[:, :-1], subgoal_mode), 0, 1)
+    return traj.s_0, traj.inputs.obs["target"], subgoals, success
+
+
+def subgoal_steps(traj: Trajectory, end: WindowEnd, alpha) -> chex.Array:
+    """Where each step's sub-goal lies in its episode, `[T, B]` int32: t* (the position
+    of the key its attention row weighs most; the step's own position with the plain
+    critic, whose sub-goal is the step's state). The keys are the memory, positions
+    0..M-1 of the running episode, then the window's states (`window_critic`)."""
+    if alpha is None:
+        return traj.episode_step
+    steps = jnp.concatenate([traj.episode_step, end.episode_step[None]], axis=0).T  # [B, T + 1]
+    memory_size = alpha.shape[-1] - steps.shape[-1]
+    memory = jnp.broadcast_to(jnp.arange(memory_size, dtype=steps.dtype), (steps.shape[0], memory_size))
+    key_steps = jnp.concatenate([memory, steps], axis=1)  # [B, M + T + 1]
+    index = jnp.argmax(alpha[:, :-1], axis=-1)  # [B, T]
+    return jnp.take_along_axis(key_steps, index, axis=1).T  # [T, B]
 
 
 class Trainer:
@@ -93,10 +174,11 @@ class Trainer:
         self.config = config
         self.env = env
         self.env_params = env_params
-        self.agent = Agent(config)
+        self.networks = build(config)
+        self.agent = self.networks  # the old name of the record acting reads (trainer.agent.imagine: f_w)
         # The attention critic remembers a running episode's states across windows: at most
         # the time limit's worth. Whole-episode updates carry nothing across updates.
-        self.memory_size = limit if self.packed and self.agent.method.attention_critic else 0
+        self.memory_size = limit if self.packed and config.pieces.attention_critic else 0
         self.optimizer = optax.chain(
             optax.clip_by_global_norm(config.max_grad_norm), optax.adam(config.learning_rate)
         )
@@ -114,11 +196,11 @@ class Trainer:
         cfg = self.config
         k_obs, k_params, k_actor, key = jax.random.split(key, 4)
         obs, _ = self.env.reset(k_obs, self.env_params)
-        params, w_params = self.agent.init(k_params, obs)
+        params, w_params = self.networks.init(k_params, obs)
         goal_size = obs["target"].shape[-1]
         lanes = lambda x: jnp.broadcast_to(x, (cfg.num_lanes,) + x.shape)  # noqa: E731
         buffers = jax.tree.map(lanes, imagination.buffer_init(cfg.buffer_size, cfg.hidden_size, goal_size))
-        actor = self.agent.start(k_actor, self.bind(self.env_params), cfg.num_lanes, self.memory_size)
+        actor = rollout.start(self.networks, k_actor, self.bind(self.env_params), cfg.num_lanes, self.memory_size)
         return RunnerState(
             params, self.optimizer.init(params), w_params, buffers, actor, key, jnp.zeros((), jnp.int32)
         )
@@ -130,7 +212,7 @@ class Trainer:
         start `[B, M, H]` (or None).
         Returns (loss, (alpha `[B, T + 1, K]` or None, key_states `[B, K, H]`, metrics))."""
         cfg = self.config
-        critic, key_states = self.agent.critic(params, traj, end, memory)
+        critic, key_states = window_critic(self.networks, params, traj, end, memory)
         value, bootstrap = critic.value[:-1], critic.value[-1]  # [T, B], [B] V(s*_T)
         if not self.packed:
             bootstrap = jnp.zeros_like(bootstrap)  # whole episodes: nothing to bootstrap
@@ -146,7 +228,7 @@ class Trainer:
             key) -> tuple[ActorState, Trajectory, WindowEnd]:  # fmt: skip
         """One window of every lane (inputs recorded, for the replay and the buffers)."""
         options = ActOptions(whole_episodes=not self.packed, record_inputs=True)
-        return self.agent.act(acting, env, actor, key, self.config.num_steps, options)
+        return rollout.act(self.networks, acting, env, actor, key, self.config.num_steps, options)
 
     def loss_and_grad(self, params, w_params, env: BoundEnv, actor: ActorState, key):
         """((loss, WindowResult), grads) of one window with respect to `params`, by the
@@ -155,7 +237,7 @@ class Trainer:
             next_actor, traj, end = self.act(AgentParams(params, w_params), env, actor, key)
 
             def loss_fn(p):
-                replay_traj = replayed(self.agent, p, traj, actor.lstm)
+                replay_traj = replayed(self.networks, p, traj, actor.lstm)
                 loss, aux = self.window_loss(p, replay_traj, end, actor.memory)
                 return loss, WindowResult(next_actor, replay_traj, *aux)
 
@@ -173,11 +255,11 @@ class Trainer:
         """(the lanes at the window's start, the next key, the window's acting key)."""
         key, k_act, k_start = jax.random.split(key, 3)
         if not self.packed:  # SAVN's layout: every lane starts a fresh episode
-            actor = self.agent.start(k_start, env, self.config.num_lanes, 0, tracker=actor.tracker)
+            actor = rollout.start(self.networks, k_start, env, self.config.num_lanes, 0, tracker=actor.tracker)
         return actor, key, k_act
 
     def update(self, state: RunnerState, env_params) -> tuple[RunnerState, dict]:
-        cfg, variant, env = self.config, self.agent.imagination_variant, self.bind(env_params)
+        cfg, variant, env = self.config, self.networks.imagination_variant, self.bind(env_params)
         actor, key, k_act = self.begin_window(state.actor, state.key, env)
         rho = jax.vmap(imagination.success_rate)(actor.tracker)  # [B] at the window's start
         (loss, window), grads = self.loss_and_grad(state.params, state.imagination_params, env, actor, k_act)
@@ -189,7 +271,7 @@ class Trainer:
         metrics = dict(metrics)
         ended, stats = ended_episodes(traj)
         if variant.trains_imagination:
-            items = self.subgoal_items(traj, alpha, key_states, stats.success)
+            items = subgoal_items(variant.subgoal_mode, traj, alpha, key_states, stats.success)
             w_params, buffers, imag_metrics = self.store_and_train(w_params, buffers, items)
             metrics.update(imag_metrics)
         num_ended = jnp.sum(ended.astype(jnp.float32))
@@ -218,33 +300,6 @@ class Trainer:
         new_state = RunnerState(params, opt_state, w_params, buffers, next_actor, key, state.update + 1)
         return new_state, metrics
 
-    def subgoal_items(self, traj: Trajectory, alpha, key_states, success):
-        """What each step offers the buffers: (s_0 `[T, B, H]`, g_tau `[T, B, D]`, the
-        sub-goal ŝ_tau `[T, B, H]`, add `[T, B]`: an episode ended there successfully).
-        ŝ_tau is what the step's attention row selects (Section 4.2: at the Done step,
-        s_{t*}, t* = argmax alpha, over all the episode's states); the plain critic has no
-        attention (alpha None), and ŝ_tau is then the step's own state, the goal state."""
-        if alpha is None:
-            subgoals = jax.lax.stop_gradient(traj.states)
-        else:
-            mode = self.agent.imagination_variant.subgoal_mode
-            subgoals = jnp.swapaxes(subgoals_of_rows(key_states, alpha[:, :-1], mode), 0, 1)
-        return traj.s_0, traj.inputs.obs["target"], subgoals, success
-
-    def subgoal_steps(self, traj: Trajectory, end: WindowEnd, alpha) -> chex.Array:
-        """Where each step's sub-goal lies in its episode, `[T, B]` int32: t* (the position
-        of the key its attention row weighs most; the step's own position with the plain
-        critic, whose sub-goal is the step's state). The keys are the memory, positions
-        0..M-1 of the running episode, then the window's states (`Agent.critic`)."""
-        if alpha is None:
-            return traj.episode_step
-        steps = jnp.concatenate([traj.episode_step, end.episode_step[None]], axis=0).T  # [B, T + 1]
-        memory_size = alpha.shape[-1] - steps.shape[-1]
-        memory = jnp.broadcast_to(jnp.arange(memory_size, dtype=steps.dtype), (steps.shape[0], memory_size))
-        key_steps = jnp.concatenate([memory, steps], axis=1)  # [B, M + T + 1]
-        index = jnp.argmax(alpha[:, :-1], axis=-1)  # [B, T]
-        return jnp.take_along_axis(key_steps, index, axis=1).T  # [T, B]
-
     def collect_subgoal_items(self, state: RunnerState, env_params, num_windows: int):
         """What `num_windows` windows played by the agent of `state` (not updated) offer
         the buffers: ((s_0, g_tau, ŝ_tau, add), (t*, step)), each `[num_windows, T, B, ...]`:
@@ -259,8 +314,8 @@ class Trainer:
             next_actor, traj, end = self.act(AgentParams(state.params, state.imagination_params), env, actor, k_act)
             _, (alpha, key_states, _) = self.window_loss(state.params, traj, end, actor.memory)  # the critic's alpha
             _, stats = ended_episodes(traj)
-            items = self.subgoal_items(traj, alpha, key_states, stats.success)
-            return (next_actor, key), (items, (self.subgoal_steps(traj, end, alpha), traj.episode_step))
+            items = subgoal_items(self.networks.imagination_variant.subgoal_mode, traj, alpha, key_states, stats.success)
+            return (next_actor, key), (items, (subgoal_steps(traj, end, alpha), traj.episode_step))
 
         _, items = jax.lax.scan(window, (state.actor, state.key), None, length=num_windows)
         return items
@@ -276,7 +331,7 @@ class Trainer:
             w_params, buffers, losses = carry
             buffers = jax.vmap(imagination.buffer_add)(buffers, *item)
             w_params, buffers, trained, _ = imagination.train_on_full_buffers(
-                w_params, buffers, self.agent.imagine, self.imagination_optimizer, cfg.imagination_epochs,
+                w_params, buffers, self.networks.imagine, self.imagination_optimizer, cfg.imagination_epochs,
                 cfg.imagination_batch,
             )
             return (w_params, buffers, losses.plus(trained)), None

@@ -1,6 +1,6 @@
-"""foresit_jax.agent: parameter trees per method, the shared rollout (invariants against
+"""foresit_jax.rollout: parameter trees per method, the shared rollout (invariants against
 the environment's rules), the replay's values, the critic, and episode statistics
-against hand-computed values."""
+against hand-computed values; the deprecated `foresit_jax.agent.Agent` shim."""
 
 import functools
 
@@ -11,11 +11,14 @@ import numpy as np
 import pytest
 
 import train_helpers as H
-from foresit_jax.agent import (
-    Agent, AgentParams, BoundEnv, EpisodeStats, Trajectory, WindowEnd, ended_episodes, episode_stats,
-)  # fmt: skip
 from foresit_jax.lstm import initial_carry
-from foresit_jax.replay import replayed as replay_of
+from foresit_jax.networks import build
+from foresit_jax.rollout import (
+    ActOptions, AgentParams, BoundEnv, EpisodeStats, Trajectory, WindowEnd, ended_episodes, episode_stats,
+)  # fmt: skip
+from foresit_jax.rollout import rollout as rollout_of
+from foresit_jax.train import replayed as replay_of
+from foresit_jax.train import window_critic
 
 DONE = 5
 LANES = 8
@@ -31,7 +34,7 @@ def observation():
 def test_a_linear_value_head_is_one_dense_layer_for_every_critic():
     for method in ("a3c", "a3c+foresit"):
         config = H.tiny_config(method, value_head="linear")
-        params, _ = jax.eval_shape(Agent(config).init, jax.random.PRNGKey(0), observation())
+        params, _ = jax.eval_shape(build(config).init, jax.random.PRNGKey(0), observation())
         head = params["params"]["value_critic"]["value_head"]
         assert set(head) == {"out"} and head["out"]["kernel"].shape == (config.hidden_size, 1)
 
@@ -40,7 +43,7 @@ def test_a_linear_value_head_is_one_dense_layer_for_every_critic():
 def test_parameter_tree_of_each_method(method):
     config = H.tiny_config(method)
     obs = observation()
-    params, w_params = jax.eval_shape(Agent(config).init, jax.random.PRNGKey(0), obs)
+    params, w_params = jax.eval_shape(build(config).init, jax.random.PRNGKey(0), obs)
     flags, hidden = config.pieces.imagination_variant, config.hidden_size
     critic = params["params"]["value_critic"]
     # Only the attention critic has q, k, v (Eq. 3-4); the plain A3C critic is an MLP.
@@ -99,16 +102,16 @@ def test_episode_stats_hand_computed():
 @functools.lru_cache(maxsize=None)
 def _rollout(greedy: bool):
     """jit(rollout with recorded inputs, then replay) of the tiny ForeSIT agent, once."""
-    agent, (env, _) = Agent(FORESIT), H.bathroom_env()
+    nets, (env, _) = build(FORESIT), H.bathroom_env()
 
     def run(params, w_params, env_params, key, sigma2):
-        traj = agent.rollout(AgentParams(params, w_params, sigma2), BoundEnv(env, env_params), key, FORESIT.num_steps, greedy,
-                             record_inputs=not greedy)  # fmt: skip
-        again = None if greedy else replay_of(agent, params, traj, initial_carry((LANES,), FORESIT.hidden_size))
+        traj = rollout_of(nets, AgentParams(params, w_params, sigma2), BoundEnv(env, env_params), key, FORESIT.num_steps,
+                          ActOptions(greedy=greedy, record_inputs=not greedy))  # fmt: skip
+        again = None if greedy else replay_of(nets, params, traj, initial_carry((LANES,), FORESIT.hidden_size))
         replayed = None if greedy else (again.states, again.logits)
         memory = jnp.zeros((LANES, 0, FORESIT.hidden_size))
         end = WindowEnd(jnp.zeros((LANES, FORESIT.hidden_size)), jnp.zeros((LANES,), jnp.int32))  # whole episodes: nothing bootstrapped
-        return traj, replayed, agent.critic(params, traj, end, memory)[0]
+        return traj, replayed, window_critic(nets, params, traj, end, memory)[0]
 
     return jax.jit(run, compiler_options=H.FAST_COMPILE)
 
@@ -117,7 +120,7 @@ def _rollout(greedy: bool):
 def rollout():
     """A sampled rollout of 8 lanes with freshly initialised parameters."""
     env, env_params = H.bathroom_env()
-    params, w_params = Agent(FORESIT).init(jax.random.PRNGKey(0), observation())
+    params, w_params = build(FORESIT).init(jax.random.PRNGKey(0), observation())
     sigma2 = jnp.full((LANES,), 0.5)
     out = _rollout(False)(params, w_params, env_params, jax.random.PRNGKey(1), sigma2)
     return (params, w_params, env_params, sigma2), jax.tree.map(np.asarray, out)
@@ -186,3 +189,25 @@ def test_greedy_rollout_takes_the_most_likely_action(rollout):
     np.testing.assert_array_equal(traj.optimal_length[0], sampled.optimal_length[0])
     np.testing.assert_array_equal(traj.room_type[0], sampled.room_type[0])
     assert (sampled.actions[sampled.valid] != sampled.logits.argmax(-1)[sampled.valid]).any()
+
+
+# ---------------------------------------------------------------------- the deprecated shim
+def test_the_deprecated_agent_warns_and_rolls_out_as_the_rollout_function():
+    """`foresit_jax.agent.Agent` (kept for one release) warns, and its `rollout` is
+    `rollout.rollout` over `networks.build(config)`: the same Trajectory, bit for bit."""
+    from foresit_jax.agent import Agent
+
+    config = H.tiny_config("a3c+foresit", num_lanes=2)
+    with pytest.warns(FutureWarning, match="deprecated"):
+        agent = Agent(config)
+    nets = build(config)
+    env, env_params = H.bathroom_env()
+    params, w_params = nets.init(jax.random.PRNGKey(0), observation())
+    H.assert_trees_bitwise_equal(agent.init(jax.random.PRNGKey(0), observation()), (params, w_params))
+    acting, bound, key = AgentParams(params, w_params, jnp.full((2,), 0.5)), BoundEnv(env, env_params), jax.random.key(1)
+    old = jax.jit(lambda a: agent.rollout(a, bound, key, 8, record_inputs=True), compiler_options=H.FAST_COMPILE)
+    new = jax.jit(lambda a: rollout_of(nets, a, bound, key, 8, ActOptions(record_inputs=True)),
+                  compiler_options=H.FAST_COMPILE)  # fmt: skip
+    got, want = old(acting), new(acting)
+    assert isinstance(got, Trajectory) and got.inputs is not None
+    H.assert_trees_bitwise_equal(got, want)

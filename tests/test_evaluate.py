@@ -14,7 +14,7 @@ import train_helpers as H
 from envs import metrics
 from experiments.running.presets import preset
 from foresit_jax import imagination
-from foresit_jax.agent import EpisodeStats
+from foresit_jax.rollout import EpisodeStats
 from foresit_jax.evaluate import (
     Evaluator,
     agent_params,

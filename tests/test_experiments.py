@@ -1070,15 +1070,30 @@ def test_readme_python_blocks_run_at_a_tiny_size():
             assert "obs" in namespace and "state" in namespace
 
 
+def _extending_blocks(evaluating: bool) -> list[str]:
+    """docs/extending.md's Python blocks: those that evaluate a policy (tens of seconds of
+    compiling) or the others."""
+    blocks = re.findall(r"```python\n(.*?)```", DOCS["extending.md"], flags=re.S)
+    return [b for b in blocks if ("evaluate_policy" in b) == evaluating]
+
+
 def test_extending_blocks_run():
     """docs/extending.md's Python blocks run as written (they are small by design)."""
-    blocks = re.findall(r"```python\n(.*?)```", DOCS["extending.md"], flags=re.S)
+    blocks = _extending_blocks(evaluating=False)
     assert len(blocks) >= 2
     for body in blocks:
         exec(compile(body, "docs/extending.md", "exec"), {})  # noqa: S102
     from foresit_jax import methods
 
     assert "myint" not in methods.IMAGINATION_VARIANTS  # the example cleans up after itself
+
+
+@pytest.mark.slow
+def test_extending_blocks_that_evaluate_run():
+    """docs/extending.md's block that acts and evaluates from a user's own code runs as written."""
+    blocks = _extending_blocks(evaluating=True)
+    assert len(blocks) == 1
+    exec(compile(blocks[0], "docs/extending.md", "exec"), {})  # noqa: S102
 
 
 def test_console_scripts_are_the_module_programs(monkeypatch, capsys):

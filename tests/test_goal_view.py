@@ -13,12 +13,13 @@ import pytest
 from env_helpers import make_states
 from env_reference import reference_transition
 from envs.wrappers import GoalViewWrapper
-from foresit_jax.agent import ActOptions, Agent, AgentParams, BoundEnv
+from foresit_jax import rollout
 from foresit_jax.config import Config
 from foresit_jax.lstm import initial_carry
 from foresit_jax.methods import parse_method
-from foresit_jax.networks import ActorCritic
-from foresit_jax.probes import ShuffledImagination
+from foresit_jax.networks import ActorCritic, build
+from foresit_jax.probes import shuffled
+from foresit_jax.rollout import ActOptions, AgentParams, BoundEnv
 from test_oracle import cached_oracle
 
 N = 48  # reset keys per kit
@@ -114,14 +115,14 @@ def small_config(**kw) -> Config:
 @pytest.mark.parametrize("imagination_input", ["head", pytest.param("encoder", marks=pytest.mark.slow)])
 def test_oracle_i_tau_with_the_noise_off_is_one_network_step_on_the_goal_view(savn_kit, imagination_input):
     config = small_config(imagination_input=imagination_input)
-    agent = Agent(config)
+    nets = build(config)
     env = BoundEnv(kit_env := savn_kit.env, savn_kit.params)
     obs, _ = kit_env.reset(jax.random.PRNGKey(0), savn_kit.params)
-    params, w_params = agent.init(jax.random.PRNGKey(1), obs)
-    actor = agent.start(jax.random.PRNGKey(2), env, config.num_lanes)
-    assert set(actor.obs) >= {"goal_view", "view", "target"}  # the agent wrapped the env itself
+    params, w_params = nets.init(jax.random.PRNGKey(1), obs)
+    actor = rollout.start(nets, jax.random.PRNGKey(2), env, config.num_lanes)
+    assert set(actor.obs) >= {"goal_view", "view", "target"}  # start wrapped the env itself
     acting = AgentParams(params, w_params, jnp.zeros((config.num_lanes,)))
-    act = jax.jit(lambda a, k: agent.act(acting, env, a, k, 20, ActOptions(record_inputs=True)))
+    act = jax.jit(lambda a, k: rollout.act(nets, acting, env, a, k, 20, ActOptions(record_inputs=True)))
     _, traj = act(actor, jax.random.PRNGKey(3))[:2]
     inputs = traj.inputs
     i_tau = inputs.imagined if imagination_input == "head" else None
@@ -132,30 +133,39 @@ def test_oracle_i_tau_with_the_noise_off_is_one_network_step_on_the_goal_view(sa
     hidden, actions = config.hidden_size, config.num_actions
     shape = obs["target"].shape[:-1]
     enc = jnp.zeros(shape + (hidden,)) if imagination_input == "encoder" else None
-    _, expected = agent.model.apply(params, initial_carry(shape, hidden), goal_obs, jnp.zeros(shape + (actions,)), enc,
-                                    method=ActorCritic.encode)  # the flax cell's route, not acting's
+    _, expected = nets.model.apply(params, initial_carry(shape, hidden), goal_obs, jnp.zeros(shape + (actions,)), enc,
+                                   method=ActorCritic.encode)  # the flax cell's route, not acting's
     step = np.asarray(traj.episode_step)
     used = step > 0 if imagination_input == "encoder" else np.ones_like(step, bool)
     np.testing.assert_allclose(np.asarray(i_tau)[used], np.asarray(expected)[used], atol=1e-6)
     assert (step == 0).sum() > config.num_lanes  # several episodes began inside the window
     # With the noise on, i_tau is that latent plus noise, fixed for the episode.
     noisy = AgentParams(params, w_params, jnp.full((config.num_lanes,), 0.25))
-    traj = jax.jit(lambda a, k: agent.act(noisy, env, a, k, 20, ActOptions(record_inputs=True)))(actor, jax.random.PRNGKey(3))[1]
+    traj = jax.jit(lambda a, k: rollout.act(nets, noisy, env, a, k, 20, ActOptions(record_inputs=True)))(
+        actor, jax.random.PRNGKey(3))[1]
     if imagination_input == "head":
         diff = np.asarray(traj.inputs.imagined) - np.asarray(expected)
         assert 0.3 < diff.std() < 0.7  # sigma = 0.5
 
 
 def test_shuffled_probe_shuffles_the_oracles_i_tau_across_episodes(savn_kit):
+    """The probe's shuffle (`probes.shuffled`) applies to the oracle's goal latent where
+    i_tau is made (`rollout._imagine`, noise off): lane b gets lane b - 1's."""
     config = small_config()
-    agent, shuffled = Agent(config), ShuffledImagination(config)
+    nets = build(config)
     env = BoundEnv(savn_kit.env, savn_kit.params)
     obs, _ = savn_kit.env.reset(jax.random.PRNGKey(0), savn_kit.params)
-    params, _ = agent.init(jax.random.PRNGKey(1), obs)
-    actor = agent.start(jax.random.PRNGKey(2), env, config.num_lanes)
-    kernels = agent.lstm_kernels(params)
-    own = agent.goal_latent(params, kernels, actor.obs)
-    np.testing.assert_array_equal(shuffled.goal_latent(params, kernels, actor.obs), jnp.roll(own, 1, axis=0))
+    params, w_params = nets.init(jax.random.PRNGKey(1), obs)
+    actor = rollout.start(nets, jax.random.PRNGKey(2), env, config.num_lanes)
+    kernels = nets.model.apply(params, None, method="lstm_kernels")
+    own = rollout.goal_latent(nets, params, kernels, actor.obs)
+
+    def i_tau(n):  # with the noise off
+        return rollout._imagine(n, w_params, actor.s_0, actor.obs["target"], jax.random.PRNGKey(3),
+                                jnp.zeros((config.num_lanes,)), lambda: own)
+
+    np.testing.assert_array_equal(i_tau(nets), own)
+    np.testing.assert_array_equal(i_tau(shuffled(nets)), jnp.roll(own, 1, axis=0))
 
 
 def test_the_oracle_is_a_privileged_diagnostic_with_clear_errors():

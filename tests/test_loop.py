@@ -1,6 +1,6 @@
-"""experiments.running.loop, the run loop train and sweep share: chunking and the chunk budget,
-the non-finite stop (naming update, seed and the last checkpoint), divergence warnings,
-and where a resume continues (the newest intact checkpoint the records cover). Fake
+"""experiments.running.loop, the parts of the run loop train and sweep share (`Run.train`):
+chunking and the chunk budget, the non-finite stop (naming update, seed and the last
+checkpoint), divergence warnings, and where a resume continues (the newest intact checkpoint the records cover). Fake
 `run` functions in numpy, and real orbax checkpoints of small trees: no training."""
 
 import numpy as np
@@ -37,24 +37,38 @@ class NoCheckpoints:
         return None
 
 
+def run_loop(run, state, *, done, total, chunk_updates, manager=None, checkpoints="c", seeds=None, budget=None,
+             label="", seen=None):  # fmt: skip
+    """`Run.train`'s loop over a fake `run`: [(the state after each chunk, its `Chunk`)], as
+    recorded (appended to `seen` as they are)."""
+    seen = [] if seen is None else seen
+    for n in loop.chunk_sizes(done, total, chunk_updates, budget):
+        state, metrics = run(state, None, n)
+        warning = loop.check(metrics, state, done, n, manager=manager or NoCheckpoints(), checkpoints=checkpoints,
+                             seeds=seeds, label=label)  # fmt: skip
+        done += n
+        seen.append((state, loop.Chunk(metrics, done, n, warning, 0.0)))
+    return seen
+
+
 def test_chunks_cover_the_updates_and_the_budget_stops_between_them():
     run, calls = fake_run()
-    seen = []
-    state, done = loop.run_chunks(run, {"count": np.int32(0), "w": np.ones(3, np.float32)}, None, done=0, total=10,
-                                  chunk_updates=4, after_chunk=lambda s, c: seen.append((int(s["count"]), c.done, c.n)),
-                                  manager=NoCheckpoints(), checkpoints="ckpt")  # fmt: skip
-    assert (calls, done, int(state["count"])) == ([4, 4, 2], 10, 10)
-    assert seen == [(4, 4, 4), (8, 8, 4), (10, 10, 2)]  # after_chunk sees the new state and the count
+    seen = run_loop(run, {"count": np.int32(0), "w": np.ones(3, np.float32)}, done=0, total=10, chunk_updates=4)
+    assert calls == [4, 4, 2] and int(seen[-1][0]["count"]) == 10
+    assert [(int(s["count"]), c.done, c.n) for s, c in seen] == [(4, 4, 4), (8, 8, 4), (10, 10, 2)]
+    assert list(loop.chunk_sizes(0, 10, 4)) == [4, 4, 2] and list(loop.chunk_sizes(10, 10, 4)) == []
     budget = [2]
     run, calls = fake_run()
-    state, done = loop.run_chunks(run, {"count": np.int32(3), "w": np.ones(3, np.float32)}, None, done=3, total=10,
-                                  chunk_updates=2, after_chunk=lambda s, c: None, manager=NoCheckpoints(),
-                                  checkpoints="ckpt", budget=budget)  # fmt: skip
-    assert (calls, done, budget) == ([2, 2], 7, [0])
+    seen = run_loop(run, {"count": np.int32(3), "w": np.ones(3, np.float32)}, done=3, total=10, chunk_updates=2,
+                    budget=budget)  # fmt: skip
+    assert (calls, seen[-1][1].done, budget) == ([2, 2], 7, [0])
     run, calls = fake_run()
-    assert loop.run_chunks(run, {"count": np.int32(0), "w": np.ones(1)}, None, done=0, total=5, chunk_updates=5,
-                           after_chunk=lambda s, c: None, manager=NoCheckpoints(), checkpoints="c",
-                           budget=[0])[1] == 0 and calls == []  # fmt: skip
+    assert run_loop(run, {"count": np.int32(0), "w": np.ones(1)}, done=0, total=5, chunk_updates=5, budget=[0]) == []
+    assert calls == []
+    budget = [1]  # spent when the loop's body over a chunk has returned, not before
+    sizes = loop.chunk_sizes(0, 10, 4, budget)
+    assert next(sizes) == 4 and budget == [1]
+    assert list(sizes) == [] and budget == [0]
 
 
 def test_nonfinite_names_the_update_and_the_seed():
@@ -78,20 +92,19 @@ def test_a_non_finite_chunk_stops_before_it_is_recorded(capsys):
         def latest_step(self):
             return 4
 
-    seen = []
     run, _ = fake_run(nan_at=6, seeds=[3, 7])
+    seen = []
     with pytest.raises(SystemExit) as stop:
-        loop.run_chunks(run, {"count": np.zeros(2, np.int32), "w": np.ones((2, 3), np.float32)}, None, done=0, total=9,
-                        chunk_updates=4, after_chunk=lambda s, c: seen.append(c.done), manager=Manager(),
-                        checkpoints="runs/x/checkpoints", seeds=[3, 7], label="a3c: ")  # fmt: skip
-    assert stop.value.code == 1 and seen == [4]  # the second chunk is not recorded
+        run_loop(run, {"count": np.zeros(2, np.int32), "w": np.ones((2, 3), np.float32)}, done=0, total=9,
+                 chunk_updates=4, manager=Manager(), checkpoints="runs/x/checkpoints", seeds=[3, 7], label="a3c: ",
+                 seen=seen)  # fmt: skip
+    assert stop.value.code == 1 and [c.done for _, c in seen] == [4]  # the second chunk is not recorded
     err = capsys.readouterr().err
     assert ("a3c: non-finite loss at update 6 of seed 7; training stopped, its last checkpoint (update 4, finite) "
             "is kept in runs/x/checkpoints") in err, err
     run, _ = fake_run(nan_params_after=0)
     with pytest.raises(SystemExit):
-        loop.run_chunks(run, {"count": np.int32(0), "w": np.ones(3, np.float32)}, None, done=0, total=9, chunk_updates=4,
-                        after_chunk=lambda s, c: None, manager=NoCheckpoints(), checkpoints="c")  # fmt: skip
+        run_loop(run, {"count": np.int32(0), "w": np.ones(3, np.float32)}, done=0, total=9, chunk_updates=4)
     assert "non-finite parameters after update 4" in capsys.readouterr().err
 
 
@@ -99,10 +112,8 @@ def test_divergence_short_of_nan_is_warned_and_handed_on(capsys):
     def run(state, env_params, n):
         return state, {"losses/total_loss": np.full(n, 1e9), "losses/entropy": np.ones(n)}
 
-    warnings = []
-    loop.run_chunks(run, {"w": np.ones(1, np.float32)}, None, done=2, total=4, chunk_updates=2,
-                    after_chunk=lambda s, c: warnings.append(c.warning), manager=NoCheckpoints(), checkpoints="c")  # fmt: skip
-    assert "total_loss reached 1e+09" in warnings[0]
+    seen = run_loop(run, {"w": np.ones(1, np.float32)}, done=2, total=4, chunk_updates=2)
+    assert "total_loss reached 1e+09" in seen[0][1].warning
     assert "warning: updates 3-4: training may be diverging" in capsys.readouterr().err
 
 

@@ -179,20 +179,25 @@ def test_low_rank_update_equals_the_dense_kernels_in_numpy():
 
 @pytest.fixture(scope="module")
 def small_agent():
-    """(an a3c Agent of hidden size H, its initial parameters)."""
-    from foresit_jax.agent import Agent
+    """(the Networks of an a3c agent of hidden size H, its initial parameters)."""
     from foresit_jax.config import Config
+    from foresit_jax.networks import build
 
-    agent = Agent(Config(method="a3c", hidden_size=H, attention_size=4, value_hidden=4, imagination_layer_sizes=(4, H)))
-    params, _ = agent.init(jax.random.key(0), {"view": jnp.zeros((3, 2, 23)), "target": jnp.ones((300,))})
-    return agent, params
+    nets = build(Config(method="a3c", hidden_size=H, attention_size=4, value_hidden=4, imagination_layer_sizes=(4, H)))
+    params, _ = nets.init(jax.random.key(0), {"view": jnp.zeros((3, 2, 23)), "target": jnp.ones((300,))})
+    return nets, params
+
+
+def kernels_of(nets, params, update=None):
+    """The encoder LSTM's kernels under `params` (`ActorCritic.lstm_kernels`)."""
+    return nets.model.apply(params, update, method="lstm_kernels")
 
 
 def test_the_agents_lstm_kernels_come_from_its_encoder_cell(small_agent):
-    """`Agent.lstm_kernels` (the network's own method) gives the kernels of the encoder's
+    """`ActorCritic.lstm_kernels` (the network's own method) gives the kernels of the encoder's
     cell, the ones at the parameter path MAML splits by, and they run the cell exactly."""
-    agent, params = small_agent
-    mine = agent.lstm_kernels(params)
+    nets, params = small_agent
+    mine = kernels_of(nets, params)
     chex.assert_trees_all_equal(mine, lstm.lstm_kernels(lstm.encoder_lstm_params(params)))
     cell = nn.OptimizedLSTMCell(H)
     x = jax.random.normal(jax.random.key(1), (B, 3 * 2 * 64))
@@ -207,7 +212,7 @@ def test_splitting_the_agents_tree_at_the_encoder_lstm_and_replacing_its_kernels
     """What the maml base does with the tree: the split holds exactly the cell's eight
     kernels, joins back to the same tree, and replacing the kernels by updated ones changes
     those eight leaves alone, to the dense kernels' values."""
-    agent, params = small_agent
+    nets, params = small_agent
     kernels, rest = lstm.split_encoder_lstm_kernels(params)
     cell = lstm.encoder_lstm_params(kernels)
     assert {name: set(leaves) for name, leaves in cell.items()} == {n + g: {"kernel"} for n in "ih" for g in lstm.LSTM_GATES}
@@ -216,9 +221,9 @@ def test_splitting_the_agents_tree_at_the_encoder_lstm_and_replacing_its_kernels
 
     keys = jax.random.split(jax.random.key(4), 3)
     update = lstm.LowRankUpdate(*(jax.random.normal(k, s) for k, s in zip(keys, [(2, 3 * 2 * 64), (2, H), (2, 4 * H)])))
-    changed = lstm.with_encoder_lstm_kernels(params, agent.lstm_kernels(params)._replace(update=update))
-    dense = agent.lstm_kernels(params)._replace(update=update).dense()
-    chex.assert_trees_all_close(agent.lstm_kernels(changed), dense._replace(recurrent_kernel_t=None), rtol=1e-6, atol=1e-6)
+    changed = lstm.with_encoder_lstm_kernels(params, kernels_of(nets, params)._replace(update=update))
+    dense = kernels_of(nets, params)._replace(update=update).dense()
+    chex.assert_trees_all_close(kernels_of(nets, changed), dense._replace(recurrent_kernel_t=None), rtol=1e-6, atol=1e-6)
     flat_old, flat_new = (jax.tree_util.tree_flatten_with_path(t)[0] for t in (params, changed))
     moved = [jax.tree_util.keystr(p) for (p, a), (_, b) in zip(flat_old, flat_new) if not np.array_equal(a, b)]
     assert len(moved) == 8 and all("'lstm'" in p and "'kernel'" in p for p in moved)

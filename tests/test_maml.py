@@ -12,11 +12,19 @@ import pytest
 from flax import traverse_util
 
 import train_helpers as H
-from foresit_jax import maml
-from foresit_jax.agent import ActOptions, Agent, AgentParams, BoundEnv
-from foresit_jax.networks import ActorCritic
+from foresit_jax import imagination, maml, rollout
+from foresit_jax.networks import ActorCritic, build
+from foresit_jax.rollout import ActOptions, AgentParams, BoundEnv
 
 WHOLE = ActOptions(whole_episodes=True)  # the maml base acts in whole episodes
+
+
+def _adaptive_act(nets, params, w_params, env, actor, key, num_steps, options=WHOLE):
+    """`maml.adaptive_act` acting as training does: each lane's noise variance Eq. 7's
+    from its success tracker (what `rollout.act` fills in)."""
+    rho = jax.vmap(imagination.success_rate)(actor.tracker)
+    acting = AgentParams(params, w_params, imagination.noise_variance(rho, nets.config.sigma2_max))
+    return maml.adaptive_act(nets, acting, env, actor, key, num_steps, options, rollout.act_window)
 
 
 # ---------------------------------------------------------------------- the learned loss
@@ -88,20 +96,20 @@ def test_update_slots_are_savns():
 def _setup(lr=0.05, lanes=16, training=True, never_done=False, **overrides):
     config = H.tiny_config("a3c+maml", num_lanes=lanes, maml_inner_lr=lr, **overrides)
     env, env_params = H.bathroom_env("train", training)
-    agent = Agent(config)
+    nets = build(config)
     obs, _ = env.reset(jax.random.PRNGKey(0), env_params)
-    params, w_params = agent.init(jax.random.PRNGKey(3), obs)
+    params, w_params = nets.init(jax.random.PRNGKey(3), obs)
     if never_done:  # the Done action never sampled: every episode runs to the time limit
         params = jax.tree.map(lambda x: x, params)
         params["params"]["policy"]["actor"]["bias"] = params["params"]["policy"]["actor"]["bias"].at[5].set(-30.0)
-    actor = agent.start(jax.random.PRNGKey(4), BoundEnv(env, env_params), lanes)
-    return config, agent, env, env_params, params, w_params, actor
+    actor = rollout.start(nets, jax.random.PRNGKey(4), BoundEnv(env, env_params), lanes)
+    return config, nets, env, env_params, params, w_params, actor
 
 
 @pytest.fixture(scope="module")
 def adapted_rollout():
-    config, agent, env, env_params, params, w_params, actor = _setup()
-    run = jax.jit(lambda p, a, k: maml.adaptive_act(agent.base_functions, agent.base_settings, AgentParams(p, w_params), BoundEnv(env, env_params), a, k, 30, WHOLE),
+    config, nets, env, env_params, params, w_params, actor = _setup()
+    run = jax.jit(lambda p, a, k: _adaptive_act(nets, p, w_params, BoundEnv(env, env_params), a, k, 30),
                   compiler_options=H.FAST_COMPILE)  # fmt: skip
     _, traj, _, thetas = run(params, actor, jax.random.PRNGKey(5))
     return config, params, traj, thetas
@@ -137,8 +145,8 @@ def test_evaluation_step_13_runs_under_theta_2_recomputed_independently():
     (steps 0-5 under theta_0) and theta_2 (steps 6-11 under theta_1) with flax's own
     modules over the recorded observations, then step 13's logits under
     theta_2; they match the rollout's and differ from theta_0's."""
-    config, agent, env, env_params, params, w_params, actor = _setup(lr=5.0, lanes=4, training=False, never_done=True)
-    run = jax.jit(lambda p, a, k: maml.adaptive_act(agent.base_functions, agent.base_settings, AgentParams(p, w_params), BoundEnv(env, env_params), a, k, 14, WHOLE),
+    config, nets, env, env_params, params, w_params, actor = _setup(lr=5.0, lanes=4, training=False, never_done=True)
+    run = jax.jit(lambda p, a, k: _adaptive_act(nets, p, w_params, BoundEnv(env, env_params), a, k, 14),
                   compiler_options=H.FAST_COMPILE)  # fmt: skip
     _, traj, _, thetas = run(params, actor, jax.random.PRNGKey(6))
     assert bool(np.all(np.asarray(traj.valid)[:14]))  # every lane still in its episode at step 13
@@ -153,7 +161,7 @@ def test_evaluation_step_13_runs_under_theta_2_recomputed_independently():
         probs, states, logits = lane_inputs.prev_action_probs[start], [], []
         for t in range(start, stop):
             obs = jax.tree.map(lambda x: x[t], lane_inputs.obs)
-            carry, s_t, logit = agent.model.apply(theta, carry, obs, probs, None, method=ActorCritic.step)
+            carry, s_t, logit = nets.model.apply(theta, carry, obs, probs, None, method=ActorCritic.step)
             probs = jax.nn.softmax(logit)
             states.append(s_t)
             logits.append(logit)
@@ -161,7 +169,7 @@ def test_evaluation_step_13_runs_under_theta_2_recomputed_independently():
 
     def segment_loss(theta, carry, start):
         _, states, logits = run_steps(theta, carry, start, start + 6)
-        return agent.model.apply(theta, maml.interaction_inputs(states, logits), method=ActorCritic.interaction_loss)
+        return nets.model.apply(theta, maml.interaction_inputs(states, logits), method=ActorCritic.interaction_loss)
 
     lr = config.maml_inner_lr
     theta_1 = maml.inner_step(params, jax.grad(segment_loss)(params, carry0, 0), lr)
@@ -181,24 +189,25 @@ def test_evaluation_step_13_runs_under_theta_2_recomputed_independently():
 
 @pytest.mark.slow
 def test_agent_rollout_adapts_through_the_same_code_path(monkeypatch):
-    """Evaluation (`Agent.rollout`) and training (`Agent.act`) both run adaptive_act (traced
+    """Evaluation (`rollout.rollout`) and training (`rollout.act`) both run adaptive_act (traced
     only: what is compiled is what is traced); packed windows are refused."""
-    config, agent, env, env_params, params, w_params, actor = _setup(lanes=4, training=False)
+    config, nets, env, env_params, params, w_params, actor = _setup(lanes=4, training=False)
     calls, bound = [], BoundEnv(env, env_params)
     real = maml.adaptive_act
 
     def spy(*args, **kwargs):
-        calls.append(args[6])  # num_steps
+        calls.append(args[5])  # num_steps
         return real(*args, **kwargs)
 
     monkeypatch.setattr(maml, "adaptive_act", spy)
     key = jax.random.PRNGKey(7)
-    traj = jax.eval_shape(lambda p: agent.rollout(AgentParams(p, w_params, 0.0), bound, key, 20, num_lanes=4), params)
+    traj = jax.eval_shape(lambda p: rollout.rollout(nets, AgentParams(p, w_params, 0.0), bound, key, 20, num_lanes=4),
+                          params)  # fmt: skip
     assert calls == [20] and traj.logits.shape == (20, 4, 6)
-    jax.eval_shape(lambda p: agent.act(AgentParams(p, w_params), bound, actor, key, 30, WHOLE), params)
+    jax.eval_shape(lambda p: rollout.act(nets, AgentParams(p, w_params), bound, actor, key, 30, WHOLE), params)
     assert calls == [20, 30]
     with pytest.raises(ValueError, match="whole episodes"):
-        agent.act(AgentParams(params, w_params), bound, actor, key, 5)  # packed windows: refused
+        rollout.act(nets, AgentParams(params, w_params), bound, actor, key, 5)  # packed windows: refused
 
 
 # ---------------------------------------------------------------------- the meta-gradient
@@ -210,14 +219,14 @@ def _meta_objective(first_order: bool):
     the trainer differentiates it through the same adaptive rollout.)"""
     config = H.tiny_config("a3c+maml", maml_inner_lr=0.5, maml_first_order=first_order, num_lanes=3)
     env, env_params = H.bathroom_env()
-    agent = Agent(config)
+    nets = build(config)
     obs, _ = env.reset(jax.random.PRNGKey(0), env_params)
-    params, w_params = agent.init(jax.random.PRNGKey(2), obs)
+    params, w_params = nets.init(jax.random.PRNGKey(2), obs)
     # Off the initial zero biases: a ReLU of exactly 0 (zero bias, zero input) has no
     # derivative, and central differences would see half its slope.
     rng = np.random.default_rng(1)
     params = jax.tree.map(lambda x: x.astype(jnp.float64) + 0.05 * rng.standard_normal(x.shape), params)
-    actor = agent.start(jax.random.PRNGKey(3), BoundEnv(env, env_params), config.num_lanes)
+    actor = rollout.start(nets, jax.random.PRNGKey(3), BoundEnv(env, env_params), config.num_lanes)
     f64 = lambda x: x.astype(jnp.float64)  # noqa: E731  the agent's own carries, in float64
     actor = actor._replace(lstm=jax.tree.map(f64, actor.lstm), prev_probs=f64(actor.prev_probs),
                            imagined=f64(actor.imagined), s_0=f64(actor.s_0))  # fmt: skip
@@ -226,8 +235,8 @@ def _meta_objective(first_order: bool):
     w_states = jnp.asarray(rng.standard_normal((steps, 3, config.hidden_size)))
 
     def objective(p):
-        _, traj, _, _ = maml.adaptive_act(agent.base_functions, agent.base_settings, AgentParams(p, w_params), BoundEnv(env, env_params), actor,
-                                          jax.random.PRNGKey(11), steps, WHOLE._replace(record_inputs=False))  # fmt: skip
+        _, traj, _, _ = _adaptive_act(nets, p, w_params, BoundEnv(env, env_params), actor, jax.random.PRNGKey(11), steps,
+                                      WHOLE._replace(record_inputs=False))  # fmt: skip
         valid = traj.valid[..., None]
         return jnp.sum(jnp.where(valid, traj.logits * w_logits, 0.0)) + jnp.sum(jnp.where(valid, traj.states * w_states, 0.0))
 
@@ -321,7 +330,7 @@ def test_maml_evaluation_runs_its_episodes_in_groups(monkeypatch):
     assert ev.group_layout(250, 50) == (5, 50) and ev.group_layout(25, 50) == (1, 25)
     assert ev.group_layout(7, 5) == (2, 4) and ev.group_layout(53, 50) == (2, 27) and ev.group_layout(12, None) == (1, 12)
     monkeypatch.setattr(ev, "MAX_ADAPTIVE_LANES", 2)
-    config, agent, env, env_params, params, w_params, actor = _setup(lanes=5, training=False)
+    config, nets, env, env_params, params, w_params, actor = _setup(lanes=5, training=False)
     evaluator = ev.Evaluator(config.setup)
     run = evaluator.agent_rollout(config, 8, False)
     room = evaluator.room_params("val", "bathroom")
@@ -336,8 +345,9 @@ def test_maml_evaluation_runs_its_episodes_in_groups(monkeypatch):
     # Group g: one rollout of its lanes' reset keys, acting with the g-th split of the key.
     k_start, k_act = jax.random.split(key)
     reset = jax.random.split(k_start, 5)
-    group = jax.jit(lambda k, r: ev.episode_stats(agent.rollout(AgentParams(params, w_params, 0.0), BoundEnv(evaluator.env, room), k,
-                                                                8, num_lanes=r.shape[0], reset_keys=r)),
+    group = jax.jit(lambda k, r: ev.episode_stats(rollout.rollout(nets, AgentParams(params, w_params, 0.0),
+                                                                  BoundEnv(evaluator.env, room), k, 8,
+                                                                  num_lanes=r.shape[0], reset_keys=r)),
                     compiler_options=H.FAST_COMPILE)  # fmt: skip
     for g, k in enumerate(jax.random.split(k_act, 3)):
         lanes = slice(2 * g, min(2 * g + 2, 5))

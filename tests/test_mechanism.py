@@ -10,10 +10,12 @@ import numpy as np
 import pytest
 
 import train_helpers as H
-from foresit_jax import probes
-from foresit_jax.agent import Agent, AgentParams, BoundEnv
+from foresit_jax import probes, rollout
 from foresit_jax.config import Config
 from foresit_jax.evaluate import agent_params
+from foresit_jax.networks import build
+from foresit_jax.rollout import AgentParams, BoundEnv
+from foresit_jax.train import subgoal_items, subgoal_steps
 from test_networks import np_attention_critic, np_dense
 
 relu = lambda x: np.maximum(x, 0.0)  # noqa: E731
@@ -39,14 +41,18 @@ def test_the_encoder_reading_feeds_i_tau_beside_the_target():
     tile(g) : tile(action) : tile(i_tau embedded)], built here by hand in numpy; the head
     sees s_t alone."""
     config = H.tiny_config("a3c+foresit", imagination_input="encoder")
-    agent = Agent(config)
+    nets = build(config)
     obs = observation()
-    params, _ = agent.init(jax.random.PRNGKey(0), jax.tree.map(lambda x: x[0], obs))
+    params, _ = nets.init(jax.random.PRNGKey(0), jax.tree.map(lambda x: x[0], obs))
+
+    def lstm_inputs(params, obs, probs, imagined=None):
+        return nets.model.apply(params, obs, probs, imagined, method="encoder_features")
+
     params = scrambled(params)
     rng = np.random.default_rng(0)
     probs = np.asarray(jax.nn.softmax(rng.normal(size=(4, config.num_actions))), np.float32)
     imagined = np.tanh(rng.normal(size=(4, config.hidden_size))).astype(np.float32)
-    got = np.asarray(agent.lstm_inputs(params, obs, probs, imagined))
+    got = np.asarray(lstm_inputs(params, obs, probs, imagined))
 
     p = jax.tree.map(lambda x: np.asarray(x, np.float64), params["params"]["encoder"])
     view = np.asarray(obs["view"], np.float64)
@@ -57,10 +63,10 @@ def test_the_encoder_reading_feeds_i_tau_beside_the_target():
                  for r in range(view.shape[1]) for c in range(view.shape[2])]  # fmt: skip
         np.testing.assert_allclose(got[b], np.concatenate(cells), rtol=2e-4, atol=2e-5)
     # i_tau changes the input; the policy head takes s_t alone.
-    assert np.abs(got - np.asarray(agent.lstm_inputs(params, obs, probs, 0 * imagined))).max() > 1e-3
+    assert np.abs(got - np.asarray(lstm_inputs(params, obs, probs, 0 * imagined))).max() > 1e-3
     assert params["params"]["policy"]["actor"]["kernel"].shape == (config.hidden_size, config.num_actions)
     with pytest.raises(ValueError, match="needs i_tau"):
-        agent.lstm_inputs(params, obs, probs)
+        lstm_inputs(params, obs, probs)
 
 
 @pytest.mark.slow
@@ -69,14 +75,14 @@ def test_the_mlp_reading_is_a_two_layer_head(method):
     """imagination_input='mlp': logits = Dense(ReLU(Dense([s_t : i_tau]))), and the base gets
     the same MLP over s_t (so a pair changes one thing)."""
     config = H.tiny_config(method, imagination_input="mlp")
-    agent = Agent(config)
+    nets = build(config)
     obs = jax.tree.map(lambda x: x[0], observation())
-    params, _ = agent.init(jax.random.PRNGKey(0), obs)
+    params, _ = nets.init(jax.random.PRNGKey(0), obs)
     params = scrambled(params)
     rng = np.random.default_rng(1)
     s_t, i_tau = (np.tanh(rng.normal(size=(3, config.hidden_size))).astype(np.float32) for _ in range(2))
     uses = config.pieces.imagination_variant.uses_imagination
-    got = agent.model.apply(params, s_t, i_tau if uses else None, method=type(agent.model).policy_logits)
+    got = nets.model.apply(params, s_t, i_tau if uses else None, method=type(nets.model).policy_logits)
     p = jax.tree.map(np.asarray, params["params"]["policy"])
     x = np.concatenate([s_t, i_tau], -1) if uses else s_t
     np.testing.assert_allclose(got, np_dense(p["actor"], relu(np_dense(p["hidden"], x))), rtol=1e-4, atol=1e-5)
@@ -92,18 +98,18 @@ def test_i_tau_while_acting_is_f_w_of_the_episode_state_it_was_renewed_at(method
     at the first) and the head gets none. With noise, i_tau - f_w has the noise's variance
     and is constant over the episode."""
     config = H.tiny_config(method, imagination_input=reading, int_interval=4, num_steps=30)
-    agent = Agent(config)
+    nets = build(config)
     env, env_params = H.bathroom_env()
     obs = jax.tree.map(lambda x: x[0], observation())
-    params, w_params = agent.init(jax.random.PRNGKey(0), obs)
+    params, w_params = nets.init(jax.random.PRNGKey(0), obs)
     params, w_params = scrambled(params, 1, 0.3), scrambled(w_params, 2, 0.5)
     lanes = 8
 
     @jax.jit
     def act(variance, key):
         bound = BoundEnv(env, env_params)
-        actor = agent.start(jax.random.PRNGKey(5), bound, lanes)
-        return agent.act(AgentParams(params, w_params, variance), bound, actor, key, 30)[1]
+        actor = rollout.start(nets, jax.random.PRNGKey(5), bound, lanes)
+        return rollout.act(nets, AgentParams(params, w_params, variance), bound, actor, key, 30)[1]
 
     traj = jax.tree.map(np.asarray, act(jnp.zeros(lanes), jax.random.PRNGKey(6)))
     seen = traj.inputs
@@ -120,14 +126,14 @@ def test_i_tau_while_acting_is_f_w_of_the_episode_state_it_was_renewed_at(method
                     np.testing.assert_array_equal(given[t, b], 0.0)
                     continue
                 k = t - 1 - (step[t, b] - 1) % interval
-            want = agent.imagine(w_params, states[k, b], goal[k, b])
+            want = nets.imagine(w_params, states[k, b], goal[k, b])
             np.testing.assert_allclose(given[t, b], want, rtol=1e-5, atol=1e-6)
             checked += 1
     assert checked > 100 and (step == 0).sum() > lanes, "precondition: several episodes per lane"
 
     noisy = jax.tree.map(np.asarray, act(jnp.full(lanes, 0.25), jax.random.PRNGKey(6)))
     given = noisy.inputs.encoder_imagined if reading == "encoder" else noisy.inputs.imagined
-    residual = given - np.asarray(agent.imagine(w_params, noisy.s_0, noisy.inputs.obs["target"]))
+    residual = given - np.asarray(nets.imagine(w_params, noisy.s_0, noisy.inputs.obs["target"]))
     if method == "a3c+foresit":  # constant over the episode: the same residual at every step
         for t in range(1, 30):
             same = (noisy.episode_step[t] > (1 if reading == "encoder" else 0))
@@ -151,8 +157,8 @@ def _two_windows(method, seed=0):
         memory = actor.memory
         next_actor, traj, end = trainer.act(AgentParams(state.params, state.imagination_params), env, actor, k_act)
         _, (alpha, keys, _) = trainer.window_loss(state.params, traj, end, memory)
-        items = trainer.subgoal_items(traj, alpha, keys, traj.success)
-        return next_actor, key, (traj, items, trainer.subgoal_steps(traj, end, alpha))
+        items = subgoal_items(trainer.networks.imagination_variant.subgoal_mode, traj, alpha, keys, traj.success)
+        return next_actor, key, (traj, items, subgoal_steps(traj, end, alpha))
 
     for _ in range(3):
         actor, key, got = window(actor, key)
@@ -205,14 +211,22 @@ def test_evaluation_noise_off_zeroes_the_variance():
 # ---------------------------------------------------------------------- probes
 @pytest.mark.slow
 def test_shuffled_imagination_imagines_from_another_episode():
+    """The probe's networks (`probes.ShuffledImagination`) make each lane's i_tau where
+    acting makes it (`rollout._imagine`, noise off) from the previous lane's s_0 and target;
+    the unshuffled networks from the lane's own."""
     config = H.tiny_config("a3c+foresit")
-    agent, shuffled = Agent(config), probes.ShuffledImagination(config)
+    nets, shuffled = build(config), probes.ShuffledImagination(config)
     rng = np.random.default_rng(0)
-    s_0, goal = rng.normal(size=(5, config.hidden_size)), rng.normal(size=(5, 300))
-    _, w = agent.init(jax.random.PRNGKey(0), jax.tree.map(lambda x: x[0], observation()))
-    got = np.asarray(shuffled.imagine(w, s_0, goal))
+    s_0, goal = (jnp.asarray(rng.normal(size=(5, n)), jnp.float32) for n in (config.hidden_size, 300))
+    _, w = nets.init(jax.random.PRNGKey(0), jax.tree.map(lambda x: x[0], observation()))
+
+    def i_tau(n):  # with the noise off
+        return np.asarray(rollout._imagine(n, w, s_0, goal, jax.random.PRNGKey(1), jnp.zeros(5), None))
+
+    got, own = i_tau(shuffled), i_tau(nets)
     for b in range(5):
-        np.testing.assert_allclose(got[b], agent.imagine(w, s_0[b - 1], goal[b - 1]), rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(got[b], nets.imagine(w, s_0[b - 1], goal[b - 1]), rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(own[b], nets.imagine(w, s_0[b], goal[b]), rtol=1e-5, atol=1e-6)
 
 
 def test_imagination_fit_against_hand_computed_values():
@@ -290,7 +304,7 @@ def test_offline_f_w_fits_what_a_teacher_f_w_computes():
     predicts the odd ones far better than the untrained f_w (from which it starts)."""
     from foresit_jax.networks import ImaginationNet
 
-    net = ImaginationNet((32, 16, 8, 16, 32, 16))  # f_w as Agent.imagine applies it, at H = 16
+    net = ImaginationNet((32, 16, 8, 16, 32, 16))  # f_w as Networks.imagine applies it, at H = 16
     rng = np.random.default_rng(5)
     n = 400
     goal = rng.normal(size=(n, 8)).astype(np.float32)
@@ -320,7 +334,7 @@ def replay_stream(config, steps: int, seed: int, offered: float):
     lanes, hidden = config.num_lanes, config.hidden_size
     items = (rng.normal(size=(steps, lanes, hidden)).astype(np.float32), rng.normal(size=(steps, lanes, GOAL_SIZE)).astype(np.float32),
              rng.normal(size=(steps, lanes, hidden)).astype(np.float32), rng.random((steps, lanes)) < offered)  # fmt: skip
-    return trainer, items, trainer.agent.imagination_net.init(jax.random.PRNGKey(0), items[0][0, 0], items[1][0, 0])
+    return trainer, items, trainer.networks.imagination_net.init(jax.random.PRNGKey(0), items[0][0, 0], items[1][0, 0])
 
 
 def test_replayed_online_fit_is_the_training_procedure():
@@ -335,7 +349,7 @@ def test_replayed_online_fit_is_the_training_procedure():
                            imagination.buffer_init(config.buffer_size, config.hidden_size, GOAL_SIZE))  # fmt: skip
     doubled = tuple(jnp.asarray(np.concatenate([x, x])) for x in items)
     want, _, _ = jax.jit(trainer.store_and_train)(w0, buffers, doubled)
-    got = probes.replay_online_fit(trainer.agent.imagine, w0, *items, trainer.imagination_optimizer,
+    got = probes.replay_online_fit(trainer.networks.imagine, w0, *items, trainer.imagination_optimizer,
                                    config.imagination_epochs, config.buffer_size, passes=2, batch=2)  # fmt: skip
     H.assert_trees_bitwise_equal(got, want)
     assert not H.trees_bitwise_equal(got, w0)
@@ -349,7 +363,7 @@ def test_the_replay_can_keep_one_optimizer_state_across_flushes():
 
     config = H.tiny_config("a3c+foresit", buffer_size=2)
     trainer, items, w0 = replay_stream(config, steps=4, seed=9, offered=0.7)
-    fresh, kept = (probes.replay_online_fit(trainer.agent.imagine, w0, *items, optax.adam(1e-2), 1, config.buffer_size,
+    fresh, kept = (probes.replay_online_fit(trainer.networks.imagine, w0, *items, optax.adam(1e-2), 1, config.buffer_size,
                                             keep_optimizer_state=keep) for keep in (False, True))  # fmt: skip
     assert not H.trees_bitwise_equal(fresh, w0)
     assert not H.trees_bitwise_equal(kept, fresh)
@@ -368,7 +382,7 @@ def test_signal_to_noise_and_subgoal_histogram_by_hand():
 def test_a_method_is_parsed_with_its_critic_into_the_network():
     """`a3c+critic` has the attention critic's q, k, v and a plain linear head over s_t."""
     config = H.tiny_config("a3c+critic")
-    params, _ = jax.eval_shape(Agent(config).init, jax.random.PRNGKey(0), jax.tree.map(lambda x: x[0], observation()))
+    params, _ = jax.eval_shape(build(config).init, jax.random.PRNGKey(0), jax.tree.map(lambda x: x[0], observation()))
     assert {"query", "key", "value", "value_head"} == set(params["params"]["value_critic"])
     assert params["params"]["policy"]["actor"]["kernel"].shape == (config.hidden_size, config.num_actions)
     assert dataclasses.replace(config, method="a3c").pieces.attention_critic is False
@@ -417,7 +431,7 @@ def test_stopped_key_gradient_leaves_the_values_and_cuts_the_earlier_states_grad
     reference = jax.jacrev(lambda x: full.apply(params, x, valid, keys=jnp.asarray(states), key_mask=mask).value)(states)
     np.testing.assert_allclose(jac["stopped"], reference, atol=1e-6)
     config = H.tiny_config("a3c+critic", attention_key_gradient="stopped")
-    assert Agent(config).model.key_gradient is False and Agent(H.tiny_config("a3c+critic")).model.key_gradient is True
+    assert build(config).model.key_gradient is False and build(H.tiny_config("a3c+critic")).model.key_gradient is True
     with pytest.raises(ValueError, match="attention_key_gradient"):
         Config(attention_key_gradient="none")
 
@@ -475,11 +489,11 @@ def test_sweep_diagnostics_table_by_hand():
 
 @pytest.mark.slow
 def test_fit_options_replay_each_option_on_the_fit_items_and_score_the_held_out_ones():
-    """`experiments.reporting.probing.fit_options` on items `[windows, T, B]`: one R^2 per option of
+    """`experiments.running.probes.fit_options` on items `[windows, T, B]`: one R^2 per option of
     FIT_OPTIONS; 'as trained' is the run's own procedure replayed on the even items and
     scored on the odd ones against their mean, as a direct computation gives it."""
-    from experiments.reporting import probing
     from experiments.running import models
+    from experiments.running import probes as probe_runs
 
     config = H.tiny_config("a3c+foresit", buffer_size=8)
     trainer = H.trainer(config)
@@ -487,16 +501,16 @@ def test_fit_options_replay_each_option_on_the_fit_items_and_score_the_held_out_
     shape = (3, 5, config.num_lanes)
     items = (rng.normal(size=shape + (16,)).astype(np.float32), rng.normal(size=shape + (8,)).astype(np.float32),
              rng.normal(size=shape + (16,)).astype(np.float32), rng.random(shape) < 0.6)  # fmt: skip
-    w0 = trainer.agent.imagination_net.init(jax.random.PRNGKey(0), items[0][0, 0, 0], items[1][0, 0, 0])
+    w0 = trainer.networks.imagination_net.init(jax.random.PRNGKey(0), items[0][0, 0, 0], items[1][0, 0, 0])
     model = models.Model(config, trainer, 0, None, None)
-    got = probing.fit_options(model, w0, items, passes=2)
-    assert list(got) == list(probing.FIT_OPTIONS) and all(np.isfinite(v) for v in got.values())
+    got = probe_runs.fit_options(model, w0, items, passes=2)
+    assert list(got) == list(probe_runs.FIT_OPTIONS) and all(np.isfinite(v) for v in got.values())
     small = models.Model(dataclasses.replace(config, buffer_size=2), trainer, 0, None, None)
-    assert np.isnan(probing.fit_options(small, w0, items, passes=1)["batch 8"])  # 8 does not divide 2
+    assert np.isnan(probe_runs.fit_options(small, w0, items, passes=1)["batch 8"])  # 8 does not divide 2
     flat = [x.reshape((-1,) + x.shape[2:]) for x in items]
     add = flat[3]
-    w = probes.replay_online_fit(trainer.agent.imagine, w0, *flat[:3], probes.only_fit_items(add),
+    w = probes.replay_online_fit(trainer.networks.imagine, w0, *flat[:3], probes.only_fit_items(add),
                                  trainer.imagination_optimizer, config.imagination_epochs, config.buffer_size, 2)  # fmt: skip
     target = flat[2][add]
-    predicted = np.asarray(trainer.agent.imagine(w, flat[0][add][1::2], flat[1][add][1::2]))
+    predicted = np.asarray(trainer.networks.imagine(w, flat[0][add][1::2], flat[1][add][1::2]))
     assert got["as trained"] == pytest.approx(probes.r_squared(predicted, target[1::2], target[::2].mean(0)))

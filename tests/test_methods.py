@@ -125,56 +125,77 @@ def test_no_code_outside_the_pieces_tests_a_base_or_encoder_name():
 
 
 @pytest.mark.slow
-def test_the_agent_acts_through_its_bases_act():
-    """`Agent.act` is the base piece's `act` (here a3c's, wrapped to count its calls)."""
+def test_acting_goes_through_the_bases_flag(monkeypatch):
+    """`rollout.act` runs the a3c base as one `act_window` per window (wrapped to count its
+    calls; traced only), and hands the maml base to `maml.adaptive_act` (a stand-in that
+    records its call), with `rollout.act_window` for its segments and Eq. 7's variance filled in."""
     import jax
 
-    from foresit_jax import methods
-    from foresit_jax.agent import ActOptions, Agent, AgentParams, BoundEnv
-    from foresit_jax.train import make_env
+    import train_helpers as H
+    from foresit_jax import maml, rollout
+    from foresit_jax.networks import build
+    from foresit_jax.rollout import ActOptions, AgentParams, BoundEnv
 
-    calls = []
+    env, env_params = H.bathroom_env()
+    env = BoundEnv(env, env_params)
+    obs, _ = env.env.reset(jax.random.key(0), env_params)
 
-    def counting(*args):
-        calls.append(args[-1])  # the ActOptions
-        return methods.act_in_windows(*args)
+    def acting_of(config):
+        nets = build(config)
+        params, w_params = nets.init(jax.random.key(1), obs)
+        return nets, AgentParams(params, w_params), rollout.start(nets, jax.random.key(2), env, 2)
 
-    config = Config(method="a3c", room_types=("bathroom",), num_lanes=2, num_steps=3, hidden_size=8,
-                    attention_size=8, value_hidden=8, imagination_layer_sizes=(8, 8))  # fmt: skip
-    pieces = dict(methods.BASE_PIECES, a3c=dataclasses.replace(methods.BASE_PIECES["a3c"], act=counting))
-    original = methods.BASE_PIECES
-    methods.BASE_PIECES = pieces
-    try:
-        agent = Agent(config)
-        env, env_params = make_env(config)
-        obs, _ = env.reset(jax.random.key(0), env_params)
-        params, w_params = agent.init(jax.random.key(1), obs)
-        env = BoundEnv(env, env_params)
-        actor = agent.start(jax.random.key(2), env, 2)
-        _, traj, _ = agent.act(AgentParams(params, w_params), env, actor, jax.random.key(3), 3, ActOptions(greedy=True))
-    finally:
-        methods.BASE_PIECES = original
+    calls, real_window = [], rollout.act_window
+
+    def counting(*args, **kwargs):
+        calls.append(args[6])  # the ActOptions
+        return real_window(*args, **kwargs)
+
+    monkeypatch.setattr(rollout, "act_window", counting)
+    nets, acting, actor = acting_of(H.tiny_config("a3c", num_lanes=2, num_steps=3))
+    traj = jax.eval_shape(lambda a: rollout.act(nets, a, env, actor, jax.random.key(3), 3, ActOptions(greedy=True))[1],
+                          acting)  # fmt: skip
     assert len(calls) == 1 and calls[0].greedy is True and traj.actions.shape == (3, 2)
+
+    adaptive = []
+
+    def stand_in(*args):
+        adaptive.append(args)
+        return args[3], "traj", "end", []  # (actor, Trajectory, WindowEnd, thetas): nothing is run
+
+    monkeypatch.setattr(maml, "adaptive_act", stand_in)
+    nets, acting, actor = acting_of(H.tiny_config("a3c+maml", num_lanes=2))
+    options = ActOptions(greedy=True, whole_episodes=True)
+    assert rollout.act(nets, acting, env, actor, jax.random.key(3), 3, options)[1:] == ("traj", "end")
+    (got,) = adaptive
+    assert got[0] is nets and got[5:7] == (3, options) and got[7] is counting  # rollout's act_window (here wrapped)
+    assert got[1].noise_variance is not None and got[1].noise_variance.shape == (2,)
+    assert len(calls) == 1  # the base's own window was not run beside it
 
 
 def test_noise_on_the_input_is_algorithm_1s_and_on_the_output_eq_6s():
-    """The learned imagination's i_tau: f_w([s : g]) + eta by default (Eq. 6); with the
-    noise on the input, f_w([s : g] + eta) (Algorithm 1), eta from the same key and variance."""
+    """The learned imagination's i_tau (`rollout._imagine`): f_w([s : g]) + eta by default
+    (Eq. 6); with the noise on the input (`Config.imagination_noise='input'`),
+    f_w([s : g] + eta) (Algorithm 1), eta from the same key and variance."""
     import jax
     import jax.numpy as jnp
     import numpy as np
 
-    from foresit_jax import imagination, methods
+    import train_helpers as H
+    from foresit_jax import imagination, rollout
+    from foresit_jax.networks import build
 
     def imagine_fn(w, s, g):  # a nonlinear stand-in for f_w: where the noise enters matters
         return jnp.tanh(w * s + g.sum(-1, keepdims=True))
 
-    piece = methods.IMAGINATION_VARIANTS["foresit"]
+    def nets_of(noise):
+        return dataclasses.replace(build(H.tiny_config("a3c+foresit", imagination_noise=noise)), imagine=imagine_fn)
+
     key, s_t, goal = jax.random.key(1), jnp.full((2, 4), 0.5), jnp.ones((2, 3))
     variance = jnp.array([0.3, 1.0])
-    out = piece.imagine(imagine_fn, 2.0, s_t, goal, key, variance, 0.5)
+    out = rollout._imagine(nets_of("output"), 2.0, s_t, goal, key, variance, None)
     np.testing.assert_allclose(out, imagination.add_imagination_noise(key, imagine_fn(2.0, s_t, goal), variance))
-    inside = piece.imagine(imagine_fn, 2.0, s_t, goal, key, variance, 0.5, noise_on_input=True)
+    inside = rollout._imagine(nets_of("input"), 2.0, s_t, goal, key, variance, None)
     np.testing.assert_allclose(inside, imagine_fn(2.0, *imagination.add_input_noise(key, s_t, goal, variance)))
     assert not np.allclose(inside, out)
 

@@ -19,11 +19,10 @@ import numpy as np
 import pytest
 
 import train_helpers as H
-from foresit_jax import losses
-from foresit_jax.agent import ActOptions, AgentParams, WindowEnd
+from foresit_jax import losses, rollout
 from foresit_jax.networks import window_attention_mask
-from foresit_jax.replay import replayed
-from foresit_jax.train import Trainer
+from foresit_jax.rollout import ActOptions, AgentParams, WindowEnd
+from foresit_jax.train import Trainer, replayed, window_critic
 
 # Random bathroom episodes last ~6 steps: a 40-step window holds several per lane.
 PACKED = H.tiny_config("a3c+foresit", num_steps=40, num_lanes=4, buffer_size=64)
@@ -62,8 +61,8 @@ def _act(num_steps):
     trainer = H.trainer(PACKED)
 
     def act(params, w_params, env_params, actor, step_keys):
-        return trainer.agent.act(AgentParams(params, w_params), trainer.bind(env_params), actor, step_keys[0], num_steps,
-                                 ActOptions(step_keys=step_keys))  # fmt: skip
+        return rollout.act(trainer.networks, AgentParams(params, w_params), trainer.bind(env_params), actor, step_keys[0],
+                           num_steps, ActOptions(step_keys=step_keys))  # fmt: skip
 
     return jax.jit(act, compiler_options=H.FAST_COMPILE)
 
@@ -71,7 +70,7 @@ def _act(num_steps):
 @functools.lru_cache(maxsize=None)
 def _critic():
     trainer = H.trainer(PACKED)
-    return jax.jit(trainer.agent.critic, compiler_options=H.FAST_COMPILE)
+    return jax.jit(functools.partial(window_critic, trainer.networks), compiler_options=H.FAST_COMPILE)
 
 
 @pytest.fixture(scope="module")
@@ -169,13 +168,13 @@ def test_packing_changes_nothing_but_speed(windows):
 
     def packed_loss(p):
         traj = long._replace(valid=jnp.asarray(complete))
-        return packed.window_loss(p, replayed(packed.agent, p, traj, state.actor.lstm), long_end, state.actor.memory)[0]
+        return packed.window_loss(p, replayed(packed.networks, p, traj, state.actor.lstm), long_end, state.actor.memory)[0]
 
     def whole_loss(p):
         zeros = (jnp.zeros((E, hidden)), jnp.zeros((E, hidden)))
         traj = jax.tree.map(jnp.asarray, whole)
         end = jax.tree.map(jnp.asarray, whole_end)
-        return whole_trainer.window_loss(p, replayed(whole_trainer.agent, p, traj, zeros), end, jnp.zeros((E, 0, hidden)))[0]
+        return whole_trainer.window_loss(p, replayed(whole_trainer.networks, p, traj, zeros), end, jnp.zeros((E, 0, hidden)))[0]
 
     grad = functools.partial(jax.jit, compiler_options=H.FAST_COMPILE)
     loss_p, grads_p = grad(jax.value_and_grad(packed_loss))(state.params)

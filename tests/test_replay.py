@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 import train_helpers as H
-from foresit_jax.agent import AgentParams
-from foresit_jax.replay import replayed
+from foresit_jax.rollout import AgentParams
+from foresit_jax.train import replayed
 from foresit_jax.train import Trainer
 
 REPLAY = H.tiny_config("a3c+foresit", num_steps=20, num_lanes=4)
@@ -72,7 +72,7 @@ def test_replay_recomputes_the_acting_values(mid_episode_state):
     act = jax.jit(trainer.act, compiler_options=H.FAST_COMPILE)
     _, traj, _ = act(AgentParams(state.params, state.imagination_params), trainer.bind(trainer.env_params), state.actor,
                      state.key)  # fmt: skip
-    again = jax.jit(functools.partial(replayed, trainer.agent), compiler_options=H.FAST_COMPILE)(
+    again = jax.jit(functools.partial(replayed, trainer.networks), compiler_options=H.FAST_COMPILE)(
         state.params, traj, state.actor.lstm
     )
     np.testing.assert_allclose(again.states, traj.states, rtol=1e-5, atol=1e-6)
@@ -86,7 +86,7 @@ def test_replay_needs_recorded_inputs(mid_episode_state):
         AgentParams(state.params, state.imagination_params), trainer.bind(trainer.env_params), state.actor, state.key
     )
     with pytest.raises(ValueError, match="record_inputs"):
-        replayed(trainer.agent, state.params, traj._replace(inputs=None), state.actor.lstm)
+        replayed(trainer.networks, state.params, traj._replace(inputs=None), state.actor.lstm)
 
 
 def test_whole_episode_rollout_needs_room_for_an_episode():

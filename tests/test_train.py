@@ -16,7 +16,7 @@ import pytest
 import train_helpers as H
 from foresit_jax import imagination
 from foresit_jax import train as train_module
-from foresit_jax.agent import AgentParams
+from foresit_jax.rollout import AgentParams
 from foresit_jax.train import Trainer
 
 FORESIT = H.tiny_config("a3c+foresit")
@@ -99,7 +99,7 @@ def test_imagination_loss_depends_on_fw_only():
     state = H.jitted_init(FORESIT)(jax.random.PRNGKey(0))
     rng = np.random.default_rng(0)
     s_0, goal, subgoal = (jnp.asarray(rng.normal(size=n), jnp.float32) for n in (16, 300, 16))
-    loss = lambda w, s, g, sg: imagination.imagination_loss(trainer.agent.imagine, w, s, g, sg)  # noqa: E731
+    loss = lambda w, s, g, sg: imagination.imagination_loss(trainer.networks.imagine, w, s, g, sg)  # noqa: E731
     grads = jax.jit(jax.grad(loss, argnums=(0, 1, 2, 3)), compiler_options=H.FAST_COMPILE)
     d_w, d_s0, d_goal, d_subgoal = grads(state.imagination_params, s_0, goal, subgoal)
     assert H.max_abs(d_w) > 0
@@ -140,7 +140,7 @@ def test_full_buffer_trains_only_fw_and_is_emptied():
     assert not H.trees_bitwise_equal(forced.imagination_params, state.imagination_params)
     assert int(forced.buffers.count[0]) == 0
     assert H.max_abs(jax.tree.map(lambda x: x[0], forced.buffers)) == 0
-    loss = lambda w: imagination.imagination_loss(trainer.agent.imagine, w, s_0, goal, subgoal)  # noqa: E731
+    loss = lambda w: imagination.imagination_loss(trainer.networks.imagine, w, s_0, goal, subgoal)  # noqa: E731
     assert float(loss(forced.imagination_params)) < float(loss(state.imagination_params))
     np.testing.assert_allclose(float(m_forced["imagination/first_epoch_loss"]), float(loss(state.imagination_params)), rtol=1e-5)
 
@@ -209,16 +209,17 @@ def test_the_encoder_really_uses_the_detections():
     config = H.tiny_config("a3c+org", setup="org")
     trainer = H.trainer(config)
     state = H.jitted_init(config)(jax.random.PRNGKey(0))
-    agent, obs = trainer.agent, jax.tree.map(lambda x: x[0], state.actor.obs)  # lane 0
+    nets, obs = trainer.networks, jax.tree.map(lambda x: x[0], state.actor.obs)  # lane 0
     probs = jnp.zeros((config.num_actions,))
 
     def logits(detections):
         seen = {**obs, "detections": detections}
-        gates = agent.input_gates(state.params, seen, probs)
+        kernels = nets.model.apply(state.params, None, method="lstm_kernels")
+        gates = nets.model.apply(state.params, seen, probs, None, kernels, method="input_gates")
         from foresit_jax.lstm import encoder_lstm_params, initial_carry, lstm_kernels, lstm_step
 
         _, s_t = lstm_step(lstm_kernels(encoder_lstm_params(state.params)), initial_carry((), config.hidden_size), gates)
-        return agent.model.apply(state.params, s_t, None, method=type(agent.model).policy_logits)
+        return nets.model.apply(state.params, s_t, None, method=type(nets.model).policy_logits)
 
     detections = obs["detections"]
     grad = jax.grad(lambda d: jnp.sum(logits(d) * jnp.arange(1.0, 7.0)))(detections)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import functools
 import importlib
+import pkgutil
 
 import chex
 import jax
@@ -203,14 +204,21 @@ def patch_for_experiments(mp) -> None:
     instead of 8), `make_trainer` returns one Trainer per config (so every `main()` call
     reuses the same jitted chunk instead of recompiling it: a Trainer is pure), one Evaluator
     per setup (its compiled evaluation rollouts are shared the same way), and jit compiles
-    with FAST_COMPILE."""
+    with FAST_COMPILE.
+
+    The programs import `make_trainer` and `Evaluator` at their top (tests/test_layering.py),
+    so each module of experiments that holds one is patched too; every such module is
+    imported first, so that none imports a patched one while the patch holds and keeps it."""
+    import experiments
     import experiments.running.presets as presets
     import foresit_jax.train as train
 
     evaluate = importlib.import_module("foresit_jax.evaluate")  # the module (the package exports a function)
+    programs = [importlib.import_module(m.name) for m in pkgutil.walk_packages(experiments.__path__, "experiments.")]
 
     fields, schedule = presets.PRESETS["tiny"]
     mp.setitem(presets.PRESETS, "tiny", ({**fields, "room_types": ("bathroom",)}, schedule))
+    real_make_trainer = train.make_trainer
     mp.setattr(train, "make_trainer", _make_trainer_cached)
     evaluators = {}  # dropped with the patch (and its compiled rollouts with it)
 
@@ -224,4 +232,9 @@ def patch_for_experiments(mp) -> None:
             return evaluators[key]
 
     mp.setattr(evaluate, "Evaluator", CachedEvaluator)
+    for module in programs:
+        for name, real, cached in (("make_trainer", real_make_trainer, _make_trainer_cached),
+                                   ("Evaluator", _REAL_EVALUATOR, CachedEvaluator)):  # fmt: skip
+            if getattr(module, name, None) is real:
+                mp.setattr(module, name, cached)
     mp.setattr(jax, "jit", _fast_jit(jax.jit))

@@ -8,6 +8,7 @@ import jax
 import numpy as np
 
 from experiments.reporting.tables import markdown_table
+from foresit_jax import cvae
 
 MIN_ITEMS = 10
 
@@ -27,8 +28,6 @@ def compare(config, items: tuple[np.ndarray, ...], epochs: int, seed: int) -> di
     """The comparison on `collect_items`'s items: 80% to fit and 20% held out
     (`foresit_jax.cvae.compare_imagination_targets`); with fewer than MIN_ITEMS items,
     only {"items": n}."""
-    from foresit_jax import cvae
-
     n = len(items[0])
     if n < MIN_ITEMS:
         return {"items": n}

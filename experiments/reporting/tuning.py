@@ -11,7 +11,7 @@ import numpy as np
 
 from experiments.reporting import figures, report
 from experiments.reporting.tables import markdown_table
-from experiments.running.errors import UserError
+from experiments.errors import UserError
 
 
 # ---------------------------------------------------------------------- choosing on validation

@@ -1,2 +1,3 @@
-"""The run machinery the programs share: presets, sweeps, the run loop, validation and
-selection, run folders, checkpoints, trained models read back (docs/design.md)."""
+"""The run machinery the programs share: presets, the run flags, sweeps, the run loop,
+validation and selection, run folders, checkpoints, trained models read back and the
+probes run over them (docs/design.md). Above experiments/reporting, which it imports."""

@@ -16,7 +16,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from experiments.running.errors import UserError
+from experiments.errors import UserError
 from experiments.running.rundir import write_json
 
 

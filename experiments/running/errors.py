@@ -1,44 +1,4 @@
-"""What the user asked wrongly, as one line: `UserError`, and `run_cli`, the body of every
-program (tyro parses the flags; a UserError, a ValueError or an OSError of the user's
-disk or paths is one line on stderr and an exit status, never a traceback)."""
+"""Moved to `experiments.errors` (a leaf that experiments/reporting imports too: the layers
+import one way only, tests/test_layering.py); kept here for the imports of before."""
 
-from __future__ import annotations
-
-import errno
-import sys
-
-
-class UserError(Exception):
-    """A problem with what the user asked for: printed as one line, exit status 2."""
-
-
-def fail(message: str, status: int = 2) -> None:
-    print(f"error: {message}", file=sys.stderr)
-    raise SystemExit(status)
-
-
-def run_cli(args_class, main, argv=None):
-    """A CLI's body: parse `argv` into `args_class` with tyro and run `main`; what the user
-    asked wrongly (UserError, ValueError) is one line on stderr and exit status 2."""
-    import tyro
-
-    args = tyro.cli(args_class, args=argv)
-    try:
-        return main(args)
-    except (UserError, ValueError) as e:
-        fail(str(e))
-    except OSError as e:  # disk full, read-only, not a directory: one line, not a traceback
-        if e.errno not in _USER_ERRNOS:
-            raise
-        fail(os_message(e), status=1 if e.errno in (errno.ENOSPC, errno.EDQUOT) else 2)
-
-
-# What the user's disk or paths did, not a bug: reported in one line.
-_USER_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.ENOTDIR, errno.EISDIR,
-                errno.EEXIST, errno.ENOENT}  # fmt: skip
-
-
-def os_message(e: OSError) -> str:
-    where = f"{e.filename}: " if e.filename else ""
-    return f"{where}{e.strerror or e}" + (" (free some space, then continue with --resume)"
-                                          if e.errno in (errno.ENOSPC, errno.EDQUOT) else "")  # fmt: skip
+from experiments.errors import UserError, fail, os_message, run_cli  # noqa: F401

@@ -1,24 +1,25 @@
-"""The run loop of `experiments.running.run.Run` (train's run of one seed, each arm of a sweep's):
+"""The run loop's parts (`experiments.running.run.Run.train` is the loop, a plain `for` over
+chunks: learn, check, validate and select, record, checkpoint):
 
     resume_point       where a resumed run continues: its newest intact checkpoint
-    run_chunks         run a chunk of updates; stop, naming the update and the seed, on a
-                       non-finite loss or parameter; warn of divergence short of NaN; hand
-                       the chunk to the caller's `after_chunk` (which records its metrics,
-                       checkpoints, validates and selects the model, moves the bar); stop
-                       early when the invocation's chunk budget (--stop-after-chunks) is spent
+    chunk_sizes        the chunks from where the run stands to its end, while the
+                       invocation's chunk budget (--stop-after-chunks) lasts
+    check              a chunk's metrics and state before anything of it is recorded: stop,
+                       naming the update and the seed, on a non-finite loss or parameter;
+                       warn of divergence short of NaN
 """
 
 from __future__ import annotations
 
 import sys
-import time
 from pathlib import Path
-from typing import Callable, NamedTuple, Optional, Sequence
+from typing import Iterator, NamedTuple, Optional, Sequence
 
 import jax
 import numpy as np
 
-from experiments.running import checkpoint, errors
+from experiments import errors
+from experiments.running import checkpoint
 
 
 def finite_seeds(tree, num_seeds: int | None = None) -> np.ndarray:
@@ -60,7 +61,7 @@ def warn(line: str) -> None:
 
 
 class Chunk(NamedTuple):
-    """One chunk of updates, as `run_chunks` hands it to its caller's `after_chunk`."""
+    """One chunk of updates, as the run loop hands it to its recorders (`run.Recorder`)."""
 
     metrics: dict  # name -> [n] (or [seeds, n]) numpy, one value per update
     done: int  # updates done, this chunk included
@@ -118,34 +119,34 @@ def kept_checkpoint(manager, folder: Path) -> str:
     return f"its last checkpoint (update {step}, finite) is kept in {folder}"
 
 
-def run_chunks(run: Callable, state, env_params, *, done: int, total: int, chunk_updates: int,
-               after_chunk: Callable, manager, checkpoints: Path, seeds: Optional[Sequence[int]] = None,
-               budget: Optional[list] = None, label: str = ""):  # fmt: skip
-    """Train from update `done` to `total` in chunks of `chunk_updates`: `run(state,
-    env_params, n)` (a jitted `Trainer.run` or `run_seeds`) -> (state, metrics), then
-    `after_chunk(state, Chunk(metrics, done, n, warning, started))` with `done` counting the chunk and
-    `warning` the divergence warning or None. `budget` is a one-item list of the chunks
-    this invocation may still run ([None]: no limit), spent as they run. Returns
-    (state, done): `done < total` when the budget ran out first.
-
-    A non-finite loss or parameter stops the process (exit status 1) before anything of
-    the chunk is recorded, naming the update, the seed and the last checkpoint (`manager`,
-    in the folder `checkpoints`), which is finite: every saved state passed this check."""
+def chunk_sizes(done: int, total: int, chunk_updates: int, budget: Optional[list] = None) -> Iterator[int]:
+    """The sizes of the chunks that train from update `done` to `total`, `chunk_updates`
+    each (the last one what remains), while `budget` lasts: a one-item list of the chunks
+    this invocation may still run ([None]: no limit; a sweep's arms share it), one spent
+    each time the loop's body over a chunk has returned."""
     while done < total:
         if budget is not None and budget[0] is not None and budget[0] <= 0:
-            break
-        n, started = min(chunk_updates, total - done), time.time()
-        new_state, metrics = run(state, env_params, n)
-        metrics = jax.tree.map(np.asarray, metrics)
-        what = nonfinite(metrics, new_state, done, n, seeds)
-        if what is not None:
-            errors.fail(f"{label}{what}; training stopped, {kept_checkpoint(manager, checkpoints)}; "
-                        "a lower --learning-rate may help", status=1)  # fmt: skip
-        warning = divergence(metrics)
-        if warning:
-            warn(f"{label}updates {done + 1}-{done + n}: {warning}")
-        state, done = new_state, done + n
-        after_chunk(state, Chunk(metrics, done, n, warning, started))
+            return
+        n = min(chunk_updates, total - done)
+        yield n
+        done += n
         if budget is not None and budget[0] is not None:
             budget[0] -= 1
-    return state, done
+
+
+def check(metrics: dict, state, done: int, n: int, *, manager, checkpoints: Path,
+          seeds: Optional[Sequence[int]] = None, label: str = "") -> Optional[str]:  # fmt: skip
+    """A chunk of `n` updates after the first `done`, checked before anything of it is
+    recorded: its metrics (numpy, {name: [n]} or [seeds, n]) and the state it left. A
+    non-finite loss or parameter stops the process (exit status 1), naming the update, the
+    seed and the last checkpoint (`manager`, in the folder `checkpoints`), which is finite:
+    every saved state passed this check. Divergence short of NaN (`divergence`) is warned
+    of, and returned (None when there is none)."""
+    what = nonfinite(metrics, state, done, n, seeds)
+    if what is not None:
+        errors.fail(f"{label}{what}; training stopped, {kept_checkpoint(manager, checkpoints)}; "
+                    "a lower --learning-rate may help", status=1)  # fmt: skip
+    warning = divergence(metrics)
+    if warning:
+        warn(f"{label}updates {done + 1}-{done + n}: {warning}")
+    return warning

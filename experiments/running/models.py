@@ -1,15 +1,24 @@
 """Trained models read back from a run folder (`train`, or a sweep's arm) or a sweep folder (`sweep`): one
 `Model` per seed, with the training state at its end and the model selected on validation,
-for the programs that play or probe them (probe, failures, paper)."""
+for the programs that play or probe them (probe, failures, paper); and `load`, a trained
+policy for a user's own code (`experiments.load`, docs/extending.md)."""
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 from pathlib import Path
+from typing import Any, Callable, NamedTuple
 
 import jax
 
-from experiments.running import checkpoint, errors, run, rundir, selection, sweeps
+from experiments import errors
+from experiments.running import checkpoint, devices, run, rundir, selection, sweeps
+from foresit_jax import rollout
+from foresit_jax.config import Config
+from foresit_jax.evaluate import agent_params
+from foresit_jax.networks import build
+from foresit_jax.train import make_trainer
 
 
 @dataclasses.dataclass
@@ -41,10 +50,6 @@ class Trained:
 def read_trained(folder: Path) -> Trained:
     """The models of a run folder (`train`'s, or an arm's in a sweep: `experiments.running.run`),
     or of a train folder of before that format (run.json with one seed, best/)."""
-    from foresit_jax.config import Config
-    from foresit_jax.evaluate import agent_params
-    from foresit_jax.train import make_trainer
-
     info = rundir.read_run_info(folder)
     if not run.is_legacy_train_folder(info):
         one = run.read(folder)
@@ -100,3 +105,54 @@ def models_of_sweep(folder: Path, methods: tuple[str, ...]) -> dict[str, list[Mo
         config, trainer, states, best = sweeps.load_method(method, args, folder / "methods" / method)
         out[method] = _models(config, trainer, sweeps.finished_seeds(folder / "methods" / method), states, best)
     return out
+
+
+class Policy(NamedTuple):
+    """A trained policy (`load`): `act(params, carry, obs, first, key) -> (action [B], carry)`
+    is pure and batched over lanes (`foresit_jax.rollout.policy`: `first` `[B]` marks an
+    episode's first step, where the carry resets); `params` what it acts with (theta/omega,
+    f_w's w, the evaluation's noise variance); `initial_carry(num_lanes)` its carry before a
+    first step; `config` the run's Config. `test_key` and `test_episodes_per_room` give
+    the episodes the run's report tested it on (`foresit_jax.evaluate.evaluate_policy`)."""
+
+    act: Callable
+    params: Any
+    initial_carry: Callable[[int], Any]
+    config: Config
+    test_key: jax.Array
+    test_episodes_per_room: int
+
+
+WHICH = ("best", "last")
+
+
+def load(run_dir, seed: int = 0, which: str = "best") -> Policy:
+    """The policy a run folder (`python -m experiments.train`'s, or a sweep's arm,
+    `<sweep>/methods/<arm>`) trained for `seed`: `which` is "best", the model selected on
+    validation (what results.json reports as "selected"), or "last", the state at the run's
+    last checkpoint. Acts as the run's evaluation does (its greedy or sampled protocol, the
+    evaluation noise): `evaluate_policy(p.act, p.params, p.initial_carry, p.config, "test",
+    p.test_key, p.test_episodes_per_room)` gives results.json's test numbers."""
+    if which not in WHICH:
+        raise errors.UserError(f"which must be one of {WHICH}, got {which!r}")
+    folder = Path(run_dir)
+    if not (folder / "run.json").is_file():
+        hint = " (a sweep folder: give one of its arms, <sweep>/methods/<arm>)" if (folder / "sweep.json").is_file() else ""
+        raise errors.UserError(f"{folder} is not a run folder: it has no run.json{hint}")
+    trained = read_trained(folder)
+    if seed not in trained.seeds:
+        raise errors.UserError(f"{folder} trained seeds {trained.seeds}, not seed {seed}")
+    i, config = trained.seeds.index(seed), trained.config
+    nets = build(config)
+    try:
+        act = rollout.policy(nets, config.pieces.greedy_evaluation)
+    except ValueError as e:
+        raise errors.UserError(f"{folder}: {e}") from None
+    if which == "best":
+        params = devices.seed_slice(trained.selected, i)
+    else:  # as the run's report computes the last model's (`Run.test`)
+        config_ = trained.trainer.config
+        last = jax.vmap(lambda s: agent_params(s, config_.sigma2_max, config_.evaluation_noise))(trained.states)
+        params = devices.seed_slice(last, i)
+    return Policy(act, params, functools.partial(rollout.policy_carry, nets), config, selection.test_key(seed),
+                  trained.schedule["test_episodes_per_room"])  # fmt: skip

@@ -171,5 +171,6 @@ def given(fields) -> dict:
     return {k: v for k, v in dataclasses.asdict(fields).items() if v is not None}
 
 
-TrainConfigFields = config_fields("TrainConfigFields", (*_NOT_FLAGS, "num_updates", "num_lanes", "learning_rate"))
+# num_updates is a run flag (`flags.NumUpdates`: with --resume it extends a run), not one of these.
+TrainConfigFields = config_fields("TrainConfigFields", (*_NOT_FLAGS, "num_updates"))
 SweepConfigFields = config_fields("SweepConfigFields", (*_NOT_FLAGS, "num_updates"))

@@ -35,8 +35,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from experiments import errors
 from experiments.reporting.report import DIAGNOSTICS
-from experiments.running import checkpoint, devices, errors, loop, numerics, rundir, selection
+from experiments.running import checkpoint, devices, loop, numerics, rundir, selection
+from experiments.running.presets import Schedule
+from foresit_jax.config import Config
+from foresit_jax.evaluate import agent_params
+from foresit_jax.train import make_trainer
 
 # run.json's "format": 2 is this one. A `train` folder written before (run.json with one
 # "seed", best/ and validation.jsonl) still reads (`models`, evaluate), but does not resume.
@@ -90,8 +95,6 @@ def initial_states(trainer, seeds: Sequence[int]):
     """(the seeds' training states, stacked; the selected models (`AgentParams`), stacked:
     at first the initial ones): what a run's checkpoints hold, as `checkpoint.restore` needs
     it. One seed is initialised unvmapped (as `train` always was) and given the seed axis."""
-    from foresit_jax.evaluate import agent_params
-
     select = functools.partial(agent_params, sigma2_max=trainer.config.sigma2_max,
                                evaluation_noise=trainer.config.evaluation_noise)  # fmt: skip
     if len(seeds) == 1:
@@ -142,8 +145,8 @@ class Run:
     arm in messages and on the progress bar, `preset` is recorded in run.json."""
 
     folder: Path
-    config: object  # foresit_jax.config.Config
-    schedule: object  # presets.Schedule
+    config: Config
+    schedule: Schedule
     seeds: tuple[int, ...]
     label: str = ""
     preset: str = ""
@@ -228,9 +231,6 @@ class Run:
         first. After each chunk: the recorders, then a checkpoint of the states and the
         selected models, then progress.json. `bar` is `progress.progress_bar`'s, over every
         update it counts (a sweep's bar counts all its arms)."""
-        from foresit_jax.evaluate import agent_params
-        from foresit_jax.train import make_trainer
-
         config, schedule, seeds, folder = self.config, self.schedule, list(self.seeds), self.folder
         label = f"{self.label}: " if self.label else ""
         done_results = folder / "results.json"
@@ -290,12 +290,18 @@ class Run:
             states = devices.shard_seeds(states, mesh)
             run = trainer.seeds_runner(on_update) if on_update else trainer.run_seeds
             seed_params, stacked = seed_params_of, lambda tree: tree
-        history = progress["history"]
+        history, checkpoints = progress["history"], folder / "checkpoints"
 
-        def after_chunk(states, chunk: loop.Chunk) -> None:
-            """Select each seed's model on validation, record the chunk, checkpoint the states
-            and the selected models, then progress.json; move the bar."""
-            metrics = chunk.metrics  # [seeds, n]
+        # The run loop: per chunk, learn, check, validate and select, record, checkpoint.
+        for n in loop.chunk_sizes(progress["done"], config.num_updates, schedule.chunk_updates, budget):
+            done, started = progress["done"], time.time()
+            states, metrics = run(states, env_params, n)
+            metrics = jax.tree.map(np.asarray, metrics)  # [seeds, n]
+            # A non-finite loss or parameter stops here, before anything of the chunk is recorded.
+            warning = loop.check(metrics, states, done, n, manager=manager, checkpoints=checkpoints, seeds=seeds,
+                                 label=label)  # fmt: skip
+            chunk = loop.Chunk(metrics, done + n, n, warning, started)
+            # Each seed validated, its best model kept (`selection`).
             params_now = seed_params(states)
             validations = []
             for i, seed in enumerate(seeds):
@@ -303,6 +309,8 @@ class Run:
                 val = selection.validate(evaluator, params, config, seed, schedule.val_episodes_per_room)
                 validations.append({"update": chunk.done, **val["overall"]})
                 best[i].offer(val["overall"]["SR"], chunk.done, params)
+            # Recorded, then checkpointed (states and selected models), then progress.json: a
+            # kill between the two repeats the chunk (`Recorder.record`, `loop.resume_point`).
             for recorder in recorders:
                 recorder.record(chunk, validations)
             progress["curves"].append(metrics["charts/success_rate"].tolist())
@@ -322,11 +330,7 @@ class Run:
                           "SR": f"{metrics['charts/success_rate'].mean():.3f}",
                           "val SR": f"{np.mean([v['SR'] for v in validations]):.1f}%",
                           **({"warning": "diverging"} if chunk.warning else {})})  # fmt: skip
-
-        states, done = loop.run_chunks(run, states, env_params, done=progress["done"], total=config.num_updates,
-                                       chunk_updates=schedule.chunk_updates, after_chunk=after_chunk, manager=manager,
-                                       checkpoints=folder / "checkpoints", seeds=seeds, budget=budget, label=label)  # fmt: skip
-        return done >= config.num_updates
+        return progress["done"] >= config.num_updates
 
     def test(self, evaluator) -> dict:
         """Test each seed's selected and last model (on the test episodes of its seed, with SR
@@ -357,15 +361,11 @@ class Run:
 
     # ------------------------------------------------------------------ reading back
     def _params_of(self, trainer, states):
-        from foresit_jax.evaluate import agent_params
-
         return jax.vmap(lambda s: agent_params(s, trainer.config.sigma2_max, trainer.config.evaluation_noise))(states)
 
     def load_checkpoint(self, step: int, seeds: Sequence[int] | None = None):
         """(trainer, the seeds' training states, their selected models) of checkpoint `step`,
         stacked over `seeds` (the run's, unless given: a finished run's in results' order)."""
-        from foresit_jax.train import make_trainer
-
         trainer = make_trainer(self.config)
         states, best = initial_states(trainer, list(seeds or self.seeds))
         restored = checkpoint.restore(checkpoint.checkpoint_manager(self.folder / "checkpoints", self.schedule.keep_checkpoints),
@@ -387,9 +387,6 @@ def is_legacy_train_folder(info: dict) -> bool:
 
 def read(folder: Path) -> Run:
     """The run a folder's run.json describes (one of this format: `RUN_FORMAT`)."""
-    from foresit_jax.config import Config
-    from experiments.running.presets import Schedule
-
     info = rundir.read_run_info(folder)
     if is_legacy_train_folder(info):
         raise errors.UserError(f"{folder} was written by experiments.train before runs had one format (it keeps best/ "

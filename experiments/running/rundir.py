@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
+from experiments.errors import UserError, read_json  # noqa: F401 (rundir.read_json: a run folder's files read back)
 from experiments.reporting.tables import write_csv
-from experiments.running.errors import UserError
 
 try:  # POSIX: flock on the folder's .lock, which also names the holder's pid
     import fcntl
@@ -195,14 +195,6 @@ def read_run_info(path: Path) -> dict:
     if not is_run(path):
         raise UserError(f"{path} is not a run folder (no {RUN_FILE}); pass the --out folder of experiments.train")
     return read_json(path / RUN_FILE)
-
-
-def read_json(path: Path):
-    """A JSON file this project wrote; a broken one is a UserError naming it."""
-    try:
-        return json.loads(Path(path).read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise UserError(f"{path} is not valid JSON ({e}); it was damaged after it was written") from None
 
 
 # ---------------------------------------------------------------------- JSON

@@ -19,7 +19,7 @@ from typing import Any
 
 import jax
 
-from experiments.running.errors import UserError
+from experiments.errors import UserError
 
 # Bumped whenever what selects a run's model changes (the keys, the tie rule, the presets'
 # validation episodes): results of another version are not combined with this one's

@@ -32,15 +32,17 @@ from typing import Optional
 import jax
 import numpy as np
 
+from experiments import errors
 from experiments.reporting import figures
 from experiments.reporting.report import (
     by_length_markdown, diagnostics_markdown, paired_markdown, selection_markdown, table, table_markdown,
 )  # fmt: skip
 from experiments.reporting.tables import write_csv
-from experiments.running import checkpoint, devices, errors, numerics, rundir, selection
+from experiments.running import checkpoint, devices, flags, numerics, rundir, selection
 from experiments.running.run import Run, check_continuable, finished_seeds, set_aside
 from experiments.running.presets import SweepConfigFields, config_flag, given, preset
 from experiments.running.progress import progress_bar
+from foresit_jax.evaluate import Evaluator
 
 
 @dataclasses.dataclass(frozen=True)
@@ -64,18 +66,10 @@ class Sweep:
     """Base seed: seed i of a method is the run `train --seed <seed + i>` would make."""
     out: Path = Path("runs/sweep")
     """Output folder."""
-    reuse: tuple[Path, ...] = ()
-    """Sweep folders whose finished methods are taken into --out instead of trained (same
-    setup, preset and overrides), seed by seed: a method whose every seed of this sweep
-    they finished between them is copied or assembled (each seed from the first folder that
-    has it), e.g. rows run on another machine, or seeds 2-4 (--seed 2 --seeds 3) added to
-    a sweep of seeds 0-1; a method they finish only some seeds of is trained here."""
-    num_updates: Optional[int] = None
-    """Override the preset's number of updates."""
-    test_episodes_per_room: Optional[int] = None
-    """Override the preset's test episodes per room type."""
-    val_episodes_per_room: Optional[int] = None
-    """Override the preset's validation episodes per room type."""
+    reuse: flags.Reuse = ()
+    num_updates: flags.NumUpdates = None
+    test_episodes_per_room: flags.TestEpisodes = None
+    val_episodes_per_room: flags.ValEpisodes = None
     config: config_flag(SweepConfigFields) = dataclasses.field(default_factory=SweepConfigFields)
     """Every other Config field for every method, e.g. --learning-rate 3e-4: the preset's (or the arm's) unless given."""
 
@@ -407,8 +401,6 @@ def run(spec: Sweep, *, resume: bool = False, overwrite: bool = False, stop_afte
     `resume` continues the sweep in `spec.out`, which must have been started as `spec`
     (`saved`); without it `spec.out` must be new or empty, or a sweep folder (sweep.json)
     to replace with `overwrite` (`rundir.prepare_run_dir`)."""
-    from foresit_jax.evaluate import Evaluator
-
     check(spec)
     sources = reuse_sources(spec)
     out = spec.out

@@ -21,7 +21,7 @@ import importlib.util
 import os
 from pathlib import Path
 
-from experiments.running.errors import UserError
+from experiments.errors import UserError
 
 TRACKERS = ("none", "tensorboard", "wandb")
 _PACKAGE = {"tensorboard": "tensorboardX", "wandb": "wandb"}

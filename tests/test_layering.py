@@ -1,0 +1,125 @@
+"""How the project's modules import each other, read from their source (ast; nothing is imported):
+
+* experiments/reporting (statistics, tables, figures, reports: pure functions of results)
+  is the lower layer and imports nothing of experiments/running (the run machinery), which
+  imports it: one way only. Both raise `experiments.errors.UserError`, a leaf.
+* An import of the project's own modules sits at the top of its module, where the reader
+  sees what a module depends on, unless it defers an optional or heavy dependency or
+  breaks an import cycle: those are listed in `ALLOWED`, each with its reason.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PROJECT = ("foresit_jax", "envs", "experiments", "benchmarks")
+
+# The packages whose function-level imports are checked (foresit_jax: to be added once its
+# restructuring (issue 60) has settled, with its own entries below).
+CHECKED = ("experiments", "benchmarks", "envs")
+
+# (file, function, module imported) -> why it is imported inside the function.
+ALLOWED = {
+    ("experiments/__init__.py", "__getattr__", "experiments.running"):
+        "defers jax and the library to `experiments.load`: every `python -m experiments.<program>` imports the package",
+    ("experiments/paper.py", "trajectories_figure", "envs.render"):
+        "defers matplotlib (envs.render imports it at its top) to the figure that draws",
+    ("envs/gymnax_compat.py", "make_gymnax", "envs"): "cycle: envs/__init__ imports gymnax_compat",
+    ("envs/gymnax_compat.py", "register_gymnax", "envs"): "cycle: envs/__init__ imports gymnax_compat",
+    ("benchmarks/bench_devices.py", "measure", "experiments.running"):
+        "defers jax and the trainer: the parent process only starts the measuring ones",
+    ("benchmarks/bench_devices.py", "measure", "experiments.running.presets"):
+        "defers jax and the trainer: the parent process only starts the measuring ones",
+    ("benchmarks/bench_devices.py", "measure", "foresit_jax.train"):
+        "defers jax and the trainer: the parent process only starts the measuring ones",
+    ("benchmarks/bench_grid.py", "main", "experiments.running.presets"):
+        "defers jax and the trainer past the flags (--help, a refused flag)",
+    ("benchmarks/bench_grid.py", "main", "foresit_jax.train"):
+        "defers jax and the trainer past the flags (--help, a refused flag)",
+}
+
+
+def modules(package: str, root: Path = ROOT) -> list[Path]:
+    return sorted((root / package).rglob("*.py"))
+
+
+def imports(path: Path, root: Path = ROOT) -> list[tuple[str, str, list[str]]]:
+    """(the enclosing function's qualified name, '' at module or class level; the module the
+    import statement names; every module it may import) of each import in `path`: `import
+    a.b` names a.b; `from a import b` names a, and imports a and perhaps a.b (b may be a
+    module). A relative import is resolved against `path`'s package."""
+    found = []
+
+    def visit(node, qualname: str, in_function: bool):
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+                name = f"{qualname}.{child.name}" if qualname else child.name
+                visit(child, name, in_function or not isinstance(child, ast.ClassDef))
+                continue
+            where = qualname if in_function else ""
+            if isinstance(child, ast.Import):
+                found.extend((where, alias.name, [alias.name]) for alias in child.names)
+            elif isinstance(child, ast.ImportFrom):
+                base = child.module or ""
+                if child.level:
+                    package = path.relative_to(root).parent.parts
+                    base = ".".join([*package[: len(package) - (child.level - 1)], *([base] if base else [])])
+                found.append((where, base, [base, *(f"{base}.{alias.name}" for alias in child.names)]))
+            visit(child, qualname, in_function)
+
+    visit(ast.parse(path.read_text(), str(path)), "", False)
+    return found
+
+
+def layer_imports(lower: str, upper: str, root: Path = ROOT) -> list[str]:
+    """'file imports module' for each import of experiments/`upper` by experiments/`lower`."""
+    prefix = f"experiments.{upper}"
+    return [f"{path.relative_to(root)} imports {name}" for path in modules(f"experiments/{lower}", root)
+            for _, _, names in imports(path, root) for name in names if name == prefix or name.startswith(prefix + ".")]
+
+
+def test_reporting_is_below_running():
+    """reporting imports nothing of running (and so they do not import each other both ways)."""
+    assert layer_imports("reporting", "running") == []
+    assert layer_imports("running", "reporting"), "running uses reporting: the layers are as documented"
+
+
+def test_errors_is_a_leaf():
+    """experiments.errors imports nothing of the project: either layer may import it."""
+    assert [m for _, m, _ in imports(ROOT / "experiments" / "errors.py") if m.split(".")[0] in PROJECT] == []
+
+
+def function_level_imports(packages=CHECKED, root: Path = ROOT) -> set[tuple[str, str, str]]:
+    """(file, function, module) of each import of a project module made inside a function."""
+    return {(str(path.relative_to(root)), where, module) for package in packages for path in modules(package, root)
+            for where, module, _ in imports(path, root) if where and module.split(".")[0] in PROJECT}
+
+
+def test_function_level_imports_of_the_project_are_only_the_allowed_ones():
+    found = function_level_imports()
+    new = sorted(found - set(ALLOWED))
+    assert new == [], "move these imports to the top of their module, or add them to ALLOWED with why"
+    assert sorted(set(ALLOWED) - found) == [], "these ALLOWED imports are gone: take them out of the list"
+    assert all(reason.strip() for reason in ALLOWED.values())
+
+
+def test_the_checks_see_what_they_look_for(tmp_path):
+    """The ast walk finds a function's import (a method's and a nested function's too),
+    resolves a relative one, and counts a class body's as the module's."""
+    package = tmp_path / "experiments" / "reporting"
+    package.mkdir(parents=True)
+    (package / "x.py").write_text("import experiments.running.run\n"
+                                  "def f():\n    from ..running import sweeps\n"
+                                  "class C:\n    from envs import catalog\n"
+                                  "    def g(self):\n        def h():\n"
+                                  "            import foresit_jax.train\n")  # fmt: skip
+    assert imports(package / "x.py", tmp_path) == [
+        ("", "experiments.running.run", ["experiments.running.run"]),
+        ("f", "experiments.running", ["experiments.running", "experiments.running.sweeps"]),
+        ("", "envs", ["envs", "envs.catalog"]), ("C.g.h", "foresit_jax.train", ["foresit_jax.train"])]  # fmt: skip
+    assert len(layer_imports("reporting", "running", tmp_path)) == 3
+    x = "experiments/reporting/x.py"
+    assert function_level_imports(("experiments",), tmp_path) == {(x, "f", "experiments.running"),
+                                                                  (x, "C.g.h", "foresit_jax.train")}

@@ -1,0 +1,125 @@
+"""The agent as a step-by-step policy (`rollout.policy`), any policy on the reports' episodes
+(`evaluate.evaluate_policy`), and a trained policy loaded from a run folder
+(`experiments.load`): each replays what the library's own rollout and evaluation play,
+exactly (issue 61).
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import train_helpers as H
+from foresit_jax import rollout
+from foresit_jax.evaluate import Evaluator, evaluate_policy, policy_episodes
+from foresit_jax.networks import build
+from foresit_jax.rollout import ActOptions, AgentParams, BoundEnv, episode_stats
+
+DONE = 5  # GridNav's Done action
+
+
+def _same(a, b) -> bool:
+    """Equal nested results, NaN equal to NaN (a length bucket with no episode)."""
+    if isinstance(a, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    return a == b or (isinstance(a, float) and math.isnan(a) and math.isnan(b))
+
+
+def _acting(config, done_bias: float = 1.5):
+    """(nets, AgentParams with noise 0.3 and a Done bias so that episodes end at many lengths)."""
+    nets = build(config)
+    env, env_params = H.bathroom_env()
+    obs, _ = env.reset(jax.random.PRNGKey(0), env_params)
+    params, w_params = nets.init(jax.random.PRNGKey(1), obs)
+    params = jax.tree.map(lambda x: x, params)
+    bias = params["params"]["policy"]["actor"]["bias"]
+    params["params"]["policy"]["actor"]["bias"] = bias.at[DONE].set(done_bias)
+    return nets, AgentParams(params, w_params, jnp.float32(0.3)), env, env_params
+
+
+@pytest.mark.parametrize("method", ["a3c+foresit", "a3c+oracle", "int"])
+def test_the_policy_step_by_step_plays_rollouts_episodes_exactly(method):
+    config = H.tiny_config(method)
+    nets, acting, env, env_params = _acting(config)
+    lanes, steps, key = 12, 30, jax.random.PRNGKey(5)
+    bound = rollout.acting_env(nets, BoundEnv(env, env_params))
+    want = jax.jit(lambda a: episode_stats(rollout.rollout(nets, a, bound, key, steps, num_lanes=lanes)))(acting)
+    act = rollout.policy(nets)
+    got = jax.jit(lambda a: policy_episodes(act, a, rollout.policy_carry(nets, lanes), bound, key, steps, lanes))(acting)
+    for name in ("success", "length", "optimal_length", "ended", "spl", "room_type"):
+        np.testing.assert_array_equal(np.asarray(getattr(got, name)), np.asarray(getattr(want, name)), err_msg=name)
+    lengths = np.asarray(want.length)
+    assert len(set(lengths.tolist())) >= 3, lengths  # the episodes differ: every step's keys mattered
+
+
+def test_policy_refuses_the_maml_base_and_a_missing_noise_variance():
+    with pytest.raises(ValueError, match="maml base"):
+        rollout.policy(build(H.tiny_config("a3c+maml")))
+    config = H.tiny_config("a3c+foresit")
+    nets, acting, env, env_params = _acting(config)
+    obs, _ = BoundEnv(env, env_params).reset(jax.random.split(jax.random.PRNGKey(0), 2))
+    with pytest.raises(ValueError, match="noise_variance"):
+        rollout.policy(nets)(acting._replace(noise_variance=None), rollout.policy_carry(nets, 2), obs,
+                             jnp.ones(2, bool), jax.random.PRNGKey(0))  # fmt: skip
+
+
+def test_evaluate_policy_gives_the_evaluators_numbers():
+    config = H.tiny_config("a3c+foresit")
+    nets, acting, _, _ = _acting(config)
+    key = jax.random.PRNGKey(9)
+    want = Evaluator.for_config(config).evaluate(acting, config, "test", key, 8, by_length=True)
+    got = evaluate_policy(rollout.policy(nets), acting, functools.partial(rollout.policy_carry, nets), config, "test",
+                          key, 8)  # fmt: skip
+    assert _same(got, want), (got, want)
+    assert 0.0 < want["overall"]["SR"] + want["overall"]["episodes"]
+
+
+def test_a_users_own_policy_runs_on_the_same_episodes():
+    """Hand-checkable policies: always Done ends every episode after one action; always
+    turning (action 1) never succeeds and runs to the time limit."""
+    config = H.tiny_config("a3c")
+    env, env_params = H.bathroom_env()
+    bound, lanes, steps = BoundEnv(env, env_params), 6, 30
+
+    def constant(action):
+        return lambda params, carry, obs, first, key: (jnp.full(first.shape, action, jnp.int32), carry)
+
+    done = policy_episodes(constant(DONE), None, (), bound, jax.random.PRNGKey(2), steps, lanes)
+    np.testing.assert_array_equal(np.asarray(done.length), 1)
+    assert bool(np.all(done.ended))
+    turn = policy_episodes(constant(1), None, (), bound, jax.random.PRNGKey(2), steps, lanes)
+    assert not np.any(turn.success) and bool(np.all(turn.ended))
+    np.testing.assert_array_equal(np.asarray(turn.length), int(np.max(env_params.max_steps)))
+    report = evaluate_policy(constant(DONE), None, lambda n: (), config, "test", jax.random.PRNGKey(2), 6)
+    assert report["overall"]["episodes"] == 6 and 0.0 <= report["overall"]["SR"] <= 100.0
+
+
+@pytest.mark.slow
+def test_load_reproduces_the_runs_test_results(tmp_path):
+    """A tiny run trained by the CLI, loaded (`experiments.load`, the selected and the last
+    model) and evaluated on its test episodes: the numbers its results.json reports."""
+    import experiments
+    from experiments import train as train_cli
+    from experiments.errors import UserError
+
+    out = tmp_path / "run"
+    train_cli.main(train_cli.Args(method="a3c+foresit", preset="tiny", seed=3, out=out, progress=False))
+    results = json.loads((out / "results.json").read_text())["results"][0]
+    for which, reported in (("best", "selected"), ("last", "last")):
+        policy = experiments.load(out, seed=3, which=which)
+        got = evaluate_policy(policy.act, policy.params, policy.initial_carry, policy.config, "test", policy.test_key,
+                              policy.test_episodes_per_room)  # fmt: skip
+        for metric in ("SR", "SPL"):
+            assert got["overall"][metric] == pytest.approx(results[reported]["overall"][metric], abs=1e-9), which
+    with pytest.raises(UserError, match="seeds"):
+        experiments.load(out, seed=4)
+    with pytest.raises(UserError, match="which"):
+        experiments.load(out, which="first")
+    with pytest.raises(UserError, match="not a run folder"):
+        experiments.load(tmp_path)

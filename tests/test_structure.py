@@ -1,0 +1,152 @@
+"""The shape of the foresit_jax package, read from its source (ast) and, for the lazy face,
+from a fresh interpreter (issue 60; docs/design.md):
+
+* at most 6 import floors (a module with no import of the package is on floor 1; one that
+  imports modules of floor k at most is on floor k + 1), the package's __init__ importing
+  none of its modules at load (its names load lazily);
+* methods.py imports nothing of the package and config.py only methods.py, so a Config,
+  a record of hyperparameters, pulls in neither jax nor the algorithm;
+* no class has more than 12 methods (properties, static methods aside, and dunders not
+  counted), and no acting entry point takes more than 8 parameters;
+* a method's pieces become modules in one place (`networks.build`).
+"""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "foresit_jax"
+MAX_FLOORS = 6
+MAX_METHODS = 12
+MAX_ACTING_PARAMETERS = 8
+
+
+def _tree(name: str) -> ast.Module:
+    return ast.parse((PACKAGE / f"{name}.py").read_text())
+
+
+def _modules() -> list[str]:
+    return sorted(p.stem for p in PACKAGE.glob("*.py") if p.stem != "__init__")
+
+
+def package_imports(tree: ast.Module) -> set[str]:
+    """The package's modules a module imports at its top level (not inside functions)."""
+    found = set()
+    for node in tree.body:
+        if isinstance(node, ast.Import):
+            found |= {a.name.split(".")[1] for a in node.names if a.name.startswith("foresit_jax.")}
+        elif isinstance(node, ast.ImportFrom) and node.module and node.module.split(".")[0] == "foresit_jax":
+            if node.module == "foresit_jax":
+                found |= {a.name for a in node.names}
+            else:
+                found.add(node.module.split(".")[1])
+    return found
+
+
+def floors(graph: dict[str, set[str]]) -> dict[str, int]:
+    out: dict[str, int] = {}
+
+    def floor(name, path=()):
+        if name in path:
+            raise AssertionError(f"import cycle: {' -> '.join(path + (name,))}")
+        if name not in out:
+            out[name] = 1 + max((floor(d, path + (name,)) for d in graph[name]), default=0)
+        return out[name]
+
+    for name in graph:
+        floor(name)
+    return out
+
+
+def test_floors_are_computed_as_documented():
+    """The floor function on a hand-made graph (so that the package's test can fail)."""
+    graph = {"a": set(), "b": {"a"}, "c": {"a", "b"}, "d": {"c"}}
+    assert floors(graph) == {"a": 1, "b": 2, "c": 3, "d": 4}
+    with pytest.raises(AssertionError, match="cycle"):
+        floors({"a": {"b"}, "b": {"a"}})
+
+
+def test_the_package_is_at_most_six_floors_deep():
+    graph = {m: package_imports(_tree(m)) for m in _modules()}
+    found = floors(graph)
+    assert max(found.values()) <= MAX_FLOORS, sorted(found.items(), key=lambda kv: kv[1])
+    assert package_imports(_tree("__init__")) == set(), "the package face imports its modules lazily"
+
+
+def test_methods_import_nothing_of_the_package_and_config_only_methods():
+    assert package_imports(_tree("methods")) == set()
+    assert package_imports(_tree("config")) == {"methods"}
+
+
+def test_importing_config_loads_neither_jax_nor_the_algorithm():
+    code = ("import sys; import foresit_jax.config; "
+            "print(sorted(m for m in sys.modules if m.startswith('foresit_jax')), 'jax' in sys.modules)")  # fmt: skip
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
+    assert out == "['foresit_jax', 'foresit_jax.config', 'foresit_jax.methods'] False"
+
+
+def test_the_package_face_loads_names_on_first_use():
+    code = ("import foresit_jax, sys; import foresit_jax.evaluate; "
+            "from foresit_jax import evaluate, make_train, Config; "
+            "print(callable(evaluate) and evaluate.__module__, make_train.__module__, Config.__module__, "
+            "sorted(set(foresit_jax.__all__) - set(dir(foresit_jax))))")  # fmt: skip
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
+    # `foresit_jax.evaluate` stays the function even after its submodule is imported
+    assert out == "foresit_jax.evaluate foresit_jax.train foresit_jax.config []"
+
+
+def _counted_methods(cls: ast.ClassDef) -> list[str]:
+    names = []
+    for node in cls.body:
+        if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            continue
+        decorators = {d.id if isinstance(d, ast.Name) else getattr(d, "attr", "") for d in node.decorator_list}
+        if node.name.startswith("__") and node.name.endswith("__"):
+            continue
+        if decorators & {"property", "cached_property", "staticmethod"}:
+            continue
+        names.append(node.name)
+    return names
+
+
+def test_no_class_has_more_than_twelve_methods():
+    crowded = {}
+    for module in _modules():
+        for node in ast.walk(_tree(module)):
+            if isinstance(node, ast.ClassDef) and len(_counted_methods(node)) > MAX_METHODS:
+                crowded[f"{module}.{node.name}"] = _counted_methods(node)
+    assert not crowded
+
+
+def _parameters(fn: ast.FunctionDef) -> int:
+    a = fn.args
+    return len(a.posonlyargs) + len(a.args) + len(a.kwonlyargs) + bool(a.vararg) + bool(a.kwarg)
+
+
+def test_acting_entry_points_take_at_most_eight_parameters():
+    wide = {}
+    for module in ("rollout", "maml"):
+        for node in _tree(module).body:
+            if isinstance(node, ast.FunctionDef) and not node.name.startswith("_"):
+                if _parameters(node) > MAX_ACTING_PARAMETERS:
+                    wide[f"{module}.{node.name}"] = _parameters(node)
+    assert not wide
+    assert {"act", "act_window", "rollout", "start"} <= {n.name for n in _tree("rollout").body
+                                                         if isinstance(n, ast.FunctionDef)}  # fmt: skip
+
+
+def test_pieces_become_modules_in_networks_build_alone():
+    """The agent's network, ORG's object graph and SAVN's learned loss are made (called)
+    only in networks.py (cvae.py makes its own f_w, the C-VAE comparison's)."""
+    makers = {"ObjectGraph", "LearnedLoss", "ActorCritic"}
+    made = {}
+    for module in _modules():
+        for node in ast.walk(_tree(module)):
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in makers:
+                made.setdefault(node.func.id, set()).add(module)
+    assert made == {name: {"networks"} for name in makers}
