@@ -65,3 +65,34 @@ def test_ceiling_md_quotes_the_probe_of_the_oracle():
         assert row in doc, row
     s = stats.summary(trained)
     assert f"| trained | {s['mean']:.1f} ± {s['std']:.1f} | |" in doc
+
+
+def test_ceiling_md_quotes_the_noise_off_oracle(tmp_path, capsys):
+    """The noise-off oracle (docs/data/ceiling_savn_noiseoff.tar.xz): its row, its ceiling over
+    the critic (not resolved) and its pair with the noisy oracle, and results.md's table of
+    why part 3 was not run."""
+    noiseoff = "a3c+oracle@learning_rate=3e-4,sigma2_max=0"
+    root = study_data.unpack("ceiling_savn_noiseoff.tar.xz", tmp_path, (CRITIC, FORESIT, ORACLE, noiseoff))
+    out = compare.main(compare.Args(run=root, pairs=(f"{CRITIC}:{noiseoff}", f"{ORACLE}:{noiseoff}"),
+                                    ceiling=(f"{CRITIC}:{FORESIT}:{noiseoff}",)))  # fmt: skip
+    capsys.readouterr()
+    doc = (REPO / "docs" / "ceiling.md").read_text()
+    results = report.load(root)
+    sr, spl = (report.values(results[noiseoff], c) for c in ("SR", "SPL"))
+    row = (f"| a3c+oracle@sigma2_max=0 (privileged) | {' / '.join(f'{x:.1f}' for x in sr)} | "
+           f"{sr.mean():.1f} ± {sr.std(ddof=1):.1f} | {spl.mean():.1f} ± {spl.std(ddof=1):.1f} |")
+    assert row in doc, row
+    for (a, label) in ((CRITIC, "the noise-off ceiling: a3c+oracle@sigma2_max=0 - a3c+critic"),
+                       (ORACLE, "a3c+oracle@sigma2_max=0 - a3c+oracle (both privileged)")):  # fmt: skip
+        pair = out["pairs"][f"{noiseoff} - {a}"]
+        row = (f"| {label} | {study_data.interval(pair['SR'])} | {study_data.interval(pair['SPL'])} | "
+               f"{pair['robust']['SR']['mde']:.1f} |")
+        assert row in doc, row
+    ceiling = out["ceiling"][f"{noiseoff} - {CRITIC}"]["SR"]
+    assert not ceiling["resolved"]
+    pair = out["pairs"][f"{noiseoff} - {CRITIC}"]
+    results_md = (REPO / "docs" / "results.md").read_text()
+    assert (f"| today's rooms, the oracle without noise (`sigma2_max=0`) | {study_data.interval(pair['SR'])} | "
+            f"{pair['robust']['SR']['mde']:.1f} |") in results_md
+    assert "| today's rooms, the oracle with Eq. 7's noise | +1.4 [-2.0, +4.7] | 4.5 |" in results_md
+    assert "| rooms with priors, the oracle with Eq. 7's noise | +4.1 [+0.2, +8.0] | 5.3 |" in results_md

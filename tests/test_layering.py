@@ -16,9 +16,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 PROJECT = ("foresit_jax", "envs", "experiments", "benchmarks")
 
-# The packages whose function-level imports are checked (foresit_jax: to be added once its
-# restructuring (issue 60) has settled, with its own entries below).
-CHECKED = ("experiments", "benchmarks", "envs")
+# The packages whose function-level imports are checked.
+CHECKED = ("foresit_jax", "experiments", "benchmarks", "envs")
 
 # (file, function, module imported) -> why it is imported inside the function.
 ALLOWED = {

@@ -16,7 +16,7 @@ def test_the_path_of_an_update_and_hashes_that_tell_programs_apart(capsys):
     report = trace_update.main(trace_update.Args(methods=("a3c",)))["a3c"]
     files = report["files"]
     # The files every a3c update goes through; not the ones only other methods use.
-    assert {"train.py", "agent.py", "networks.py", "losses.py", "lstm.py", "replay.py"} <= set(files)
+    assert {"train.py", "rollout.py", "networks.py", "losses.py", "lstm.py"} <= set(files)
     assert "maml.py" not in files and "org.py" not in files
     assert all(functions >= 1 and lines >= functions for functions, lines in files.values())
     out = capsys.readouterr().out
@@ -29,3 +29,15 @@ def test_the_path_of_an_update_and_hashes_that_tell_programs_apart(capsys):
     other = make_trainer(dataclasses.replace(config, gamma=0.9))
     hashes = trace_update.program_hashes(other, other.init(jax.random.PRNGKey(0)))
     assert hashes["train"] != report["hashes"]["train"] and hashes["evaluate"] == report["hashes"]["evaluate"]
+
+
+@pytest.mark.slow
+def test_the_path_from_the_cli_to_the_optimiser():
+    """`--cli-path`: the project files whose functions run from `python -m experiments.train`'s
+    entry to the first `optax.apply_updates`, in the order entered (docs/design.md walks them)."""
+    path = trace_update.files_from_cli("a3c", "tiny")
+    assert len(path) == len(set(path))
+    assert {"experiments/train.py", "experiments/running/run.py", "foresit_jax/config.py", "foresit_jax/train.py",
+            "foresit_jax/rollout.py", "foresit_jax/networks.py", "foresit_jax/losses.py", "envs/gridnav.py"} <= set(path)
+    assert "foresit_jax/maml.py" not in path and "foresit_jax/agent.py" not in path  # neither runs for a3c
+    assert path.index("experiments/train.py") < path.index("foresit_jax/train.py") < path.index("foresit_jax/losses.py")
