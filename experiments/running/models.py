@@ -151,8 +151,6 @@ def load(run_dir, seed: int = 0, which: str = "best") -> Policy:
     if which == "best":
         params = devices.seed_slice(trained.selected, i)
     else:  # as the run's report computes the last model's (`Run.test`)
-        config_ = trained.trainer.config
-        last = jax.vmap(lambda s: agent_params(s, config_.sigma2_max, config_.evaluation_noise))(trained.states)
-        params = devices.seed_slice(last, i)
+        params = devices.seed_slice(run.seeds_params(config, trained.states), i)
     return Policy(act, params, functools.partial(rollout.policy_carry, nets), config, selection.test_key(seed),
                   trained.schedule["test_episodes_per_room"])  # fmt: skip

@@ -104,6 +104,12 @@ def initial_states(trainer, seeds: Sequence[int]):
     return states, jax.vmap(select)(states)
 
 
+def seeds_params(config: Config, states):
+    """The `AgentParams` each seed's training state acts with at evaluation (its
+    `evaluation_noise`), for states stacked over seeds."""
+    return jax.vmap(lambda s: agent_params(s, config.sigma2_max, config.evaluation_noise))(states)
+
+
 def finished_seeds(folder: Path) -> list[int]:
     """The seeds a run folder has finished (none when it has not finished)."""
     if not (folder / "results.json").is_file():
@@ -361,7 +367,7 @@ class Run:
 
     # ------------------------------------------------------------------ reading back
     def _params_of(self, trainer, states):
-        return jax.vmap(lambda s: agent_params(s, trainer.config.sigma2_max, trainer.config.evaluation_noise))(states)
+        return seeds_params(trainer.config, states)
 
     def load_checkpoint(self, step: int, seeds: Sequence[int] | None = None):
         """(trainer, the seeds' training states, their selected models) of checkpoint `step`,
