@@ -45,7 +45,7 @@ from flax import struct
 import envs.metrics
 from envs.wrappers import GoalViewWrapper
 from foresit_jax import distributions, imagination, maml
-from foresit_jax.maml import Adaptation  # noqa: F401 (an acting record: re-exported)
+from foresit_jax.maml import Adaptation  # an acting record, defined beside the inner loop that fills it
 from foresit_jax.lstm import LSTMCarry, initial_carry, reset_carry
 from foresit_jax.networks import Networks
 

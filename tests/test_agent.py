@@ -192,6 +192,7 @@ def test_greedy_rollout_takes_the_most_likely_action(rollout):
 
 
 # ---------------------------------------------------------------------- the deprecated shim
+@pytest.mark.slow
 def test_the_deprecated_agent_warns_and_rolls_out_as_the_rollout_function():
     """`foresit_jax.agent.Agent` (kept for one release) warns, and its `rollout` is
     `rollout.rollout` over `networks.build(config)`: the same Trajectory, bit for bit."""

@@ -43,15 +43,18 @@ def _acting(config, done_bias: float = 1.5):
     return nets, AgentParams(params, w_params, jnp.float32(0.3)), env, env_params
 
 
-@pytest.mark.parametrize("method", ["a3c+foresit", "a3c+oracle", "int"])
+@pytest.mark.parametrize("method", ["a3c+foresit", pytest.param("a3c+oracle", marks=pytest.mark.slow),
+                                    pytest.param("int", marks=pytest.mark.slow)])  # fmt: skip
 def test_the_policy_step_by_step_plays_rollouts_episodes_exactly(method):
     config = H.tiny_config(method)
     nets, acting, env, env_params = _acting(config)
     lanes, steps, key = 12, 30, jax.random.PRNGKey(5)
     bound = rollout.acting_env(nets, BoundEnv(env, env_params))
-    want = jax.jit(lambda a: episode_stats(rollout.rollout(nets, a, bound, key, steps, num_lanes=lanes)))(acting)
+    want = jax.jit(lambda a: episode_stats(rollout.rollout(nets, a, bound, key, steps, num_lanes=lanes)),
+                   compiler_options=H.FAST_COMPILE)(acting)  # fmt: skip
     act = rollout.policy(nets)
-    got = jax.jit(lambda a: policy_episodes(act, a, rollout.policy_carry(nets, lanes), bound, key, steps, lanes))(acting)
+    got = jax.jit(lambda a: policy_episodes(act, a, rollout.policy_carry(nets, lanes), bound, key, steps, lanes),
+                  compiler_options=H.FAST_COMPILE)(acting)  # fmt: skip
     for name in ("success", "length", "optimal_length", "ended", "spl", "room_type"):
         np.testing.assert_array_equal(np.asarray(getattr(got, name)), np.asarray(getattr(want, name)), err_msg=name)
     lengths = np.asarray(want.length)
@@ -69,6 +72,7 @@ def test_policy_refuses_the_maml_base_and_a_missing_noise_variance():
                              jnp.ones(2, bool), jax.random.PRNGKey(0))  # fmt: skip
 
 
+@pytest.mark.slow
 def test_evaluate_policy_gives_the_evaluators_numbers():
     config = H.tiny_config("a3c+foresit")
     nets, acting, _, _ = _acting(config)
