@@ -19,7 +19,7 @@ import train_helpers as H
 from foresit_jax import rollout
 from foresit_jax.evaluate import Evaluator, evaluate_policy, policy_episodes
 from foresit_jax.networks import build
-from foresit_jax.rollout import ActOptions, AgentParams, BoundEnv, episode_stats
+from foresit_jax.rollout import AgentParams, BoundEnv, episode_stats
 
 DONE = 5  # GridNav's Done action
 
