@@ -6,9 +6,10 @@ For each method (at a preset's sizes, tiny by default):
 * the functions of `foresit_jax` that lowering one `Trainer.update` runs through, per file,
   counted in lines (each outermost function once; nested ones are inside it): what a reader
   crosses to follow one update;
-* the project's files (experiments/, foresit_jax/, envs/) a reader crosses from the CLI's
-  entry (`python -m experiments.train --method M --preset P`) to the first update's
-  `optax.apply_updates`, in the order first entered (`files_from_cli`; `--cli-path`);
+* the project's files (experiments/, foresit_jax/, envs/) from the CLI's entry (`python -m
+  experiments.train --method M --preset P`) to the first update's `optax.apply_updates`
+  (`files_from_cli`; `--cli-path`): every file that runs, and the reader's path (the call
+  chain to the optimiser, then the update's body; `CliPath`);
 * a short sha256 of each lowered program: a chunk of training (`Trainer.run`), the
   evaluation rollout (`Evaluator.agent_rollout`) and the sub-goal collection
   (`Trainer.collect_subgoal_items`). Equal hashes before and after a refactor mean the
@@ -91,26 +92,53 @@ def functions_crossed(fn, *args) -> dict[str, tuple[int, int]]:
     return out
 
 
-def files_from_cli(method: str, preset: str = "tiny") -> list[str]:
+@dataclasses.dataclass(frozen=True)
+class CliPath:
     """The project's files (paths under the checkout: experiments/, foresit_jax/, envs/)
-    whose functions run (a module's import-time code and a package's lazy `__getattr__` not
-    counted) from `python -m experiments.train --method M --preset P`'s entry until
-    the first call of `optax.apply_updates` (while the first chunk's update is traced), in
-    the order first entered: what a reader follows from the command to the optimiser step.
-    Runs the CLI in a temporary folder; what runs after that call is not counted."""
+    from `python -m experiments.train`'s entry to the first `optax.apply_updates`.
+
+    entered: every file whose functions run before that call (a module's import-time code
+      and a package's lazy `__getattr__` not counted), in the order first entered: the
+      setup too (the run folder, the scene banks, the checkpointer).
+    reader: what a reader follows to learn what one update is: the files on the call stack
+      at that call, outermost first (the command, the run loop, the Trainer), then those
+      entered from the first `Trainer.update` until the call (the update's body: acting,
+      the environment's step, the networks, the loss), each once. Issue 60 counted 17 this
+      way before the redesign (this count gives 16 at f511043)."""
+
+    entered: list[str]
+    reader: list[str]
+
+
+def files_from_cli(method: str, preset: str = "tiny") -> CliPath:
+    """Runs `python -m experiments.train --method M --preset P` in a temporary folder and
+    records its `CliPath` (what runs after the first `optax.apply_updates` is not counted)."""
     root = os.path.dirname(os.path.dirname(os.path.abspath(experiments.__file__)))
     packages = tuple(os.path.join(root, p) + os.sep for p in ("experiments", "foresit_jax", "envs"))
-    seen: list[str] = []
-    on = [True]
+    update_file = os.path.join(root, "foresit_jax", "train.py")
+    entered: list[str] = []
+    body: list[str] = []
+    stack: list[str] = []
+    state = {"on": True, "in_update": False}
 
     def tracer(frame, event, arg):
-        if on[0] and event == "call":
-            path = frame.f_code.co_filename
-            if frame.f_code.co_name == "apply_updates" and f"{os.sep}optax{os.sep}" in path:
-                on[0] = False
-            elif frame.f_code.co_name not in ("<module>", "__getattr__") and path.startswith(packages) \
-                    and os.path.relpath(path, root) not in seen:
-                seen.append(os.path.relpath(path, root))
+        if not state["on"] or event != "call":
+            return None
+        path, name = frame.f_code.co_filename, frame.f_code.co_name
+        if name == "apply_updates" and f"{os.sep}optax{os.sep}" in path:
+            state["on"] = False
+            caller = frame.f_back
+            while caller is not None:
+                file = caller.f_code.co_filename
+                if file.startswith(packages) and os.path.relpath(file, root) not in stack:
+                    stack.append(os.path.relpath(file, root))
+                caller = caller.f_back
+        elif name not in ("<module>", "__getattr__") and path.startswith(packages):
+            file = os.path.relpath(path, root)
+            state["in_update"] |= name == "update" and path == update_file
+            for seen in (entered, body) if state["in_update"] else (entered,):
+                if file not in seen:
+                    seen.append(file)
         return None
 
     with tempfile.TemporaryDirectory() as out:
@@ -127,7 +155,7 @@ def files_from_cli(method: str, preset: str = "tiny") -> list[str]:
             sys.settrace(None)
             threading.settrace(None)
             sys.argv = argv
-    return seen
+    return CliPath(entered, list(dict.fromkeys(stack[::-1] + body)))
 
 
 def program_hashes(trainer, state) -> dict[str, str]:
@@ -161,8 +189,9 @@ def main(args: Args) -> dict:
         print("  lowered programs: " + ", ".join(f"{k} {v}" for k, v in report[method]["hashes"].items()))
         if args.cli_path:
             path = files_from_cli(method, args.preset)
-            report[method]["cli_files"] = path
-            print(f"  from `python -m experiments.train` to optax.apply_updates: {len(path)} project files: " + ", ".join(path))
+            report[method]["cli_files"], report[method]["reader_files"] = path.entered, path.reader
+            print(f"  from `python -m experiments.train` to optax.apply_updates: {len(path.entered)} project files "
+                  f"run; a reader follows {len(path.reader)} (the call chain, then the update): " + ", ".join(path.reader))  # fmt: skip
     return report
 
 

@@ -10,11 +10,12 @@ The entry points (what the README uses):
 
 The modules hold the pieces, from the ground up: `methods` (base x encoder x critic x
 imagination, as flags), `config` (Config), `lstm` (the encoder LSTM and its split form),
-`org` (ORG's object graph), `losses`, `imagination` (buffers, f_w training, noise),
+`org` (ORG's object graph), `imagination` (buffers, f_w training, noise, f_w's loss),
 `maml` (SAVN's inner loop), `networks` (flax modules; `build(config)`), `rollout` (acting:
-records and plain functions), `train` (the learner: the replay loss, the update, Algorithm
-1's imagination step, Trainer), `evaluate` (SR/SPL on held-out scenes), `probes`, `cvae`
-(the paper's C-VAE comparison). `agent` keeps the old `Agent` class for one release.
+records and plain functions), `train` (the learner: returns, advantages and the A3C loss, the
+update, Algorithm 1's imagination step, Trainer), `evaluate` (SR/SPL on held-out scenes), `probes`, `cvae`
+(the paper's C-VAE comparison). `agent` and `losses` keep
+the old `Agent` class and the losses' old home for one release.
 """
 
 import importlib as _importlib

@@ -32,7 +32,6 @@ import jax
 import jax.numpy as jnp
 import optax
 
-from foresit_jax import losses
 
 # apply_fn(params, s_0 [..., H], goal [..., D]) -> imagined state [..., H]
 ImagineFn = Callable[[Any, chex.Array, chex.Array], chex.Array]
@@ -49,6 +48,21 @@ class ReplayBuffer(NamedTuple):
     @property
     def capacity(self) -> int:
         return self.s_0.shape[-2]
+
+
+def smooth_l1(prediction: chex.Array, target: chex.Array, beta: float = 1.0) -> chex.Array:
+    """Smooth-L1 (Huber with threshold `beta`), averaged over the last axis.
+
+    Per element: 0.5 * x**2 / beta if |x| < beta else |x| - 0.5 * beta, x = prediction -
+    target. For one item `[D]` this equals `torch.nn.SmoothL1Loss()(prediction, target)`
+    (reduction='mean' over all D dims, beta=1); `[..., D] -> [...]`, so the mean over a
+    batch of items is the mean of the result (also torch's value on the whole batch).
+    """
+    chex.assert_equal_shape([prediction, target])
+    x = jnp.abs(prediction - target)
+    elementwise = jnp.where(x < beta, 0.5 * x**2 / beta, x - 0.5 * beta)
+    return jnp.mean(elementwise, axis=-1)
+
 
 
 def buffer_init(capacity: int, state_size: int, goal_size: int) -> ReplayBuffer:
@@ -105,7 +119,7 @@ def imagination_loss(
 ) -> chex.Array:
     """Eq. 5 with smooth-L1: mean over items `[..., H]` of smooth_l1(f_w([s_0 : g]), ŝ)."""
     imagined = apply_fn(params, s_0, goal)
-    return jnp.mean(losses.smooth_l1(imagined, jax.lax.stop_gradient(subgoal)))
+    return jnp.mean(smooth_l1(imagined, jax.lax.stop_gradient(subgoal)))
 
 
 def make_imagination_optimizer(name: str, learning_rate: float) -> optax.GradientTransformation:

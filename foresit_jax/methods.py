@@ -74,28 +74,19 @@ class ImaginationVariant:
     critic: str = "plain"
     subgoal_mode: str = "argmax"
     renew_every_k: bool = False
+    # Derived from `source` when the record is made (flags, not code run at every step):
+    uses_imagination: bool = dataclasses.field(init=False, repr=False)
+    """Whether the policy sees an i_tau at all."""
+    reads_goal_view: bool = dataclasses.field(init=False, repr=False)
+    """Whether i_tau comes from the episode's goal view (privileged: the environment is
+    wrapped in `envs.wrappers.GoalViewWrapper`)."""
+    trains_imagination: bool = dataclasses.field(init=False, repr=False)
+    """Whether buffers are filled and f_w is trained."""
 
-    @property
-    def uses_imagination(self) -> bool:
-        return self.source != "none"
-
-    @property
-    def reads_goal_view(self) -> bool:
-        """Whether i_tau comes from the episode's goal view (privileged: the environment is
-        wrapped in `envs.wrappers.GoalViewWrapper`)."""
-        return self.source == "goal_view"
-
-    @property
-    def trains_imagination(self) -> bool:
-        """Whether buffers are filled and f_w is trained."""
-        return self.source == "learned"
-
-    def renews(self, episode_step, interval: int):
-        """Whether i_tau is (re)imagined at this step of the episode, `[...]` bool (an array
-        of steps in, an array out)."""
-        if self.renew_every_k:
-            return episode_step % interval == 0
-        return episode_step == 0
+    def __post_init__(self):
+        object.__setattr__(self, "uses_imagination", self.source != "none")
+        object.__setattr__(self, "reads_goal_view", self.source == "goal_view")
+        object.__setattr__(self, "trains_imagination", self.source == "learned")
 
 
 _FORESIT = ImaginationVariant("foresit", source="learned", critic="attention")
@@ -161,6 +152,17 @@ class Method:
     encoder: str = "plain"
     imagination_variant: ImaginationVariant = IMAGINATION_VARIANTS["none"]
     critic: str | None = None
+    # Derived when the record is made (flags, not code run at every step):
+    base_piece: Base = dataclasses.field(init=False, repr=False)
+    encoder_piece: Encoder = dataclasses.field(init=False, repr=False)
+    attention_critic: bool = dataclasses.field(init=False, repr=False)
+    """Whether the value comes from the attention of Eq. 3-4 (V(s*_t))."""
+    action_probs_carry_gradient: bool = dataclasses.field(init=False, repr=False)
+    """Whether the previous step's action probabilities, an input of the encoder, carry
+    gradient to the earlier steps. maml: yes, as in SAVN, whose episode is one graph
+    (the inner and the meta-gradient both flow through them). a3c: no, they are inputs
+    like the observation, which is what lets the replay re-run a window from its
+    recorded inputs (the differentiate-through-rollout reference matches it)."""
 
     def __post_init__(self):
         if self.base not in BASE_PIECES or self.encoder not in ENCODER_PIECES:
@@ -175,19 +177,11 @@ class Method:
                 f"imagination {self.imagination_variant.name!r} imagines the attention-weighted average of the "
                 f"episode's states: it needs the attention critic (drop 'plaincritic')"
             )
-
-    @property
-    def base_piece(self) -> Base:
-        return BASE_PIECES[self.base]
-
-    @property
-    def encoder_piece(self) -> Encoder:
-        return ENCODER_PIECES[self.encoder]
-
-    @property
-    def attention_critic(self) -> bool:
-        """Whether the value comes from the attention of Eq. 3-4 (V(s*_t))."""
-        return self.critic == "attention"
+        base = BASE_PIECES[self.base]
+        object.__setattr__(self, "base_piece", base)
+        object.__setattr__(self, "encoder_piece", ENCODER_PIECES[self.encoder])
+        object.__setattr__(self, "attention_critic", self.critic == "attention")
+        object.__setattr__(self, "action_probs_carry_gradient", base.adapts_in_episode)
 
     @property
     def name(self) -> str:
@@ -206,15 +200,6 @@ class Method:
         window's recorded inputs under ONE parameter set: right for a3c, wrong for maml,
         whose steps run under the parameters adapted so far in the episode."""
         return ("through_rollout",) if self.base_piece.adapts_in_episode else GRADIENTS
-
-    @property
-    def action_probs_carry_gradient(self) -> bool:
-        """Whether the previous step's action probabilities, an input of the encoder, carry
-        gradient to the earlier steps. maml: yes, as in SAVN, whose episode is one graph
-        (the inner and the meta-gradient both flow through them). a3c: no, they are inputs
-        like the observation, which is what lets the replay re-run a window from its
-        recorded inputs (the differentiate-through-rollout reference matches it)."""
-        return self.base_piece.adapts_in_episode
 
     @property
     def rollouts(self) -> tuple[str, ...]:

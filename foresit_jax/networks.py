@@ -474,14 +474,13 @@ class Networks:
     imagination_net: ImaginationNet
     imagine: Callable
     permute: Optional[Callable] = None
+    # The Config's parsed method and its imagination piece, held when the record is made:
+    method: Method = dataclasses.field(init=False)
+    imagination_variant: ImaginationVariant = dataclasses.field(init=False)
 
-    @property
-    def method(self) -> Method:
-        return self.config.pieces
-
-    @property
-    def imagination_variant(self) -> ImaginationVariant:
-        return self.config.pieces.imagination_variant
+    def __post_init__(self):
+        object.__setattr__(self, "method", self.config.pieces)
+        object.__setattr__(self, "imagination_variant", self.config.pieces.imagination_variant)
 
     @property
     def imagination_in_encoder(self) -> bool:

@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from foresit_jax import imagination, losses
+from foresit_jax import imagination
 from foresit_jax.config import Config
 from foresit_jax.networks import Networks, build
 
@@ -58,7 +58,7 @@ def r_squared(predicted: np.ndarray, target: np.ndarray, reference: np.ndarray) 
 
 
 def smooth_l1(predicted: np.ndarray, target: np.ndarray) -> float:
-    """Mean smooth-L1 (Huber, delta 1), f_w's own loss (`foresit_jax.losses.smooth_l1`)."""
+    """Mean smooth-L1 (Huber, delta 1), f_w's own loss (`foresit_jax.imagination.smooth_l1`)."""
     d = np.abs(np.asarray(predicted) - np.asarray(target))
     return float(np.mean(np.where(d < 1.0, 0.5 * d**2, d - 0.5)))
 
@@ -151,7 +151,7 @@ def fit_imagination_offline(imagine, w_init, s_0, goal, target, steps: int = 300
     per item. One even item in five is held back for early stopping (every
     `check_every` steps; the parameters of its lowest loss are returned), so the odd items
     the probe scores stay unseen. Returns (parameters, steps taken to the best)."""
-    loss_of = losses.smooth_l1
+    loss_of = imagination.smooth_l1
 
     fit, _ = halves(len(target))
     stop, train = fit[::5], np.setdiff1d(fit, fit[::5])

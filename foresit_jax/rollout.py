@@ -47,6 +47,7 @@ from envs.wrappers import GoalViewWrapper
 from foresit_jax import distributions, imagination, maml
 from foresit_jax.maml import Adaptation  # an acting record, defined beside the inner loop that fills it
 from foresit_jax.lstm import LSTMCarry, initial_carry, reset_carry
+from foresit_jax.methods import ImaginationVariant
 from foresit_jax.networks import Networks
 
 
@@ -261,6 +262,14 @@ def _imagine(nets: Networks, w_params, s_t, goal, key, noise_variance, goal_late
     return jax.lax.stop_gradient(imagination.add_imagination_noise(key, imagined, noise_variance))
 
 
+def renews(variant: ImaginationVariant, episode_step: chex.Array, interval: int) -> chex.Array:
+    """Whether i_tau is (re)imagined at this step of the episode, `[...]` bool: at every
+    `interval`-th step with the `int` ablation's `renew_every_k`, else at the first."""
+    if variant.renew_every_k:
+        return episode_step % interval == 0
+    return episode_step == 0
+
+
 def imagined_at_step(nets: Networks, acting: AgentParams, actor: ActorState, s_t: chex.Array, key: chex.PRNGKey,
                      goal_latent_fn: Optional[Callable[[], chex.Array]] = None) -> chex.Array:  # fmt: skip
     """i_tau for a step `[B, H]` (Eq. 6-7): renewed where the ImaginationVariant piece says
@@ -276,7 +285,7 @@ def imagined_at_step(nets: Networks, acting: AgentParams, actor: ActorState, s_t
     noise_variance = acting.noise_variance
     if noise_variance is None:
         noise_variance = imagination.noise_variance(jax.vmap(imagination.success_rate)(actor.tracker), cfg.sigma2_max)
-    renew = variant.renews(actor.episode_step, cfg.int_interval)  # [B]
+    renew = renews(variant, actor.episode_step, cfg.int_interval)  # [B]
     goal = actor.obs["target"]
 
     def renewed():

@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from foresit_jax import cvae, imagination, losses
+from foresit_jax import cvae, imagination
 
 
 def synthetic_items(key, n, state=12, goal_size=4):
@@ -75,4 +75,4 @@ def test_the_comparison_trains_both_imaginations_and_beats_predicting_the_mean()
     assert 0 < out["direct"]["loss"] < 0.5 * float(mean_guess)
     assert np.isfinite(out["cvae_latent"]["loss"]) and out["cvae_latent"]["target_variance"] > 0
     assert out["direct"]["target_variance"] == pytest.approx(float(jnp.mean(jnp.var(test[2], axis=0))))
-    assert float(losses.smooth_l1(test[2], test[2]).mean()) == 0.0
+    assert float(imagination.smooth_l1(test[2], test[2]).mean()) == 0.0

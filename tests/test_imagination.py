@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 from absl.testing import parameterized
 
-from foresit_jax import imagination, losses, networks
+from foresit_jax import imagination, networks
 
 H, D, M = 8, 3, 4  # small state, goal and buffer sizes for tests
 
@@ -87,7 +87,7 @@ class BufferTest(chex.TestCase):
 
 @jax.jit
 def item_loss_and_grad(params, s_0, goal, subgoal):
-    return jax.value_and_grad(lambda p: losses.smooth_l1(apply_fn(p, s_0, goal), subgoal))(params)
+    return jax.value_and_grad(lambda p: imagination.smooth_l1(apply_fn(p, s_0, goal), subgoal))(params)
 
 
 def brute_force_train(params, buffer, optimizer, epochs):

@@ -1,14 +1,18 @@
-"""foresit_jax.losses against brute-force loops and hand-computed values."""
+"""The losses (foresit_jax.train: returns, advantages, Eq. 8-9; foresit_jax.imagination.smooth_l1) against brute-force loops and hand-computed values."""
+
+import importlib
+import sys
 
 import chex
 import hypothesis.strategies as st
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 from absl.testing import parameterized
 from hypothesis import given, settings
 
-from foresit_jax import losses
+from foresit_jax import imagination, train
 
 
 def savn_style_targets(r, v, terminated, truncated, valid, bootstrap, gamma, lam):
@@ -67,7 +71,7 @@ class TargetsTest(chex.TestCase):
     def test_matches_episode_loop(self, gamma, lam):
         batch = make_batch(0)
         fn = self.variant(
-            lambda b: losses.advantages_and_returns(**b, gamma=gamma, lambda_=lam)
+            lambda b: train.advantages_and_returns(**b, gamma=gamma, lambda_=lam)
         )
         adv, ret = fn(batch)
         chex.assert_shape([adv, ret], (7, 4))
@@ -84,7 +88,7 @@ class TargetsTest(chex.TestCase):
         v = jnp.array([1.0, 2.0, 3.0, 9.0])
         term = jnp.array([0, 0, 1, 0])
         valid = jnp.array([1, 1, 1, 0])
-        adv, ret = losses.advantages_and_returns(
+        adv, ret = train.advantages_and_returns(
             r, v, term, jnp.zeros(4), valid, jnp.array(11.0), gamma=0.5, lambda_=1.0
         )
         # R2 = 5, R1 = -1 + 0.5 * 5 = 1.5, R0 = -1 + 0.5 * 1.5 = -0.25
@@ -97,13 +101,13 @@ class TargetsTest(chex.TestCase):
         valid = jnp.ones(3)
         kwargs = dict(gamma=0.99, lambda_=1.0)
         truncated = jnp.array([0, 0, 1])
-        _, ret_trunc = losses.advantages_and_returns(
+        _, ret_trunc = train.advantages_and_returns(
             r, v, jnp.zeros(3), truncated, valid, jnp.array(100.0), **kwargs
         )
-        _, ret_term = losses.advantages_and_returns(
+        _, ret_term = train.advantages_and_returns(
             r, v, truncated, jnp.zeros(3), valid, jnp.array(100.0), **kwargs
         )
-        _, ret_running = losses.advantages_and_returns(
+        _, ret_running = train.advantages_and_returns(
             r, v, jnp.zeros(3), jnp.zeros(3), valid, jnp.array(100.0), **kwargs
         )
         expected = [-0.01 * (1 + 0.99 + 0.99**2), -0.01 * 1.99, -0.01]
@@ -114,14 +118,14 @@ class TargetsTest(chex.TestCase):
 
     def test_padding_garbage_is_ignored(self):
         batch = make_batch(1)
-        adv, ret = losses.advantages_and_returns(**batch, gamma=0.99, lambda_=1.0)
+        adv, ret = train.advantages_and_returns(**batch, gamma=0.99, lambda_=1.0)
         rng = np.random.default_rng(5)
         pad = ~batch["valid_t"]
         noisy = dict(batch)
         noisy["r_t"] = np.where(pad, rng.normal(size=pad.shape) * 1e3, batch["r_t"]).astype(np.float32)
         noisy["v_t"] = np.where(pad, rng.normal(size=pad.shape) * 1e3, batch["v_t"]).astype(np.float32)
         noisy["truncated_t"] = batch["truncated_t"] | (pad & (rng.random(pad.shape) < 0.5))
-        adv2, ret2 = losses.advantages_and_returns(**noisy, gamma=0.99, lambda_=1.0)
+        adv2, ret2 = train.advantages_and_returns(**noisy, gamma=0.99, lambda_=1.0)
         np.testing.assert_array_equal(adv, adv2)
         np.testing.assert_array_equal(ret, ret2)
         np.testing.assert_array_equal(np.asarray(adv)[pad], 0.0)
@@ -129,10 +133,10 @@ class TargetsTest(chex.TestCase):
 
     def test_unbatched_time_axis_only(self):
         batch = make_batch(2)
-        adv, ret = losses.advantages_and_returns(**batch, gamma=0.9, lambda_=0.8)
+        adv, ret = train.advantages_and_returns(**batch, gamma=0.9, lambda_=0.8)
         for b in range(4):
             lane = {k: (v[b] if k == "bootstrap_value" else v[:, b]) for k, v in batch.items()}
-            adv_b, ret_b = losses.advantages_and_returns(**lane, gamma=0.9, lambda_=0.8)
+            adv_b, ret_b = train.advantages_and_returns(**lane, gamma=0.9, lambda_=0.8)
             chex.assert_shape(adv_b, (7,))
             np.testing.assert_allclose(adv_b, adv[:, b], rtol=1e-6)
             np.testing.assert_allclose(ret_b, ret[:, b], rtol=1e-6)
@@ -142,24 +146,24 @@ class TargetsTest(chex.TestCase):
         trunc = jnp.zeros((4, 1))
         valid = jnp.array([[1], [1], [0], [0]])
         np.testing.assert_allclose(
-            losses.episode_discounts(term, trunc, valid, 0.9)[:, 0], [0.9, 0.0, 0.0, 0.0]
+            train.episode_discounts(term, trunc, valid, 0.9)[:, 0], [0.9, 0.0, 0.0, 0.0]
         )
         # A valid step followed by padding without a done flag is not bootstrapped.
         valid = jnp.array([[1], [1], [1], [0]])
         np.testing.assert_allclose(
-            losses.episode_discounts(jnp.zeros((4, 1)), trunc, valid, 0.9)[:, 0],
+            train.episode_discounts(jnp.zeros((4, 1)), trunc, valid, 0.9)[:, 0],
             [0.9, 0.9, 0.0, 0.0],
         )
 
     def test_traced_once(self):
         fn = jax.jit(chex.assert_max_traces(
-            lambda b: losses.advantages_and_returns(**b, gamma=0.99, lambda_=1.0), n=1
+            lambda b: train.advantages_and_returns(**b, gamma=0.99, lambda_=1.0), n=1
         ))
         for seed in range(3):
             jax.block_until_ready(fn(make_batch(seed)))
 
 
-_TARGETS = jax.jit(losses.advantages_and_returns, static_argnames=("gamma", "lambda_"))
+_TARGETS = jax.jit(train.advantages_and_returns, static_argnames=("gamma", "lambda_"))
 
 
 @settings(max_examples=40, deadline=None)
@@ -194,20 +198,20 @@ class SmoothL1Test(chex.TestCase):
     @chex.variants(with_jit=True, without_jit=True)
     def test_hand_values(self):
         pred = jnp.array([0.5, 2.0, -1.0, 0.0])
-        out = self.variant(losses.smooth_l1)(pred, jnp.zeros(4))
+        out = self.variant(imagination.smooth_l1)(pred, jnp.zeros(4))
         # 0.5 * 0.25, 2 - 0.5, |-1| - 0.5 (boundary), 0 -> mean over the 4 dims
         np.testing.assert_allclose(out, (0.125 + 1.5 + 0.5 + 0.0) / 4)
 
     def test_beta_and_batch(self):
         pred = jnp.array([[1.0, 3.0], [0.0, -4.0]])
         target = jnp.array([[0.0, 0.0], [0.0, 0.0]])
-        out = losses.smooth_l1(pred, target, beta=2.0)
+        out = imagination.smooth_l1(pred, target, beta=2.0)
         chex.assert_shape(out, (2,))
         # beta 2: 0.5 * 1 / 2 = 0.25, 3 - 1 = 2; 0, 4 - 1 = 3
         np.testing.assert_allclose(out, [(0.25 + 2.0) / 2, (0.0 + 3.0) / 2])
 
     def test_gradient_is_clipped(self):
-        grad = jax.grad(lambda p: losses.smooth_l1(p, jnp.zeros(2)))(jnp.array([0.4, -7.0]))
+        grad = jax.grad(lambda p: imagination.smooth_l1(p, jnp.zeros(2)))(jnp.array([0.4, -7.0]))
         np.testing.assert_allclose(grad, [0.4 / 2, -1.0 / 2])
 
 
@@ -241,7 +245,7 @@ class A3CLossTest(chex.TestCase):
 
     @chex.variants(with_jit=True, without_jit=True)
     def test_matches_numpy(self):
-        loss, metrics = self.variant(losses.a3c_loss)(*self.args(), 0.01, 0.5)
+        loss, metrics = self.variant(train.a3c_loss)(*self.args(), 0.01, 0.5)
         chex.assert_shape(loss, ())
         total, pg, entropy, value = np_a3c_loss(*self.args(), 0.01, 0.5)
         np.testing.assert_allclose(loss, total, rtol=1e-5)
@@ -252,7 +256,7 @@ class A3CLossTest(chex.TestCase):
 
     def test_gradients(self):
         def f(logits, v, adv, ret):
-            return losses.a3c_loss(logits, self.a, v, adv, ret, self.valid, 0.01, 0.5)[0]
+            return train.a3c_loss(logits, self.a, v, adv, ret, self.valid, 0.01, 0.5)[0]
 
         g_logits, g_v, g_adv, g_ret = jax.grad(f, argnums=(0, 1, 2, 3))(
             self.logits, self.v, self.adv, self.ret
@@ -265,3 +269,13 @@ class A3CLossTest(chex.TestCase):
         # Padding steps get no gradient.
         pad = self.valid == 0
         np.testing.assert_array_equal(np.asarray(g_logits)[pad], 0.0)
+
+
+def test_the_old_losses_module_warns_and_re_exports_the_same_functions():
+    """`foresit_jax.losses` (0.2's home) stays one release: it warns and hands back the very
+    functions of `foresit_jax.train` and `foresit_jax.imagination`."""
+    sys.modules.pop("foresit_jax.losses", None)
+    with pytest.warns(FutureWarning, match="foresit_jax.train"):
+        old = importlib.import_module("foresit_jax.losses")
+    assert old.a3c_loss is train.a3c_loss and old.advantages_and_returns is train.advantages_and_returns
+    assert old.smooth_l1 is imagination.smooth_l1

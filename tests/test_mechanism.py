@@ -461,18 +461,18 @@ def test_episode_endings_on_hand_made_episodes():
 
 
 def test_explained_variance_and_advantage_spread_against_numpy():
-    from foresit_jax import losses
+    from foresit_jax import train
 
     rng = np.random.default_rng(0)
     returns, values = rng.normal(size=(6, 3)), rng.normal(size=(6, 3))
     mask = rng.random((6, 3)) > 0.3
     r, v = returns[mask], values[mask]
     want = 1 - np.var(r - v) / np.var(r)
-    got = losses.explained_variance(jnp.asarray(values), jnp.asarray(returns), jnp.asarray(mask))
+    got = train.explained_variance(jnp.asarray(values), jnp.asarray(returns), jnp.asarray(mask))
     assert float(got) == pytest.approx(want, rel=1e-5)
-    assert float(losses.explained_variance(jnp.asarray(returns), jnp.asarray(returns), jnp.asarray(mask))) == pytest.approx(1.0)
-    assert float(losses.masked_variance(jnp.asarray(returns), jnp.asarray(mask))) == pytest.approx(np.var(r), rel=1e-5)
-    assert float(losses.explained_variance(jnp.ones((4,)), jnp.zeros((4,)), jnp.ones((4,), bool))) == 0.0  # no spread
+    assert float(train.explained_variance(jnp.asarray(returns), jnp.asarray(returns), jnp.asarray(mask))) == pytest.approx(1.0)
+    assert float(train.masked_variance(jnp.asarray(returns), jnp.asarray(mask))) == pytest.approx(np.var(r), rel=1e-5)
+    assert float(train.explained_variance(jnp.ones((4,)), jnp.zeros((4,)), jnp.ones((4,), bool))) == 0.0  # no spread
 
 
 def test_sweep_diagnostics_table_by_hand():

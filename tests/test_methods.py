@@ -9,6 +9,7 @@ import pytest
 
 from foresit_jax.config import Config
 from foresit_jax.methods import IMAGINATION_VARIANTS, IMPLEMENTED_METHODS, PAPER_METHODS, Method, parse_method
+from foresit_jax.rollout import renews
 
 
 @pytest.mark.parametrize(
@@ -99,8 +100,10 @@ def test_imagination_pieces():
     assert rnd.uses_imagination and not rnd.trains_imagination
     assert not none.uses_imagination and none.critic == "plain"
     steps = jnp.arange(25)
-    np.testing.assert_array_equal(foresit.renews(steps, 10), steps == 0)
-    np.testing.assert_array_equal(intv.renews(steps, 10), steps % 10 == 0)
+    np.testing.assert_array_equal(renews(foresit, steps, 10), steps == 0)
+    np.testing.assert_array_equal(renews(intv, steps, 10), steps % 10 == 0)
+    # the derived flags follow the source when a record is replaced
+    assert dataclasses.replace(none, source="goal_view").reads_goal_view and not none.reads_goal_view
     assert dataclasses.replace(foresit, name="x") != foresit  # frozen, comparable
 
 

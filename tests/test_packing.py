@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 import train_helpers as H
-from foresit_jax import losses, rollout
+from foresit_jax import rollout, train
 from foresit_jax.networks import window_attention_mask
 from foresit_jax.rollout import ActOptions, AgentParams, WindowEnd
 from foresit_jax.train import Trainer, replayed, window_critic
@@ -198,11 +198,11 @@ def test_bootstrapped_return_at_a_cut_by_hand():
     v = jnp.asarray([0.5, 1.0, 0.2, 0.3])[:, None]
     term = jnp.asarray([0, 1, 0, 0], bool)[:, None]
     valid = jnp.ones((4, 1), bool)
-    advantage, returns = losses.advantages_and_returns(r, v, term, jnp.zeros_like(term), valid, jnp.asarray([2.0]), 0.99, 1.0)
+    advantage, returns = train.advantages_and_returns(r, v, term, jnp.zeros_like(term), valid, jnp.asarray([2.0]), 0.99, 1.0)
     np.testing.assert_allclose(returns[:, 0], [4.94, 5.0, 1.9403, 1.97], rtol=1e-6)
     np.testing.assert_allclose(advantage[:, 0], [4.44, 4.0, 1.7403, 1.67], rtol=1e-5)
     trunc = jnp.asarray([0, 0, 0, 1], bool)[:, None]
-    _, returns = losses.advantages_and_returns(r, v, term, trunc, valid, jnp.asarray([2.0]), 0.99, 1.0)
+    _, returns = train.advantages_and_returns(r, v, term, trunc, valid, jnp.asarray([2.0]), 0.99, 1.0)
     np.testing.assert_allclose(returns[:, 0], [4.94, 5.0, -0.0199, -0.01], rtol=1e-6)
 
 

@@ -16,7 +16,7 @@ def test_the_path_of_an_update_and_hashes_that_tell_programs_apart(capsys):
     report = trace_update.main(trace_update.Args(methods=("a3c",)))["a3c"]
     files = report["files"]
     # The files every a3c update goes through; not the ones only other methods use.
-    assert {"train.py", "rollout.py", "networks.py", "losses.py", "lstm.py"} <= set(files)
+    assert {"train.py", "rollout.py", "networks.py", "imagination.py", "lstm.py"} <= set(files)
     assert "maml.py" not in files and "org.py" not in files
     assert all(functions >= 1 and lines >= functions for functions, lines in files.values())
     out = capsys.readouterr().out
@@ -34,10 +34,19 @@ def test_the_path_of_an_update_and_hashes_that_tell_programs_apart(capsys):
 @pytest.mark.slow
 def test_the_path_from_the_cli_to_the_optimiser():
     """`--cli-path`: the project files whose functions run from `python -m experiments.train`'s
-    entry to the first `optax.apply_updates`, in the order entered (docs/design.md walks them)."""
+    entry to the first `optax.apply_updates`, in the order entered, and the reader's path
+    (the call chain to the optimiser, then the update's body; docs/design.md walks it)."""
     path = trace_update.files_from_cli("a3c", "tiny")
-    assert len(path) == len(set(path))
+    entered, reader = path.entered, path.reader
+    assert len(entered) == len(set(entered)) and len(reader) == len(set(reader))
     assert {"experiments/train.py", "experiments/running/run.py", "foresit_jax/config.py", "foresit_jax/train.py",
-            "foresit_jax/rollout.py", "foresit_jax/networks.py", "foresit_jax/losses.py", "envs/gridnav.py"} <= set(path)
-    assert "foresit_jax/maml.py" not in path and "foresit_jax/agent.py" not in path  # neither runs for a3c
-    assert path.index("experiments/train.py") < path.index("foresit_jax/train.py") < path.index("foresit_jax/losses.py")
+            "foresit_jax/rollout.py", "foresit_jax/networks.py", "envs/gridnav.py"} <= set(entered)
+    assert "foresit_jax/maml.py" not in entered and "foresit_jax/agent.py" not in entered  # neither runs for a3c
+    assert set(reader) <= set(entered)
+    # the chain first (the command, its run, the Trainer), then the update's body
+    assert reader[:3] == ["experiments/errors.py", "experiments/train.py", "experiments/running/run.py"]
+    assert reader.index("foresit_jax/train.py") < reader.index("foresit_jax/rollout.py")
+    assert {"foresit_jax/lstm.py", "envs/gridnav.py", "envs/dynamics.py"} <= set(reader)
+    # setup is not what one update is: the run folder's helpers and the scene banks are run, not followed
+    assert not {"experiments/running/rundir.py", "envs/bank.py"} & set(reader)
+    assert len(reader) <= 12  # issue 60's target (16 at f511043, measured this way)
