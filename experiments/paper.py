@@ -103,8 +103,18 @@ class Args:
     """Figure 4: most sub-goal items embedded (each gives an imagined and a selected state)."""
     probe_episodes_per_room: int = 50
     """Test episodes per room type of each condition of the imagination probes."""
+    fast_compile: bool | None = None
+    """Compile with most of XLA's optimisations off (jax's `jax_disable_most_optimizations`):
+    programs compile in a fraction of the time and run slower. By default on for the tiny
+    preset alone, a smoke run whose time is mostly compiling; its numbers then differ from a
+    normally compiled run's in the last bits, and each run records it with its platform."""
     stop_after_chunks: flags.StopAfterChunks = None
     progress: flags.Progress = True
+
+
+def fast_compile(args: Args) -> bool:
+    """Whether this report compiles with most XLA optimisations off (`Args.fast_compile`)."""
+    return args.preset == "tiny" if args.fast_compile is None else args.fast_compile
 
 
 def arm_of(args: Args, method: str) -> str:
@@ -183,6 +193,12 @@ def main(args: Args) -> dict | None:
     if not args.resume:
         rundir.prepare_run_dir(args.out, resume=False, overwrite=args.overwrite, marker="paper.json", kind="paper run")
         rundir.write_started_args(args.out / "paper.json", args, flags.INVOCATION)
+    with numerics.compiled_fast(fast_compile(args)):
+        return _run(args)
+
+
+def _run(args: Args) -> dict | None:
+    """`main` after its checks: the sweeps, then the report."""
     t0 = time.time()
     results = {}
     for setup, group in GROUPS.items():

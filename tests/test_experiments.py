@@ -944,6 +944,7 @@ BENCH_ARGS = {  # commands whose flags are parsed here and which run in their ow
     "experiments.compare": lambda: importlib.import_module("experiments.compare").Args,  # tests/test_compare.py
     "experiments.tune": lambda: importlib.import_module("experiments.tune").Args,  # tests/test_tune.py runs it
     "experiments.foresight": lambda: importlib.import_module("experiments.foresight").Args,  # tests/test_foresight.py
+    "benchmarks.reference_ppo": lambda: importlib.import_module("benchmarks.reference_ppo").Args,  # tests/test_reference_ppo.py
 }
 
 

@@ -95,3 +95,25 @@ def test_platforms_section_names_the_pairs_that_mix_platforms():
     resumed = numerics.extend(here, 500, THERE)[0]
     text = numerics.markdown({"a": per_seed(here), "b": per_seed(resumed)}, [("a", "b")])
     assert ": a and b." in text
+
+
+def test_compiled_fast_turns_most_xla_optimisations_off_and_back_and_is_recorded():
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+    import pytest
+
+    assert not numerics.fast_compile_on() and "xla_optimizations" not in numerics.fingerprint()
+    f = jax.jit(lambda x: jnp.tanh(x) @ x.T)
+    x = jnp.linspace(-1.0, 1.0, 12).reshape(3, 4)
+    with numerics.compiled_fast(True):
+        assert numerics.fast_compile_on()
+        fp = numerics.fingerprint()
+        assert fp["xla_optimizations"] == "most off" and "most XLA optimisations off" in numerics.describe(fp)
+        np.testing.assert_allclose(jax.jit(lambda x: jnp.tanh(x) @ x.T)(x), f(x), rtol=1e-6)  # the same function
+    assert not numerics.fast_compile_on()
+    with pytest.raises(RuntimeError), numerics.compiled_fast(True):  # restored after an error too
+        raise RuntimeError("boom")
+    assert not numerics.fast_compile_on()
+    with numerics.compiled_fast(False):
+        assert not numerics.fast_compile_on()

@@ -13,6 +13,7 @@ import pytest
 import envs
 from envs.metrics import LENGTH_BUCKETS, bucket_label, by_length
 from experiments import paper
+from experiments.running import numerics
 from experiments.reporting import paper_tables
 from test_experiments import cli_error
 
@@ -64,6 +65,9 @@ def test_tiny_report_has_every_table_figure_and_claim_after_a_kill_resume_and_re
     for section in SECTIONS:
         assert section in report, section
     assert "Every method was trained on cpu (" in report  # a3c copied from a run on this machine
+    # tiny compiles with most XLA optimisations off (`--fast-compile`), says so, and leaves the process as it was
+    assert "most XLA optimisations off." in report.split("Every method was trained on cpu (")[1].splitlines()[0]
+    assert not numerics.fast_compile_on()
     assert (out / "table3.csv").read_text() == ""  # none of Table 3's methods ran
     for name in ("table1.csv", "table2.csv", "by_length.csv", "claims.csv", "cvae_comparison.json", "probe.json",
                  "fig4_tsne.png", "fig3_a3c_vs_a3c_foresit.png", "by_length_a3c_vs_a3c_foresit.png",
@@ -92,6 +96,12 @@ def result(sr: float, sr5: float) -> dict:
     buckets = {bucket_label(b): {"SR": sr, "SPL": sr / 2, "episodes": 4} for b in LENGTH_BUCKETS}
     test = {"overall": {"SR": sr, "SPL": sr / 2, "SR>=5": sr5, "SPL>=5": sr5 / 2}, "by_length": buckets}
     return {"selected": test, "last": {**test, "overall": {**test["overall"], "SR": sr - 1.0}}}
+
+
+def test_fast_compile_is_on_for_tiny_alone_unless_asked():
+    assert paper.fast_compile(paper.Args(preset="tiny")) and not paper.fast_compile(paper.Args(preset="quick"))
+    assert not paper.fast_compile(paper.Args(preset="tiny", fast_compile=False))
+    assert paper.fast_compile(paper.Args(preset="quick", fast_compile=True))
 
 
 def test_sampled_section_pairs_greedy_with_sampled_and_each_method_with_the_base():

@@ -114,7 +114,8 @@ def drop_steps_after(manager, step: int) -> None:
 
 def restore(manager, step: int, like):
     """The checkpoint of `step`, shaped as `like` and placed where `like`'s arrays are
-    (numpy leaves: on the first local device), not where the saving process had them:
+    (numpy leaves and shapes without a sharding, `jax.eval_shape`'s: on the first local
+    device), not where the saving process had them:
     without a sharding orbax restores the saved one, so a sweep's checkpoint of seeds
     spread over 2 devices came back spread over them in any reader, which then ran
     cross-device collectives it never asked for (and on the CPU these could time out:
@@ -123,8 +124,8 @@ def restore(manager, step: int, like):
 
     verify(manager, step)
     first = jax.sharding.SingleDeviceSharding(jax.local_devices()[0])
-    abstract = jax.tree.map(lambda x: jax.ShapeDtypeStruct(np.shape(x), x.dtype, sharding=getattr(x, "sharding", first)),
-                            like)  # fmt: skip
+    abstract = jax.tree.map(lambda x: jax.ShapeDtypeStruct(np.shape(x), x.dtype, sharding=getattr(x, "sharding", None) or first),
+                            like)  # fmt: skip  (`like` may be arrays or shapes, `jax.eval_shape`'s)
     try:
         return manager.restore(step, args=ocp.args.StandardRestore(abstract))
     except Exception as e:  # orbax's (often multi-line) reason, as one line naming the checkpoint

@@ -62,7 +62,7 @@ def read_trained(folder: Path) -> Trained:
                        progress["best_update"], done)  # fmt: skip
     config = Config(**info["config"])
     trainer = make_trainer(config)
-    like = trainer.init(selection.run_key(info["seed"]))
+    like = jax.eval_shape(trainer.init, selection.run_key(info["seed"]))  # the shapes restore needs
     managers = [checkpoint.checkpoint_manager(folder / name, 100) for name in ("checkpoints", "best")]
     steps = [m.latest_step() for m in managers]
     if None in steps:

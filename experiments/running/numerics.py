@@ -28,6 +28,7 @@ differ, only not known to agree.
 
 from __future__ import annotations
 
+import contextlib
 import platform
 import re
 from pathlib import Path
@@ -70,6 +71,34 @@ def xla_flags(flags: str) -> str:
     return " ".join(sorted(DEVICE_COUNT_FLAG.sub("", flags).split()))
 
 
+FAST_COMPILE_FLAG = "jax_disable_most_optimizations"
+
+
+def fast_compile_on() -> bool:
+    """Whether this process compiles with most of XLA's optimisations off (`compiled_fast`)."""
+    import jax
+
+    return bool(jax.config.read(FAST_COMPILE_FLAG))
+
+
+@contextlib.contextmanager
+def compiled_fast(on: bool):
+    """Compile what runs inside with most of XLA's optimisations off (jax's
+    `jax_disable_most_optimizations`: backend optimisation level 0, no expensive LLVM passes)
+    when `on`, and restore the setting after. Programs compile in a fraction of the time and
+    run slower, and their floating-point results can differ from a normally compiled
+    program's in the last bits (a platform of its own: `fingerprint` records it). For smoke
+    runs, where compiling is most of the time (`experiments.paper --preset tiny`)."""
+    import jax
+
+    before = fast_compile_on()
+    jax.config.update(FAST_COMPILE_FLAG, bool(on))
+    try:
+        yield
+    finally:
+        jax.config.update(FAST_COMPILE_FLAG, before)
+
+
 def fingerprint() -> dict:
     """This process's platform, as recorded with a run (JSON values only)."""
     import os
@@ -82,6 +111,8 @@ def fingerprint() -> dict:
           "device": jax.devices()[0].device_kind, "xla_flags": xla_flags(os.environ.get("XLA_FLAGS", ""))}  # fmt: skip
     if backend == "cpu":
         fp["cpu"] = host_cpu()
+    if fast_compile_on():  # only then: a fingerprint of a normal compile stays as it was
+        fp["xla_optimizations"] = "most off"
     return fp
 
 
@@ -97,7 +128,8 @@ def describe(fp: dict | None) -> str:
     else:
         where = f"{fp['backend']} ({fp['device']})"
     flags = f", XLA_FLAGS {fp['xla_flags']}" if fp.get("xla_flags") else ""
-    return f"{where}, jax {fp['jax']}{flags}"
+    fast = ", most XLA optimisations off" if fp.get("xla_optimizations") else ""
+    return f"{where}, jax {fp['jax']}{flags}{fast}"
 
 
 def extend(history: list | None, done: int, here: dict | None = None) -> tuple[list, str | None]:

@@ -373,7 +373,9 @@ class Run:
         """(trainer, the seeds' training states, their selected models) of checkpoint `step`,
         stacked over `seeds` (the run's, unless given: a finished run's in results' order)."""
         trainer = make_trainer(self.config)
-        states, best = initial_states(trainer, list(seeds or self.seeds))
+        # the checkpoint's shapes only (`eval_shape`: nothing runs; initialising for real ran
+        # the networks' init op by op, hundreds of small compilations per method)
+        states, best = jax.eval_shape(lambda: initial_states(trainer, list(seeds or self.seeds)))
         restored = checkpoint.restore(checkpoint.checkpoint_manager(self.folder / "checkpoints", self.schedule.keep_checkpoints),
                                       step, {"states": states, "best": best})  # fmt: skip
         return trainer, restored["states"], restored["best"]
