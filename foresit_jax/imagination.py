@@ -64,7 +64,6 @@ def smooth_l1(prediction: chex.Array, target: chex.Array, beta: float = 1.0) -> 
     return jnp.mean(elementwise, axis=-1)
 
 
-
 def buffer_init(capacity: int, state_size: int, goal_size: int) -> ReplayBuffer:
     """An empty buffer with room for `capacity` (M_max) items."""
     return ReplayBuffer(

@@ -175,7 +175,6 @@ def ended_episodes(traj: Trajectory) -> tuple[chex.Array, EpisodeStats]:
     return ended, EpisodeStats(success, length, traj.optimal_length, ended, spl, traj.room_type)
 
 
-
 # ---------------------------------------------------------------------- acting
 
 
