@@ -120,7 +120,7 @@ def _rollout(greedy: bool):
 def rollout():
     """A sampled rollout of 8 lanes with freshly initialised parameters."""
     env, env_params = H.bathroom_env()
-    params, w_params = build(FORESIT).init(jax.random.PRNGKey(0), observation())
+    params, w_params = jax.jit(build(FORESIT).init, compiler_options=H.FAST_COMPILE)(jax.random.PRNGKey(0), observation())
     sigma2 = jnp.full((LANES,), 0.5)
     out = _rollout(False)(params, w_params, env_params, jax.random.PRNGKey(1), sigma2)
     return (params, w_params, env_params, sigma2), jax.tree.map(np.asarray, out)

@@ -73,7 +73,7 @@ def tiny_agent():
     with pytest.MonkeyPatch.context() as mp:
         H.patch_for_experiments(mp)
         config, _ = preset("tiny", "a3c+foresit")
-        state = H.cached_trainer(config).init(jax.random.PRNGKey(0))
+        state = jax.jit(H.cached_trainer(config).init, compiler_options=H.FAST_COMPILE)(jax.random.PRNGKey(0))
         yield config, agent_params(state, config.sigma2_max)
 
 
@@ -90,6 +90,7 @@ def test_evaluate_on_the_validation_split(tiny_agent):
     np.testing.assert_equal(evaluate(params, config, "val", jax.random.PRNGKey(0), episodes_per_room=2), results)
 
 
+@pytest.mark.slow  # a second evaluation program (14 s cold); the sampled one is tested above
 def test_evaluate_greedy_has_the_same_layout(tiny_agent):
     config, params = tiny_agent
     results = evaluate(params, config, "val", jax.random.PRNGKey(0), episodes_per_room=2, greedy=True)

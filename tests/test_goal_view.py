@@ -9,6 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+import train_helpers as H
 
 from env_helpers import make_states
 from env_reference import reference_transition
@@ -118,11 +119,12 @@ def test_oracle_i_tau_with_the_noise_off_is_one_network_step_on_the_goal_view(sa
     nets = build(config)
     env = BoundEnv(kit_env := savn_kit.env, savn_kit.params)
     obs, _ = kit_env.reset(jax.random.PRNGKey(0), savn_kit.params)
-    params, w_params = nets.init(jax.random.PRNGKey(1), obs)
+    params, w_params = jax.jit(nets.init, compiler_options=H.FAST_COMPILE)(jax.random.PRNGKey(1), obs)
     actor = rollout.start(nets, jax.random.PRNGKey(2), env, config.num_lanes)
     assert set(actor.obs) >= {"goal_view", "view", "target"}  # start wrapped the env itself
     acting = AgentParams(params, w_params, jnp.zeros((config.num_lanes,)))
-    act = jax.jit(lambda a, k: rollout.act(nets, acting, env, a, k, 20, ActOptions(record_inputs=True)))
+    act = jax.jit(lambda a, k: rollout.act(nets, acting, env, a, k, 20, ActOptions(record_inputs=True)),
+                  compiler_options=H.FAST_COMPILE)  # compile-bound: its checks compare values made here
     _, traj = act(actor, jax.random.PRNGKey(3))[:2]
     inputs = traj.inputs
     i_tau = inputs.imagined if imagination_input == "head" else None
@@ -141,8 +143,8 @@ def test_oracle_i_tau_with_the_noise_off_is_one_network_step_on_the_goal_view(sa
     assert (step == 0).sum() > config.num_lanes  # several episodes began inside the window
     # With the noise on, i_tau is that latent plus noise, fixed for the episode.
     noisy = AgentParams(params, w_params, jnp.full((config.num_lanes,), 0.25))
-    traj = jax.jit(lambda a, k: rollout.act(nets, noisy, env, a, k, 20, ActOptions(record_inputs=True)))(
-        actor, jax.random.PRNGKey(3))[1]
+    traj = jax.jit(lambda a, k: rollout.act(nets, noisy, env, a, k, 20, ActOptions(record_inputs=True)),
+                   compiler_options=H.FAST_COMPILE)(actor, jax.random.PRNGKey(3))[1]
     if imagination_input == "head":
         diff = np.asarray(traj.inputs.imagined) - np.asarray(expected)
         assert 0.3 < diff.std() < 0.7  # sigma = 0.5
@@ -155,7 +157,7 @@ def test_shuffled_probe_shuffles_the_oracles_i_tau_across_episodes(savn_kit):
     nets = build(config)
     env = BoundEnv(savn_kit.env, savn_kit.params)
     obs, _ = savn_kit.env.reset(jax.random.PRNGKey(0), savn_kit.params)
-    params, w_params = nets.init(jax.random.PRNGKey(1), obs)
+    params, w_params = jax.jit(nets.init, compiler_options=H.FAST_COMPILE)(jax.random.PRNGKey(1), obs)
     actor = rollout.start(nets, jax.random.PRNGKey(2), env, config.num_lanes)
     kernels = nets.model.apply(params, None, method="lstm_kernels")
     own = rollout.goal_latent(nets, params, kernels, actor.obs)
