@@ -62,13 +62,18 @@ def read_trained(folder: Path) -> Trained:
                        progress["best_update"], done)  # fmt: skip
     config = Config(**info["config"])
     trainer = make_trainer(config)
-    like = jax.eval_shape(trainer.init, selection.run_key(info["seed"]))  # the shapes restore needs
+
+    def shapes(key):  # what the two checkpoints hold, as shapes (`eval_shape`: nothing runs)
+        state = trainer.init(key)
+        return state, agent_params(state, config.sigma2_max, config.evaluation_noise)
+
+    like, like_selected = jax.eval_shape(shapes, selection.run_key(info["seed"]))
     managers = [checkpoint.checkpoint_manager(folder / name, 100) for name in ("checkpoints", "best")]
     steps = [m.latest_step() for m in managers]
     if None in steps:
         raise errors.UserError(f"{folder} has no finished checkpoint (checkpoints/ and best/); train it to the end first")
     state = checkpoint.restore(managers[0], steps[0], like)
-    selected = checkpoint.restore(managers[1], steps[1], agent_params(like, config.sigma2_max, config.evaluation_noise))
+    selected = checkpoint.restore(managers[1], steps[1], like_selected)
     states, selected = jax.tree.map(lambda x: x[None], (state, selected))
     return Trained(config, info["schedule"], [info["seed"]], trainer, states, selected, [steps[1]], steps[0])
 
