@@ -272,24 +272,28 @@ def policy_episodes(policy_fn: Callable, params, carry, env: BoundEnv, key: chex
                     num_lanes: int) -> EpisodeStats:  # fmt: skip
     """One whole episode per lane of any batched policy function
     `(params, carry, obs, first, key) -> (action [B], carry)`, padded to `num_steps`, as
-    `rollout.rollout` plays them: the lanes reset with `split(split(key)[0], B)`, step t gets
-    key `split(split(key)[1], num_steps)[t]`, and the environment steps with
-    `split(split(that key, 3)[2], B)`; only each lane's first episode counts."""
+    `rollout.rollout` plays them: the lanes reset with `split(split(key)[0], B)`, and the
+    steps' keys come from `split(key)[1]` by the policy's `step_keys` schedule
+    (`rollout.StepPolicy`; a plain function gets `rollout.lockstep_keys`: step t gets
+    `split(k, num_steps)[t]` and the environment steps with `split(split(that key, 3)[2], B)`);
+    only each lane's first episode counts."""
     k_start, k_act = jax.random.split(key)
     obs, env_state = env.reset(jax.random.split(k_start, num_lanes))
+    step_keys = getattr(policy_fn, "step_keys", rollout.lockstep_keys)
+    policy_keys, env_keys = step_keys(k_act, num_steps, num_lanes)
 
-    def step(state, step_key):
+    def step(state, keys):
         obs, env_state, carry, alive, first = state
-        action, carry = policy_fn(params, carry, obs, first, step_key)
-        k_env = jax.random.split(step_key, 3)[2]
-        obs, env_state, _, term, trunc, info = env.step(jax.random.split(k_env, num_lanes), env_state, action)
+        policy_key, env_key = keys
+        action, carry = policy_fn(params, carry, obs, first, policy_key)
+        obs, env_state, _, term, trunc, info = env.step(env_key, env_state, action)
         done = term | trunc
         out = (alive, info["success"] & alive, (term | trunc) & alive, info["optimal_length"], info["room_type"])
         return (obs, env_state, carry, alive & ~done, done), out
 
     first = jnp.ones((num_lanes,), bool)
     _, (valid, success, ended, optimal, room) = jax.lax.scan(
-        step, (obs, env_state, carry, first, first), jax.random.split(k_act, num_steps)
+        step, (obs, env_state, carry, first, first), (policy_keys, env_keys)
     )
     length = jnp.sum(valid.astype(jnp.int32), axis=0)
     success = jnp.any(success, axis=0)

@@ -252,7 +252,6 @@ def adaptive_act(
     variance = jnp.broadcast_to(jnp.asarray(acting.noise_variance, jnp.float32), (num_lanes,))[:, None]  # [B, 1]
     shared, lanes = split_encoder_lstm_kernels(acting.params)
     lanes = jax.tree.map(lambda x: jnp.broadcast_to(x, (num_lanes,) + x.shape), lanes)
-    kernel_dtype = jax.tree.leaves(shared)[0].dtype
     lane_actor = _per_lane(actor)
     alive = jnp.ones((num_lanes, 1), bool)
 
@@ -263,18 +262,12 @@ def adaptive_act(
                           Adaptation(alive, update, gate_offsets))  # fmt: skip
 
     def segment(lanes, update, lane_actor, key, variance, alive):  # one lane
-        def loss(lanes, gate_offsets):
+        def run(lanes, gate_offsets):
             next_actor, traj, end = window(lanes, update, lane_actor, key, variance, alive, loop.segment, True,
                                           gate_offsets)  # fmt: skip
-            inputs = interaction_inputs(traj.states[:, 0], traj.logits[:, 0])  # [segment, H + A]
-            loss = nets.model.apply(join_partial_trees(shared, lanes), inputs, method="interaction_loss")
-            return loss, (next_actor, traj, end)
+            return traj, (next_actor, end)
 
-        zeros = jnp.zeros((loop.segment, 1, 4 * actor.lstm[1].shape[-1]), kernel_dtype)  # [segment, 1, 4H]
-        (_, (next_actor, traj, end)), (grads, gate_grads) = jax.value_and_grad(loss, (0, 1), has_aux=True)(lanes, zeros)
-        rows = _kernel_update(nets, loop, join_partial_trees(shared, lanes), lane_actor, traj, gate_grads)
-        if loop.first_order:
-            grads, rows = jax.lax.stop_gradient((grads, rows))
+        grads, rows, traj, (next_actor, end) = segment_update(nets, loop, shared, lanes, lane_actor.lstm[1], run)
         still_alive = traj.valid[-1] & ~(traj.terminated[-1] | traj.truncated[-1])  # [1] the episode runs on (alive next)
         rows = rows._replace(deltas=jnp.where(still_alive[0], rows.deltas, 0.0))
         update = rows if update is None else update.concat(rows)
@@ -303,16 +296,45 @@ def adaptive_act(
     return _unlane(lane_actor), traj, end, thetas
 
 
-def _kernel_update(nets, loop: InnerLoop, params, lane_actor, traj, gate_grads) -> LowRankUpdate:
+def segment_update(nets, loop: InnerLoop, shared, lanes, h_before: chex.Array, run: Callable):
+    """One lane's inner step after a segment: (the gradient of L_phi with respect to the
+    lane's adapted parameters but the LSTM kernels, those kernels' step as factors
+    (`LowRankUpdate`, see "Adapted kernels"), `run`'s segment and aux), with the meta-gradient through
+    them unless `loop.first_order`.
+
+    run: `(lanes, gate_offsets [segment, 1, 4H]) -> (segment, aux)` plays the segment
+    under theta_i = `shared` + `lanes` with the offsets added to its gate pre-activations;
+    `segment` has `states` `[segment, 1, H]`, `logits` and the encoder's `inputs` (a
+    `Trajectory` recorded with inputs): `adaptive_act` runs it in the environment, the
+    step-by-step policy (`foresit_jax.rollout.policy`) on the segment's recorded
+    observations. h_before: `[1, H]` the LSTM output entering the segment."""
+
+    def loss(lanes, gate_offsets):
+        segment, aux = run(lanes, gate_offsets)
+        inputs = interaction_inputs(segment.states[:, 0], segment.logits[:, 0])  # [segment, H + A]
+        loss = nets.model.apply(join_partial_trees(shared, lanes), inputs, method="interaction_loss")
+        return loss, (segment, aux)
+
+    kernel_dtype = jax.tree.leaves(shared)[0].dtype
+    zeros = jnp.zeros((loop.segment, 1, 4 * h_before.shape[-1]), kernel_dtype)  # [segment, 1, 4H]
+    (_, (segment, aux)), (grads, gate_grads) = jax.value_and_grad(loss, (0, 1), has_aux=True)(lanes, zeros)
+    rows = _kernel_update(nets, loop, join_partial_trees(shared, lanes), h_before, segment, gate_grads)
+    if loop.first_order:
+        grads, rows = jax.lax.stop_gradient((grads, rows))
+    return grads, rows, segment, aux
+
+
+def _kernel_update(nets, loop: InnerLoop, params, h_before, traj, gate_grads) -> LowRankUpdate:
     """The LSTM kernels' inner step of one lane's segment, as factors (module doc, "Adapted
     kernels"): the gradients sum_t x_t^T delta_t and sum_t h_{t-1}^T delta_t, kept as the
     segment's inputs x_t `[segment, F]` (under `params`, the lane's theta_i), carries
-    h_{t-1} `[segment, H]` and -lr delta_t `[segment, 4H]` (`gate_grads`: d L_phi / d gates)."""
+    h_{t-1} `[segment, H]` (`h_before` `[1, H]` first) and -lr delta_t `[segment, 4H]`
+    (`gate_grads`: d L_phi / d gates)."""
     seen = traj.inputs
     return LowRankUpdate(
         inputs=nets.model.apply(params, seen.obs, seen.prev_action_probs, seen.encoder_imagined,
                                 method="encoder_features")[:, 0],
-        hiddens=jnp.concatenate([lane_actor.lstm[1], traj.states[:-1, 0]]),
+        hiddens=jnp.concatenate([h_before, traj.states[:-1, 0]]),
         deltas=-loop.lr * gate_grads[:, 0],
     )
 

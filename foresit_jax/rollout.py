@@ -46,7 +46,16 @@ import envs.metrics
 from envs.wrappers import GoalViewWrapper
 from foresit_jax import distributions, imagination, maml
 from foresit_jax.maml import Adaptation  # an acting record, defined beside the inner loop that fills it
-from foresit_jax.lstm import LSTMCarry, initial_carry, reset_carry
+from foresit_jax.lstm import (
+    LowRankUpdate,
+    LSTMCarry,
+    encoder_lstm_params,
+    initial_carry,
+    join_partial_trees,
+    lstm_kernels,
+    reset_carry,
+    split_encoder_lstm_kernels,
+)
 from foresit_jax.methods import ImaginationVariant
 from foresit_jax.networks import Networks
 
@@ -434,47 +443,235 @@ class PolicyCarry(NamedTuple):
     episode_step: chex.Array  # [B] int32 the step's position in its episode
 
 
-def policy_carry(nets: Networks, num_lanes: int) -> PolicyCarry:
-    """The carry before any step (zeros; `first` at the first step resets it anyway)."""
+class AdaptiveCarry(NamedTuple):
+    """What the maml base's `policy` carries, per lane (leaves `[B, ...]`): the policy's
+    carry, the lane's adapted parameters theta_i (as `maml.adaptive_act` keeps them: every
+    parameter but the LSTM kernels, and the kernels' low-rank change, zero rows beyond the
+    updates made so far), and the running segment, which the next inner step learns from."""
+
+    policy: PolicyCarry
+    lanes: Any  # theta_i but the encoder LSTM's kernels, leaves [B, ...]
+    update: LowRankUpdate  # [B, segment * updates, ...] the kernels' change so far
+    segment_start: PolicyCarry  # the carry that entered the running segment's first step
+    seen_obs: Any  # [B, segment, ...] the running segment's observations
+    seen_keys: chex.Array  # [B, segment, 2] its steps' keys
+
+
+def lockstep_keys(key: chex.PRNGKey, num_steps: int, num_lanes: int) -> tuple[chex.Array, chex.Array]:
+    """The keys `rollout` gives a window under one parameter set (the a3c base), for a
+    step-by-step replay: (the policy's `[T, 2]`, `split(key, T)`; the environment's
+    `[T, B, 2]`, `split(split(step key, 3)[2], B)`)."""
+    keys = jax.random.split(key, num_steps)
+    return keys, jax.vmap(lambda k: jax.random.split(jax.random.split(k, 3)[2], num_lanes))(keys)
+
+
+def adaptive_keys(loop: maml.InnerLoop, key: chex.PRNGKey, num_steps: int, num_lanes: int) -> tuple[chex.Array, chex.Array]:
+    """The keys `maml.adaptive_act` gives a whole-episode rollout, for a step-by-step replay:
+    one key per segment (the update slots' and the rest's, `split(key, slots + 1)`), split
+    per lane, then per step: (the policy's `[T, B, 2]`, one per lane; the environment's
+    `[T, B, 2]`, `split(split(step key, 3)[2], 1)[0]`, each lane stepped alone)."""
+    slots = maml.update_steps(num_steps, loop.segment, loop.updates)
+    lengths = [loop.segment] * len(slots) + [num_steps - loop.segment * len(slots)]
+    keys = jax.random.split(key, len(slots) + 1)
+    per_segment = [jnp.swapaxes(jax.vmap(lambda k, n=n: jax.random.split(k, n))(jax.random.split(k, num_lanes)), 0, 1)
+                   for k, n in zip(keys, lengths)]  # fmt: skip
+    policy_keys = jnp.concatenate(per_segment)  # [T, B, 2]
+    env_key = lambda k: jax.random.split(jax.random.split(k, 3)[2], 1)[0]  # noqa: E731
+    return policy_keys, jax.vmap(jax.vmap(env_key))(policy_keys)
+
+
+class StepPolicy(NamedTuple):
+    """A batched policy function, `(acting, carry, obs, first, key) -> (action [B], carry)`
+    (call it), with the key schedule that replays `rollout`'s episodes exactly:
+    `step_keys(key, num_steps, num_lanes) -> (the policy's keys [T, ...], the
+    environment's [T, B, 2])` (`foresit_jax.evaluate.policy_episodes` reads it)."""
+
+    act: Callable
+    step_keys: Callable = lockstep_keys
+
+    def __call__(self, acting, carry, obs, first, key):
+        return self.act(acting, carry, obs, first, key)
+
+
+def policy_carry(nets: Networks, num_lanes: int, acting: Optional[AgentParams] = None, obs=None):
+    """The carry before any step (`first` at the first step resets it anyway): a
+    `PolicyCarry` of zeros; for the maml base an `AdaptiveCarry`, which needs `acting`
+    (its theta_0) and `obs`, one unbatched observation of the environment or its shapes
+    (`jax.eval_shape`), to shape the segment it keeps."""
     hidden = nets.config.hidden_size
     zeros = jnp.zeros((num_lanes, hidden), jnp.float32)
-    return PolicyCarry(initial_carry((num_lanes,), hidden), jnp.zeros((num_lanes, nets.config.num_actions), jnp.float32),
-                       zeros, zeros, jnp.zeros((num_lanes,), jnp.int32))  # fmt: skip
+    carry = PolicyCarry(initial_carry((num_lanes,), hidden), jnp.zeros((num_lanes, nets.config.num_actions), jnp.float32),
+                        zeros, zeros, jnp.zeros((num_lanes,), jnp.int32))  # fmt: skip
+    if not nets.method.base_piece.adapts_in_episode:
+        return carry
+    if acting is None or obs is None:
+        raise ValueError(f"method {nets.method.name!r}: the maml base's carry holds each lane's adapted parameters and "
+                         "its running segment; give policy_carry(nets, num_lanes, acting=AgentParams(...), obs=one "
+                         "observation) (experiments.load's initial_carry does)")  # fmt: skip
+    loop = maml.InnerLoop.of(nets.config)
+    shared, lanes = split_encoder_lstm_kernels(acting.params)
+    kernels = lstm_kernels(encoder_lstm_params(acting.params))
+    rows, dtype = loop.segment * loop.updates, kernels.input_kernel.dtype
+    update = LowRankUpdate(jnp.zeros((num_lanes, rows, kernels.input_kernel.shape[0]), dtype),
+                                jnp.zeros((num_lanes, rows, hidden), dtype),
+                                jnp.zeros((num_lanes, rows, 4 * hidden), dtype))  # fmt: skip
+    return AdaptiveCarry(
+        policy=carry,
+        lanes=jax.tree.map(lambda x: jnp.broadcast_to(x, (num_lanes,) + x.shape), lanes),
+        update=update,
+        segment_start=carry,
+        seen_obs=jax.tree.map(lambda x: jnp.zeros((num_lanes, loop.segment) + tuple(x.shape), x.dtype), obs),
+        seen_keys=jnp.zeros((num_lanes, loop.segment, 2), jnp.uint32),
+    )
 
 
-def policy(nets: Networks, greedy: bool = False) -> Callable:
+def _with_noise(acting: AgentParams, lanes: int) -> AgentParams:
+    if acting.noise_variance is None:
+        raise ValueError("policy: give AgentParams.noise_variance, the evaluation's fixed variance")
+    variance = jnp.broadcast_to(jnp.asarray(acting.noise_variance, jnp.float32), (lanes,))
+    return acting._replace(noise_variance=variance)
+
+
+def _reset(carry: PolicyCarry, first: chex.Array) -> PolicyCarry:
+    """The carry as a step sees it: zeroed where `first` begins an episode."""
+    return carry._replace(lstm=reset_carry(first, carry.lstm), prev_probs=jnp.where(first[:, None], 0.0, carry.prev_probs),
+                          episode_step=jnp.where(first, 0, carry.episode_step))  # fmt: skip
+
+
+def _actor(carry: PolicyCarry, obs) -> ActorState:
+    return ActorState(env_state=None, obs=obs, lstm=carry.lstm, prev_probs=carry.prev_probs, imagined=carry.imagined,
+                      s_0=carry.s_0, episode_step=carry.episode_step, memory=None, tracker=None)  # fmt: skip
+
+
+def _policy_step(nets: Networks, acting: AgentParams, kernels, carry: PolicyCarry, obs, key, greedy: bool):
+    """One step of the agent on a reset carry: (action [B], the next carry). `key` is split
+    in 3 as acting splits it: i_tau's noise, the action's sample, the environment's."""
+    k_imag, k_act, _ = jax.random.split(key, 3)
+    lstm, _, logits, imagined, s_0, _ = _agent_step(nets, acting, kernels, _actor(carry, obs), k_imag, None)
+    action = distributions.greedy(logits) if greedy else distributions.sample(k_act, logits)
+    probs = jax.lax.stop_gradient(distributions.probs(logits))
+    return action, PolicyCarry(lstm, probs, imagined, s_0, carry.episode_step + 1)
+
+
+class _Replayed(NamedTuple):
+    """A segment replayed on its recorded observations (what `maml.segment_update` reads)."""
+
+    states: chex.Array  # [segment, 1, H]
+    logits: chex.Array  # [segment, 1, A]
+    inputs: StepInputs  # [segment, 1, ...]
+
+
+def _replayed_segment(nets: Networks, acting: AgentParams, kernels, start: PolicyCarry, seen_obs, seen_keys,
+                      gate_offsets) -> _Replayed:  # fmt: skip
+    """`act_window`'s agent half over one lane's recorded segment (`[1, ...]` leaves; obs
+    `[segment, 1, ...]`, keys `[segment, 2]`), the episode running throughout: the same
+    states and logits, as functions of `acting.params`, without the environment."""
+    carries_gradient = nets.method.action_probs_carry_gradient
+
+    def step(actor, xs):
+        obs, key, gate_offset = xs
+        actor = actor._replace(obs=obs)
+        k_imag = jax.random.split(key, 3)[0]
+        lstm, s_t, logits, imagined, s_0, seen_imagined = _agent_step(nets, acting, kernels, actor, k_imag, gate_offset)
+        seen = StepInputs(obs, actor.prev_probs, imagined if nets.imagination_in_head else None, seen_imagined)
+        probs = distributions.probs(logits)
+        if not carries_gradient:
+            probs = jax.lax.stop_gradient(probs)
+        actor = actor._replace(lstm=lstm, prev_probs=probs, imagined=imagined, s_0=s_0,
+                               episode_step=actor.episode_step + 1)  # fmt: skip
+        return actor, _Replayed(s_t, logits, seen)
+
+    first_obs = jax.tree.map(lambda x: x[0], seen_obs)
+    _, out = jax.lax.scan(step, _actor(start, first_obs), (seen_obs, seen_keys, gate_offsets))
+    return out
+
+
+def _adaptive_policy(nets: Networks, greedy: bool) -> StepPolicy:
+    """The maml base step by step (`policy`): each lane adapts its own parameters after
+    steps 6, 12, 18 and 24 of its episode, by `maml.segment_update` on the segment it has
+    just played (replayed from the observations the carry kept), and starts every episode
+    from theta_0. Each lane acts alone, as `maml.adaptive_act`'s lanes do, with its own key
+    (`adaptive_keys`), so that the replay is exact."""
+    loop = maml.InnerLoop.of(nets.config)
+    lane = lambda tree: jax.tree.map(lambda x: x[None], tree)  # noqa: E731  [...] -> [1, ...]
+    unlane = lambda tree: jax.tree.map(lambda x: x[0], tree)  # noqa: E731
+
+    def act(acting: AgentParams, carry: AdaptiveCarry, obs, first: chex.Array, keys: chex.Array):
+        num_lanes = first.shape[0]
+        acting = _with_noise(acting, num_lanes)
+        shared, theta_0 = split_encoder_lstm_kernels(acting.params)
+        pick = lambda new, old: jax.tree.map(  # noqa: E731
+            lambda n, o: jnp.where(first.reshape((-1,) + (1,) * (o.ndim - 1)), n, o), new, old)
+        lanes = pick(jax.tree.map(lambda x: jnp.broadcast_to(x, (num_lanes,) + x.shape), theta_0), carry.lanes)
+        update = jax.tree.map(lambda u: jnp.where(first[:, None, None], 0.0, u), carry.update)
+        step_carry = _reset(carry.policy, first)
+        episode_step = step_carry.episode_step
+        slot = episode_step // loop.segment  # the updates made before this step
+        adapts = (episode_step > 0) & (episode_step % loop.segment == 0) & (slot <= loop.updates)
+
+        def lane_params(lanes, update):
+            params = join_partial_trees(shared, lanes)
+            return params, nets.model.apply(params, update, method="lstm_kernels")
+
+        def lane_update(lanes, update, start, seen_obs, seen_keys, variance, slot):  # one lane: theta_i -> theta_i+1
+            def run(lanes, gate_offsets):
+                params, kernels = lane_params(lanes, update)
+                lane_acting = acting._replace(params=params, noise_variance=variance[None])
+                return _replayed_segment(nets, lane_acting, kernels, lane(start), jax.tree.map(lambda x: x[:, None], seen_obs), seen_keys,
+                                         gate_offsets), None  # fmt: skip
+
+            grads, rows, _, _ = maml.segment_update(nets, loop, shared, lanes, lane(start.lstm[1]), run)
+            at = (slot - 1) * loop.segment
+            update = jax.tree.map(lambda u, r: jax.lax.dynamic_update_slice_in_dim(u, r, at, 0), update, rows)
+            return maml.inner_step(lanes, grads, loop.lr), update
+
+        def adapted():
+            new = jax.vmap(lane_update)(lanes, update, carry.segment_start, carry.seen_obs, carry.seen_keys,
+                                        acting.noise_variance, slot)  # fmt: skip
+            return jax.tree.map(lambda n, o: jnp.where(adapts.reshape((-1,) + (1,) * (o.ndim - 1)), n, o), new,
+                                (lanes, update))  # fmt: skip
+
+        lanes, update = jax.lax.cond(jnp.any(adapts), adapted, lambda: (lanes, update))
+
+        def lane_step(lanes, update, step_carry, obs, key, variance):  # one lane, as adaptive_act's act alone
+            params, kernels = lane_params(lanes, update)
+            lane_acting = acting._replace(params=params, noise_variance=variance[None])
+            action, next_carry = _policy_step(nets, lane_acting, kernels, lane(step_carry), lane(obs), key, greedy)
+            return action[0], unlane(next_carry)
+
+        action, next_carry = jax.vmap(lane_step)(lanes, update, step_carry, obs, keys, acting.noise_variance)
+        at = episode_step % loop.segment  # the step's place in its segment
+        lanes_idx = jnp.arange(num_lanes)
+        seen_obs = jax.tree.map(lambda buf, o: buf.at[lanes_idx, at].set(o), carry.seen_obs, obs)
+        seen_keys = carry.seen_keys.at[lanes_idx, at].set(keys)
+        starts = (at == 0)
+        segment_start = jax.tree.map(lambda n, o: jnp.where(starts.reshape((-1,) + (1,) * (o.ndim - 1)), n, o),
+                                     step_carry, carry.segment_start)  # fmt: skip
+        return action, AdaptiveCarry(next_carry, lanes, update, segment_start, seen_obs, seen_keys)
+
+    return StepPolicy(act, functools.partial(adaptive_keys, loop))
+
+
+def policy(nets: Networks, greedy: bool = False) -> StepPolicy:
     """The agent as a pure, batched policy function:
     `(acting, carry, obs, first, key) -> (action [B], carry)`.
 
     acting: `AgentParams` with the noise variance `[B]` (or `[]`) set (evaluation's);
-    carry: a `PolicyCarry` (`policy_carry(nets, B)` to start); obs: the environment's
-    observations, leaves `[B, ...]` (for the privileged `oracle`, from an environment wrapped
-    by `acting_env`); first: `[B]` bool, the step begins an episode (the carry is reset there);
-    key: the step's key, split in 3 as acting splits it: i_tau's noise, the action's sample,
-    and (unused here) the environment's, so that stepping the environment with
-    `split(split(key, 3)[2], B)` replays `rollout`'s episodes exactly
-    (`foresit_jax.evaluate.evaluate_policy`). The maml base adapts its parameters over
-    segments of an episode and has no step-by-step form here: use `rollout`."""
+    carry: `policy_carry(nets, B)` to start (with the maml base, `policy_carry(nets, B,
+    acting, obs)`); obs: the environment's observations, leaves `[B, ...]` (for the
+    privileged `oracle`, from an environment wrapped by `acting_env`); first: `[B]` bool,
+    the step begins an episode (the carry is reset there); key: the step's key, split in 3
+    as acting splits it: i_tau's noise, the action's sample, and (unused here) the
+    environment's. The returned `StepPolicy`'s `step_keys` gives the keys that replay
+    `rollout`'s episodes exactly (`foresit_jax.evaluate.policy_episodes`): one `[2]` key per
+    step, or, with the maml base, which adapts each lane's parameters inside its episode
+    (the adapted parameters live in the carry), one `[B, 2]` per step, a key per lane."""
     if nets.method.base_piece.adapts_in_episode:
-        raise ValueError(f"method {nets.method.name!r}: the maml base adapts its parameters over 6-step segments of "
-                         "an episode and has no step-by-step policy here; evaluate it with foresit_jax.rollout.rollout "
-                         "or foresit_jax.evaluate.Evaluator")  # fmt: skip
+        return _adaptive_policy(nets, greedy)
 
     def act(acting: AgentParams, carry: PolicyCarry, obs, first: chex.Array, key: chex.PRNGKey):
-        if acting.noise_variance is None:
-            raise ValueError("policy: give AgentParams.noise_variance, the evaluation's fixed variance")
-        lanes = first.shape[0]
-        acting = acting._replace(noise_variance=jnp.broadcast_to(jnp.asarray(acting.noise_variance, jnp.float32),
-                                                                 (lanes,)))  # fmt: skip
-        k_imag, k_act, _ = jax.random.split(key, 3)
-        actor = ActorState(env_state=None, obs=obs, lstm=reset_carry(first, carry.lstm),
-                           prev_probs=jnp.where(first[:, None], 0.0, carry.prev_probs), imagined=carry.imagined,
-                           s_0=carry.s_0, episode_step=jnp.where(first, 0, carry.episode_step), memory=None,
-                           tracker=None)  # fmt: skip
+        acting = _with_noise(acting, first.shape[0])
         kernels = nets.model.apply(acting.params, None, method="lstm_kernels")
-        lstm, _, logits, imagined, s_0, _ = _agent_step(nets, acting, kernels, actor, k_imag, None)
-        action = distributions.greedy(logits) if greedy else distributions.sample(k_act, logits)
-        probs = jax.lax.stop_gradient(distributions.probs(logits))
-        return action, PolicyCarry(lstm, probs, imagined, s_0, actor.episode_step + 1)
+        return _policy_step(nets, acting, kernels, _reset(carry, first), obs, key, greedy)
 
-    return act
+    return StepPolicy(act)

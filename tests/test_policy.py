@@ -6,6 +6,7 @@ exactly (issue 61).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import math
@@ -61,9 +62,56 @@ def test_the_policy_step_by_step_plays_rollouts_episodes_exactly(method):
     assert len(set(lengths.tolist())) >= 3, lengths  # the episodes differ: every step's keys mattered
 
 
-def test_policy_refuses_the_maml_base_and_a_missing_noise_variance():
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["a3c+maml", "a3c+maml+foresit"])
+def test_the_maml_policy_adapts_in_its_carry_and_plays_rollouts_episodes_exactly(method):
+    """The maml base step by step: each lane's theta_i in the carry, updated after steps 6,
+    12, 18, 24 of its episode from the segment it replays. At a large inner rate (1e4, so
+    that the updates change actions) it plays `rollout`'s episodes exactly, and those
+    differ from the same episodes at SAVN's rate: the updates it replays mattered."""
+    config = dataclasses.replace(H.tiny_config(method), maml_inner_lr=1e4)
+    nets, acting, env, env_params = _acting(config, done_bias=-2.0)
+    lanes, steps, key = 12, 30, jax.random.PRNGKey(5)
+    bound = BoundEnv(env, env_params)
+    obs, _ = env.reset(jax.random.PRNGKey(0), env_params)
+
+    def played(nets):
+        return jax.jit(lambda a: episode_stats(rollout.rollout(nets, a, bound, key, steps, num_lanes=lanes)),
+                       compiler_options=H.FAST_COMPILE)(acting)  # fmt: skip
+
+    want = played(nets)
+    act = rollout.policy(nets)
+    carry = rollout.policy_carry(nets, lanes, acting, jax.eval_shape(lambda: obs))
+    got = jax.jit(lambda a, c: policy_episodes(act, a, c, bound, key, steps, lanes),
+                  compiler_options=H.FAST_COMPILE)(acting, carry)  # fmt: skip
+    for name in ("success", "length", "optimal_length", "ended", "spl", "room_type"):
+        np.testing.assert_array_equal(np.asarray(getattr(got, name)), np.asarray(getattr(want, name)), err_msg=name)
+    lengths = np.asarray(want.length)
+    assert np.sum(lengths > 12) >= 3, lengths  # episodes long enough for two updates or more
+    savn = played(build(H.tiny_config(method)))  # the default inner rate, 1e-4
+    assert not np.array_equal(np.asarray(savn.length), lengths), lengths
+
+
+def test_the_maml_keys_are_adaptive_acts():
+    """`adaptive_keys` by hand: segment j's key is split(key, slots + 1)[j], split per lane,
+    then per step; the environment's is split(split(step key, 3)[2], 1)[0]."""
+    from foresit_jax.maml import InnerLoop
+
+    loop, key, lanes, steps = InnerLoop(segment=2, updates=2, lr=1.0, first_order=False), jax.random.PRNGKey(3), 3, 7
+    policy_keys, env_keys = rollout.adaptive_keys(loop, key, steps, lanes)
+    assert policy_keys.shape == (steps, lanes, 2) and env_keys.shape == (steps, lanes, 2)
+    segments = jax.random.split(key, 3)  # slots after steps 2 and 4, then the rest (3 steps)
+    for t, (j, n, i) in enumerate([(0, 2, 0), (0, 2, 1), (1, 2, 0), (1, 2, 1), (2, 3, 0), (2, 3, 1), (2, 3, 2)]):
+        for b in range(lanes):
+            want = jax.random.split(jax.random.split(segments[j], lanes)[b], n)[i]
+            np.testing.assert_array_equal(np.asarray(policy_keys[t, b]), np.asarray(want))
+            env_want = jax.random.split(jax.random.split(want, 3)[2], 1)[0]
+            np.testing.assert_array_equal(np.asarray(env_keys[t, b]), np.asarray(env_want))
+
+
+def test_the_maml_carry_needs_its_parameters_and_a_missing_noise_variance_is_refused():
     with pytest.raises(ValueError, match="maml base"):
-        rollout.policy(build(H.tiny_config("a3c+maml")))
+        rollout.policy_carry(build(H.tiny_config("a3c+maml")), 2)
     config = H.tiny_config("a3c+foresit")
     nets, acting, env, env_params = _acting(config)
     obs, _ = BoundEnv(env, env_params).reset(jax.random.split(jax.random.PRNGKey(0), 2))
@@ -105,15 +153,17 @@ def test_a_users_own_policy_runs_on_the_same_episodes():
 
 
 @pytest.mark.slow
-def test_load_reproduces_the_runs_test_results(tmp_path):
+@pytest.mark.parametrize("method", ["a3c+foresit", "a3c+maml"])
+def test_load_reproduces_the_runs_test_results(tmp_path, method):
     """A tiny run trained by the CLI, loaded (`experiments.load`, the selected and the last
-    model) and evaluated on its test episodes: the numbers its results.json reports."""
+    model) and evaluated on its test episodes: the numbers its results.json reports (the
+    maml base adapting step by step in its carry)."""
     import experiments
     from experiments import train as train_cli
     from experiments.errors import UserError
 
     out = tmp_path / "run"
-    train_cli.main(train_cli.Args(method="a3c+foresit", preset="tiny", seed=3, out=out, progress=False))
+    train_cli.main(train_cli.Args(method=method, preset="tiny", seed=3, out=out, progress=False))
     results = json.loads((out / "results.json").read_text())["results"][0]
     for which, reported in (("best", "selected"), ("last", "last")):
         policy = experiments.load(out, seed=3, which=which)

@@ -16,7 +16,7 @@ from experiments import errors
 from experiments.running import checkpoint, devices, run, rundir, selection, sweeps
 from foresit_jax import rollout
 from foresit_jax.config import Config
-from foresit_jax.evaluate import agent_params
+from foresit_jax.evaluate import Evaluator, agent_params
 from foresit_jax.networks import build
 from foresit_jax.train import make_trainer
 
@@ -115,9 +115,11 @@ def models_of_sweep(folder: Path, methods: tuple[str, ...]) -> dict[str, list[Mo
 class Policy(NamedTuple):
     """A trained policy (`load`): `act(params, carry, obs, first, key) -> (action [B], carry)`
     is pure and batched over lanes (`foresit_jax.rollout.policy`: `first` `[B]` marks an
-    episode's first step, where the carry resets); `params` what it acts with (theta/omega,
-    f_w's w, the evaluation's noise variance); `initial_carry(num_lanes)` its carry before a
-    first step; `config` the run's Config. `test_key` and `test_episodes_per_room` give
+    episode's first step, where the carry resets; with the maml base the carry holds each
+    lane's adapted parameters, and `key` is one per lane, `[B, 2]`: `act.step_keys` gives
+    the keys a rollout uses); `params` what it acts with (theta/omega, f_w's w, the
+    evaluation's noise variance); `initial_carry(num_lanes)` its carry before a first step;
+    `config` the run's Config. `test_key` and `test_episodes_per_room` give
     the episodes the run's report tested it on (`foresit_jax.evaluate.evaluate_policy`)."""
 
     act: Callable
@@ -149,13 +151,18 @@ def load(run_dir, seed: int = 0, which: str = "best") -> Policy:
         raise errors.UserError(f"{folder} trained seeds {trained.seeds}, not seed {seed}")
     i, config = trained.seeds.index(seed), trained.config
     nets = build(config)
-    try:
-        act = rollout.policy(nets, config.pieces.greedy_evaluation)
-    except ValueError as e:
-        raise errors.UserError(f"{folder}: {e}") from None
+    act = rollout.policy(nets, config.pieces.greedy_evaluation)
     if which == "best":
         params = devices.seed_slice(trained.selected, i)
     else:  # as the run's report computes the last model's (`Run.test`)
         params = devices.seed_slice(run.seeds_params(config, trained.states), i)
-    return Policy(act, params, functools.partial(rollout.policy_carry, nets), config, selection.test_key(seed),
-                  trained.schedule["test_episodes_per_room"])  # fmt: skip
+    carry = functools.partial(rollout.policy_carry, nets)
+    if config.pieces.base_piece.adapts_in_episode:  # its carry holds theta_i and the running segment's observations
+        carry = functools.partial(rollout.policy_carry, nets, acting=params, obs=_observation_shapes(nets, config))
+    return Policy(act, params, carry, config, selection.test_key(seed), trained.schedule["test_episodes_per_room"])
+
+
+def _observation_shapes(nets, config: Config) -> dict:
+    """One observation's shapes in the environment the policy acts in (`rollout.acting_env`)."""
+    env = rollout.acting_env(nets, rollout.BoundEnv(Evaluator.for_config(config).env, None)).env
+    return {name: jax.ShapeDtypeStruct(space.shape, space.dtype) for name, space in env.observation_space().spaces.items()}
