@@ -69,6 +69,9 @@ class Args:
     """Random starts drawn per split (train fits, test scores)."""
     seed: int = 0
     """Seed of the starts and of the bootstrap."""
+    perception_range: Optional[float] = None
+    """Emulate a perception range on the view (a lever, issue 58): objects farther than this many cells (depth) are
+    seen but not resolved, one 'unresolved object' class, and a target that far does not count as in view (None: off)"""
     out: Optional[Path] = None
     """Also write foresight.md and foresight.json into this folder."""
 
@@ -126,6 +129,7 @@ def foresight_bound(train: dict, test: dict, labels: str, seed: int = 0) -> dict
         return out
     majority = np.bincount(y_train).argmax()
     out["majority"] = float(np.mean(y_test == majority))
+    out["test_shares"] = (np.bincount(y_test) / len(y_test)).tolist()  # each label's share of the test rows
     correct = {}
     for name in FEATURE_SETS:
         predicted, out[f"C {name}"] = fit_and_score(train[name][keep_train], y_train, train["group"][keep_train],
@@ -148,14 +152,30 @@ def foresight_bound(train: dict, test: dict, labels: str, seed: int = 0) -> dict
 
 
 # ---------------------------------------------------------------------- the data
+def within_range(sem: np.ndarray, depth: np.ndarray, perception_range: Optional[float], num_semantic: int,
+                 num_targets: int, structural: int) -> tuple[np.ndarray, int]:  # fmt: skip
+    """A perception range emulated on views (sem, depth [N, 3, W]): the object categories
+    (`structural` .. `structural + num_targets`) seen farther than `perception_range` cells
+    become one extra class, `num_semantic` ("an object, unresolved"); walls, floor and
+    furniture stay as they are. Returns (the views' classes, the number of classes); None
+    leaves the views alone."""
+    if perception_range is None:
+        return sem, num_semantic
+    far = (sem >= structural) & (sem < structural + num_targets) & (depth > perception_range)
+    return np.where(far, num_semantic, sem), num_semantic + 1
+
+
 def features(sem: np.ndarray, depth: np.ndarray, target: np.ndarray, num_semantic: int, num_targets: int,
-             structural: int) -> dict[str, np.ndarray]:  # fmt: skip
-    """The feature sets of first views: sem, depth [N, 3, W] (envs' `view`), the target
-    category [N] (ints, the setup's category index)."""
+             structural: int, unresolved: Optional[int] = None) -> dict[str, np.ndarray]:  # fmt: skip
+    """The feature sets of first views: sem, depth [N, 3, W] (envs' `view`, or
+    `within_range`'s, whose `unresolved` class reads as an object in the geometry), the
+    target category [N] (ints, the setup's category index)."""
     n, width = sem.shape[0], sem.shape[-1]
-    # Every object category -> one "object" class; every furniture kind (layouts with
-    # priors: classes after the categories) -> furniture.
+    # Every object category (and an unresolved object) -> one "object" class; every
+    # furniture kind (layouts with priors: classes after the categories) -> furniture.
     coarse = np.where(sem >= structural + num_targets, C.SEM_FURNITURE, np.minimum(sem, structural))
+    if unresolved is not None:
+        coarse = np.where(sem == unresolved, structural, coarse)
     geometry = np.concatenate([np.eye(structural + 1)[coarse].reshape(n, -1),
                                depth.reshape(n, -1) / max(float(depth.max()), 1e-9)], axis=1)  # fmt: skip
     half = width // 2
@@ -175,10 +195,11 @@ def bearing_sector(offset, heading: int) -> int:
     return int(((angle + 45.0) % 360.0) // 90.0)
 
 
-def collect(env, params, resets: int, key) -> dict[str, np.ndarray]:
+def collect(env, params, resets: int, key, perception_range: Optional[float] = None) -> dict[str, np.ndarray]:
     """From `resets` starts: the first views' feature sets, the turn and bearing labels (-1
     where a row is left out), the scene of each start (`group`) and whether the target is
-    out of view (only those rows keep labels)."""
+    out of view (only those rows keep labels); with `perception_range`, the views as
+    `within_range` sees them (a target beyond it is out of view)."""
     def one(k):
         obs, state = env.reset(k, params)
         sem, depth = env.view(state, params)
@@ -191,7 +212,9 @@ def collect(env, params, resets: int, key) -> dict[str, np.ndarray]:
         np.asarray, jax.jit(jax.vmap(one))(jax.random.split(key, resets)))
     bank = params.bank
     obj_cat = np.asarray(bank.obj_cat)
-    out_of_view = ~(sem == C.NUM_STRUCTURAL + target[:, None, None]).any(axis=(1, 2))
+    seen, num_classes = within_range(sem, depth, perception_range, env.num_semantic, env.num_categories,
+                                     C.NUM_STRUCTURAL)  # fmt: skip
+    out_of_view = ~(seen == C.NUM_STRUCTURAL + target[:, None, None]).any(axis=(1, 2))
     turn = np.where(after[:, 0] < after[:, 1], 0, np.where(after[:, 1] < after[:, 0], 1, -1))
     bearing = np.full(resets, -1)
     for i in range(resets):
@@ -201,7 +224,8 @@ def collect(env, params, resets: int, key) -> dict[str, np.ndarray]:
         d = cells - pos[i]
         bearing[i] = bearing_sector(d[np.argmin(np.abs(d).sum(1))], heading[i])
     keep = out_of_view & (here > 1)
-    data = features(sem, depth, target, env.num_semantic, env.num_categories, C.NUM_STRUCTURAL)
+    unresolved = None if perception_range is None else env.num_semantic
+    data = features(seen, depth, target, num_classes, env.num_categories, C.NUM_STRUCTURAL, unresolved)
     data.update(turn=np.where(keep, turn, -1), bearing=np.where(keep, bearing, -1),
                 group=np.asarray(bank.numbers)[scene], out_of_view=out_of_view)  # fmt: skip
     if getattr(env, "priors", False):  # where the first view shows a piece the target stands by
@@ -239,18 +263,26 @@ def markdown(args: Args, results: dict, seconds: float) -> str:
                 rows.append([f"{label}, {name}", "", f"{part['samples']} ({100 * part['share']:.0f}%)", "",
                              *(f"{100 * part[k]:.1f}" for k in FEATURE_SETS),
                              f"{100 * part['gain']:+.1f} [{100 * lo:+.1f}, {100 * hi:+.1f}]"])  # fmt: skip
+    shares = "; ".join(f"{label}: " + ", ".join(f"{name} {100 * share:.0f}%" for name, share in zip(names, r["test_shares"]))
+                       for (label, r), names in zip(results.items(), (TURNS, BEARINGS)) if "test_shares" in r)  # fmt: skip
     family = f"{args.layout} layouts with priors" if args.priors else f"{args.layout} layouts"
+    if args.perception_range is not None:
+        family += f", objects resolved within {args.perception_range:g} cells (emulated on the view)"
     return (f"# Foresight: {args.setup} setup, {family}\n\n"
             f"{args.resets} starts per split; the starts whose first view does not show the target; fitted on the "
             "train layouts, accuracy (%) on the test layouts; the gain of the target over the view with its 95% "
             f"interval over the test layouts ({seconds:.0f} s).\n\n"
             + markdown_table(rows, ["predicts", "train starts", "test starts", "majority", *FEATURE_SETS,
-                                    "gain from the target"]) + "\n")  # fmt: skip
+                                    "gain from the target"]) + "\n"
+            + (f"\nThe test starts' labels: {shares}.\n" if shares else ""))  # fmt: skip
 
 
 def main(args: Args) -> dict:
     if importlib.util.find_spec("sklearn") is None:
         raise errors.UserError("experiments.foresight needs scikit-learn: pip install -e '.[paper]'")
+    if args.perception_range is not None and not args.perception_range > 0:
+        raise errors.UserError(f"--perception-range {args.perception_range}: give a positive number of cells, or leave "
+                               "it out for no range")  # fmt: skip
     if args.resets < 100:
         raise errors.UserError(f"--resets {args.resets}: give at least 100 starts per split")
     t0 = time.time()
@@ -258,7 +290,8 @@ def main(args: Args) -> dict:
     for i, split in enumerate(("train", "test")):
         env, params = envs.make("GridNav-v0", setup=args.setup, split=split, layout=args.layout, training=False,
                                 priors=args.priors)  # fmt: skip
-        data[split] = collect(env, params, args.resets, jax.random.fold_in(jax.random.PRNGKey(args.seed), i))
+        data[split] = collect(env, params, args.resets, jax.random.fold_in(jax.random.PRNGKey(args.seed), i),
+                              args.perception_range)  # fmt: skip
     results = {label: foresight_bound(data["train"], data["test"], label, args.seed)
                for label in ("turn", "bearing")}  # fmt: skip
     md = markdown(args, results, time.time() - t0)

@@ -54,6 +54,8 @@ def test_rows_labelled_minus_one_are_left_out():
     train["turn"][:50] = -1
     r = foresight.foresight_bound(train, test, "turn")
     assert (r["train_samples"], r["test_samples"]) == (550, 500)
+    kept = test["turn"][test["turn"] >= 0]  # the shares count the kept test rows only
+    assert r["test_shares"] == pytest.approx([np.mean(kept == 0), np.mean(kept == 1)])
 
 
 @pytest.mark.parametrize("offset, heading, sector", [
@@ -149,3 +151,30 @@ def test_anchor_in_view_reads_the_relation_table():
     sem[2, 1, 2] = counter  # a counter, with a pillow as the target
     target = np.array([cats.index("Toaster"), cats.index("Toaster"), cats.index("Pillow")])
     np.testing.assert_array_equal(foresight.anchor_in_view(sem, target, "savn"), [True, False, False])
+
+
+def test_a_perception_range_leaves_near_objects_and_all_furniture_resolved():
+    """By hand: structural classes 0-3, target categories 4-5, a furniture kind 6 (7 classes);
+    range 6 cells. The object at 3 cells stays, the one at 8 becomes class 7 (unresolved),
+    the furniture at 9 stays; the geometry reads the unresolved one as an object (class 4 of
+    its one-hot), and the sides show it as its own class."""
+    sem = np.array([[[4, 5, 6, 1]]])  # [N=1, rows=1, W=4]
+    depth = np.array([[[3.0, 8.0, 9.0, 2.0]]])
+    seen, classes = foresight.within_range(sem, depth, 6.0, 7, 2, 4)
+    np.testing.assert_array_equal(seen, [[[4, 7, 6, 1]]])
+    assert classes == 8
+    untouched, same = foresight.within_range(sem, depth, None, 7, 2, 4)
+    assert untouched is sem and same == 7
+    f = foresight.features(seen, depth, np.array([0]), classes, 2, 4, unresolved=7)
+    onehots = f["geometry"][0, : 4 * 5].reshape(4, 5)  # per pixel: nothing, wall, floor, furniture, object
+    np.testing.assert_array_equal(onehots.argmax(1), [4, 4, 3, 1])
+    sides = f["view"][0, f["geometry"].shape[1]:].reshape(2, classes)
+    assert sides[0, 4] and sides[0, 7] and not sides[0, 5]  # left half: the near object, the unresolved one
+    assert sides[1, 6] and sides[1, 1]
+
+
+def test_perception_range_must_be_positive():
+    from experiments.errors import UserError
+
+    with pytest.raises(UserError, match="perception-range"):
+        foresight.main(foresight.Args(perception_range=0.0, resets=100))
