@@ -62,6 +62,7 @@ def test_goal_view_is_the_view_at_the_end_of_a_reference_shortest_path(request, 
     assert (np.abs(obs["goal_view"] - obs["view"]).sum((1, 2, 3)) > 0).mean() > 0.5
 
 
+@pytest.mark.slow  # 11.4 s cold (docs/testing.md)
 def test_each_episode_holds_its_own_goal_view_after_auto_resets_lane_by_lane(savn_kit):
     """Lanes acting at random for 40 steps (many episodes end): at every step each lane's
     goal view is the goal of the episode it is in (computed alone from that episode's
@@ -113,7 +114,8 @@ def small_config(**kw) -> Config:
     return Config(**{**base, **kw})
 
 
-@pytest.mark.parametrize("imagination_input", ["head", pytest.param("encoder", marks=pytest.mark.slow)])
+@pytest.mark.slow  # 11.6 s cold (docs/testing.md)
+@pytest.mark.parametrize("imagination_input", ["head", "encoder"])
 def test_oracle_i_tau_with_the_noise_off_is_one_network_step_on_the_goal_view(savn_kit, imagination_input):
     config = small_config(imagination_input=imagination_input)
     nets = build(config)
