@@ -40,8 +40,6 @@ def test_ceiling_md_quotes_the_ceiling(tmp_path, capsys, archive):
     if archive == "ceiling_savn.tar.xz":
         assert not ceiling["SR"]["resolved"] and "ceiling not resolved" in doc
         assert f"moves test SR by {study_data.interval(sr)} points over the critic alone" in flat
-        readme = " ".join((REPO / "README.md").read_text().split())
-        assert f"moves SR by {study_data.interval(sr)} over the critic alone" in readme
     else:
         share = ceiling["SR"]
         assert share["resolved"]
@@ -96,3 +94,33 @@ def test_ceiling_md_quotes_the_noise_off_oracle(tmp_path, capsys):
             f"{pair['robust']['SR']['mde']:.1f} |") in results_md
     assert "| today's rooms, the oracle with Eq. 7's noise | +1.4 [-2.0, +4.7] | 4.5 |" in results_md
     assert "| rooms with priors, the oracle with Eq. 7's noise | +4.1 [+0.2, +8.0] | 5.3 |" in results_md
+
+
+def test_ceiling_md_quotes_the_machine_matched_ceiling(tmp_path, capsys):
+    """The critic retrained on the oracles' machine (docs/data/ceiling_savn_epyc.tar.xz): its
+    row, both ceilings (not resolved), results.md's rows and the README's sentence."""
+    noiseoff = "a3c+oracle@learning_rate=3e-4,sigma2_max=0"
+    root = study_data.unpack("ceiling_savn_epyc.tar.xz", tmp_path, (CRITIC, ORACLE, noiseoff))
+    out = compare.main(compare.Args(run=root, pairs=(f"{CRITIC}:{ORACLE}", f"{CRITIC}:{noiseoff}")))
+    capsys.readouterr()
+    doc = (REPO / "docs" / "ceiling.md").read_text()
+    results = report.load(root)
+    sr, spl = (report.values(results[CRITIC], c) for c in ("SR", "SPL"))
+    row = (f"| a3c+critic, on the EPYC | {' / '.join(f'{x:.1f}' for x in sr)} | {sr.mean():.1f} ± {sr.std(ddof=1):.1f} | "
+           f"{spl.mean():.1f} ± {spl.std(ddof=1):.1f} |")
+    assert row in doc, row
+    results_md = (REPO / "docs" / "results.md").read_text()
+    for arm, label, setting in (
+        (ORACLE, "the ceiling: a3c+oracle (privileged) - a3c+critic",
+         "today's rooms, machine-matched (the critic retrained on the EPYC), with the noise"),
+        (noiseoff, "the noise-off ceiling: a3c+oracle@sigma2_max=0 - a3c+critic", "today's rooms, machine-matched, without noise"),
+    ):  # fmt: skip
+        pair = out["pairs"][f"{arm} - {CRITIC}"]
+        assert pair["SR"]["ci_low"] < 0 < pair["SR"]["ci_high"]  # not resolved
+        mde = f"{pair['robust']['SR']['mde']:.1f}"
+        row = f"| {label} | {study_data.interval(pair['SR'])} | {study_data.interval(pair['SPL'])} | {mde} |"
+        assert row in doc, row
+        assert f"| {setting} | {study_data.interval(pair['SR'])} | {mde} |" in results_md
+    trained = report.values(results[ORACLE], "SR")
+    readme = " ".join((REPO / "README.md").read_text().split())
+    assert f"moves SR by {study_data.interval(stats.paired(sr, trained))} over the critic alone" in readme
