@@ -34,6 +34,7 @@ chooses by the base's flag, the one place that reads it for acting.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from typing import Any, Callable, NamedTuple, Optional
 
@@ -480,7 +481,8 @@ def adaptive_keys(loop: maml.InnerLoop, key: chex.PRNGKey, num_steps: int, num_l
     return policy_keys, jax.vmap(jax.vmap(env_key))(policy_keys)
 
 
-class StepPolicy(NamedTuple):
+@dataclasses.dataclass(frozen=True)
+class StepPolicy:
     """A batched policy function, `(acting, carry, obs, first, key) -> (action [B], carry)`
     (call it), with the key schedule that replays `rollout`'s episodes exactly:
     `step_keys(key, num_steps, num_lanes) -> (the policy's keys [T, ...], the
