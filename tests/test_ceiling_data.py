@@ -96,31 +96,44 @@ def test_ceiling_md_quotes_the_noise_off_oracle(tmp_path, capsys):
     assert "| rooms with priors, the oracle with Eq. 7's noise | +4.1 [+0.2, +8.0] | 5.3 |" in results_md
 
 
-def test_ceiling_md_quotes_the_machine_matched_ceiling(tmp_path, capsys):
-    """The critic retrained on the oracles' machine (docs/data/ceiling_savn_epyc.tar.xz): its
-    row, both ceilings (not resolved), results.md's rows and the README's sentence."""
-    noiseoff = "a3c+oracle@learning_rate=3e-4,sigma2_max=0"
-    root = study_data.unpack("ceiling_savn_epyc.tar.xz", tmp_path, (CRITIC, ORACLE, noiseoff))
-    out = compare.main(compare.Args(run=root, pairs=(f"{CRITIC}:{ORACLE}", f"{CRITIC}:{noiseoff}")))
+NOISEOFF = "a3c+oracle@learning_rate=3e-4,sigma2_max=0"
+
+
+@pytest.mark.parametrize("archive, methods, label, rows", [
+    ("ceiling_savn_epyc.tar.xz", (CRITIC, ORACLE, NOISEOFF), "a3c+critic, on the EPYC", (
+        (ORACLE, "the ceiling: a3c+oracle (privileged) - a3c+critic",
+         "today's rooms, machine-matched (the critic retrained on the EPYC), with the noise"),
+        (NOISEOFF, "the noise-off ceiling: a3c+oracle@sigma2_max=0 - a3c+critic",
+         "today's rooms, machine-matched, without noise"))),
+    ("ceiling_priors_epyc.tar.xz", (CRITIC, ORACLE), "a3c+critic, on the EPYC, rooms with priors", (
+        (ORACLE, "the ceiling in rooms with priors: a3c+oracle (privileged) - a3c+critic",
+         "rooms with priors, machine-matched (the critic retrained on the EPYC), with the noise"),)),
+])  # fmt: skip
+def test_ceiling_md_quotes_the_machine_matched_ceilings(tmp_path, capsys, archive, methods, label, rows):
+    """The critic retrained on the oracles' machine (docs/data/`archive`): its row, each
+    ceiling (none resolved), results.md's rows and the README's sentence."""
+    root = study_data.unpack(archive, tmp_path, methods)
+    out = compare.main(compare.Args(run=root, pairs=tuple(f"{CRITIC}:{arm}" for arm, _, _ in rows)))
     capsys.readouterr()
     doc = (REPO / "docs" / "ceiling.md").read_text()
     results = report.load(root)
     sr, spl = (report.values(results[CRITIC], c) for c in ("SR", "SPL"))
-    row = (f"| a3c+critic, on the EPYC | {' / '.join(f'{x:.1f}' for x in sr)} | {sr.mean():.1f} ± {sr.std(ddof=1):.1f} | "
+    row = (f"| {label} | {' / '.join(f'{x:.1f}' for x in sr)} | {sr.mean():.1f} ± {sr.std(ddof=1):.1f} | "
            f"{spl.mean():.1f} ± {spl.std(ddof=1):.1f} |")
     assert row in doc, row
     results_md = (REPO / "docs" / "results.md").read_text()
-    for arm, label, setting in (
-        (ORACLE, "the ceiling: a3c+oracle (privileged) - a3c+critic",
-         "today's rooms, machine-matched (the critic retrained on the EPYC), with the noise"),
-        (noiseoff, "the noise-off ceiling: a3c+oracle@sigma2_max=0 - a3c+critic", "today's rooms, machine-matched, without noise"),
-    ):  # fmt: skip
+    for arm, pair_label, setting in rows:
         pair = out["pairs"][f"{arm} - {CRITIC}"]
         assert pair["SR"]["ci_low"] < 0 < pair["SR"]["ci_high"]  # not resolved
         mde = f"{pair['robust']['SR']['mde']:.1f}"
-        row = f"| {label} | {study_data.interval(pair['SR'])} | {study_data.interval(pair['SPL'])} | {mde} |"
+        row = f"| {pair_label} | {study_data.interval(pair['SR'])} | {study_data.interval(pair['SPL'])} | {mde} |"
         assert row in doc, row
         assert f"| {setting} | {study_data.interval(pair['SR'])} | {mde} |" in results_md
-    trained = report.values(results[ORACLE], "SR")
+    ceiling = study_data.interval(stats.paired(sr, report.values(results[ORACLE], "SR")))
     readme = " ".join((REPO / "README.md").read_text().split())
-    assert f"moves SR by {study_data.interval(stats.paired(sr, trained))} over the critic alone" in readme
+    flat = " ".join(doc.split())
+    if "priors" in archive:
+        assert f"in rooms with priors, {ceiling} ([docs/ceiling.md]" in readme
+        assert f"the ceiling becomes {ceiling}" in flat
+    else:
+        assert f"moves SR by {ceiling} over the critic alone" in readme
