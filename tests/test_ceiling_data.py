@@ -10,6 +10,13 @@ from experiments import compare
 from experiments.reporting import report, stats
 
 REPO = Path(__file__).resolve().parents[1]
+def arm_row(results: dict, arm: str, label: str) -> str:
+    """The docs' row of one arm: SR per seed, SR and SPL as mean ± std."""
+    sr, spl = (report.values(results[arm], c) for c in ("SR", "SPL"))
+    return (f"| {label} | {' / '.join(f'{x:.1f}' for x in sr)} | {sr.mean():.1f} ± {sr.std(ddof=1):.1f} | "
+            f"{spl.mean():.1f} ± {spl.std(ddof=1):.1f} |")
+
+
 CRITIC, FORESIT, ORACLE = ("a3c+critic@learning_rate=3e-4", "a3c+foresit@learning_rate=3e-4",
                            "a3c+oracle@learning_rate=3e-4")  # fmt: skip
 
@@ -23,10 +30,7 @@ def test_ceiling_md_quotes_the_ceiling(tmp_path, capsys, archive):
     doc = (REPO / "docs" / "ceiling.md").read_text()
     results = report.load(root)
     for arm, label in ((CRITIC, "a3c+critic"), (FORESIT, "a3c+foresit"), (ORACLE, "a3c+oracle (privileged)")):
-        sr, spl = (report.values(results[arm], c) for c in ("SR", "SPL"))
-        row = (f"| {label} | {' / '.join(f'{x:.1f}' for x in sr)} | {sr.mean():.1f} ± {sr.std(ddof=1):.1f} | "
-               f"{spl.mean():.1f} ± {spl.std(ddof=1):.1f} |")
-        assert row in doc, row
+        assert arm_row(results, arm, label) in doc, arm_row(results, arm, label)
     for (a, b), label in (((CRITIC, ORACLE), "the ceiling: a3c+oracle (privileged) - a3c+critic"),
                           ((CRITIC, FORESIT), "a3c+foresit - a3c+critic")):  # fmt: skip
         pair = out["pairs"][f"{b} - {a}"]
@@ -76,9 +80,7 @@ def test_ceiling_md_quotes_the_noise_off_oracle(tmp_path, capsys):
     capsys.readouterr()
     doc = (REPO / "docs" / "ceiling.md").read_text()
     results = report.load(root)
-    sr, spl = (report.values(results[noiseoff], c) for c in ("SR", "SPL"))
-    row = (f"| a3c+oracle@sigma2_max=0 (privileged) | {' / '.join(f'{x:.1f}' for x in sr)} | "
-           f"{sr.mean():.1f} ± {sr.std(ddof=1):.1f} | {spl.mean():.1f} ± {spl.std(ddof=1):.1f} |")
+    row = arm_row(results, noiseoff, "a3c+oracle@sigma2_max=0 (privileged)")
     assert row in doc, row
     for (a, label) in ((CRITIC, "the noise-off ceiling: a3c+oracle@sigma2_max=0 - a3c+critic"),
                        (ORACLE, "a3c+oracle@sigma2_max=0 - a3c+oracle (both privileged)")):  # fmt: skip
@@ -117,10 +119,7 @@ def test_ceiling_md_quotes_the_machine_matched_ceilings(tmp_path, capsys, archiv
     capsys.readouterr()
     doc = (REPO / "docs" / "ceiling.md").read_text()
     results = report.load(root)
-    sr, spl = (report.values(results[CRITIC], c) for c in ("SR", "SPL"))
-    row = (f"| {label} | {' / '.join(f'{x:.1f}' for x in sr)} | {sr.mean():.1f} ± {sr.std(ddof=1):.1f} | "
-           f"{spl.mean():.1f} ± {spl.std(ddof=1):.1f} |")
-    assert row in doc, row
+    assert arm_row(results, CRITIC, label) in doc, arm_row(results, CRITIC, label)
     results_md = (REPO / "docs" / "results.md").read_text()
     for arm, pair_label, setting in rows:
         pair = out["pairs"][f"{arm} - {CRITIC}"]
@@ -129,7 +128,7 @@ def test_ceiling_md_quotes_the_machine_matched_ceilings(tmp_path, capsys, archiv
         row = f"| {pair_label} | {study_data.interval(pair['SR'])} | {study_data.interval(pair['SPL'])} | {mde} |"
         assert row in doc, row
         assert f"| {setting} | {study_data.interval(pair['SR'])} | {mde} |" in results_md
-    ceiling = study_data.interval(stats.paired(sr, report.values(results[ORACLE], "SR")))
+    ceiling = study_data.interval(stats.paired(*(report.values(results[arm], "SR") for arm in (CRITIC, ORACLE))))
     readme = " ".join((REPO / "README.md").read_text().split())
     flat = " ".join(doc.split())
     if "priors" in archive:
