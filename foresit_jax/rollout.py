@@ -466,7 +466,8 @@ def lockstep_keys(key: chex.PRNGKey, num_steps: int, num_lanes: int) -> tuple[ch
     return keys, jax.vmap(lambda k: jax.random.split(jax.random.split(k, 3)[2], num_lanes))(keys)
 
 
-def adaptive_keys(loop: maml.InnerLoop, key: chex.PRNGKey, num_steps: int, num_lanes: int) -> tuple[chex.Array, chex.Array]:
+def adaptive_keys(loop: maml.InnerLoop, key: chex.PRNGKey, num_steps: int,
+                  num_lanes: int) -> tuple[chex.Array, chex.Array]:  # fmt: skip
     """The keys `maml.adaptive_act` gives a whole-episode rollout, for a step-by-step replay:
     one key per segment (the update slots' and the rest's, `split(key, slots + 1)`), split
     per lane, then per step: (the policy's `[T, B, 2]`, one per lane; the environment's
@@ -502,8 +503,8 @@ def policy_carry(nets: Networks, num_lanes: int, acting: Optional[AgentParams] =
     (`jax.eval_shape`), to shape the segment it keeps."""
     hidden = nets.config.hidden_size
     zeros = jnp.zeros((num_lanes, hidden), jnp.float32)
-    carry = PolicyCarry(initial_carry((num_lanes,), hidden), jnp.zeros((num_lanes, nets.config.num_actions), jnp.float32),
-                        zeros, zeros, jnp.zeros((num_lanes,), jnp.int32))  # fmt: skip
+    probs = jnp.zeros((num_lanes, nets.config.num_actions), jnp.float32)
+    carry = PolicyCarry(initial_carry((num_lanes,), hidden), probs, zeros, zeros, jnp.zeros((num_lanes,), jnp.int32))
     if not nets.method.base_piece.adapts_in_episode:
         return carry
     if acting is None or obs is None:
@@ -515,8 +516,7 @@ def policy_carry(nets: Networks, num_lanes: int, acting: Optional[AgentParams] =
     kernels = lstm_kernels(encoder_lstm_params(acting.params))
     rows, dtype = loop.segment * loop.updates, kernels.input_kernel.dtype
     update = LowRankUpdate(jnp.zeros((num_lanes, rows, kernels.input_kernel.shape[0]), dtype),
-                                jnp.zeros((num_lanes, rows, hidden), dtype),
-                                jnp.zeros((num_lanes, rows, 4 * hidden), dtype))  # fmt: skip
+                           jnp.zeros((num_lanes, rows, hidden), dtype), jnp.zeros((num_lanes, rows, 4 * hidden), dtype))
     return AdaptiveCarry(
         policy=carry,
         lanes=jax.tree.map(lambda x: jnp.broadcast_to(x, (num_lanes,) + x.shape), lanes),
@@ -536,7 +536,8 @@ def _with_noise(acting: AgentParams, lanes: int) -> AgentParams:
 
 def _reset(carry: PolicyCarry, first: chex.Array) -> PolicyCarry:
     """The carry as a step sees it: zeroed where `first` begins an episode."""
-    return carry._replace(lstm=reset_carry(first, carry.lstm), prev_probs=jnp.where(first[:, None], 0.0, carry.prev_probs),
+    probs = jnp.where(first[:, None], 0.0, carry.prev_probs)
+    return carry._replace(lstm=reset_carry(first, carry.lstm), prev_probs=probs,
                           episode_step=jnp.where(first, 0, carry.episode_step))  # fmt: skip
 
 
@@ -588,6 +589,11 @@ def _replayed_segment(nets: Networks, acting: AgentParams, kernels, start: Polic
     return out
 
 
+def _where_lanes(mask: chex.Array, new, old):
+    """`new` where `mask` `[B]` is true, else `old` (trees of leaves `[B, ...]`)."""
+    return jax.tree.map(lambda n, o: jnp.where(mask.reshape((-1,) + (1,) * (o.ndim - 1)), n, o), new, old)
+
+
 def _adaptive_policy(nets: Networks, greedy: bool) -> StepPolicy:
     """The maml base step by step (`policy`): each lane adapts its own parameters after
     steps 6, 12, 18 and 24 of its episode, by `maml.segment_update` on the segment it has
@@ -595,17 +601,16 @@ def _adaptive_policy(nets: Networks, greedy: bool) -> StepPolicy:
     from theta_0. Each lane acts alone, as `maml.adaptive_act`'s lanes do, with its own key
     (`adaptive_keys`), so that the replay is exact."""
     loop = maml.InnerLoop.of(nets.config)
-    lane = lambda tree: jax.tree.map(lambda x: x[None], tree)  # noqa: E731  [...] -> [1, ...]
-    unlane = lambda tree: jax.tree.map(lambda x: x[0], tree)  # noqa: E731
+    lane = lambda tree, axis=0: jax.tree.map(lambda x: jnp.expand_dims(x, axis), tree)  # noqa: E731  a lane of 1
 
     def act(acting: AgentParams, carry: AdaptiveCarry, obs, first: chex.Array, keys: chex.Array):
         num_lanes = first.shape[0]
         acting = _with_noise(acting, num_lanes)
         shared, theta_0 = split_encoder_lstm_kernels(acting.params)
-        pick = lambda new, old: jax.tree.map(  # noqa: E731
-            lambda n, o: jnp.where(first.reshape((-1,) + (1,) * (o.ndim - 1)), n, o), new, old)
-        lanes = pick(jax.tree.map(lambda x: jnp.broadcast_to(x, (num_lanes,) + x.shape), theta_0), carry.lanes)
-        update = jax.tree.map(lambda u: jnp.where(first[:, None, None], 0.0, u), carry.update)
+        # A new episode starts from theta_0.
+        lanes = _where_lanes(first, jax.tree.map(lambda x: jnp.broadcast_to(x, (num_lanes,) + x.shape), theta_0),
+                             carry.lanes)  # fmt: skip
+        update = _where_lanes(first, jax.tree.map(jnp.zeros_like, carry.update), carry.update)
         step_carry = _reset(carry.policy, first)
         episode_step = step_carry.episode_step
         slot = episode_step // loop.segment  # the updates made before this step
@@ -619,8 +624,9 @@ def _adaptive_policy(nets: Networks, greedy: bool) -> StepPolicy:
             def run(lanes, gate_offsets):
                 params, kernels = lane_params(lanes, update)
                 lane_acting = acting._replace(params=params, noise_variance=variance[None])
-                return _replayed_segment(nets, lane_acting, kernels, lane(start), jax.tree.map(lambda x: x[:, None], seen_obs), seen_keys,
-                                         gate_offsets), None  # fmt: skip
+                segment = _replayed_segment(nets, lane_acting, kernels, lane(start), lane(seen_obs, 1), seen_keys,
+                                            gate_offsets)  # fmt: skip
+                return segment, None
 
             grads, rows, _, _ = maml.segment_update(nets, loop, shared, lanes, lane(start.lstm[1]), run)
             at = (slot - 1) * loop.segment
@@ -630,8 +636,7 @@ def _adaptive_policy(nets: Networks, greedy: bool) -> StepPolicy:
         def adapted():
             new = jax.vmap(lane_update)(lanes, update, carry.segment_start, carry.seen_obs, carry.seen_keys,
                                         acting.noise_variance, slot)  # fmt: skip
-            return jax.tree.map(lambda n, o: jnp.where(adapts.reshape((-1,) + (1,) * (o.ndim - 1)), n, o), new,
-                                (lanes, update))  # fmt: skip
+            return _where_lanes(adapts, new, (lanes, update))
 
         lanes, update = jax.lax.cond(jnp.any(adapts), adapted, lambda: (lanes, update))
 
@@ -639,16 +644,13 @@ def _adaptive_policy(nets: Networks, greedy: bool) -> StepPolicy:
             params, kernels = lane_params(lanes, update)
             lane_acting = acting._replace(params=params, noise_variance=variance[None])
             action, next_carry = _policy_step(nets, lane_acting, kernels, lane(step_carry), lane(obs), key, greedy)
-            return action[0], unlane(next_carry)
+            return action[0], jax.tree.map(lambda x: x[0], next_carry)
 
         action, next_carry = jax.vmap(lane_step)(lanes, update, step_carry, obs, keys, acting.noise_variance)
-        at = episode_step % loop.segment  # the step's place in its segment
-        lanes_idx = jnp.arange(num_lanes)
-        seen_obs = jax.tree.map(lambda buf, o: buf.at[lanes_idx, at].set(o), carry.seen_obs, obs)
-        seen_keys = carry.seen_keys.at[lanes_idx, at].set(keys)
-        starts = (at == 0)
-        segment_start = jax.tree.map(lambda n, o: jnp.where(starts.reshape((-1,) + (1,) * (o.ndim - 1)), n, o),
-                                     step_carry, carry.segment_start)  # fmt: skip
+        at, rows = episode_step % loop.segment, jnp.arange(num_lanes)  # the step's place in its segment
+        seen_obs = jax.tree.map(lambda buf, o: buf.at[rows, at].set(o), carry.seen_obs, obs)
+        seen_keys = carry.seen_keys.at[rows, at].set(keys)
+        segment_start = _where_lanes(at == 0, step_carry, carry.segment_start)
         return action, AdaptiveCarry(next_carry, lanes, update, segment_start, seen_obs, seen_keys)
 
     return StepPolicy(act, functools.partial(adaptive_keys, loop))
