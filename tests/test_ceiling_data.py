@@ -110,6 +110,9 @@ NOISEOFF = "a3c+oracle@learning_rate=3e-4,sigma2_max=0"
     ("ceiling_priors_epyc.tar.xz", (CRITIC, ORACLE), "a3c+critic, on the EPYC, rooms with priors", (
         (ORACLE, "the ceiling in rooms with priors: a3c+oracle (privileged) - a3c+critic",
          "rooms with priors, machine-matched (the critic retrained on the EPYC), with the noise"),)),
+    ("ceiling_priors_noiseoff.tar.xz", (CRITIC, ORACLE, NOISEOFF), "a3c+critic, on the EPYC, rooms with priors", (
+        (NOISEOFF, "the noise-off ceiling in rooms with priors: a3c+oracle@sigma2_max=0 - a3c+critic",
+         "rooms with priors, machine-matched, without noise"),)),
 ])  # fmt: skip
 def test_ceiling_md_quotes_the_machine_matched_ceilings(tmp_path, capsys, archive, methods, label, rows):
     """The critic retrained on the oracles' machine (docs/data/`archive`): its row, each
