@@ -195,6 +195,11 @@ class AdaptedParams(NamedTuple):
         return jax.vmap(one, in_axes=(0, 0))(self.lanes, self.lstm_update)
 
 
+def lane_copies(tree, num_lanes: int):
+    """`tree` broadcast to every lane, leaves `[B, ...]` (theta_0 before any inner step)."""
+    return jax.tree.map(lambda x: jnp.broadcast_to(x, (num_lanes,) + x.shape), tree)
+
+
 def _per_lane(tree):
     return jax.tree.map(lambda x: x[:, None], tree)  # [B, ...] -> [B, 1, ...]
 
@@ -251,7 +256,7 @@ def adaptive_act(
     num_lanes = actor.episode_step.shape[0]
     variance = jnp.broadcast_to(jnp.asarray(acting.noise_variance, jnp.float32), (num_lanes,))[:, None]  # [B, 1]
     shared, lanes = split_encoder_lstm_kernels(acting.params)
-    lanes = jax.tree.map(lambda x: jnp.broadcast_to(x, (num_lanes,) + x.shape), lanes)
+    lanes = lane_copies(lanes, num_lanes)
     lane_actor = _per_lane(actor)
     alive = jnp.ones((num_lanes, 1), bool)
 
