@@ -67,6 +67,13 @@ def join_partial_trees(first: Mapping[str, Any], second: Mapping[str, Any]) -> d
     return traverse_util.unflatten_dict({**traverse_util.flatten_dict(first), **traverse_util.flatten_dict(second)})
 
 
+def lane_copies(tree, num_lanes: int):
+    """`tree` broadcast to every lane, leaves `[B, ...]`: maml's theta_0 before any inner
+    step, or the rollout's fresh success trackers. It lives here, beside the other tree
+    helpers, so that a rollout without the maml base never enters maml.py."""
+    return jax.tree.map(lambda x: jnp.broadcast_to(x, (num_lanes,) + x.shape), tree)
+
+
 def with_encoder_lstm_kernels(params: Mapping[str, Any], kernels: LSTMKernels) -> dict:
     """`params` with the encoder LSTM's parameters replaced by `kernels` (their `update`
     added in, see `LSTMKernels.dense`)."""

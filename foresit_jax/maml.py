@@ -81,6 +81,7 @@ from foresit_jax.lstm import (
     LowRankUpdate,
     encoder_lstm_params,
     join_partial_trees,
+    lane_copies,
     lstm_kernels,
     split_encoder_lstm_kernels,
     with_encoder_lstm_kernels,
@@ -193,11 +194,6 @@ class AdaptedParams(NamedTuple):
             return with_encoder_lstm_kernels(params, kernels)
 
         return jax.vmap(one, in_axes=(0, 0))(self.lanes, self.lstm_update)
-
-
-def lane_copies(tree, num_lanes: int):
-    """`tree` broadcast to every lane, leaves `[B, ...]` (theta_0 before any inner step)."""
-    return jax.tree.map(lambda x: jnp.broadcast_to(x, (num_lanes,) + x.shape), tree)
 
 
 def _per_lane(tree):

@@ -53,6 +53,7 @@ from foresit_jax.lstm import (
     encoder_lstm_params,
     initial_carry,
     join_partial_trees,
+    lane_copies,
     lstm_kernels,
     reset_carry,
     split_encoder_lstm_kernels,
@@ -205,7 +206,7 @@ def start(nets: Networks, key, env: BoundEnv, num_lanes: int, memory_size: int =
     zeros = jnp.zeros((num_lanes, hidden), jnp.float32)
     if tracker is None:
         one = imagination.tracker_init(cfg.success_window)
-        tracker = maml.lane_copies(one, num_lanes)
+        tracker = lane_copies(one, num_lanes)
     return ActorState(
         env_state=env_state,
         obs=obs,
@@ -519,7 +520,7 @@ def policy_carry(nets: Networks, num_lanes: int, acting: Optional[AgentParams] =
                            jnp.zeros((num_lanes, rows, hidden), dtype), jnp.zeros((num_lanes, rows, 4 * hidden), dtype))
     return AdaptiveCarry(
         policy=carry,
-        lanes=maml.lane_copies(lanes, num_lanes),
+        lanes=lane_copies(lanes, num_lanes),
         update=update,
         segment_start=carry,
         seen_obs=jax.tree.map(lambda x: jnp.zeros((num_lanes, loop.segment) + tuple(x.shape), x.dtype), obs),
@@ -608,7 +609,7 @@ def _adaptive_policy(nets: Networks, greedy: bool) -> StepPolicy:
         acting = _with_noise(acting, num_lanes)
         shared, theta_0 = split_encoder_lstm_kernels(acting.params)
         # A new episode starts from theta_0.
-        lanes = _where_lanes(first, maml.lane_copies(theta_0, num_lanes), carry.lanes)
+        lanes = _where_lanes(first, lane_copies(theta_0, num_lanes), carry.lanes)
         update = _where_lanes(first, jax.tree.map(jnp.zeros_like, carry.update), carry.update)
         step_carry = _reset(carry.policy, first)
         episode_step = step_carry.episode_step
