@@ -18,7 +18,9 @@ env); ``raycast`` casts the view at every step (``precomputed_views=False``; tim
 a shared machine are noisy: compare the best column of one run.
 ``--layouts room house`` times single rooms and houses (``layout="house"``) in the same
 rounds and prints the ratio houses / rooms per batch size; ``--priors False True`` times
-today's layouts and those with priors (envs.priors) and prints the ratio priors / today's.
+today's layouts and those with priors (envs.priors) and prints the ratio priors / today's;
+``--perception-ranges 4`` also times each env with that perception range (GridNav's
+``perception_range``) and prints the ratio ranged / unranged.
 ``--compare xminigrid`` measures XLand-MiniGrid's ``MiniGrid-DoorKey-8x8`` the same way
 (its ``GymAutoResetWrapper``, random actions, observation carried) and prints the ratio
 ours / DoorKey per batch size.
@@ -67,6 +69,8 @@ class BenchConfig:
     """GridNav layouts to time: single rooms, houses (envs.houses) or both (then their ratio)"""
     priors: tuple[bool, ...] = (False,)
     """today's layouts (False), those with priors (True, envs.priors) or both (then their ratio)"""
+    perception_ranges: tuple[float, ...] = ()
+    """also time each env with these perception ranges (cells; GridNav's perception_range), then the ratio"""
     seed: int = 0
     """PRNG seed"""
 
@@ -98,12 +102,13 @@ def time_once(compiled, args: tuple, key, batch_size: int, steps: int) -> float:
 
 
 def gridnav_rollout(precomputed_views: bool, setup: str, split: str, batch_size: int, steps: int, layout: str = "room",
-                    priors: bool = False):  # fmt: skip
+                    priors: bool = False, perception_range: float | None = None):  # fmt: skip
     """(jitted rollout(params, carry, key) -> carry, (params, carry)) for GridNav-v0.
 
     The scene bank is an argument, not a constant folded into the program."""
+    ranged = {} if perception_range is None else {"perception_range": perception_range}
     env, params = envs.make("GridNav-v0", setup=setup, split=split, precomputed_views=precomputed_views, layout=layout,
-                            priors=priors)  # fmt: skip
+                            priors=priors, **ranged)  # fmt: skip
     vstep = jax.vmap(env.step, in_axes=(0, 0, 0, None))
 
     @jax.jit
@@ -177,12 +182,14 @@ def main(config: BenchConfig) -> int:
         for layout in config.layouts:
             for priors in config.priors:
                 for precomputed in modes:
-                    steps = config.steps if precomputed else config.raycast_steps
-                    name = (f"GridNav {'precomputed' if precomputed else 'raycast'}" + ("" if layout == "room" else " house")
-                            + (" priors" if priors else ""))  # fmt: skip
-                    build = lambda p=precomputed, n=steps, lay=layout, pr=priors: gridnav_rollout(  # noqa: E731
-                        p, config.setup, config.split, batch_size, n, lay, pr)
-                    jobs.append((name, steps, build))
+                    for reach in (None, *config.perception_ranges):
+                        steps = config.steps if precomputed else config.raycast_steps
+                        name = (f"GridNav {'precomputed' if precomputed else 'raycast'}"
+                                + ("" if layout == "room" else " house") + (" priors" if priors else "")
+                                + ("" if reach is None else f" range {reach:g}"))  # fmt: skip
+                        build = lambda p=precomputed, n=steps, lay=layout, pr=priors, r=reach: gridnav_rollout(  # noqa: E731
+                            p, config.setup, config.split, batch_size, n, lay, pr, r)
+                        jobs.append((name, steps, build))
         if config.compare == "xminigrid":
             jobs.append((f"xminigrid {XMINIGRID_ENV}", config.steps, lambda: xminigrid_rollout(batch_size, config.steps)))
         # Compile everything of this batch size first, then time round-robin: on a shared
@@ -213,7 +220,8 @@ def main(config: BenchConfig) -> int:
                 print(f"  {m.name:20s} B={m.batch_size:<5d} {m.best_sps / reference[m.batch_size]:6.2f}x")
     best = {(m.name, m.batch_size): m.best_sps for m, _ in results}
     for wanted, label, suffix in ((set(config.layouts) == {"room", "house"}, "houses / rooms", " house"),
-                                  (set(config.priors) == {False, True}, "priors / today's layouts", " priors")):
+                                  (set(config.priors) == {False, True}, "priors / today's layouts", " priors"),
+                                  *((True, f"range {r:g} / no range", f" range {r:g}") for r in config.perception_ranges)):
         if not wanted:
             continue
         print()

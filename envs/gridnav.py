@@ -140,6 +140,13 @@ class GridNav:
         target placed by relations to furniture and other targets, houses' rooms in adjacent
         pairs, and (savn) target word vectors related as the categories are.  False (the
         default) gives today's layouts, whose targets stand uniformly at random.
+      perception_range: None (the default: every object pixel shows its category, at any
+        depth) or a range in cells (0.25 m): an object pixel deeper than it shows one more
+        class, ``unresolved_class`` (the last: "an object, not resolved"), in ``view``, in
+        the observation and in org's detections; walls, floor and furniture show as
+        without it. A far target is then seen as some object, its anchor furniture as what
+        it is (docs/foresight.md, "Levers"). The layouts, banks, oracle and success are
+        unchanged.
       grid_size: side of the padded scene grid, in 0.25 m cells (default 20 for rooms,
         30 for houses).
       view_width: number of view columns (rays) across the 100 degree field of view.
@@ -159,6 +166,7 @@ class GridNav:
         check_actions: bool = False,
         layout: str = "room",
         priors: bool = False,
+        perception_range: float | None = None,
     ):
         C.check_setup(setup)
         C.check_layout(layout)
@@ -176,7 +184,10 @@ class GridNav:
         self.num_categories = len(self.categories)
         self.success_radius_m = C.SETUPS[setup][2]
         self.priors = bool(priors)
-        self.num_semantic = C.num_semantic(setup, self.priors)
+        self.perception_range = _checked_range(perception_range)
+        # With a perception range, one more class after the others: an object seen but not resolved.
+        self.unresolved_class = C.num_semantic(setup, self.priors)
+        self.num_semantic = self.unresolved_class + (self.perception_range is not None)
         self.max_depth = float(grid_size) * 1.5  # depth channel = depth in cells / max_depth
         # Multiply by reciprocals, never divide by constants: XLA rewrites x / c as
         # x * (1 / c) under jit only, which would make jit and no-jit differ in the last bit.
@@ -328,19 +339,24 @@ class GridNav:
 
     # ----------------------------------------------------------------- observation
     def view(self, state: EnvState, params: EnvParams):
-        """(sem int32 [3, W], depth float32 [3, W] in cells) seen from the state's pose."""
+        """(sem int32 [3, W], depth float32 [3, W] in cells) seen from the state's pose (with
+        a perception range, object pixels deeper than it show ``unresolved_class``)."""
         bank = params.bank
         if self.precomputed_views:
             pose = pose_index(state.agent_pos, state.heading, state.horizon, self.grid_size)
             sem = bank.view_sem[state.scene, pose].astype(jnp.int32)
             depth = bank.view_depth[state.scene, pose].astype(jnp.float32) / DEPTH_RESOLUTION
+        else:
+            s = state.scene
+            furniture_sem = None if bank.furniture_sem is None else bank.furniture_sem[s]
+            sem, depth = cast_view(
+                bank.cell_type[s], bank.obj_cat[s], bank.obj_band[s],
+                state.agent_pos, state.heading, state.horizon, self.view_width, furniture_sem,
+            )  # fmt: skip
+        if self.perception_range is None:  # static: today's program, untouched
             return sem, depth
-        s = state.scene
-        furniture_sem = None if bank.furniture_sem is None else bank.furniture_sem[s]
-        return cast_view(
-            bank.cell_type[s], bank.obj_cat[s], bank.obj_band[s],
-            state.agent_pos, state.heading, state.horizon, self.view_width, furniture_sem,
-        )  # fmt: skip
+        is_object = (sem >= C.NUM_STRUCTURAL) & (sem < C.NUM_STRUCTURAL + self.num_categories)
+        return jnp.where(is_object & (depth > self.perception_range), self.unresolved_class, sem), depth
 
     def get_obs(self, state: EnvState, params: EnvParams) -> dict[str, jax.Array]:
         sem, depth = self.view(state, params)
@@ -401,6 +417,16 @@ class GridNav:
         costs = jnp.stack([cost(a) for a in range(C.DONE)])
         here = self.shortest_path_length(state, params)
         return jnp.where(here == 1, C.DONE, jnp.argmin(costs)).astype(jnp.int32)
+
+
+def _checked_range(perception_range) -> float | None:
+    if perception_range is None:
+        return None
+    if isinstance(perception_range, bool) or not isinstance(perception_range, (int, float)) \
+            or not 0 < perception_range < float("inf"):
+        raise ValueError(f"perception_range must be None (off) or a positive number of cells (0.25 m), "
+                         f"got {perception_range!r}")  # fmt: skip
+    return float(perception_range)
 
 
 def _raise_on_bad_action(action) -> None:

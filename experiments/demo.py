@@ -187,7 +187,8 @@ def main(config: DemoConfig) -> int:
     timings = {}
     t = time.perf_counter()
     rooms = {room: envs.make("GridNav-v0", setup=config.setup, split="test", room_types=(room,), training=False,
-                             layout=config.layout, priors=config.priors) for room in C.ROOM_TYPES}  # fmt: skip
+                             layout=config.layout, priors=config.priors,
+                             perception_range=config.perception_range) for room in C.ROOM_TYPES}  # fmt: skip
     env = rooms[C.ROOM_TYPES[0]][0]
     timings["scene banks"] = time.perf_counter() - t
     num_steps = max(int(np.max(params.max_steps)) for _, params in rooms.values())

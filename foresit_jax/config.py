@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Optional
 
 from foresit_jax.methods import GRADIENTS, ROLLOUTS, Method, parse_method
 
@@ -45,6 +46,11 @@ class Config:
     kinds seen as their own classes, each target placed by relations to furniture and to
     other targets, houses' rooms in adjacent pairs, related savn word vectors. False:
     today's GridNav scenes, where every target stands uniformly at random."""
+    perception_range: Optional[float] = None
+    """A perception range, in cells (0.25 m): object pixels deeper than it show one
+    'unresolved object' class, so a far target is seen as some object and its anchor
+    furniture as what it is (`envs.GridNav`'s `perception_range`; docs/foresight.md,
+    "Levers"). None, the default: every object resolved at any depth, today's view."""
     progress_reward: float = 0.0
     """Reward shaping (a deviation from the paper's reward, which is +5 on success and
     -0.01 a step): each step also earns w (d_t - d_{t+1}), d the oracle's actions to
@@ -188,6 +194,11 @@ class Config:
             raise ValueError(f"setup must be one of {SETUPS}, got {self.setup!r}.")
         if self.layout not in LAYOUTS:
             raise ValueError(f"layout must be one of {LAYOUTS}, got {self.layout!r}.")
+        if self.perception_range is not None and (
+                isinstance(self.perception_range, bool) or not isinstance(self.perception_range, (int, float))
+                or not 0 < self.perception_range < math.inf):  # fmt: skip
+            raise ValueError(f"perception_range must be None (off) or a positive number of cells, "
+                             f"got {self.perception_range!r}.")  # fmt: skip
         if pieces.required_setup not in (None, self.setup):
             raise ValueError(
                 f"method {self.method!r} needs setup {pieces.required_setup!r} (its {pieces.encoder!r} "

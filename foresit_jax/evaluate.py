@@ -104,16 +104,19 @@ class Evaluator:
     the same episode length. Attributes: `env`, `params` ({(split, room): EnvParams}) and
     `compiled` ({key: jitted rollout}, keyed by (policy, config, num_steps, greedy))."""
 
-    def __init__(self, setup: str = "savn", layout: str = "room", priors: bool = False):
+    def __init__(self, setup: str = "savn", layout: str = "room", priors: bool = False,
+                 perception_range: float | None = None):  # fmt: skip
         self.setup, self.layout, self.priors = setup, layout, bool(priors)
-        self.env = envs.GridNav(setup=setup, layout=layout, priors=self.priors)
+        self.env = envs.GridNav(setup=setup, layout=layout, priors=self.priors, perception_range=perception_range)
+        self.perception_range = self.env.perception_range
         self.params: dict[tuple[str, str], Any] = {}
         self.compiled: dict[tuple, Any] = {}
 
     @staticmethod
-    def scenes_of(config: Config) -> tuple[str, str, bool]:
-        """(setup, layout, priors): what an Evaluator is made for (`Evaluator(*scenes_of(config))`)."""
-        return config.setup, config.layout, config.priors
+    def scenes_of(config: Config) -> tuple[str, str, bool, float | None]:
+        """(setup, layout, priors, perception_range): what an Evaluator is made for
+        (`Evaluator(*scenes_of(config))`)."""
+        return config.setup, config.layout, config.priors, config.perception_range
 
     @classmethod
     def for_config(cls, config: Config) -> "Evaluator":
@@ -209,6 +212,9 @@ class Evaluator:
         if config.priors != self.priors:
             raise ValueError(f"this Evaluator is for priors={self.priors}, the config's is {config.priors}; "
                              "make one with Evaluator.for_config(config)")  # fmt: skip
+        if config.perception_range != self.perception_range:
+            raise ValueError(f"this Evaluator is for perception_range={self.perception_range}, the config's is "
+                             f"{config.perception_range}; make one with Evaluator.for_config(config)")  # fmt: skip
 
     def evaluate(
         self, agent_params: AgentParams, config: Config, split: str = "test", key: chex.PRNGKey | None = None,

@@ -191,7 +191,7 @@ def test_the_option_reaches_the_env_the_evaluator_and_the_cache(priors_test):
     env, params = make_env(config, "val")
     assert env.num_semantic == 35 and params.bank.furniture_sem is not None
     evaluator = Evaluator.for_config(config)
-    assert evaluator.env.priors and Evaluator.scenes_of(config) == ("savn", "room", True)
+    assert evaluator.env.priors and Evaluator.scenes_of(config) == ("savn", "room", True, None)
     with pytest.raises(ValueError, match="priors"):
         Evaluator("savn", "room")._check(config, "val", 1)
     numbers = tuple(C.scene_numbers("val", [C.BATHROOM]))

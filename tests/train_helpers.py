@@ -225,8 +225,9 @@ def patch_for_experiments(mp) -> None:
     class CachedEvaluator(_REAL_EVALUATOR):
         """Evaluator(...) and Evaluator.for_config(...) give the one Evaluator of their scenes."""
 
-        def __new__(cls, setup: str = "savn", layout: str = "room", priors: bool = False):
-            key = (setup, layout, bool(priors))
+        def __new__(cls, setup: str = "savn", layout: str = "room", priors: bool = False,
+                    perception_range: float | None = None):  # fmt: skip
+            key = (setup, layout, bool(priors), perception_range)
             if key not in evaluators:  # a real Evaluator: its __init__ runs once, here
                 evaluators[key] = _REAL_EVALUATOR(*key)
             return evaluators[key]

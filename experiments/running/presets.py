@@ -93,9 +93,9 @@ def split_arm(arm: str) -> tuple[str, dict]:
         field, eq, text = (x.strip() for x in item.partition("="))
         if not eq or not text:
             raise ValueError(f"arm {arm!r}: {item!r} is not field=value")
-        if field not in defaults or field in ("method", "setup", "layout", "priors"):
+        if field not in defaults or field in ("method", "setup", "layout", "priors", "perception_range"):
             raise ValueError(f"arm {arm!r}: {field!r} is not a Config field an arm can set (the scenes are "
-                             "the sweep's: --setup, --layout, --priors)")  # fmt: skip
+                             "the sweep's: --setup, --layout, --priors, --perception-range)")  # fmt: skip
         kind = type(defaults[field])
         try:
             if kind is bool:
