@@ -86,3 +86,32 @@ def test_the_config_reaches_the_trainers_env_and_the_evaluator():
     assert evaluator.env.perception_range == 4.0
     with pytest.raises(ValueError, match="perception_range"):
         evaluator._check(dataclasses.replace(config, perception_range=None), "test", 1)
+
+
+def test_the_range_changes_only_what_is_seen():
+    """Same keys and actions with and without the range: the same states, rewards, ends and
+    per-episode facts (so the layouts, starts, oracle, success and the calibration of
+    test_env_calibration are the family's too); only the views' classes differ."""
+    kw = dict(setup="savn", priors=True, view_width=3)
+    plain, ranged = envs.GridNav(**kw), envs.GridNav(perception_range=4.0, **kw)
+    params = plain.make_params("val", room_types=("bedroom",))
+    keys = jax.random.split(jax.random.PRNGKey(11), 64)
+
+    def play(env):
+        obs, state = jax.vmap(lambda k: env.reset(k, params))(keys)
+
+        def body(state, t):
+            step_keys = jax.vmap(lambda k: jax.random.fold_in(k, t))(keys)
+            action = jax.random.randint(jax.random.fold_in(keys[0], t), (64,), 0, C.NUM_ACTIONS)
+            obs, state, reward, terminated, truncated, info = jax.vmap(
+                lambda k, s, a: env.step(k, s, a, params))(step_keys, state, action)
+            info = {k: v for k, v in info.items() if k != "final_observation"}
+            return state, (state, reward, terminated, truncated, info, obs["view"].argmax(-1))
+
+        return jax.lax.scan(body, state, jnp.arange(60))[1]
+
+    (*same_plain, sem_plain), (*same_ranged, sem_ranged) = play(plain), play(ranged)
+    jax.tree.map(lambda a, b: np.testing.assert_array_equal(np.asarray(a), np.asarray(b)), same_plain, same_ranged)
+    assert np.asarray(same_plain[2] | same_plain[3]).any()  # episodes ended and auto-reset inside the 60 steps
+    differ = np.asarray(sem_plain != sem_ranged)
+    assert differ.any() and (np.asarray(sem_ranged)[differ] == ranged.unresolved_class).all()
