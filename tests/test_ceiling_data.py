@@ -7,6 +7,7 @@ import pytest
 import study_data
 
 from experiments import compare
+from experiments.running import rundir
 from experiments.reporting import report, stats
 
 REPO = Path(__file__).resolve().parents[1]
@@ -135,7 +136,35 @@ def test_ceiling_md_quotes_the_machine_matched_ceilings(tmp_path, capsys, archiv
     readme = " ".join((REPO / "README.md").read_text().split())
     flat = " ".join(doc.split())
     if "priors" in archive:
-        assert f"in rooms with priors, {ceiling} ([docs/ceiling.md]" in readme
+        assert f"in rooms with priors, {ceiling}; " in readme
         assert f"the ceiling becomes {ceiling}" in flat
     else:
         assert f"moves SR by {ceiling} over the critic alone" in readme
+
+
+def test_ceiling_md_quotes_the_ceiling_at_range_4(tmp_path, capsys):
+    """The candidate family (rooms with priors, perception range 4; docs/data/ceiling_range4.tar.xz,
+    trained with the range): both arms' rows, the ceiling resolved below 0 where the docs say
+    the oracle costs, results.md's row and the README's sentence."""
+    root = study_data.unpack("ceiling_range4.tar.xz", tmp_path, (CRITIC, ORACLE))
+    results = report.load(root)
+    for arm in (CRITIC, ORACLE):
+        config = rundir.read_json(root / "methods" / arm / "run.json")["config"]
+        assert config["priors"] is True and config["perception_range"] == 4.0
+    out = compare.main(compare.Args(run=root, pairs=(f"{CRITIC}:{ORACLE}",)))
+    capsys.readouterr()
+    doc = (REPO / "docs" / "ceiling.md").read_text()
+    for arm, label in ((CRITIC, "a3c+critic, on the EPYC, rooms with priors, range 4"),
+                       (ORACLE, "a3c+oracle (privileged), on the EPYC, rooms with priors, range 4")):
+        assert arm_row(results, arm, label) in doc, arm_row(results, arm, label)
+    pair = out["pairs"][f"{ORACLE} - {CRITIC}"]
+    assert pair["SR"]["ci_high"] < 0  # resolved, below 0: "the oracle costs"
+    mde = f"{pair['robust']['SR']['mde']:.1f}"
+    sr = study_data.interval(pair["SR"])
+    row = f"| the ceiling at range 4: a3c+oracle (privileged) - a3c+critic | {sr} | {study_data.interval(pair['SPL'])} | {mde} |"
+    assert row in doc, row
+    assert f"**Here the oracle costs**: {sr} SR" in doc
+    assert f"| rooms with priors, range 4, machine-matched, with the noise | {sr} | {mde} |" in (
+        REPO / "docs" / "results.md").read_text()
+    readme = " ".join((REPO / "README.md").read_text().split())
+    assert f"with a 1 m perception range, where a first view foresees the bearing, it costs {sr} (" in readme
