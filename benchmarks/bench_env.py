@@ -106,9 +106,8 @@ def gridnav_rollout(precomputed_views: bool, setup: str, split: str, batch_size:
     """(jitted rollout(params, carry, key) -> carry, (params, carry)) for GridNav-v0.
 
     The scene bank is an argument, not a constant folded into the program."""
-    ranged = {} if perception_range is None else {"perception_range": perception_range}
     env, params = envs.make("GridNav-v0", setup=setup, split=split, precomputed_views=precomputed_views, layout=layout,
-                            priors=priors, **ranged)  # fmt: skip
+                            priors=priors, perception_range=perception_range)  # fmt: skip
     vstep = jax.vmap(env.step, in_axes=(0, 0, 0, None))
 
     @jax.jit

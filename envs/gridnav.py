@@ -184,7 +184,7 @@ class GridNav:
         self.num_categories = len(self.categories)
         self.success_radius_m = C.SETUPS[setup][2]
         self.priors = bool(priors)
-        self.perception_range = _checked_range(perception_range)
+        self.perception_range = check_perception_range(perception_range)
         # With a perception range, one more class after the others: an object seen but not resolved.
         self.unresolved_class = C.num_semantic(setup, self.priors)
         self.num_semantic = self.unresolved_class + (self.perception_range is not None)
@@ -419,7 +419,9 @@ class GridNav:
         return jnp.where(here == 1, C.DONE, jnp.argmin(costs)).astype(jnp.int32)
 
 
-def _checked_range(perception_range) -> float | None:
+def check_perception_range(perception_range) -> float | None:
+    """``perception_range`` as a float (None stays None); ValueError if it is not None or a
+    positive finite number."""
     if perception_range is None:
         return None
     if isinstance(perception_range, bool) or not isinstance(perception_range, (int, float)) \
@@ -459,4 +461,4 @@ def _room_index(room) -> int:
     return int(room)
 
 
-__all__ = ["EnvParams", "EnvState", "GridNav", "GRID_SIZES", "time_limits", "UNREACHABLE"]
+__all__ = ["EnvParams", "EnvState", "GridNav", "GRID_SIZES", "check_perception_range", "time_limits", "UNREACHABLE"]

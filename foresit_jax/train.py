@@ -270,18 +270,12 @@ def a3c_loss(
     return total_loss, metrics
 
 
-def _view_kwargs(config: Config) -> dict:
-    """The env's perception_range, passed only when set, so today's configs build the env
-    exactly as before."""
-    return {} if config.perception_range is None else {"perception_range": config.perception_range}
-
-
 def make_env(config: Config, split: str = "train", room_types=None, training: bool | None = None):
     """The environment of a config (foresit_jax sees envs only through its public API)."""
     rooms = room_types if room_types is not None else (config.room_types or None)
     env, params = envs.make("GridNav-v0", setup=config.setup, split=split, room_types=rooms, training=training,
                             layout=config.layout, priors=config.priors,
-                            **_view_kwargs(config))  # fmt: skip
+                            perception_range=config.perception_range)  # fmt: skip
     return env, params.replace(progress_reward=config.progress_reward)
 
 
