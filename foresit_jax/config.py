@@ -11,7 +11,6 @@ import dataclasses
 import math
 from typing import Optional
 
-from envs.gridnav import check_perception_range
 from foresit_jax.methods import GRADIENTS, ROLLOUTS, Method, parse_method
 
 SETUPS: tuple[str, ...] = ("savn", "org")
@@ -195,7 +194,13 @@ class Config:
             raise ValueError(f"setup must be one of {SETUPS}, got {self.setup!r}.")
         if self.layout not in LAYOUTS:
             raise ValueError(f"layout must be one of {LAYOUTS}, got {self.layout!r}.")
-        check_perception_range(self.perception_range)  # the env's own check, so the CLI fails before any env is built
+        # The same check as envs.gridnav.check_perception_range, written again here because
+        # importing envs loads jax, and a Config is jax-free (tests/test_structure.py).
+        if self.perception_range is not None and (
+                isinstance(self.perception_range, bool) or not isinstance(self.perception_range, (int, float))
+                or not 0 < self.perception_range < math.inf):  # fmt: skip
+            raise ValueError(f"perception_range must be None (off) or a positive number of cells, "
+                             f"got {self.perception_range!r}.")  # fmt: skip
         if pieces.required_setup not in (None, self.setup):
             raise ValueError(
                 f"method {self.method!r} needs setup {pieces.required_setup!r} (its {pieces.encoder!r} "
