@@ -167,4 +167,97 @@ def test_ceiling_md_quotes_the_ceiling_at_range_4(tmp_path, capsys):
     assert f"| rooms with priors, range 4, machine-matched, with the noise | {sr} | {mde} |" in (
         REPO / "docs" / "results.md").read_text()
     readme = " ".join((REPO / "README.md").read_text().split())
-    assert f"with a 1 m perception range, where a first view foresees the bearing, it costs {sr} (" in readme
+    assert f"with a 1 m perception range, where a first view foresees the bearing, it costs {sr}, " in readme
+
+
+def test_ceiling_md_quotes_the_noise_off_ceiling_at_range_4(tmp_path, capsys):
+    """The noise-off oracle in the candidate family (docs/data/ceiling_range4_noiseoff.tar.xz,
+    the critic and the noisy oracle reused, so machine-matched): its row, both pairs (neither
+    resolved, as the docs say "cannot tell"), results.md's row and the README's clause."""
+    root = study_data.unpack("ceiling_range4_noiseoff.tar.xz", tmp_path, (CRITIC, ORACLE, NOISEOFF))
+    results = report.load(root)
+    for arm in (CRITIC, ORACLE, NOISEOFF):
+        config = rundir.read_json(root / "methods" / arm / "run.json")["config"]
+        assert config["priors"] is True and config["perception_range"] == 4.0
+    # the reused arms are the noisy study's, seed for seed
+    noisy = report.load(study_data.unpack("ceiling_range4.tar.xz", tmp_path / "noisy", (CRITIC, ORACLE)))
+    for arm in (CRITIC, ORACLE):
+        assert list(report.values(results[arm], "SR")) == list(report.values(noisy[arm], "SR"))
+    out = compare.main(compare.Args(run=root, pairs=(f"{CRITIC}:{NOISEOFF}", f"{ORACLE}:{NOISEOFF}")))
+    capsys.readouterr()
+    doc = (REPO / "docs" / "ceiling.md").read_text()
+    label = "a3c+oracle@sigma2_max=0 (privileged), on the EPYC, rooms with priors, range 4"
+    assert arm_row(results, NOISEOFF, label) in doc, arm_row(results, NOISEOFF, label)
+    for a, pair_label in ((CRITIC, "the noise-off ceiling at range 4: a3c+oracle@sigma2_max=0 - a3c+critic"),
+                          (ORACLE, "a3c+oracle@sigma2_max=0 - a3c+oracle at range 4 (both privileged)")):  # fmt: skip
+        pair = out["pairs"][f"{NOISEOFF} - {a}"]
+        assert pair["SR"]["ci_low"] < 0 < pair["SR"]["ci_high"]  # not resolved
+        mde = f"{pair['robust']['SR']['mde']:.1f}"
+        row = f"| {pair_label} | {study_data.interval(pair['SR'])} | {study_data.interval(pair['SPL'])} | {mde} |"
+        assert row in doc, row
+    pair = out["pairs"][f"{NOISEOFF} - {CRITIC}"]
+    sr, mde = study_data.interval(pair["SR"]), f"{pair['robust']['SR']['mde']:.1f}"
+    assert f"| rooms with priors, range 4, machine-matched, without noise | {sr} | {mde} |" in (
+        REPO / "docs" / "results.md").read_text()
+    assert "**Without the noise we cannot tell the ceiling from 0**, and its point estimate is the" in doc
+    assert f"noisy arm's: {sr} SR over the critic alone (MDE {mde})" in " ".join(doc.split())
+    readme = " ".join((REPO / "README.md").read_text().split())
+    assert f"without Eq. 7's noise {sr} (cannot tell; " in readme
+
+
+def test_ceiling_md_quotes_the_probe_at_range_4():
+    """docs/data/ceiling_probe_range4.json: each oracle arm's probe rows, and the noise-off
+    arm's shuffled condition resolved below 0 where the docs say that policy reads the goal view."""
+    import json
+
+    methods = json.loads((study_data.DATA / "ceiling_probe_range4.json").read_text())["methods"]
+    doc = (REPO / "docs" / "ceiling.md").read_text()
+    labels = {"noise off": "noise off", "shuffled": "shuffled (another episode's goal view)",
+              "shuffled, noise off": "shuffled, noise off"}  # fmt: skip
+    for arm, name, conditions in ((ORACLE, "a3c+oracle (Eq. 7's noise)", ("noise off", "shuffled", "shuffled, noise off")),
+                                  (NOISEOFF, "a3c+oracle@sigma2_max=0", ("shuffled",))):  # fmt: skip
+        seeds = methods[arm]
+        assert [r["seed"] for r in seeds] == [0, 1, 2, 3, 4]
+        trained = [r["sr"]["trained"] for r in seeds]
+        s = stats.summary(trained)
+        assert f"| {name} | trained | {s['mean']:.1f} ± {s['std']:.1f} | |" in doc
+        for condition in conditions:
+            values = [r["sr"][condition] for r in seeds]
+            s, pair = stats.summary(values), stats.paired(trained, values)
+            row = f"| {name} | {labels[condition]} | {s['mean']:.1f} ± {s['std']:.1f} | {study_data.interval(pair)} |"
+            assert row in doc, row
+            if arm == NOISEOFF:
+                assert pair["ci_high"] < 0
+                assert f"latent lowers its SR by {study_data.interval(pair)}" in " ".join(doc.split())
+    # the noise-off arm has no noise to switch off: its "noise off" condition is its trained one
+    assert [r["sr"]["noise off"] for r in methods[NOISEOFF]] == [r["sr"]["trained"] for r in methods[NOISEOFF]]
+
+
+def test_ceiling_md_quotes_the_range_4_arms_along_training(tmp_path):
+    """The validation table of "Along training" (docs/data/ceiling_range4_noiseoff.tar.xz): the
+    critic's validation SR at each checkpoint and each oracle arm's paired difference, and the
+    last checkpoint unresolved where the docs say validation cannot tell."""
+    import numpy as np
+
+    root = study_data.unpack("ceiling_range4_noiseoff.tar.xz", tmp_path, (CRITIC, ORACLE, NOISEOFF))
+    curves = {}
+    for arm in (CRITIC, ORACLE, NOISEOFF):
+        seeds = rundir.read_json(root / "methods" / arm / "results.json")["results"]
+        assert [r["seed"] for r in seeds] == [0, 1, 2, 3, 4]
+        updates = [[v["update"] for v in r["validation"]] for r in seeds]
+        assert all(u == [500, 1000, 1500, 2000, 2500, 3000] for u in updates)
+        curves[arm] = np.array([[v["SR"] for v in r["validation"]] for r in seeds])
+    doc = (REPO / "docs" / "ceiling.md").read_text()
+    above = {arm: 0 for arm in (ORACLE, NOISEOFF)}
+    for i, update in enumerate(range(500, 3001, 500)):
+        critic = curves[CRITIC][:, i]
+        pairs = [stats.paired(critic, curves[arm][:, i]) for arm in (ORACLE, NOISEOFF)]
+        row = (f"| {update} | {critic.mean():.1f} ± {critic.std(ddof=1):.1f} | "
+               + " | ".join(study_data.interval(p) for p in pairs) + " |")  # fmt: skip
+        assert row in doc, row
+        assert all(p["ci_high"] > 0 for p in pairs)  # "no oracle arm is behind the critic at any checkpoint"
+        if update == 3000:
+            assert all(p["ci_low"] < 0 for p in pairs)  # cannot tell at the selected model
+        for arm, p in zip((ORACLE, NOISEOFF), pairs):
+            above[arm] += p["ci_low"] > 0
+    assert above == {ORACLE: 0, NOISEOFF: 2}  # "the noise-off arm's interval lies above 0 at two of the six"
