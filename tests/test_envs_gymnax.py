@@ -249,7 +249,7 @@ def test_default_params_are_built_once(monkeypatch):
     env, params = envs.make_gymnax(room_types=ROOMS, step_api="done")
     assert len(calls) == 1
     assert env.default_params is env.default_params is params
-    grid = envs.GridNav(room_types=ROOMS)  # one room type: the bank is small, the property the same
+    grid = envs.GridNav()
     assert grid.default_params is grid.default_params
     assert len(calls) == 2
     # params=None takes the default params, as in gymnax
