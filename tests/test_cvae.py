@@ -49,6 +49,7 @@ def test_the_loss_reaches_the_encoder_through_the_sample_and_the_condition_shape
     assert not np.allclose(model.apply(params, z, s_0, goal, method=cvae.CVAE.decode), other)
 
 
+@pytest.mark.slow  # trains for 40 epochs, 5.6 s cold (docs/testing.md)
 def test_the_cvae_learns_a_conditional_structure():
     s_0, goal, subgoal = synthetic_items(jax.random.PRNGKey(0), 1024)
     model = cvae.CVAE(state_size=12, latent_size=4, hidden_size=64)

@@ -152,6 +152,7 @@ def test_oracle_i_tau_with_the_noise_off_is_one_network_step_on_the_goal_view(sa
         assert 0.3 < diff.std() < 0.7  # sigma = 0.5
 
 
+@pytest.mark.slow  # 8.3 s cold (docs/testing.md)
 def test_shuffled_probe_shuffles_the_oracles_i_tau_across_episodes(savn_kit):
     """The probe's shuffle (`probes.shuffled`) applies to the oracle's goal latent where
     i_tau is made (`rollout._imagine`, noise off): lane b gets lane b - 1's."""
