@@ -262,3 +262,91 @@ class GoalViewWrapper(Wrapper):
         replaced by the goal's; the target kept), for an encoder that reads those keys."""
         goal = {key: obs[goal] for key, goal in GoalViewWrapper.GOAL_KEYS.items() if goal in obs}
         return {key: value for key, value in obs.items() if key not in GoalViewWrapper.GOAL_KEYS.values()} | goal
+
+
+# The privileged cues of `CueWrapper`: name -> its width in floats.
+CUES: dict[str, int] = {"optimal_action": 6, "compass": 3, "compass_at_start": 3}
+
+
+@struct.dataclass
+class CueState:
+    """The wrapped env's state and the cue the running episode holds (``compass_at_start``;
+    the per-step cues keep their last value here too, unused)."""
+
+    env_state: object
+    cue: jax.Array  # float32 [K]
+
+
+class CueWrapper(Wrapper):
+    """Privileged, for diagnostics: every observation also carries ``obs["cue"]``, float32
+    ``[K]``, a fact no agent sees in a real home, to test what a channel of the agent can
+    carry (docs/plans/ceiling_channels.md). ``cue``:
+
+    - ``"optimal_action"``: a one-hot ``[6]`` of the oracle's action from the current pose
+      (``optimal_action``: Done where Done succeeds), renewed every step: a policy that
+      copies it is optimal, so it checks the plumbing of a channel;
+    - ``"compass"``: the target's egocentric bearing and distance ``[3]``, renewed every
+      step: ``(cos b, sin b, d / G)`` with b the angle from the agent's heading to the
+      nearest cell holding the target's category (clockwise positive, radians), d that
+      cell's Euclidean distance in cells, G the grid's side;
+    - ``"compass_at_start"``: the compass of the episode's start pose, held for the
+      episode (renewed only where an episode begins): the timing of the goal view, which
+      is fixed for the episode too.
+
+    Reads the wrapped env's state (pose, scene, target) and its scene bank, as
+    ``GoalViewWrapper`` does; the cue after a step is that of the state ``step`` returns,
+    so after an automatic reset it is the next episode's."""
+
+    def __init__(self, env, cue: str):
+        if cue not in CUES:
+            raise ValueError(f"cue must be one of {tuple(CUES)}, got {cue!r}")
+        super().__init__(env)
+        self.cue = cue
+
+    def _params(self, params):
+        return self._env.default_params if params is None else params
+
+    def compass(self, state, params=None) -> jax.Array:
+        """float32 [3]: (cos b, sin b, d / G) of the nearest target cell from ``state``'s pose."""
+        params = self._params(params)
+        grid = self._env.grid_size
+        cells = params.bank.obj_cat[state.scene] == state.target  # [G, G]
+        rows, cols = jnp.meshgrid(jnp.arange(grid), jnp.arange(grid), indexing="ij")
+        d_row, d_col = rows - state.agent_pos[0], cols - state.agent_pos[1]
+        dist2 = jnp.where(cells, d_row**2 + d_col**2, jnp.iinfo(jnp.int32).max)
+        nearest = jnp.argmin(dist2)
+        d_row, d_col = d_row.reshape(-1)[nearest], d_col.reshape(-1)[nearest]
+        # Heading 0 is north (row - 1), clockwise in 45 degree steps: the absolute bearing
+        # of (d_row, d_col) clockwise from north is atan2(d_col, -d_row).
+        bearing = jnp.arctan2(d_col, -d_row) - state.heading * (jnp.pi / 4)
+        distance = jnp.sqrt((d_row**2 + d_col**2).astype(jnp.float32)) / grid
+        return jnp.stack([jnp.cos(bearing), jnp.sin(bearing), distance]).astype(jnp.float32)
+
+    def cue_of(self, state, params=None) -> jax.Array:
+        """The cue ``[K]`` at the inner env's ``state`` (for ``compass_at_start``, at a start)."""
+        params = self._params(params)
+        if self.cue == "optimal_action":
+            return jax.nn.one_hot(self._env.optimal_action(state, params), CUES[self.cue], dtype=jnp.float32)
+        return self.compass(state, params)
+
+    def observation_space(self, params=None):
+        parts = dict(self._env.observation_space(params).spaces)
+        width = CUES[self.cue]
+        low = np.zeros(width, np.float32) if self.cue == "optimal_action" else np.array([-1, -1, 0], np.float32)
+        high = np.ones(width, np.float32) if self.cue == "optimal_action" else np.array([1, 1, np.sqrt(2)], np.float32)
+        parts["cue"] = spaces.Box(low, high, (width,), jnp.float32)
+        return spaces.Dict(parts)
+
+    def reset(self, key, params=None):
+        params = self._params(params)
+        obs, env_state = self._env.reset(key, params)
+        cue = self.cue_of(env_state, params)
+        return {**obs, "cue": cue}, CueState(env_state, cue)
+
+    def step(self, key, state, action, params=None):
+        params = self._params(params)
+        obs, env_state, reward, terminated, truncated, info = self._env.step(key, state.env_state, action, params)
+        cue = self.cue_of(env_state, params)
+        if self.cue == "compass_at_start":  # renewed where the returned state starts an episode
+            cue = jnp.where(terminated | truncated, cue, state.cue)
+        return {**obs, "cue": cue}, CueState(env_state, cue), reward, terminated, truncated, info

@@ -222,6 +222,9 @@ class Config:
         if pieces.imagination_variant.reads_goal_view and self.imagination_noise != "output":
             raise ValueError(f"method {self.method!r} takes i_tau from the goal view, not from f_w: its noise is "
                              "Eq. 6's, on i_tau; drop imagination_noise (or set it to 'output').")  # fmt: skip
+        if pieces.imagination_variant.reads_cue and (self.sigma2_max != 0 or self.imagination_noise != "output"):
+            raise ValueError(f"method {self.method!r} gives the policy an exact privileged cue, without Eq. 7's noise: "
+                             "set sigma2_max=0 (and leave imagination_noise at 'output').")  # fmt: skip
         if self.imagination_optimizer not in IMAGINATION_OPTIMIZERS:
             raise ValueError(
                 f"imagination_optimizer must be one of {IMAGINATION_OPTIMIZERS}, "

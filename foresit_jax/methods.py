@@ -60,7 +60,11 @@ class ImaginationVariant:
     source: 'none' (the policy sees s_t only), 'learned' (f_w([s_0 : g_tau]) + noise,
       Eq. 6-7), 'random' (tanh(z), z ~ N(0, rnd_variance I)), 'goal_view' (privileged: the
       network's encoder and one LSTM step from a fresh carry on the episode's goal view,
-      + noise as Eq. 6-7; f_w is not trained).
+      + noise as Eq. 6-7; f_w is not trained), 'cue' (privileged: the observation's
+      `cue`, a fact of the environment named by `cue`, zero-padded to H, exact, at every
+      step; f_w is not trained).
+    cue: for source 'cue', the cue `envs.wrappers.CueWrapper` adds: 'optimal_action',
+      'compass' (both renewed every step) or 'compass_at_start' (held for the episode).
     critic: the critic a method with this variant gets unless its name says otherwise
       ('attention' for every variant of the paper, 'plain' for none).
     subgoal_mode: what f_w learns to imagine: 'argmax' (s_{argmax alpha}) or
@@ -74,6 +78,7 @@ class ImaginationVariant:
     critic: str = "plain"
     subgoal_mode: str = "argmax"
     renew_every_k: bool = False
+    cue: str = ""
     # Derived from `source` when the record is made (flags, not code run at every step):
     uses_imagination: bool = dataclasses.field(init=False, repr=False)
     """Whether the policy sees an i_tau at all."""
@@ -82,11 +87,18 @@ class ImaginationVariant:
     wrapped in `envs.wrappers.GoalViewWrapper`)."""
     trains_imagination: bool = dataclasses.field(init=False, repr=False)
     """Whether buffers are filled and f_w is trained."""
+    reads_cue: bool = dataclasses.field(init=False, repr=False)
+    """Whether i_tau is a privileged cue of the environment (wrapped in
+    `envs.wrappers.CueWrapper`), read from the observation at every step: it exists before
+    the step's state does, so the encoder sees it from an episode's first step on."""
 
     def __post_init__(self):
         object.__setattr__(self, "uses_imagination", self.source != "none")
         object.__setattr__(self, "reads_goal_view", self.source == "goal_view")
         object.__setattr__(self, "trains_imagination", self.source == "learned")
+        object.__setattr__(self, "reads_cue", self.source == "cue")
+        if self.reads_cue != bool(self.cue):
+            raise ValueError(f"imagination {self.name!r}: a cue is named exactly when the source is 'cue'")
 
 
 _FORESIT = ImaginationVariant("foresit", source="learned", critic="attention")
@@ -99,6 +111,11 @@ IMAGINATION_VARIANTS: dict[str, ImaginationVariant] = {
     "int": dataclasses.replace(_FORESIT, name="int", renew_every_k=True),
     # Privileged, a diagnostic (docs/ceiling.md): ForeSIT with i_tau from the goal view.
     "oracle": dataclasses.replace(_FORESIT, name="oracle", source="goal_view"),
+    # Privileged positive controls (docs/plans/ceiling_channels.md): i_tau is a cue of the
+    # environment, exact: the oracle's action, the target's compass per step or at the start.
+    "optaction": dataclasses.replace(_FORESIT, name="optaction", source="cue", cue="optimal_action"),
+    "compass": dataclasses.replace(_FORESIT, name="compass", source="cue", cue="compass"),
+    "startcompass": dataclasses.replace(_FORESIT, name="startcompass", source="cue", cue="compass_at_start"),
 }
 
 
@@ -216,9 +233,9 @@ class Method:
 
     @property
     def privileged(self) -> bool:
-        """Whether the method reads what no agent can see (the `oracle` imagination): a
-        diagnostic, labelled privileged wherever it is reported."""
-        return self.imagination_variant.reads_goal_view
+        """Whether the method reads what no agent can see (the `oracle` imagination and the
+        cues): a diagnostic, labelled privileged wherever it is reported."""
+        return self.imagination_variant.reads_goal_view or self.imagination_variant.reads_cue
 
     @property
     def greedy_evaluation(self) -> bool:
@@ -246,6 +263,7 @@ IMPLEMENTED_METHODS: tuple[str, ...] = (
     "a3c+org", "a3c+org+foresit", "a3c+org+rnd", "a3c+org+att", "a3c+org+int",
     "a3c+critic", "a3c+org+critic",
     "a3c+oracle", "a3c+org+oracle",  # privileged diagnostics, not methods (docs/ceiling.md)
+    "a3c+optaction", "a3c+compass", "a3c+startcompass",  # privileged controls (docs/ceiling.md)
 )  # fmt: skip
 
 

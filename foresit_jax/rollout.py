@@ -44,7 +44,7 @@ import jax.numpy as jnp
 from flax import struct
 
 import envs.metrics
-from envs.wrappers import GoalViewWrapper
+from envs.wrappers import CueWrapper, GoalViewWrapper
 from foresit_jax import distributions, imagination, maml
 from foresit_jax.maml import Adaptation  # an acting record, defined beside the inner loop that fills it
 from foresit_jax.lstm import (
@@ -222,10 +222,13 @@ def start(nets: Networks, key, env: BoundEnv, num_lanes: int, memory_size: int =
 
 def acting_env(nets: Networks, env: BoundEnv) -> BoundEnv:
     """The environment `nets` acts in: `env` itself, or, for an imagination that reads the
-    goal view (the privileged `oracle`), `env` wrapped to carry it
-    (`envs.wrappers.GoalViewWrapper`; built for that method alone, so no other program
-    changes)."""
-    if not nets.imagination_variant.reads_goal_view or isinstance(env.env, GoalViewWrapper):
+    goal view (the privileged `oracle`) or a cue (`optaction`, `compass`, `startcompass`),
+    `env` wrapped to carry it (`envs.wrappers.GoalViewWrapper`, `envs.wrappers.CueWrapper`;
+    built for those methods alone, so no other program changes)."""
+    variant = nets.imagination_variant
+    if variant.reads_cue and not isinstance(env.env, CueWrapper):
+        return BoundEnv(CueWrapper(env.env, variant.cue), env.params)
+    if not variant.reads_goal_view or isinstance(env.env, GoalViewWrapper):
         return env
     return BoundEnv(GoalViewWrapper(env.env), env.params)
 
@@ -243,12 +246,23 @@ def goal_latent(nets: Networks, params, kernels, obs) -> chex.Array:
                             method="next_state")  # fmt: skip
 
 
+def cue_latent(nets: Networks, obs) -> chex.Array:
+    """A privileged cue as i_tau `[B, H]`: `obs["cue"]` `[B, K]` zero-padded to H, exact
+    (no noise; `Config` requires sigma2_max=0), lanes reordered by `nets.permute`."""
+    cue = obs["cue"]
+    cue = (nets.permute or (lambda x: x))(cue)
+    return jnp.pad(cue, [(0, 0)] * (cue.ndim - 1) + [(0, nets.config.hidden_size - cue.shape[-1])])
+
+
 def encoder_imagined(nets: Networks, actor: ActorState) -> Optional[chex.Array]:
     """The i_tau the encoder sees at the lanes' next step `[B, H]`: the running episode's,
     zeros at an episode's first step (i_tau is imagined from that step's output); None
-    unless i_tau enters the encoder."""
+    unless i_tau enters the encoder. A cue is read from the observation, which exists
+    before the step's state: the encoder sees the step's own cue, at the first step too."""
     if not nets.imagination_in_encoder:
         return None
+    if nets.imagination_variant.reads_cue:
+        return cue_latent(nets, actor.obs)
     return jnp.where((actor.episode_step == 0)[:, None], 0.0, actor.imagined)
 
 
@@ -292,6 +306,8 @@ def imagined_at_step(nets: Networks, acting: AgentParams, actor: ActorState, s_t
     cfg, variant = nets.config, nets.imagination_variant
     if not variant.uses_imagination:
         return actor.imagined
+    if variant.reads_cue:  # the step's own cue, every step
+        return cue_latent(nets, actor.obs)
     noise_variance = acting.noise_variance
     if noise_variance is None:
         noise_variance = imagination.noise_variance(jax.vmap(imagination.success_rate)(actor.tracker), cfg.sigma2_max)

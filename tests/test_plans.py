@@ -35,9 +35,22 @@ def test_there_is_a_plan_and_each_names_its_archive():
         assert any(line.startswith("archive: docs/data/") for line in plan.read_text().splitlines()), plan.name
 
 
-@pytest.mark.parametrize("plan", PLANS, ids=[p.stem for p in PLANS])
-def test_a_plan_precedes_every_run_of_its_archive(plan):
-    archive = next(REPO / line.split(": ", 1)[1] for line in plan.read_text().splitlines() if line.startswith("archive: "))
+def archives(plan: Path) -> list[Path]:
+    """Every archive a plan names, one `archive: docs/data/...` line each (one per stage)."""
+    return [REPO / line.split(": ", 1)[1].strip() for line in plan.read_text().splitlines() if line.startswith("archive: ")]
+
+
+STAGES = [(plan, archive) for plan in PLANS for archive in archives(plan)]
+
+
+def test_archives_are_read_from_every_archive_line(tmp_path):
+    plan = tmp_path / "plan.md"
+    plan.write_text("# Plan\n\narchive: docs/data/a.tar.xz\narchive: docs/data/b.tar.xz\n\nnot archive: x\n")
+    assert archives(plan) == [REPO / "docs/data/a.tar.xz", REPO / "docs/data/b.tar.xz"]
+
+
+@pytest.mark.parametrize("plan, archive", STAGES, ids=[f"{p.stem}:{a.name}" for p, a in STAGES])
+def test_a_plan_precedes_every_run_of_its_archive(plan, archive):
     if not archive.exists():
         pytest.skip(f"{archive.name}: not run yet")
     if git("rev-parse", "HEAD").returncode != 0:
