@@ -1,7 +1,20 @@
 """The rule that ties the docs' words to their intervals (docs/results.md, "How results
-are worded"), held by a test: in every sentence of the README and the docs that quotes a
-difference with its interval, an equivalence word needs the interval inside the margin,
-and "helps" or "costs" needs it clear of 0."""
+are worded"), held by a test:
+
+- in every sentence of the README and the docs that quotes a difference with its interval,
+  an equivalence word needs the interval inside the margin, and "helps" or "costs" needs it
+  clear of 0;
+- a verdict, a word of `LEXICON` in a sentence (or table row) that names an arm, a pair, a
+  ceiling or a metric, has its interval in the same clause (a sentence is cut into clauses
+  at ";" and at ": " before a capital), or the sentence links to the docs section whose
+  table holds it (a link with a `#` anchor);
+- a word of change ("vanishes", "is gone", "disappears") needs, in its clause, an interval
+  that excludes 0 (what was there) and one that holds it (what is left);
+- "equal" is never a verdict on a measured difference: say "level", within a margin.
+
+Words in quotes or code are mentions, not verdicts; `EXEMPT` lists the uses that are not
+verdicts. `OVERREACHES` are sentences an independent read found saying more than their
+intervals (issue 68), each of which the rule must refuse."""
 
 import re
 from pathlib import Path
@@ -10,7 +23,9 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 CLAIM_FILES = ("README.md", "docs/results.md", "docs/mechanism.md", "docs/priors.md", "docs/houses.md",
-               "docs/deviations.md", "docs/foresight.md", "docs/ceiling.md", "docs/usage.md")  # fmt: skip
+               "docs/deviations.md", "docs/foresight.md", "docs/ceiling.md", "docs/usage.md", "docs/reproducibility.md",
+               "docs/learner.md", "docs/design.md", "CHANGELOG.md",
+               *sorted(str(p.relative_to(REPO)) for p in (REPO / "docs" / "plans").glob("*.md")))  # fmt: skip
 
 MARGIN = 3.8  # SR points: the paper's effect, the margin declared for "level" unless a sentence names another
 # Equivalence: the interval inside [-margin, +margin]. Only verdict uses: "end level", "level
@@ -22,14 +37,39 @@ DIRECTION = re.compile(r"\b(?:helps|hurts|costs|gains|lowers|raises)\b(?! nothin
 INTERVAL = re.compile(r"([+-]?\d+(?:\.\d+)?)\s*\[([+-]?\d+(?:\.\d+)?),\s*([+-]?\d+(?:\.\d+)?)\]")
 NAMED_MARGIN = re.compile(r"margin (?:of )?±?\s*(\d+(?:\.\d+)?)")
 
+# Issue 68's lexicon: words that give a verdict on a difference.
+LEXICON = re.compile(r"\b(?:level|equal|matches|helps|costs|gains|lowers|raises|hurts|lower|higher|better|worse|beats|"
+                     r"vanishes|is gone|disappears|at most|bounds?|bounded|ignores?)\b|\b(?:above|below)\s+(?:than|0)(?!\.?\d)",
+                     re.I)  # fmt: skip
+# What makes a sentence a verdict: it names an arm, a pair, a ceiling or a metric.
+SUBJECT = re.compile(r"\b(?:a3c[\w+@=.,-]*|foresit|oracle|critic|ceiling|pairs?|SR|SPL|compass\w*|optaction)\b", re.I)
+SECTION_LINK = re.compile(r"\]\([^)\s]*#[^)\s]+\)")
+# Mentions, not verdicts: quoted or in code.
+MENTION = re.compile(r'"[^"]*"|`[^`]*`|\*\*"[^"]*"\*\*')
+# Uses of a lexicon word that are not verdicts on a difference.
+EXEMPT = re.compile(
+    r"\b(?:lower|upper) (?:bound|end)s?\b|\btested equal\b|\bequal to (?:the|it|its)\b|\bat (?:about )?equal\b|"
+    r"\babout equal\b|\bequally\b|\bthe higher mean validation SR\b|\bmatches arms\b|\bat most \d+ (?:lines|words)\b|"
+    r"\bwhat (?:it|they|the \w+) costs?\b",
+    re.I)  # fmt: skip
+CHANGE = re.compile(r"\b(?:vanishes|is gone|disappears)\b", re.I)
+EQUAL = re.compile(r"\bequal\b", re.I)
 
-def sentences(text: str):
-    """Prose sentences of a Markdown text (table rows and code left out), lines of a
-    paragraph or bullet joined."""
+
+def sentences(text: str, rows: bool = False):
+    """Prose sentences of a Markdown text (code left out; table rows too unless `rows`,
+    then each row is one sentence), lines of a paragraph or bullet joined."""
     text = re.sub(r"```.*?```", "", text, flags=re.S)
     blocks, current = [], []
     for line in text.splitlines():
         stripped = line.strip()
+        if rows and stripped.startswith("|"):
+            if not re.fullmatch(r"\|[-|: ]+\|", stripped):
+                if current:
+                    blocks.append(" ".join(current))
+                    current = []
+                yield stripped
+            continue
         if not stripped or stripped.startswith(("|", "#")) or re.match(r"^([-*]|\d+\.) ", stripped):
             if current:
                 blocks.append(" ".join(current))
@@ -62,6 +102,82 @@ def violations(sentence: str) -> list[str]:
     return out
 
 
+def unsupported_verdicts(sentence: str) -> list[str]:
+    """Each verdict word of `sentence` (one clause, as `sentences` cuts them; a table row)
+    where the clause holds no interval and links to no docs section."""
+    plain = MENTION.sub(lambda m: " " * len(m.group(0)), sentence)
+    plain = EXEMPT.sub(lambda m: " " * len(m.group(0)), plain)
+    intervals = [(float(m.group(2)), float(m.group(3))) for m in INTERVAL.finditer(plain)]
+    out = []
+    for word in CHANGE.finditer(plain):  # a change of a difference is a verdict, whatever it names
+        if not (any(high < 0 or low > 0 for low, high in intervals) and any(low <= 0 <= high for low, high in intervals)):
+            out.append(f"{word.group(0)!r} needs what was there (an interval clear of 0) and what is left (one holding 0)")
+    if not SUBJECT.search(sentence) or SECTION_LINK.search(sentence):
+        return out
+    out += [f"{w.group(0)!r} claims no difference at all: say level, within a margin" for w in EQUAL.finditer(plain)]
+    if not intervals:  # `sentences` cuts at ";": the clause holds its interval, or nothing does
+        out += [f"{w.group(0)!r} with no interval in its clause" for w in LEXICON.finditer(plain) if not EQUAL.match(w.group(0))]
+    return out
+
+
+def test_a_verdict_needs_its_interval_in_its_clause_or_a_link_to_its_table():
+    assert unsupported_verdicts("The oracle costs -4.1 [-6.1, -2.1] SR.") == []
+    assert unsupported_verdicts("The oracle's SR is -4.1 [-6.1, -2.1], a cost.") == []
+    clauses = list(sentences("The oracle costs; its SR is -4.1 [-6.1, -2.1]."))
+    assert [v for c in clauses for v in unsupported_verdicts(c)] == ["'costs' with no interval in its clause"]
+    assert unsupported_verdicts("Here the oracle costs (every seed lower).")
+    assert unsupported_verdicts("Here the oracle costs ([below](#the-ceiling)).") == []
+    assert unsupported_verdicts('The rule: "level" only inside the margin, for SR.') == []
+    assert unsupported_verdicts("The lower bound of the ceiling is at least the MDE.") == []
+    assert unsupported_verdicts("A lower learning rate trains slowly.") == []  # names no arm or metric
+    assert unsupported_verdicts("p is below 0.05 for the pair.") == []
+    assert unsupported_verdicts("The pair's interval lies above 0.")
+
+
+# Issue 68's independent read: sentences of ceiling.md, results.md, deviations.md and
+# mechanism.md as they stood, each holding a lexicon word (those without one were reworded by
+# hand). Each must fail the rule when put back.
+OVERREACHES = (
+    '**Machine-matched it vanishes** ("Machine-matched in rooms with priors" below): the critic retrained on the '
+    "EPYC scores 60.6 where the Xeon's scored 56.2, and the ceiling becomes -0.4 [-4.7, +3.9].",
+    "So, in today's rooms at quick's budget, a perfect imagination of success is worth at most about +5 SR points "
+    "to this policy (95%), and possibly nothing.",
+    "So in today's rooms, at quick's budget, this policy gains at most about +7.6 SR points (the upper end, 95%) from "
+    "a perfect imagination of its goal, with noise or without, and possibly nothing.",
+    "So nowhere measured does a perfect imagination of the goal view resolve a gain for this policy at quick's "
+    "budget; the upper ends bound it at about +4 to +5 SR points.",
+    "What the interval does say: its upper end, +4.7, bounds (at 95%, on these seeds and machines) what a perfect "
+    "imagination, used as the paper uses it, is worth to this policy at quick's budget; a learned f_w, which can at "
+    "best approach the oracle, is bounded by it too.",
+    "**With 3x the budget at 3e-4, the test SR cost is gone**: a3c+foresit - a3c is +0.9 [-0.9, +2.6] SR (five "
+    "seeds detect 2.4 points here), level in SR within the paper's +3.8; but SPL cannot tell (+0.6 [-3.3, +4.5]).",
+    "The paper's claimed gain stays out of reach, and the cost found at quick's budget disappears.",
+    "* **ForeSIT gains the most from the longer budget**: +16.6 SR against a3c's +11.1 and the critic's +12.4.",
+    "With three times the budget, at the rate every arm then prefers, ForeSIT matches a3c and does not beat it.",
+    "The critic's cost depends on the learning rate: at 3e-4 the critic and the MLP are equal (+1.1 [-1.4, +3.6] "
+    "SR, -0.5 [-1.3, +0.2] SPL, `runs/mech_lr`).",
+    "* **At 3e-4 the arms are level** (every pair within 1.7 points, SPL within 1.8), as on savn at 3e-4.",
+    "Against the critic alone it is level (+0.3).",
+    "Against Eq. 6's it gains +2.3 SR, which five seeds cannot tell from 0 (MDE 10.0); it is level with the critic "
+    "alone (-0.3), and still below the base at its own rate.",
+    "| imagination noise | Measured at 3e-4, 5 seeds: +2.3 [-5.1, +9.8] SR over Eq. 6's, level with the critic "
+    "alone ([results.md](results.md#fairness-algorithm-1s-noise-placement-as-an-arm-5-seeds-2026-11-27)). |",
+    "2. Why the critic costs. Done: the learning rate (Study 4: at 3e-4 the critic costs nothing, and a3c at 3e-4 "
+    "pays what the critic pays at 1e-3: a slower learner, not a worse one).",
+)
+
+
+def problems(text: str) -> list[str]:
+    """Everything in a Markdown text that breaks the rule, sentence by sentence."""
+    checks = lambda s: violations(s) + unsupported_verdicts(s)  # noqa: E731
+    return [f"{v}: {s.strip()[:160]}" for s in sentences(text, rows=True) for v in checks(s)]
+
+
+@pytest.mark.parametrize("sentence", OVERREACHES, ids=range(len(OVERREACHES)))
+def test_each_quoted_overreach_fails_the_rule_when_put_back(sentence):
+    assert problems(sentence)
+
+
 def test_the_rule_reads_verdicts_and_leaves_other_uses_alone():
     assert violations("The arms end level: +0.9 [-0.9, +2.6] SR.") == []
     assert violations("The arms end level: +0.6 [-3.3, +4.5] SPL.")
@@ -81,7 +197,7 @@ def test_every_claim_sentence_follows_the_rule(name):
     path = REPO / name
     if not path.exists():
         pytest.skip(f"{name} is not there")
-    bad = [f"{v}: {s.strip()[:160]}" for s in sentences(path.read_text()) for v in violations(s)]
+    bad = problems(path.read_text())
     assert not bad, f"{name}: words stronger than their intervals (docs/results.md's rule):\n" + "\n".join(bad)
 
 
