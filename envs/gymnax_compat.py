@@ -25,13 +25,9 @@ What it returns is what ``gymnax.make`` returns for one of gymnax's own environm
     ``info["final_observation"]`` (the flat observation before the reset) is there by
     default, since gymnax 1.x's own ``FlattenObservationWrapper`` reads it at every step.
   - ``"auto"``: the installed gymnax's convention (six values from gymnax 1.0 on, five
-    before it or without it: ``installed_step_api()``), the default of version 0.1.0; never
-    the default now.
+    before it or without it: ``installed_step_api()``).
 
-  Version 0.1.0's default was ``"auto"``: six values where gymnax >= 1 is installed.  The
-  default became ``"done"`` in 0.2.0, and a call that does not pass ``step_api`` where
-  gymnax >= 1 is installed (the one case whose result changed) emits a ``FutureWarning``
-  saying so (one per call); passing ``step_api`` silences it.
+  The default is ``"done"`` whatever is installed, and it warns of nothing.
 
   Either way ``info`` holds GridNav's facts about the step (``success``,
   ``episode_length``, ``optimal_length``, ``room_type``, ``scene``, ``target``,
@@ -70,7 +66,6 @@ from __future__ import annotations
 
 import functools
 import importlib.util
-import warnings
 
 import jax
 import jax.numpy as jnp
@@ -85,7 +80,7 @@ from envs.versions import installed_version
 from envs.wrappers import FlattenObservationWrapper
 
 STEP_APIS = ("auto", "done", "terminated_truncated")
-DEFAULT_STEP_API = "done"  # fixed, whatever is installed (0.1.0's default was "auto")
+DEFAULT_STEP_API = "done"  # fixed, whatever is installed
 
 
 def installed_gymnax_version() -> tuple[int, ...] | None:
@@ -97,8 +92,8 @@ def installed_gymnax_version() -> tuple[int, ...] | None:
 
 def default_step_api() -> str:
     """The step convention ``make_gymnax`` uses when ``step_api`` is not passed: ``"done"``
-    (five values), whatever is installed.  (Before 0.2.0 it was the installed gymnax's,
-    which ``installed_step_api`` gives.)"""
+    (five values), whatever is installed (``installed_step_api`` gives the installed
+    gymnax's)."""
     return DEFAULT_STEP_API
 
 
@@ -109,24 +104,11 @@ def installed_step_api() -> str:
     return "terminated_truncated" if version is not None and version >= (1,) else "done"
 
 
-def _resolve_step_api(step_api: str | None, stacklevel: int) -> str:
-    """"done" or "terminated_truncated" for a ``step_api`` argument (None: not passed).
-
-    Not passed where gymnax >= 1 is installed, the one case whose result changed in 0.2.0
-    (0.1.0 chose six values there), is a ``FutureWarning``, raised ``stacklevel`` frames up
-    (this function counts as one)."""
+def _resolve_step_api(step_api: str | None) -> str:
+    """"done" or "terminated_truncated" for a ``step_api`` argument (None: not passed)."""
     if step_api is not None and step_api not in STEP_APIS:
         raise ValueError(f"step_api must be one of {STEP_APIS}, got {step_api!r}")
     if step_api is None:
-        version = installed_gymnax_version()
-        if version is not None and version >= (1,):
-            warnings.warn(
-                f"envs.make_gymnax / gymnax.make('GridNav-v0'): the default step_api changed in 0.2.0 from six "
-                f"values (obs, state, reward, terminated, truncated, info: gymnax 1.x's convention, which 0.1.0 "
-                f"chose where gymnax >= 1 is installed, as here: gymnax {'.'.join(map(str, version))}) to five "
-                f"(obs, state, reward, done, info), whatever is installed. Pass step_api=\"terminated_truncated\" "
-                f"for gymnax 1.x's convention, or step_api=\"done\" to silence this warning.",
-                FutureWarning, stacklevel=stacklevel)  # fmt: skip
         return DEFAULT_STEP_API
     return installed_step_api() if step_api == "auto" else step_api
 
@@ -255,6 +237,16 @@ class GymnaxGridNav:
         params = self.default_params if params is None else params
         return self._flat.flatten(self.gridnav.get_obs(state, params), params)
 
+    def observe(self, key, state, action=None, params=None):
+        """The flat observation of ``state`` (gymnax's keyed hook: GridNav's observation
+        depends on neither ``key`` nor ``action``)."""
+        del key, action
+        return self.get_obs(state, params)
+
+    def is_terminal(self, state, params=None) -> jax.Array:
+        """gymnax's legacy name for ``is_terminated`` (time limits excluded, as there)."""
+        return self.is_terminated(state, params)
+
     def is_terminated(self, state, params=None) -> jax.Array:
         """Always False: GridNav's episodes end by the Done action, which the state does not
         record (``step`` and ``step_env`` return ``terminated``; the state after a Done is not
@@ -318,8 +310,7 @@ def make_gymnax(env_id: str = "GridNav-v0", *, step_api: str | None = None, fina
         "done" (the default: five values ``obs, state, reward, done, info``, what
         PureJaxRL's ``ppo.py`` and rejax 0.1.3 unpack), "terminated_truncated" (six,
         gymnax 1.x's ``obs, state, reward, terminated, truncated, info``) or "auto" (the
-        installed gymnax's: ``installed_step_api()``).  Not passing it where gymnax >= 1
-        is installed emits a ``FutureWarning``: 0.1.0's default there was six values.
+        installed gymnax's: ``installed_step_api()``).
       final_observation: put the flat observation before the automatic reset in
         ``info["final_observation"]``; by default only with the six-value step.
       setup, split, room_types, training, env_kwargs: as ``envs.make``.
@@ -332,7 +323,7 @@ def make_gymnax(env_id: str = "GridNav-v0", *, step_api: str | None = None, fina
     """
     from envs import make  # envs/__init__ imports this module
 
-    step_api = _resolve_step_api(step_api, stacklevel=3)  # the warning points at the caller
+    step_api = _resolve_step_api(step_api)
     if final_observation is None:
         final_observation = step_api == "terminated_truncated"
     env, params = make(env_id, setup=setup, split=split, room_types=room_types, training=training,
@@ -344,7 +335,7 @@ def make_gymnax(env_id: str = "GridNav-v0", *, step_api: str | None = None, fina
 def _gymnax_factory(env_id: str, **kwargs) -> GymnaxGridNav:
     """``gymnax.make(env_id, **kwargs)``'s env: ``make_gymnax``'s, with its defaults (and its
     warning, pointed at ``gymnax.make``'s caller)."""
-    kwargs["step_api"] = _resolve_step_api(kwargs.get("step_api"), stacklevel=4)
+    kwargs["step_api"] = _resolve_step_api(kwargs.get("step_api"))
     return make_gymnax(env_id, **kwargs)[0]
 
 

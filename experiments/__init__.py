@@ -23,3 +23,8 @@ def __getattr__(name: str):
 
         return getattr(models, name)
     raise AttributeError(f"module 'experiments' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    """The module's names and the lazily imported ones, so tab completion finds `load`."""
+    return sorted(set(globals()) | {"load", "Policy"})

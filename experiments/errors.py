@@ -14,8 +14,14 @@ import sys
 from pathlib import Path
 
 
-class UserError(Exception):
-    """A problem with what the user asked for: printed as one line, exit status 2."""
+class UserError(ValueError):
+    """A problem with what the user asked for: printed as one line, exit status 2. A
+    ValueError, so that library code catching bad values catches it too."""
+
+
+class RunNotFound(UserError, FileNotFoundError):
+    """A run folder that is not there, or holds no run.json: `except FileNotFoundError`
+    and `except UserError` both catch it."""
 
 
 def fail(message: str, status: int = 2) -> None:

@@ -145,7 +145,8 @@ def load(run_dir, seed: int = 0, which: str = "best") -> Policy:
     folder = Path(run_dir)
     if not (folder / "run.json").is_file():
         hint = " (a sweep folder: give one of its arms, <sweep>/methods/<arm>)" if (folder / "sweep.json").is_file() else ""
-        raise errors.UserError(f"{folder} is not a run folder: it has no run.json{hint}")
+        what = "is not there" if not folder.exists() else "is not a run folder: it has no run.json"
+        raise errors.RunNotFound(f"{folder} {what}{hint}")
     trained = read_trained(folder)
     if seed not in trained.seeds:
         raise errors.UserError(f"{folder} trained seeds {trained.seeds}, not seed {seed}")

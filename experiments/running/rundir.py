@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.errors import UserError, read_json  # noqa: F401 (rundir.read_json: a run folder's files read back)
+from experiments.errors import RunNotFound, UserError, read_json  # noqa: F401 (rundir.read_json: a run folder's files read back)
 from experiments.reporting.tables import write_csv
 
 try:  # POSIX: flock on the folder's .lock, which also names the holder's pid
@@ -193,7 +193,8 @@ def write_run_info(path: Path, info: dict) -> None:
 
 def read_run_info(path: Path) -> dict:
     if not is_run(path):
-        raise UserError(f"{path} is not a run folder (no {RUN_FILE}); pass the --out folder of experiments.train")
+        what = "is not there" if not Path(path).exists() else f"is not a run folder (no {RUN_FILE})"
+        raise RunNotFound(f"{path} {what}; pass the --out folder of experiments.train")
     return read_json(path / RUN_FILE)
 
 
