@@ -439,6 +439,12 @@ def _raise_on_bad_action(action) -> None:
                          f"({int(bad.sum())} of {action.size} in this call)")  # fmt: skip
 
 
+def check_room_types(room_types) -> tuple[int, ...]:
+    """Room type names or indices as indices: a ValueError naming what is wrong (for a
+    program to refuse bad flags before it writes anything)."""
+    return _room_indices(room_types)
+
+
 def _room_indices(room_types) -> tuple[int, ...]:
     """Room type names or indices as indices; one ValueError names what is wrong."""
     if isinstance(room_types, (str, int, np.integer)):
@@ -461,4 +467,5 @@ def _room_index(room) -> int:
     return int(room)
 
 
-__all__ = ["EnvParams", "EnvState", "GridNav", "GRID_SIZES", "check_perception_range", "time_limits", "UNREACHABLE"]
+__all__ = ["EnvParams", "EnvState", "GridNav", "GRID_SIZES", "check_perception_range", "check_room_types", "time_limits",
+           "UNREACHABLE"]

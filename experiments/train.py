@@ -38,7 +38,7 @@ import numpy as np
 from experiments import errors
 from experiments.reporting import figures, tables
 from experiments.running import flags, loop, rundir, selection, tracking
-from experiments.running.presets import TrainConfigFields, config_flag, given, preset
+from experiments.running.presets import TrainConfigFields, check_seeds, config_flag, given, preset
 from experiments.running.progress import progress_bar
 from experiments.running.run import Run, read
 from foresit_jax.evaluate import Evaluator
@@ -80,6 +80,7 @@ class Args:
 
 def build(args: Args):
     """Config and Schedule from the arguments (or from the run folder when resuming)."""
+    check_seeds(args.seed)
     config, schedule = preset(args.preset, args.method, num_updates=args.num_updates, setup=args.setup,
                               **given(args.config))  # fmt: skip
     sched = {k: getattr(args, k) for k in ("chunk_updates", "test_episodes_per_room", "val_episodes_per_room")}

@@ -422,6 +422,10 @@ TRAIN_ERRORS = [
     (["--val-episodes-per-room", "0"], ["val_episodes_per_room must be >= 1"]),
     (["--resume"], ["not a run folder"]),
     (["--resume", "--overwrite"], ["exclude each other"]),
+    # issue 71: checked before anything is written (no run.json, no .lock left behind)
+    (["--room-types", "garage"], ["unknown room type 'garage'"]),
+    (["--seed", str(2**70)], ["seeds must lie in 0..2**63-1"]),
+    (["--seed", "-1"], ["seeds must lie in 0..2**63-1"]),
 ]
 
 
@@ -635,6 +639,10 @@ def test_sweep_rejects_bad_input_in_one_line(tmp_path, capsys):
     out = tmp_path / "sweep"
     base = ["--preset", "tiny", "--out", out]
     assert "--seeds must be >= 1" in cli_error(sweep.cli, [*base, "--seeds", "0"], capsys)
+    assert "a3c more than once" in cli_error(sweep.cli, [*base, "--methods", "a3c", "a3c+critic", "a3c"], capsys)
+    assert "2**63-1" in cli_error(sweep.cli, [*base, "--seed", str(2**63 - 2), "--seeds", "3"], capsys)
+    assert "unknown room type" in cli_error(sweep.cli, [*base, "--room-types", "garage"], capsys)
+    assert not out.exists()
     assert "unknown method 'bogus'" in cli_error(sweep.cli, [*base, "--methods", "a3c", "bogus"], capsys)
     assert "valid presets" in cli_error(sweep.cli, ["--preset", "huge", "--out", out], capsys)
     assert ">= 1" in cli_error(sweep.cli, [*base, "--test-episodes-per-room", "0"], capsys)

@@ -22,7 +22,7 @@ from typing import Annotated, Optional
 import docstring_parser
 import tyro
 
-from envs.gridnav import time_limits
+from envs.gridnav import check_room_types, time_limits
 from foresit_jax.config import Config
 from foresit_jax.methods import IMPLEMENTED_METHODS, parse_method
 
@@ -130,7 +130,21 @@ def preset(name: str, method: str, **overrides) -> tuple[Config, Schedule]:
         limit = int(max(time_limits(True, given.get("layout", fields.get("layout", Config.layout)))))
         required = {**required, "num_steps": max(fields.get("num_steps", Config.num_steps), limit)}
     config = Config(method=method, **{**fields, **required, **given})
+    if config.room_types:  # checked here, before a program writes anything in its --out
+        check_room_types(config.room_types)
     return config, schedule
+
+
+MAX_SEED = 2**63 - 1  # jax.random.PRNGKey takes a seed that fits in int64
+
+
+def check_seeds(first: int, count: int = 1) -> None:
+    """A ValueError naming the bound where seeds `first` .. `first + count - 1` do not all
+    lie in 0..MAX_SEED (before anything is written)."""
+    if isinstance(first, bool) or not isinstance(first, int) or first < 0 or first + count - 1 > MAX_SEED:
+        last = f" to {first + count - 1}" if count > 1 else ""
+        raise ValueError(f"seeds must lie in 0..2**63-1 (what jax.random.PRNGKey takes), got {first}{last}; "
+                         "choose a smaller --seed")  # fmt: skip
 
 
 # ---------------------------------------------------------------------- Config fields as flags

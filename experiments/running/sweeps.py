@@ -40,7 +40,7 @@ from experiments.reporting.report import (
 from experiments.reporting.tables import write_csv
 from experiments.running import checkpoint, devices, flags, numerics, rundir, selection
 from experiments.running.run import Run, check_continuable, finished_seeds, set_aside
-from experiments.running.presets import SweepConfigFields, config_flag, given, preset
+from experiments.running.presets import SweepConfigFields, check_seeds, config_flag, given, preset
 from experiments.running.progress import progress_bar
 from foresit_jax.evaluate import Evaluator
 
@@ -301,6 +301,10 @@ def check(spec: Sweep) -> None:
         raise errors.UserError(f"--seeds must be >= 1, got {spec.seeds}")
     if not spec.methods:
         raise errors.UserError("--methods needs at least one method")
+    twice = sorted({m for m in spec.methods if spec.methods.count(m) > 1})
+    if twice:
+        raise errors.UserError(f"--methods lists {', '.join(twice)} more than once; list each arm once")
+    check_seeds(spec.seed, spec.seeds)
     for name in ("test_episodes_per_room", "val_episodes_per_room"):
         if getattr(spec, name) is not None and getattr(spec, name) < 1:
             raise errors.UserError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(spec, name)}")
