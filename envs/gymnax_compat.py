@@ -333,8 +333,7 @@ def make_gymnax(env_id: str = "GridNav-v0", *, step_api: str | None = None, fina
 
 
 def _gymnax_factory(env_id: str, **kwargs) -> GymnaxGridNav:
-    """``gymnax.make(env_id, **kwargs)``'s env: ``make_gymnax``'s, with its defaults (and its
-    warning, pointed at ``gymnax.make``'s caller)."""
+    """``gymnax.make(env_id, **kwargs)``'s env: ``make_gymnax``'s, with its defaults."""
     kwargs["step_api"] = _resolve_step_api(kwargs.get("step_api"))
     return make_gymnax(env_id, **kwargs)[0]
 

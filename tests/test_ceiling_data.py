@@ -167,7 +167,7 @@ def test_ceiling_md_quotes_the_ceiling_at_range_4(tmp_path, capsys):
     assert f"| rooms with priors, range 4, machine-matched, with the noise | {sr} | {mde} |" in (
         REPO / "docs" / "results.md").read_text()
     readme = " ".join((REPO / "README.md").read_text().split())
-    assert f"with a 1 m perception range, where a first view foresees the bearing, it costs {sr}, " in readme
+    assert f"in rooms with priors seen to 1 m, where a first view foresees a little of the bearing, it costs {sr}, " in readme
 
 
 def test_ceiling_md_quotes_the_noise_off_ceiling_at_range_4(tmp_path, capsys):

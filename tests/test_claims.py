@@ -205,3 +205,34 @@ def test_the_readme_is_a_page_a_newcomer_reads_in_two_minutes():
     """At most 110 lines and 1,000 words (issue 61): everything else lives in docs/."""
     text = (REPO / "README.md").read_text()
     assert len(text.splitlines()) <= 110 and len(text.split()) <= 1000, (len(text.splitlines()), len(text.split()))
+
+
+def slug(heading: str) -> str:
+    """GitHub's anchor of a Markdown heading: lower case, punctuation but hyphens and
+    underscores dropped, spaces as hyphens."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lstrip("#").strip().lower()).replace(" ", "-")
+
+
+def anchors(path: Path) -> set[str]:
+    text = re.sub(r"```.*?```", "", path.read_text(), flags=re.S)
+    return {slug(line) for line in text.splitlines() if line.startswith("#")}
+
+
+def test_slugs_are_githubs():
+    assert slug("## Study 6: the critic's keys, savn, seeds 0-4") == "study-6-the-critics-keys-savn-seeds-0-4"
+    assert slug("### Stage 1: can a compass be carried? (quick, 2026-11-29)") == "stage-1-can-a-compass-be-carried-quick-2026-11-29"
+
+
+@pytest.mark.parametrize("name", CLAIM_FILES)
+def test_every_section_link_resolves(name):
+    """A verdict may link to the section whose table holds its interval: the link must
+    land on a heading that exists."""
+    path = REPO / name
+    broken = []
+    for target, anchor in re.findall(r"\]\(([^)\s#]*)#([^)\s]+)\)", path.read_text()):
+        linked = (path.parent / target).resolve() if target else path
+        if target.startswith("http") or linked.suffix != ".md":
+            continue
+        if not linked.exists() or anchor not in anchors(linked):
+            broken.append(f"{target}#{anchor}")
+    assert not broken, f"{name}: links to no heading: {broken}"
