@@ -31,7 +31,8 @@ def fail(message: str, status: int = 2) -> None:
 
 def run_cli(args_class, main, argv=None):
     """A CLI's body: parse `argv` into `args_class` with tyro and run `main`; what the user
-    asked wrongly (UserError, ValueError) is one line on stderr and exit status 2."""
+    asked wrongly (UserError, ValueError, a number too large) is one line on stderr and
+    exit status 2, XLA's out-of-memory one line and exit status 1."""
     import tyro
 
     args = tyro.cli(args_class, args=argv)
@@ -39,6 +40,13 @@ def run_cli(args_class, main, argv=None):
         return main(args)
     except (UserError, ValueError) as e:
         fail(str(e))
+    except OverflowError as e:  # a number past what jax or numpy holds (a seed of 2**70)
+        fail(f"a number given is too large ({e}); give a smaller --seed, size or count")
+    except RuntimeError as e:  # XLA's out-of-memory, raised as jaxlib's XlaRuntimeError
+        if "RESOURCE_EXHAUSTED" not in str(e):
+            raise
+        fail(f"out of memory ({str(e).splitlines()[0][:160]}); lower --num-lanes or --seeds, or train on a larger "
+             "device", status=1)  # fmt: skip
     except OSError as e:  # disk full, read-only, not a directory: one line, not a traceback
         if e.errno not in _USER_ERRNOS:
             raise
