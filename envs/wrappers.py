@@ -31,6 +31,10 @@ class Wrapper:
     def __init__(self, env):
         self._env = env
 
+    def _params(self, params):
+        """`params`, or the wrapped environment's default params where None (gymnax's rule)."""
+        return self._env.default_params if params is None else params
+
     def __getattr__(self, name):
         # Python calls this only for names not found on the wrapper. `copy`, `pickle` and
         # `copy.deepcopy` build a new wrapper without `__init__` and look up dunder names
@@ -208,9 +212,6 @@ class GoalViewWrapper(Wrapper):
 
     GOAL_KEYS = {"view": "goal_view", "detections": "goal_detections"}
 
-    def _params(self, params):
-        return self._env.default_params if params is None else params
-
     def goal_observation(self, state, params=None, walk=None):
         """The goal parts ``{"goal_view": ..., ...}`` of the episode starting at ``state``;
         ``walk`` (bool ``[]``, default True): whether to walk at all (False: the parts of
@@ -302,9 +303,6 @@ class CueWrapper(Wrapper):
             raise ValueError(f"cue must be one of {tuple(CUES)}, got {cue!r}")
         super().__init__(env)
         self.cue = cue
-
-    def _params(self, params):
-        return self._env.default_params if params is None else params
 
     def compass(self, state, params=None) -> jax.Array:
         """float32 [3]: (cos b, sin b, d / G) of the nearest target cell from ``state``'s pose."""

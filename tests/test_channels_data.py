@@ -63,5 +63,5 @@ def test_stage_1_is_quoted_with_its_verdicts(tmp_path, capsys):
     assert all(r["selected_update"] == 3000 for arm in results for r in results[arm])  # "its last model"
     readme = " ".join((REPO / "README.md").read_text().split())
     compass = study_data.interval(out["pairs"][f"{COMPASS} - {CRITIC}"]["SR"])
-    assert f"a privileged per-step compass adds {compass} SR there, one held from the start " \
+    assert f"a privileged per-step compass adds {compass} SR, one held from the start " \
            f"{study_data.interval(start['SR'])} " in readme

@@ -143,10 +143,8 @@ def load(run_dir, seed: int = 0, which: str = "best") -> Policy:
     if which not in WHICH:
         raise errors.UserError(f"which must be one of {WHICH}, got {which!r}")
     folder = Path(run_dir)
-    if not (folder / "run.json").is_file():
-        hint = " (a sweep folder: give one of its arms, <sweep>/methods/<arm>)" if (folder / "sweep.json").is_file() else ""
-        what = "is not there" if not folder.exists() else "is not a run folder: it has no run.json"
-        raise errors.RunNotFound(f"{folder} {what}{hint}")
+    sweep = (folder / "sweep.json").is_file()
+    rundir.require_run(folder, " (a sweep folder: give one of its arms, <sweep>/methods/<arm>)" if sweep else "")
     trained = read_trained(folder)
     if seed not in trained.seeds:
         raise errors.UserError(f"{folder} trained seeds {trained.seeds}, not seed {seed}")

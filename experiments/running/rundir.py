@@ -191,10 +191,15 @@ def write_run_info(path: Path, info: dict) -> None:
     write_json(path / RUN_FILE, info)
 
 
-def read_run_info(path: Path) -> dict:
-    if not is_run(path):
+def require_run(path: Path, hint: str = "; pass the --out folder of experiments.train") -> None:
+    """A RunNotFound, saying whether `path` is not there or holds no run.json, unless it is a run."""
+    if not is_run(Path(path)):
         what = "is not there" if not Path(path).exists() else f"is not a run folder (no {RUN_FILE})"
-        raise RunNotFound(f"{path} {what}; pass the --out folder of experiments.train")
+        raise RunNotFound(f"{path} {what}{hint}")
+
+
+def read_run_info(path: Path) -> dict:
+    require_run(path)
     return read_json(path / RUN_FILE)
 
 
