@@ -442,7 +442,11 @@ def _raise_on_bad_action(action) -> None:
 def check_room_types(room_types) -> tuple[int, ...]:
     """Room type names or indices as indices: a ValueError naming what is wrong (for a
     program to refuse bad flags before it writes anything)."""
-    return _room_indices(room_types)
+    rooms = _room_indices(room_types)
+    twice = sorted({C.ROOM_TYPES[r] for r in rooms if rooms.count(r) > 1})
+    if twice:
+        raise ValueError(f"room_types lists {', '.join(twice)} more than once; name each room type once")
+    return rooms
 
 
 def _room_indices(room_types) -> tuple[int, ...]:

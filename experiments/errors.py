@@ -8,6 +8,7 @@ A leaf: it imports nothing of the project, so that both layers of the programs' 
 
 from __future__ import annotations
 
+import contextvars
 import errno
 import json
 import sys
@@ -35,22 +36,69 @@ def run_cli(args_class, main, argv=None):
     exit status 2, XLA's out-of-memory one line and exit status 1."""
     import tyro
 
+    argv = sys.argv[1:] if argv is None else list(argv)
     args = tyro.cli(args_class, args=argv)
+    given = _GIVEN.set(frozenset(t[2:].split("=")[0].replace("-", "_") for t in argv if t.startswith("--")))
+    undo = _UNDO.set([])
     try:
         return main(args)
     except (UserError, ValueError) as e:
-        fail(str(e))
+        refuse(str(e))
     except OverflowError as e:  # a number past what jax or numpy holds (a seed of 2**70)
-        fail(f"a number given is too large ({e}); give a smaller --seed, size or count")
+        refuse(f"a number given is too large ({e}); give a smaller --seed, size or count")
     except RuntimeError as e:  # XLA's out-of-memory, raised as jaxlib's XlaRuntimeError
         if "RESOURCE_EXHAUSTED" not in str(e):
             raise
-        fail(f"out of memory ({str(e).splitlines()[0][:160]}); lower --num-lanes or --seeds, or train on a larger "
-             "device", status=1)  # fmt: skip
+        refuse(f"out of memory ({str(e).splitlines()[0][:160]}); lower --num-lanes or --seeds, or train on a larger "
+               "device", status=1)  # fmt: skip
     except OSError as e:  # disk full, read-only, not a directory: one line, not a traceback
         if e.errno not in _USER_ERRNOS:
             raise
-        fail(os_message(e), status=1 if e.errno in (errno.ENOSPC, errno.EDQUOT) else 2)
+        refuse(os_message(e), status=1 if e.errno in (errno.ENOSPC, errno.EDQUOT) else 2)
+    finally:
+        _GIVEN.reset(given)
+        _UNDO.reset(undo)
+
+
+def refuse(message: str, status: int = 2) -> None:
+    """`fail`, after undoing what the refused program made only to hold its folders
+    (`on_refusal`): its lock files and the empty folders made to hold them."""
+    for undo in reversed(_UNDO.get() or []):
+        undo()
+    fail(message, status)
+
+
+# What to undo if the program `run_cli` is running is refused (`on_refusal`).
+_UNDO: contextvars.ContextVar[list | None] = contextvars.ContextVar("undo_on_refusal", default=None)
+
+
+def on_refusal(undo) -> None:
+    """Call `undo()` if the program `run_cli` is running ends in a refusal (a UserError and
+    the like, before `fail`); outside `run_cli` (a program's `main` called directly),
+    nothing. rundir's `claim` registers the release of its lock here, so that a refused
+    program leaves no .lock (and no empty folder) behind."""
+    pending = _UNDO.get()
+    if pending is not None:
+        pending.append(undo)
+
+
+# The flags on the command line `run_cli` is running (field names: `--num-lanes 8` gives
+# "num_lanes"), for what the parsed arguments cannot tell: a flag given at its default.
+_GIVEN: contextvars.ContextVar[frozenset[str]] = contextvars.ContextVar("given_flags", default=frozenset())
+
+
+def given_flags() -> frozenset[str]:
+    """The flags written on the command line of the program `run_cli` runs (as field
+    names); empty where a program's `main` is called directly."""
+    return _GIVEN.get()
+
+
+def say_ignored(ignored: list[str], out) -> None:
+    """One line on stderr naming the flags --resume ignored (`ignored`: `--flag value (the
+    run has ...)`), if any."""
+    if ignored:
+        print(f"note: --resume continues {out} with the arguments it was started with; ignored {', '.join(ignored)}",
+              file=sys.stderr, flush=True)  # fmt: skip
 
 
 # What the user's disk or paths did, not a bug: reported in one line.
@@ -64,9 +112,17 @@ def os_message(e: OSError) -> str:
                                           if e.errno in (errno.ENOSPC, errno.EDQUOT) else "")  # fmt: skip
 
 
-def read_json(path: Path):
-    """A JSON file this project wrote; a broken one is a UserError naming it."""
+def read_json(path: Path, keys: tuple[str, ...] = ()):
+    """A JSON object this project wrote, holding `keys`; a broken one (not JSON, not an
+    object, a key missing) is a UserError naming it."""
     try:
-        return json.loads(Path(path).read_text())
+        value = json.loads(Path(path).read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
         raise UserError(f"{path} is not valid JSON ({e}); it was damaged after it was written") from None
+    if not isinstance(value, dict):
+        raise UserError(f"{path} holds a JSON {type(value).__name__}, not the object this project wrote; it was "
+                        "damaged after it was written")  # fmt: skip
+    missing = [k for k in keys if k not in value]
+    if missing:
+        raise UserError(f"{path} lacks {', '.join(missing)}; it was damaged after it was written")
+    return value

@@ -48,7 +48,7 @@ from envs import catalog as C
 from envs.priors import RELATIONS
 from experiments import errors
 from experiments.reporting.tables import markdown_table
-from experiments.running import rundir
+from experiments.running import presets, rundir
 
 FEATURE_SETS = ("geometry", "view", "view + target")
 TURNS = ("left", "right")
@@ -74,6 +74,8 @@ class Args:
     seen but not resolved, one 'unresolved object' class, and a target that far does not count as in view (None: off)"""
     out: Optional[Path] = None
     """Also write foresight.md and foresight.json into this folder."""
+    overwrite: bool = False
+    """Replace the foresight.md and foresight.json already in --out (refused without it)."""
 
 
 # ---------------------------------------------------------------------- the pure part
@@ -285,6 +287,14 @@ def main(args: Args) -> dict:
                                "it out for no range")  # fmt: skip
     if args.resets < 100:
         raise errors.UserError(f"--resets {args.resets}: give at least 100 starts per split")
+    presets.check_seeds(args.seed)
+    if args.out is not None:  # before the minutes of measuring
+        if args.out.exists() and not args.out.is_dir():
+            raise errors.UserError(f"--out {args.out} is a file, not a folder; choose another --out")
+        taken = [name for name in ("foresight.md", "foresight.json") if (args.out / name).exists()]
+        if taken and not args.overwrite:
+            raise errors.UserError(f"{args.out} already holds {', '.join(taken)}; pass --overwrite to replace them, or "
+                                   "choose another --out")  # fmt: skip
     t0 = time.time()
     data = {}
     for i, split in enumerate(("train", "test")):

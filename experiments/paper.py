@@ -110,6 +110,7 @@ class Args:
     normally compiled run's in the last bits, and each run records it with its platform."""
     stop_after_chunks: flags.StopAfterChunks = None
     progress: flags.Progress = True
+    allow_large: flags.AllowLarge = False
 
 
 def fast_compile(args: Args) -> bool:
@@ -172,6 +173,8 @@ def check(args: Args) -> None:
             raise errors.UserError(f"--reuse {run}: the run being written (--out); to continue it use --resume")
     for setup, group in GROUPS.items():  # each setup's sweep checks its sources' protocol (and its own)
         setup_args = sweep_args(args, setup, tuple(m for m in group if m not in args.exclude))
+        if setup_args.methods:  # the seeds and sizes of its arms, before anything is written
+            sweeps.check(setup_args, args.allow_large)
         sweeps.reuse_sources(setup_args)
         if args.resume and (setup_args.out / "sweep.json").exists():
             sweeps.check_started(setup_args)
@@ -208,7 +211,7 @@ def _run(args: Args) -> dict | None:
         print(f"== {setup} setup: {', '.join(methods)}", flush=True)
         spec = sweep_args(args, setup, methods)
         ran = sweeps.run(spec, resume=(spec.out / "sweep.json").exists(), stop_after_chunks=args.stop_after_chunks,
-                         progress=args.progress)  # fmt: skip
+                         progress=args.progress, allow_large=args.allow_large)  # fmt: skip
         if ran is None:
             print("stopped (continue with --resume)")
             return None

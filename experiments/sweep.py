@@ -41,6 +41,7 @@ class Args(sweeps.Sweep):
     overwrite: flags.Overwrite = False
     stop_after_chunks: flags.StopAfterChunks = None
     progress: flags.Progress = True
+    allow_large: flags.AllowLarge = False
 
 
 def main(args: Args) -> list[dict] | None:
@@ -51,11 +52,11 @@ def main(args: Args) -> list[dict] | None:
         args = rundir.resumed_args(dataclasses.replace(args, num_updates=None), "sweep.json", "sweep",
                                    keep=flags.INVOCATION)  # fmt: skip
         if wanted is not None:
-            extended = sweeps.extend(args.out, wanted)
+            extended = sweeps.extend(args.out, wanted, args.allow_large)
             args = dataclasses.replace(args, num_updates=extended.num_updates, reuse=extended.reuse)
     spec = sweeps.Sweep(**{f.name: getattr(args, f.name) for f in dataclasses.fields(sweeps.Sweep)})
     return sweeps.run(spec, resume=args.resume, overwrite=args.overwrite, stop_after_chunks=args.stop_after_chunks,
-                      progress=args.progress)  # fmt: skip
+                      progress=args.progress, allow_large=args.allow_large)  # fmt: skip
 
 
 def cli(argv=None) -> None:

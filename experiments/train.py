@@ -38,7 +38,7 @@ import numpy as np
 from experiments import errors
 from experiments.reporting import figures, tables
 from experiments.running import flags, loop, rundir, selection, tracking
-from experiments.running.presets import TrainConfigFields, check_seeds, config_flag, given, preset
+from experiments.running.presets import TrainConfigFields, check_seeds, check_sizes, config_flag, given, preset
 from experiments.running.progress import progress_bar
 from experiments.running.run import Run, read
 from foresit_jax.evaluate import Evaluator
@@ -70,6 +70,7 @@ class Args:
     val_episodes_per_room: flags.ValEpisodes = None
     stop_after_chunks: flags.StopAfterChunks = None
     progress: flags.Progress = True
+    allow_large: flags.AllowLarge = False
     track: Literal["none", "tensorboard", "wandb"] = "none"
     """Also log the metrics and validations to TensorBoard (<out>/tensorboard) or Weights & Biases
     (offline without WANDB_API_KEY, <out>/wandb); needs pip install 'foresit_jax[track]'."""
@@ -88,21 +89,36 @@ def build(args: Args):
     for name in ("chunk_updates", "test_episodes_per_room", "val_episodes_per_room"):
         if getattr(schedule, name) < 1:
             raise ValueError(f"{name} must be >= 1, got {getattr(schedule, name)}")
+    check_sizes(config, schedule=schedule, allow_large=args.allow_large)
     return config, schedule
+
+
+def run_flags(info: dict) -> dict:
+    """The values a run (its run.json, `info`) has for train's own flags."""
+    config, schedule = info["config"], info["schedule"]
+    return {"method": info["arm"], "setup": config["setup"], "preset": info["preset"], "seed": info["seeds"][0],
+            **{k: schedule[k] for k in ("chunk_updates", "test_episodes_per_room", "val_episodes_per_room")}}  # fmt: skip
 
 
 def resume_conflicts(args: Args, info: dict) -> list[str]:
     """The flags given with --resume (those not at their defaults: one at its default
     cannot be told from one not given) whose values differ from the run's, as
     `--flag value (the run has ...)`; --num-updates is not one (it extends the run)."""
-    config, schedule = info["config"], info["schedule"]
-    run = {"method": info["arm"], "setup": config["setup"], "preset": info["preset"], "seed": info["seeds"][0],
-           **{k: schedule[k] for k in ("chunk_updates", "test_episodes_per_room", "val_episodes_per_room")}}  # fmt: skip
+    config, run = info["config"], run_flags(info)
     defaults = Args()
     clash = [f"--{k.replace('_', '-')} {getattr(args, k)} (the run has {v})" for k, v in run.items()
              if getattr(args, k) != getattr(defaults, k) and getattr(args, k) != v]  # fmt: skip
     return clash + [f"--{k.replace('_', '-')} {v} (the run has {config[k]})" for k, v in given(args.config).items()
                     if rundir.jsonable(v) != config[k]]  # fmt: skip
+
+
+def resume_ignored(args: Args, info: dict) -> list[str]:
+    """The flags written on the command line at their defaults (`errors.given_flags`)
+    whose values differ from the run's: --resume ignores them, saying so."""
+    run = run_flags(info)
+    defaults = Args()
+    return [f"--{k.replace('_', '-')} {getattr(args, k)} (the run has {v})" for k, v in run.items()
+            if k in errors.given_flags() and getattr(args, k) == getattr(defaults, k) != v]  # fmt: skip
 
 
 class Metrics:
@@ -149,7 +165,9 @@ def start(args: Args) -> tuple[Run, bool]:
     if clash:
         raise errors.UserError(f"--resume continues {out} with its own settings; drop {', '.join(clash)} "
                                "(only --num-updates may differ: it extends the run)")  # fmt: skip
+    errors.say_ignored(resume_ignored(args, info), out)
     if args.num_updates is not None and args.num_updates != run.config.num_updates:
+        check_sizes(dataclasses.replace(run.config, num_updates=args.num_updates), allow_large=args.allow_large)
         had = run.config.num_updates
         kept = out / f"report_{had}_updates"
         run = run.extend(args.num_updates, keep=REPORT_FILES)

@@ -66,6 +66,7 @@ class Args:
     val_episodes_per_room: flags.ValEpisodes = None
     stop_after_chunks: flags.StopAfterChunks = None
     progress: flags.Progress = True
+    allow_large: flags.AllowLarge = False
 
 
 def parse_grid(specs) -> list[tuple[str, list[str]]]:
@@ -143,19 +144,21 @@ def main(args: Args) -> dict | None:
         raise errors.UserError("--methods needs at least one method, each once")
     grid = parse_grid(args.grid)
     table = arms(args, grid)
+    names = tuple(a for by_point in table.values() for a in by_point.values())
+    folder = args.out / "sweep"
+    sweeps.check(sweep_args(args, names, folder), args.allow_large)  # the seeds and sizes, before writing
     if not args.resume:
         rundir.prepare_run_dir(args.out, resume=False, overwrite=args.overwrite, marker="tune.json", kind="tune")
         rundir.write_started_args(args.out / "tune.json", args, flags.INVOCATION)
-    names = tuple(a for by_point in table.values() for a in by_point.values())
     print(f"tuning {', '.join(f for f, _ in grid)}: {len(args.methods)} method(s) x {len(points(grid))} value(s) "
           f"= {len(names)} arms, {args.seeds} seed(s) each", flush=True)  # fmt: skip
-    folder = args.out / "sweep"
     ran = sweeps.run(sweep_args(args, names, folder), resume=(folder / "sweep.json").is_file(),
-                     stop_after_chunks=args.stop_after_chunks, progress=args.progress)  # fmt: skip
+                     stop_after_chunks=args.stop_after_chunks, progress=args.progress,
+                     allow_large=args.allow_large)  # fmt: skip
     if ran is None:
         print("continue with: python -m experiments.tune --resume --out " + str(args.out))
         return None
-    results = {a: rundir.read_json(args.out / "sweep" / "methods" / a / "results.json")["results"] for a in names}
+    results = {a: rundir.read_json(args.out / "sweep" / "methods" / a / "results.json", rundir.RESULTS_KEYS)["results"] for a in names}
     md, out = tune_report(args, grid, table, results)
     (args.out / "tune.md").write_text(md)
     rundir.write_json(args.out / "tune_results.json", out)

@@ -167,7 +167,7 @@ def load(run: Path) -> dict[str, list[dict]]:
     folder = Path(run) / "methods"
     if not folder.is_dir():
         raise errors.UserError(f"{run} is not a sweep folder (it has no methods/): give --run the folder a sweep wrote")
-    found = {m.name: errors.read_json(m / "results.json")["results"]
+    found = {m.name: errors.read_json(m / "results.json", ("results",))["results"]
              for m in sorted(folder.iterdir()) if (m / "results.json").is_file()}  # fmt: skip
     if not found:
         raise errors.UserError(f"{run} has no finished method yet (no methods/*/results.json)")

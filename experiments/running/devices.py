@@ -38,6 +38,15 @@ def split_host_into_devices(count: int = DEFAULT_HOST_DEVICES) -> None:
         os.environ["XLA_FLAGS"] = f"{flags} --xla_force_host_platform_device_count={count}".strip()
 
 
+def memory_bytes() -> int:
+    """The memory a run's seeds can use: the summed `bytes_limit` of the local accelerators
+    where jax reports it, else the host's physical memory."""
+    limits = [(d.memory_stats() or {}).get("bytes_limit", 0) for d in jax.local_devices() if d.platform != "cpu"]
+    if limits and all(limits):
+        return int(sum(limits))
+    return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+
+
 def seed_mesh(num_seeds: int, devices=None) -> Mesh:
     """A mesh over the most local devices that divide `num_seeds` evenly."""
     devices = list(jax.local_devices() if devices is None else devices)

@@ -37,16 +37,19 @@ Reuse = Annotated[tuple[Path, ...], tyro.conf.arg(help=(
 Resume = Annotated[bool, tyro.conf.arg(help=(
     "Continue what was started in --out where it stopped (what finished is kept; what was training continues "
     "from its last intact checkpoint), with the arguments it was started with: another value given is refused "
-    "(a flag at its default cannot be told from one not given and is ignored), except a larger --num-updates in "
-    "train and sweep, which extends it."))]  # fmt: skip
+    "(one given at its default is ignored, and a line names it), except a larger --num-updates in train and "
+    "sweep, which extends it."))]  # fmt: skip
 Overwrite = Annotated[bool, tyro.conf.arg(help=(
     "Replace what this program wrote in --out and start again (a folder it did not write is never deleted)."))]
 StopAfterChunks = Annotated[Optional[int], tyro.conf.arg(help=(
     "Stop (as if killed) after this many chunks trained by this invocation (paper: by each of its sweeps); "
     "for testing --resume."))]  # fmt: skip
 Progress = Annotated[bool, tyro.conf.arg(help="Show the progress bar.")]
+AllowLarge = Annotated[bool, tyro.conf.arg(help=(
+    "Run past the size bounds instead of refusing: --num-updates over 10**7, --seeds over 4096, or a training "
+    "window whose observations alone exceed the machine's memory (experiments.running.presets.check_sizes)."))]  # fmt: skip
 
 # This invocation's own flags: a program that saves its arguments for --resume saves
 # neither these nor resume and overwrite (`rundir.write_started_args`), and takes them
 # from the resuming invocation (`rundir.resumed_args`).
-INVOCATION = ("stop_after_chunks", "progress")
+INVOCATION = ("stop_after_chunks", "progress", "allow_large")

@@ -16,13 +16,16 @@ fields given explicitly override both.
 from __future__ import annotations
 
 import dataclasses
+import math
 import typing
 from typing import Annotated, Optional
 
 import docstring_parser
+import numpy as np
 import tyro
 
-from envs.gridnav import check_room_types, time_limits
+from envs.gridnav import GridNav, check_room_types, time_limits
+from experiments.running import devices
 from foresit_jax.config import Config
 from foresit_jax.methods import IMPLEMENTED_METHODS, parse_method
 
@@ -145,6 +148,63 @@ def check_seeds(first: int, count: int = 1) -> None:
         last = f" to {first + count - 1}" if count > 1 else ""
         raise ValueError(f"seeds must lie in 0..2**63-1 (what jax.random.PRNGKey takes), got {first}{last}; "
                          "choose a smaller --seed")  # fmt: skip
+
+
+# The bounds past which a run is refused unless --allow-large is given (`check_sizes`): a
+# number this large is far more often a typo (an extra 0, a 2**) than a plan.
+MAX_UPDATES = 10**7  # quick trains 3000; the paper's preset 50,000
+MAX_SEEDS = 4096  # the seeds of one arm, vmapped in one program
+MAX_EPISODES = 10**5  # evaluation episodes per room type (the paper tests 250)
+MAX_INT32 = 2**31 - 1  # what any count must fit in, --allow-large or not
+
+
+def observation_bytes(config: Config) -> int:
+    """The bytes of one lane's observation at one step (every part of the environment's
+    observation space; a wrapper's additions, such as the goal view, are not counted)."""
+    env = GridNav(setup=config.setup, layout=config.layout, priors=config.priors,
+                  perception_range=config.perception_range)  # fmt: skip
+    boxes = env.observation_space().spaces.values()
+    return sum(int(math.prod(b.shape)) * np.dtype(b.dtype).itemsize for b in boxes)
+
+
+def window_bytes(config: Config, seeds: int = 1) -> int:
+    """A lower bound on what training holds at once: one window's observations, lanes x
+    (steps + 1) x observation bytes, for every seed."""
+    return seeds * config.num_lanes * (config.num_steps + 1) * observation_bytes(config)
+
+
+def check_sizes(config: Config, seeds: int = 1, schedule: Schedule | None = None, allow_large: bool = False,
+                memory: int | None = None) -> None:  # fmt: skip
+    """A ValueError naming the bound, before anything is written or compiled, where a run
+    asks for more than MAX_UPDATES updates, more than MAX_SEEDS seeds, more than
+    MAX_EPISODES evaluation episodes per room type, a count past int32, or a training
+    window whose observations alone (`window_bytes`) exceed `memory` (by default the
+    machine's: `devices.memory_bytes`). `allow_large` (--allow-large) lifts every bound but int32's."""
+    counts = {f.name: getattr(config, f.name) for f in dataclasses.fields(config) if type(getattr(config, f.name)) is int}
+    if schedule is not None:
+        counts.update((k, v) for k, v in dataclasses.asdict(schedule).items() if type(v) is int)
+    for name, value in counts.items():
+        if value > MAX_INT32:
+            raise ValueError(f"--{name.replace('_', '-')} {value} is past 2**31-1, the largest count XLA's int32 holds; "
+                             "give a smaller one")  # fmt: skip
+    if allow_large:
+        return
+    for name in ("test_episodes_per_room", "val_episodes_per_room"):
+        if counts.get(name, 0) > MAX_EPISODES:
+            raise ValueError(f"--{name.replace('_', '-')} {counts[name]} is past the bound of {MAX_EPISODES:,} episodes "
+                             "per room type; give fewer, or pass --allow-large")  # fmt: skip
+    if config.num_updates > MAX_UPDATES:
+        raise ValueError(f"--num-updates {config.num_updates} is past the bound of {MAX_UPDATES:,} updates; "
+                         "give fewer, or pass --allow-large to run it anyway")  # fmt: skip
+    if seeds > MAX_SEEDS:
+        raise ValueError(f"--seeds {seeds} is past the bound of {MAX_SEEDS} seeds in one program; give fewer (run "
+                         "more seeds as several sweeps with --seed, combined by --reuse), or pass --allow-large")  # fmt: skip
+    need, have = window_bytes(config, seeds), devices.memory_bytes() if memory is None else memory
+    if need > have:
+        raise ValueError(f"{seeds} seed(s) x {config.num_lanes} lanes x {config.num_steps + 1} steps of "
+                         f"{observation_bytes(config)}-byte observations need at least {need / 2**30:,.1f} GiB, "
+                         f"more than this machine's {have / 2**30:,.1f} GiB; lower --num-lanes or --seeds, or pass "
+                         "--allow-large to try anyway")  # fmt: skip
 
 
 # ---------------------------------------------------------------------- Config fields as flags

@@ -114,7 +114,7 @@ def finished_seeds(folder: Path) -> list[int]:
     """The seeds a run folder has finished (none when it has not finished)."""
     if not (folder / "results.json").is_file():
         return []
-    return [r["seed"] for r in rundir.read_json(folder / "results.json")["results"]]
+    return [r["seed"] for r in rundir.read_json(folder / "results.json", rundir.RESULTS_KEYS)["results"]]
 
 
 def check_continuable(folder: Path) -> None:
@@ -127,7 +127,7 @@ def check_continuable(folder: Path) -> None:
     if not (folder / "progress.json").is_file():
         raise errors.UserError(f"{where} was assembled from other sweeps' seeds (--reuse) and keeps no progress to "
                                "continue from; extend those sweeps and assemble it again")  # fmt: skip
-    done = rundir.read_json(folder / "progress.json")["done"]
+    done = rundir.read_json(folder / "progress.json", rundir.PROGRESS_KEYS)["done"]
     if not (folder / "checkpoints" / str(done)).is_dir():
         raise errors.UserError(f"{where} keeps no checkpoint of its update {done} to continue from")
 
@@ -175,13 +175,13 @@ class Run:
         path = self.folder / "results.json"
         if not path.is_file():
             return None
-        done = rundir.read_json(path)
+        done = rundir.read_json(path, rundir.RESULTS_KEYS)
         return done if done["updates"] >= self.config.num_updates else None
 
     def progress(self) -> dict:
         """progress.json, or that of a run not yet started."""
         if (self.folder / "progress.json").is_file():
-            return rundir.read_json(self.folder / "progress.json")
+            return rundir.read_json(self.folder / "progress.json", rundir.PROGRESS_KEYS)
         n = len(self.seeds)
         return {"done": 0, "best_sr": [-1.0] * n, "best_update": [None] * n, "history": [[] for _ in self.seeds],
                 "curves": [], "selection_protocol": selection.PROTOCOL_VERSION}  # fmt: skip
@@ -210,7 +210,7 @@ class Run:
         taken = [f"{kept.name}/{path.name}" for path in moved
                  if (kept / path.name).exists() and (kept / path.name).read_bytes() != path.read_bytes()]  # fmt: skip
         if (self.folder / "results.json").is_file():
-            updates = rundir.read_json(self.folder / "results.json")["updates"]
+            updates = rundir.read_json(self.folder / "results.json", rundir.RESULTS_KEYS)["updates"]
             taken += [f"results_{updates}_updates.json"] * (self.folder / f"results_{updates}_updates.json").exists()
         if taken:
             raise errors.UserError(f"{self.folder} already holds {', '.join(taken)}; move them first")
@@ -226,7 +226,7 @@ class Run:
             rundir.write_json(self.folder / "run.json", {**longer.info(), "commits": rundir.read_json(
                 self.folder / "run.json").get("commits", [])})
         if (self.folder / "results.json").is_file():
-            set_aside(self.folder, rundir.read_json(self.folder / "results.json")["updates"])
+            set_aside(self.folder, rundir.read_json(self.folder / "results.json", rundir.RESULTS_KEYS)["updates"])
         return longer
 
     # ------------------------------------------------------------------ training
@@ -240,8 +240,8 @@ class Run:
         config, schedule, seeds, folder = self.config, self.schedule, list(self.seeds), self.folder
         label = f"{self.label}: " if self.label else ""
         done_results = folder / "results.json"
-        if done_results.is_file() and rundir.read_json(done_results)["updates"] < config.num_updates:
-            set_aside(folder, rundir.read_json(done_results)["updates"])  # extended, killed before it trained on
+        if done_results.is_file() and rundir.read_json(done_results, rundir.RESULTS_KEYS)["updates"] < config.num_updates:
+            set_aside(folder, rundir.read_json(done_results, rundir.RESULTS_KEYS)["updates"])  # extended, killed before it trained on
         folder.mkdir(parents=True, exist_ok=True)
         if len(seeds) == 1 and not (folder / "run.json").is_file() and (folder / "progress.json").is_file():
             print(f"warning: {label}{folder} was started by a version that ran a seed alone vmapped; it continues with "
@@ -363,7 +363,7 @@ class Run:
         done = {"updates": progress["done"], "results": results, "curves": curves.tolist(),
                 "selection_protocol": progress.get("selection_protocol", selection.PROTOCOL_VERSION)}  # fmt: skip
         rundir.write_json(self.folder / "results.json", done)
-        return rundir.read_json(self.folder / "results.json")  # as written (NaN as None)
+        return rundir.read_json(self.folder / "results.json", rundir.RESULTS_KEYS)  # as written (NaN as None)
 
     # ------------------------------------------------------------------ reading back
     def _params_of(self, trainer, states):
@@ -372,6 +372,9 @@ class Run:
     def load_checkpoint(self, step: int, seeds: Sequence[int] | None = None):
         """(trainer, the seeds' training states, their selected models) of checkpoint `step`,
         stacked over `seeds` (the run's, unless given: a finished run's in results' order)."""
+        if not (self.folder / "checkpoints" / str(step)).is_dir():  # before orbax's manager makes checkpoints/
+            raise errors.UserError(f"{self.folder} has lost its checkpoint of update {step} (checkpoints/{step} is not "
+                                   "there: deleted or moved); put it back, or train the run anew")  # fmt: skip
         trainer = make_trainer(self.config)
         # the checkpoint's shapes only (`eval_shape`: nothing runs; initialising for real ran
         # the networks' init op by op, hundreds of small compilations per method)
@@ -384,7 +387,7 @@ class Run:
         """A finished run read back: (trainer, the seeds' last training states, their selected
         models), stacked over the seeds it finished (`finished_seeds`, in its results' order)
         on the first local device."""
-        done = rundir.read_json(self.folder / "results.json")["updates"]
+        done = rundir.read_json(self.folder / "results.json", rundir.RESULTS_KEYS)["updates"]
         return self.load_checkpoint(done, finished_seeds(self.folder))
 
 

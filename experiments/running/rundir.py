@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.errors import RunNotFound, UserError, read_json  # noqa: F401 (rundir.read_json: a run folder's files read back)
+from experiments.errors import RunNotFound, UserError, given_flags, on_refusal, read_json, say_ignored  # noqa: F401 (rundir.read_json: a run folder's files read back)
 from experiments.reporting.tables import write_csv
 
 try:  # POSIX: flock on the folder's .lock, which also names the holder's pid
@@ -29,6 +29,10 @@ except ImportError:  # native Windows (jax runs there on the CPU): filelock's ms
     fcntl = None
 
 RUN_FILE = "run.json"
+# What every run.json, progress.json and results.json holds (a damaged one lacks some: `read_json`).
+RUN_KEYS = ("config", "schedule")
+PROGRESS_KEYS = ("done",)
+RESULTS_KEYS = ("updates", "results")
 
 # ---------------------------------------------------------------------- one writer per folder
 LOCK_FILE = ".lock"
@@ -43,24 +47,45 @@ def claim(path: Path) -> None:
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise UserError(f"{path} is a file, not a folder; choose another --out")
+    made = next((p for p in (*reversed(path.absolute().parents), path.absolute()) if not p.exists()), None)
     path.mkdir(parents=True, exist_ok=True)
     key = path.resolve()
     if key in _held:
         return
+    new_lock = not (path / LOCK_FILE).exists()
     if fcntl is None:
         _held[key] = _claim_with_filelock(path)
+    else:
+        fd = os.open(path / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.read(fd, 64).decode(errors="replace").strip() or "unknown"
+            os.close(fd)
+            raise UserError(f"{path} is being written by another process (pid {holder}); wait for it to finish, "
+                            "or choose another --out") from None  # fmt: skip
+        os.ftruncate(fd, 0)
+        os.write(fd, str(os.getpid()).encode())
+        _held[key] = fd
+    on_refusal(lambda: _release(key, new_lock, made))
+
+
+def _release(key: Path, new_lock: bool, made: Path | None) -> None:
+    """Undo a `claim` of a refused program: release the lock, delete the .lock file if the
+    claim made it, and the folders it made (`made`: the topmost) if they hold nothing else."""
+    held = _held.pop(key, None)
+    if held is None:
         return
-    fd = os.open(path / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        holder = os.read(fd, 64).decode(errors="replace").strip() or "unknown"
-        os.close(fd)
-        raise UserError(f"{path} is being written by another process (pid {holder}); wait for it to finish, "
-                        "or choose another --out") from None  # fmt: skip
-    os.ftruncate(fd, 0)
-    os.write(fd, str(os.getpid()).encode())
-    _held[key] = fd
+    held.release() if fcntl is None else os.close(held)
+    if new_lock:
+        (key / LOCK_FILE).unlink(missing_ok=True)
+    if made is not None:
+        for folder in (key, *key.parents):
+            if not folder.is_dir() or any(folder.iterdir()):
+                break
+            folder.rmdir()
+            if folder == made.resolve():
+                break
 
 
 def _claim_with_filelock(path: Path):
@@ -129,19 +154,23 @@ def resumed_args(args, marker: str, kind: str, keep: tuple[str, ...]):
     prepare_run_dir(args.out, resume=True, overwrite=args.overwrite, marker=marker, kind=kind)
     started = args_from_saved(type(args), read_json(args.out / marker), out=args.out)
     defaults = type(args)()
-    clash = []
+    clash, ignored = [], []
     for f in dataclasses.fields(args):
         if f.name in (*keep, "resume", "overwrite", "out"):
             continue
         mine, theirs, default = (getattr(x, f.name) for x in (args, started, defaults))
+        flag = f"--{f.name.replace('_', '-')} {mine} (started with {theirs})"
         if dataclasses.is_dataclass(mine):  # nested flags (e.g. Config fields): each on its own
             clash += [f"--{k.replace('_', '-')} {v} (started with {getattr(theirs, k)})"
                       for k, v in dataclasses.asdict(mine).items()
                       if v is not None and jsonable(v) != jsonable(getattr(theirs, k))]  # fmt: skip
         elif jsonable(mine) not in (jsonable(default), jsonable(theirs)):
-            clash.append(f"--{f.name.replace('_', '-')} {mine} (started with {theirs})")
+            clash.append(flag)
+        elif jsonable(mine) != jsonable(theirs) and f.name in given_flags():  # given at its default
+            ignored.append(flag)
     if clash:
         raise UserError(f"--resume continues {args.out} with the arguments it was started with; drop {', '.join(clash)}")
+    say_ignored(ignored, args.out)
     return dataclasses.replace(started, resume=True, **{k: getattr(args, k) for k in keep})
 
 
@@ -200,7 +229,7 @@ def require_run(path: Path, hint: str = "; pass the --out folder of experiments.
 
 def read_run_info(path: Path) -> dict:
     require_run(path)
-    return read_json(path / RUN_FILE)
+    return read_json(path / RUN_FILE, RUN_KEYS)
 
 
 # ---------------------------------------------------------------------- JSON

@@ -40,7 +40,7 @@ from experiments.reporting.report import (
 from experiments.reporting.tables import write_csv
 from experiments.running import checkpoint, devices, flags, numerics, rundir, selection
 from experiments.running.run import Run, check_continuable, finished_seeds, set_aside
-from experiments.running.presets import SweepConfigFields, check_seeds, config_flag, given, preset
+from experiments.running.presets import SweepConfigFields, check_seeds, check_sizes, config_flag, given, preset
 from experiments.running.progress import progress_bar
 from foresit_jax.evaluate import Evaluator
 
@@ -226,7 +226,7 @@ def assemble(method: str, spec: Sweep, parts: dict[int, Path], target: Path) -> 
     seeds = seeds_of(spec)
     loaded = {}
     for folder in dict.fromkeys(parts.values()):
-        done = rundir.read_json(folder / "results.json")
+        done = rundir.read_json(folder / "results.json", rundir.RESULTS_KEYS)
         *_, states, best = load_method(method, spec, folder)
         loaded[folder] = (done, finished_seeds(folder), states, best)
     updates = {done["updates"] for done, *_ in loaded.values()}
@@ -255,7 +255,7 @@ def assembled_markdown(folders: dict[str, Path]) -> str:
     the folder each seed came from; '' when none was."""
     lines = []
     for method, folder in folders.items():
-        done = rundir.read_json(folder / "results.json") if (folder / "results.json").is_file() else {}
+        done = rundir.read_json(folder / "results.json", rundir.RESULTS_KEYS) if (folder / "results.json").is_file() else {}
         where = {}  # source folder -> its seeds
         for seed, source in done.get("assembled_from", {}).items():
             where.setdefault(source, []).append(int(seed))
@@ -294,9 +294,10 @@ def run_method(method: str, spec: Sweep, bar, evaluator, folder: Path, budget: l
     return done["results"], np.arange(1, done["updates"] + 1), np.array(done["curves"], float)
 
 
-def check(spec: Sweep) -> None:
+def check(spec: Sweep, allow_large: bool = False) -> None:
     """Refuse (one line) a sweep that cannot run, before anything is written or trained:
-    no arms, no seeds, an episode count below 1, an arm this code does not know."""
+    no arms, no seeds, an episode count below 1, an arm this code does not know, an arm
+    listed twice, and (unless `allow_large`) sizes past `presets.check_sizes`'s bounds."""
     if spec.seeds < 1:
         raise errors.UserError(f"--seeds must be >= 1, got {spec.seeds}")
     if not spec.methods:
@@ -309,7 +310,8 @@ def check(spec: Sweep) -> None:
         if getattr(spec, name) is not None and getattr(spec, name) < 1:
             raise errors.UserError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(spec, name)}")
     for method in spec.methods:  # a ValueError names what is wrong
-        method_schedule(method, spec)
+        config, schedule = method_schedule(method, spec)
+        check_sizes(config, spec.seeds, schedule, allow_large)
 
 
 def saved(folder: Path) -> Sweep:
@@ -331,7 +333,7 @@ def updates_of(spec: Sweep) -> int:
     return next(iter(counts.values()))
 
 
-def extend(folder: Path, num_updates: int) -> Sweep:
+def extend(folder: Path, num_updates: int, allow_large: bool = False) -> Sweep:
     """Make the sweep in `folder` (finished or not) one of `num_updates` updates, to be
     continued by `run(..., resume=True)`: every arm then trains on from where it stopped,
     from its checkpoint, to `num_updates`, chooses each seed's model again over all its
@@ -358,7 +360,7 @@ def extend(folder: Path, num_updates: int) -> Sweep:
     # The methods --reuse gave the sweep are in it now; its sources, of `had` updates, no
     # longer share its protocol, so the extended sweep names none ("extensions" keeps them).
     extended = dataclasses.replace(spec, num_updates=num_updates, reuse=())
-    check(extended)
+    check(extended, allow_large)
     check_started(extended)
     for method in spec.methods:
         check_continuable(folder / "methods" / method)
@@ -384,7 +386,7 @@ def extend(folder: Path, num_updates: int) -> Sweep:
     for method in spec.methods:  # no finished arm reads as one of `num_updates` (a kill before: `run_method`)
         results = folder / "methods" / method / "results.json"
         if results.is_file():
-            set_aside(results.parent, rundir.read_json(results)["updates"])
+            set_aside(results.parent, rundir.read_json(results, rundir.RESULTS_KEYS)["updates"])
     return extended
 
 
@@ -394,7 +396,7 @@ def _differences(a: Sweep, b: Sweep) -> list[str]:
 
 
 def run(spec: Sweep, *, resume: bool = False, overwrite: bool = False, stop_after_chunks: Optional[int] = None,
-        progress: bool = True) -> list[dict] | None:  # fmt: skip
+        progress: bool = True, allow_large: bool = False) -> list[dict] | None:  # fmt: skip
     """Train every arm of `spec` over its seeds (arms other sweeps finished are taken
     from `spec.reuse`), then write the report into `spec.out`: Table 1's layout of the
     selected models (Markdown and CSV), the arms paired with the first, the selected and
@@ -404,8 +406,9 @@ def run(spec: Sweep, *, resume: bool = False, overwrite: bool = False, stop_afte
 
     `resume` continues the sweep in `spec.out`, which must have been started as `spec`
     (`saved`); without it `spec.out` must be new or empty, or a sweep folder (sweep.json)
-    to replace with `overwrite` (`rundir.prepare_run_dir`)."""
-    check(spec)
+    to replace with `overwrite` (`rundir.prepare_run_dir`); `allow_large` runs past
+    `presets.check_sizes`'s bounds."""
+    check(spec, allow_large)
     sources = reuse_sources(spec)
     out = spec.out
     if resume:
