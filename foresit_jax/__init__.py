@@ -49,6 +49,7 @@ _EXPORTS = {
     "Config": "foresit_jax.config",
     "evaluate": "foresit_jax.evaluate",
     "evaluate_policy": "foresit_jax.evaluate",
+    "make_act": "foresit_jax.evaluate",
     "Method": "foresit_jax.methods",
     "parse_method": "foresit_jax.methods",
     "build": "foresit_jax.networks",

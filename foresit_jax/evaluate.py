@@ -14,7 +14,8 @@ functions `evaluate` and `evaluate_random_policy` make one when none is given.
 
 from __future__ import annotations
 
-from typing import Any, Callable
+import functools
+from typing import Any, Callable, NamedTuple
 
 import chex
 import jax
@@ -42,6 +43,51 @@ def agent_params(state, sigma2_max: float, evaluation_noise: str = "training_end
     if evaluation_noise == "off":
         variance = jnp.zeros_like(variance)
     return AgentParams(state.params, state.imagination_params, variance)
+
+
+class Acting(NamedTuple):
+    """A policy in memory (`make_act`, `acting_policy`): `act(params, carry, obs, first, key)
+    -> (action [B], carry)` (`rollout.policy`: pure, batched over lanes; `first` `[B]` marks
+    an episode's first step), `params` what it acts with, `initial_carry(num_lanes)` its
+    carry before a first step, `config` the Config it was trained with. Its first three are
+    `evaluate_policy`'s first three arguments."""
+
+    act: Callable
+    params: AgentParams
+    initial_carry: Callable[[int], Any]
+    config: Config
+
+
+def acting_policy(config: Config, params: AgentParams) -> Acting:
+    """The agent of `config` acting with `params` (`AgentParams`, the evaluation's noise
+    variance set) as its evaluation acts: greedy or sampled by the method's protocol."""
+    nets = build(config)
+    carry = functools.partial(rollout.policy_carry, nets)
+    if config.pieces.base_piece.adapts_in_episode:  # its carry holds theta_i and the running segment's observations
+        env = rollout.acting_env(nets, BoundEnv(Evaluator.for_config(config).env, None)).env
+        shapes = {k: jax.ShapeDtypeStruct(b.shape, b.dtype) for k, b in env.observation_space().spaces.items()}
+        carry = functools.partial(rollout.policy_carry, nets, acting=params, obs=shapes)
+    return Acting(rollout.policy(nets, config.pieces.greedy_evaluation), params, carry, config)
+
+
+def make_act(config: Config, state, seed: int | None = None) -> Acting:
+    """The policy a `make_train` run trained, in memory, as rejax's `make_act`: from the
+    final `RunnerState` that `train(key)` returns (one seed), or, with `seed`, seed `seed`
+    of the states `jax.vmap(train)(keys)` returns. Acts as the evaluation does, with the
+    last parameters (no model selection: that is experiments.train's):
+
+        act = make_act(config, state)
+        results = evaluate_policy(act.act, act.params, act.initial_carry, config, "test")
+    """
+    stacked = np.ndim(state.update) > 0
+    if stacked != (seed is not None):
+        raise ValueError("make_act: give seed=i for the states of several seeds (jax.vmap(train)), and no seed for "
+                         f"one seed's state (its update counter has shape {np.shape(state.update)})")  # fmt: skip
+    if stacked:
+        if not 0 <= seed < np.shape(state.update)[0]:
+            raise ValueError(f"make_act: seed {seed} is not one of the {np.shape(state.update)[0]} seeds trained")
+        state = jax.tree.map(lambda x: x[seed], state)
+    return acting_policy(config, agent_params(state, config.sigma2_max, config.evaluation_noise))
 
 
 def outcome_metrics(outcomes: EpisodeStats, layout: str = "room") -> dict[str, float]:

@@ -175,3 +175,37 @@ def test_load_reproduces_the_runs_test_results(tmp_path, method):
         experiments.load(out, which="first")
     with pytest.raises(UserError, match="not a run folder"):
         experiments.load(tmp_path)
+
+
+@pytest.mark.slow  # trains two seeds of tiny for 2 updates, then evaluates
+def test_make_act_is_the_policy_make_train_trained():
+    """rejax's `make_act`, here: from the states `jax.vmap(train)(keys)` returns, seed 1's
+    policy in memory plays the evaluator's own episodes of seed 1's last parameters."""
+    from foresit_jax.evaluate import agent_params, make_act
+    from foresit_jax.train import make_train
+
+    config = H.tiny_config("a3c+foresit", num_updates=2)
+    states, _ = jax.jit(jax.vmap(make_train(config)))(jax.random.split(jax.random.PRNGKey(0), 2))
+    act = make_act(config, states, seed=1)
+    one = jax.tree.map(lambda x: x[1], states)
+    H.assert_trees_bitwise_equal(act.params.params, one.params)
+    key = jax.random.PRNGKey(9)
+    want = Evaluator.for_config(config).evaluate(agent_params(one, config.sigma2_max, config.evaluation_noise), config,
+                                                 "test", key, 8, by_length=True)  # fmt: skip
+    got = evaluate_policy(act.act, act.params, act.initial_carry, config, "test", key, 8)
+    assert _same(got, want), (got, want)
+    assert make_act(config, one).params.noise_variance == act.params.noise_variance
+
+
+def test_make_act_asks_for_a_seed_exactly_when_the_states_hold_several():
+    from types import SimpleNamespace
+
+    from foresit_jax.evaluate import make_act
+
+    config = H.tiny_config("a3c+foresit")
+    with pytest.raises(ValueError, match=r"give seed=i .* has shape \(3,\)"):
+        make_act(config, SimpleNamespace(update=np.zeros(3)))
+    with pytest.raises(ValueError, match=r"give seed=i .* has shape \(\)"):
+        make_act(config, SimpleNamespace(update=np.zeros(())), seed=0)
+    with pytest.raises(ValueError, match="seed 3 is not one of the 3 seeds"):
+        make_act(config, SimpleNamespace(update=np.zeros(3)), seed=3)

@@ -6,7 +6,6 @@ policy for a user's own code (`experiments.load`, docs/extending.md)."""
 from __future__ import annotations
 
 import dataclasses
-import functools
 from pathlib import Path
 from typing import Any, Callable, NamedTuple
 
@@ -14,10 +13,8 @@ import jax
 
 from experiments import errors
 from experiments.running import checkpoint, devices, run, rundir, selection, sweeps
-from foresit_jax import rollout
 from foresit_jax.config import Config
-from foresit_jax.evaluate import Evaluator, agent_params
-from foresit_jax.networks import build
+from foresit_jax.evaluate import acting_policy, agent_params
 from foresit_jax.train import make_trainer
 
 
@@ -149,19 +146,9 @@ def load(run_dir, seed: int = 0, which: str = "best") -> Policy:
     if seed not in trained.seeds:
         raise errors.UserError(f"{folder} trained seeds {trained.seeds}, not seed {seed}")
     i, config = trained.seeds.index(seed), trained.config
-    nets = build(config)
-    act = rollout.policy(nets, config.pieces.greedy_evaluation)
     if which == "best":
         params = devices.seed_slice(trained.selected, i)
     else:  # as the run's report computes the last model's (`Run.test`)
         params = devices.seed_slice(run.seeds_params(config, trained.states), i)
-    carry = functools.partial(rollout.policy_carry, nets)
-    if config.pieces.base_piece.adapts_in_episode:  # its carry holds theta_i and the running segment's observations
-        carry = functools.partial(rollout.policy_carry, nets, acting=params, obs=_observation_shapes(nets, config))
+    act, params, carry, _ = acting_policy(config, params)
     return Policy(act, params, carry, config, selection.test_key(seed), trained.schedule["test_episodes_per_room"])
-
-
-def _observation_shapes(nets, config: Config) -> dict:
-    """One observation's shapes in the environment the policy acts in (`rollout.acting_env`)."""
-    env = rollout.acting_env(nets, rollout.BoundEnv(Evaluator.for_config(config).env, None)).env
-    return {name: jax.ShapeDtypeStruct(space.shape, space.dtype) for name, space in env.observation_space().spaces.items()}
