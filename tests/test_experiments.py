@@ -992,6 +992,16 @@ def test_readme_commands_parse():
         assert (REPO / link).exists(), link
 
 
+def test_the_readmes_first_run_is_the_tiny_one_and_its_snippet_acts():
+    """A newcomer's first run takes seconds (`--preset tiny`), then the quick one; the
+    library snippet ends with the trained policy in memory (`make_act`, issue 71)."""
+    first, second = readme_commands()[:2]
+    assert first[0] == second[0] == "experiments.train"
+    assert first[first.index("--preset") + 1] == "tiny" and second[second.index("--preset") + 1] == "quick"
+    snippet = next(body for lang, body in BLOCKS if lang == "python" and "make_train" in body)
+    assert "make_act(" in snippet and "evaluate_policy(" in snippet
+
+
 @pytest.mark.parametrize("doc", sorted(DOCS))
 def test_docs_commands_parse(doc):
     """The commands of docs/ name modules that exist, and their flags are accepted (the
@@ -1077,6 +1087,8 @@ def test_readme_python_blocks_run_at_a_tiny_size():
             assert np.isfinite(np.asarray(metrics["losses/total_loss"])).all()
         if "envs.make" in body:
             assert "obs" in namespace and "state" in namespace
+        if "make_act" in body:  # seed 0's policy, its parameters those of seed 0's state
+            H.assert_trees_bitwise_equal(namespace["act"].params.params, jax.tree.map(lambda x: x[0], state.params))
 
 
 def _extending_blocks(evaluating: bool) -> list[str]:
