@@ -452,7 +452,7 @@ def test_evaluate_rejects_bad_input_in_one_line(finished_run, tmp_path, capsys):
     assert "--split must be val or test" in cli_error(evaluate_cli.cli, ["--run", finished_run, "--split", "train"], capsys)
     for n in ("0", "-3"):
         line = cli_error(evaluate_cli.cli, ["--run", finished_run, "--episodes-per-room", n], capsys)
-        assert "--episodes-per-room must be >= 1" in line
+        assert "--episodes-per-room must lie in 1..100,000, got" in line
     # train wrote results_test.json: evaluating the same model again needs --overwrite.
     assert "--overwrite" in cli_error(evaluate_cli.cli, ["--run", finished_run], capsys)
 
