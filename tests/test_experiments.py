@@ -30,6 +30,7 @@ from experiments import sweep
 from experiments import train as train_cli
 from experiments.reporting import cvae_comparison, figures, report, tables
 from experiments.running import checkpoint, errors, numerics, presets, progress, rundir, selection, sweeps
+from experiments.errors import RunNotFound
 from experiments.running.run import COUNTS, RUN_FORMAT, initial_states
 from foresit_jax.config import Config
 
@@ -343,6 +344,8 @@ def test_prepare_run_dir_never_deletes_what_it_did_not_write(tmp_path, marker, k
         assert "\n" not in str(e.value)  # one line
     with pytest.raises(errors.UserError, match=f"not a {kind} folder .*nothing to resume"):
         rundir.prepare_run_dir(out, resume=True, overwrite=False, marker=marker, kind=kind)
+    with pytest.raises(RunNotFound, match="no such is not there; nothing to resume"):
+        rundir.prepare_run_dir(tmp_path / "no such", resume=True, overwrite=False, marker=marker, kind=kind)
     assert (out / "notes.txt").read_text() == "mine"
     (out / marker).write_text("{}")
     with pytest.raises(errors.UserError, match="--overwrite"):
@@ -420,7 +423,7 @@ TRAIN_ERRORS = [
     (["--learning-rate", "0"], ["learning_rate must be > 0"]),
     (["--chunk-updates", "0"], ["chunk_updates must be >= 1"]),
     (["--val-episodes-per-room", "0"], ["val_episodes_per_room must be >= 1"]),
-    (["--resume"], ["not a run folder"]),
+    (["--resume"], ["is not there; nothing to resume"]),
     (["--resume", "--overwrite"], ["exclude each other"]),
     # issue 71: checked before anything is written (no run.json, no .lock left behind)
     (["--room-types", "garage"], ["unknown room type 'garage'"]),

@@ -118,6 +118,8 @@ def prepare_run_dir(path: Path, resume: bool, overwrite: bool, marker: str = RUN
     if resume and overwrite:
         raise UserError("--resume and --overwrite exclude each other")
     if resume:
+        if not path.exists():
+            raise RunNotFound(f"{path} is not there; nothing to resume (give the --out it was started with)")
         if not (path / marker).is_file():
             raise UserError(f"{path} is not a {kind} folder (no {marker}); nothing to resume")
         claim(path)
