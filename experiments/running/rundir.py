@@ -43,7 +43,9 @@ def claim(path: Path) -> None:
     """Make this process the one writer of the folder `path` (created if missing): an
     exclusive OS lock (flock) on `path`/.lock, held until the process exits (a crash
     releases it; the file left behind locks nothing). Another process holding it is a
-    UserError naming its pid; claiming a folder this process holds is a no-op."""
+    UserError naming its pid; claiming a folder this process holds is a no-op. In a program
+    `run_cli` runs, a refusal releases the claim and deletes the .lock and the folders it
+    made (`errors.on_refusal`, `_release`): a refused command leaves --out as it found it."""
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise UserError(f"{path} is a file, not a folder; choose another --out")
