@@ -14,7 +14,6 @@ a subprocess are in the slow tier (`test_fuzz_slow.py`).
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import importlib
 import os
