@@ -20,7 +20,7 @@ import os
 from pathlib import Path
 
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from experiments.running import presets, rundir, sweeps
@@ -257,13 +257,23 @@ def test_the_fuzz_table_covers_every_program():
 
 
 # ---------------------------------------------------------------------- a strategy
-BAD_INT = st.one_of(st.integers(max_value=0), st.integers(min_value=2**63, max_value=2**80))
 FIELDS = ("--num-lanes", "--num-steps", "--hidden-size", "--chunk-updates", "--test-episodes-per-room", "--seed")
 
 
+def bad_int(flag):
+    """A value out of flag's range: counts start at 1, a seed at 0; either may overflow int64."""
+    low = -1 if flag == "--seed" else 0
+    return st.one_of(st.integers(max_value=low), st.integers(min_value=2**63, max_value=2**80))
+
+
 @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(flag=st.sampled_from(FIELDS), value=BAD_INT, program=st.sampled_from(("train", "sweep")))
-def test_any_out_of_range_count_is_refused(flag, value, program, root, capsys, tmp_path_factory):
+@given(case=st.sampled_from(FIELDS).flatmap(lambda f: st.tuples(st.just(f), bad_int(f))),
+       program=st.sampled_from(("train", "sweep")))  # fmt: skip
+@example(case=("--seed", -1), program="train")
+@example(case=("--seed", -1), program="sweep")
+@example(case=("--num-lanes", 0), program="train")
+def test_any_out_of_range_count_is_refused(case, program, root, capsys, tmp_path_factory):
+    flag, value = case
     if program == "sweep" and flag in ("--chunk-updates",):
         flag = "--seeds"
     sub = tmp_path_factory.mktemp("case")
