@@ -60,6 +60,11 @@ def pytest_configure(config):
         os.environ[_CACHE] = str(folder)
     # jax is imported already (it read its environment then): tell it directly.
     jax.config.update("jax_compilation_cache_dir", os.environ.get(_CACHE))
+    # Every program goes to the cache, not only those that took a second to compile (jax's
+    # default): after `jax.clear_caches()` and on the other worker, the many small programs
+    # the tests compile are loaded, not compiled again (the default tier cold: 583 s of test
+    # time summed over both workers before, 514 s after; docs/testing.md).
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
 
 
 @pytest.fixture(scope="module")
@@ -86,17 +91,27 @@ def _names_tests(config) -> bool:
     return any("::" in str(arg) for arg in config.args)
 
 
+# The default tier's modules are xdist groups, one module to one worker: a module-scoped
+# fixture (a scene bank, a trained state, a compiled program) is then built once, not once
+# on each worker, which cut the default tier's setup time from 105 s to 73 s summed (cold,
+# docs/testing.md).  The slow tier's tests are spread one by one (its modules are long),
+# except those that share a training fixture, which run together on one worker.
 # tryfirst: xdist's worker reads the marks in its own pytest_collection_modifyitems, which
 # would otherwise run before this one and see none.
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config, items):
     unmarked = []
     for item in items:
+        group = None
         for name in SHARED_TRAINING_FIXTURES:
             if name in getattr(item, "fixturenames", ()):
-                item.add_marker(pytest.mark.xdist_group(name))
+                group = name
                 if item.get_closest_marker(SLOW) is None:
                     unmarked.append(f"{item.nodeid} (uses {name})")
+        if group is None and item.get_closest_marker(SLOW) is None:
+            group = item.nodeid.split("::")[0]  # a default-tier module runs on one worker (below)
+        if group is not None:
+            item.add_marker(pytest.mark.xdist_group(group))
     if unmarked:
         raise pytest.UsageError(
             "tests that use a training fixture must be marked @pytest.mark.slow (docs/testing.md): "

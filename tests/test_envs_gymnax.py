@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 import envs
+from envs import catalog as C
 from envs import gymnax_compat
 from envs import spaces as own_spaces
 from envs.wrappers import FlattenObservationWrapper
@@ -239,13 +240,19 @@ def test_default_params_are_built_once(monkeypatch):
 
     calls = []
     real = gridnav.make_bank
-    monkeypatch.setattr(gridnav, "make_bank", lambda *a, **k: calls.append(a) or real(*a, **k))
+
+    def first_scene_only(setup, numbers, *rest):  # counts the calls; the bank's size is not the question
+        calls.append(tuple(numbers))
+        return real(setup, tuple(numbers)[:1], *rest)
+
+    monkeypatch.setattr(gridnav, "make_bank", first_scene_only)
     env, params = envs.make_gymnax(room_types=ROOMS, step_api="done")
     assert len(calls) == 1
     assert env.default_params is env.default_params is params
     grid = envs.GridNav()
     assert grid.default_params is grid.default_params
     assert len(calls) == 2
+    assert calls[1] == tuple(C.scene_numbers("train", range(4)))  # the default: every room type of the train split
     # params=None takes the default params, as in gymnax
     obs, _ = env.reset(jax.random.key(0))
     np.testing.assert_array_equal(obs, env.reset(jax.random.key(0), params)[0])
