@@ -6,7 +6,9 @@ about how one difference changes from one setting to another. From a sweep folde
 finished methods (`methods/<method>/results.json`) this prints, as Markdown:
 
 * per method: test SR of each seed's selected model, mean ± sample std of SR, SPL, SR>=5,
-  the training success rate over the last `--last` updates, the last chunk's training
+  the training success rate over the last `--last` updates, the area under the validation
+  SR curve (its mean over the evaluated updates, `report.validation_area`: how fast an arm
+  learned, where the selected model's SR says how far it got), the last chunk's training
   diagnostics (`report.DIAGNOSTICS`, those recorded), and the experience each seed had
   where the sweep counted it;
 * per `--pairs A:B`: B - A seed by seed (`experiments.reporting.stats.paired`: mean difference, 95%

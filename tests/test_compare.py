@@ -5,6 +5,7 @@ import json
 
 import numpy as np
 import pytest
+from scipy import integrate
 from scipy import stats as sp
 
 from experiments import compare
@@ -26,6 +27,7 @@ def write_sweep(root, rng, methods=("a", "b", "c", "d"), seeds=SEEDS):
                 "training_success_rate": rng.uniform(0, 1, 300).tolist(),
                 "diagnostics": {"losses/entropy": rng.uniform(0.2, 1, 6).tolist()},
                 "counts": {"frames/useful": 1.5e6 + seed, "charts/episodes": 1000 + seed},
+                "validation": [{"update": u, "SR": rng.uniform(0, 90)} for u in (1000, 500, 1500, 2500)],
             })  # fmt: skip
         truth[method] = per_seed
         folder = root / "methods" / method
@@ -50,9 +52,12 @@ def test_pairs_and_difference_of_differences_match_a_hand_computation(tmp_path, 
             return [100 * np.mean(r["training_success_rate"][-100:]) for r in truth[method]]
         if name == "losses/entropy":
             return [r["diagnostics"][name][-1] for r in truth[method]]
+        if name == "validation SR area":  # scipy's trapezoid over the sorted updates, over their span
+            curves = [sorted((v["update"], v["SR"]) for v in r["validation"]) for r in truth[method]]
+            return [integrate.trapezoid([y for _, y in c], [x for x, _ in c]) / (c[-1][0] - c[0][0]) for c in curves]
         return [r["selected"]["overall"][name] for r in truth[method]]
 
-    for name in ("SR", "SPL", "SR>=5", "training SR", "losses/entropy"):
+    for name in ("SR", "SPL", "SR>=5", "training SR", "validation SR area", "losses/entropy"):
         got = out["pairs"]["b - a"][name]
         np.testing.assert_allclose([got["diff"], got["ci_low"], got["ci_high"], got["p"]],
                                    hand_paired(col("a", name), col("b", name)), rtol=1e-9)  # fmt: skip
@@ -66,6 +71,17 @@ def test_pairs_and_difference_of_differences_match_a_hand_computation(tmp_path, 
     assert " / ".join(f"{x:.1f}" for x in sr_a) in printed
     assert f"{out['pairs']['b - a']['SR']['diff']:+.2f}" in printed
     assert "1.50M / 1003" in printed  # the experience of seed 3
+
+
+def test_the_validation_area_is_the_curves_mean_over_its_span():
+    from experiments.reporting.report import validation_area
+
+    # (500, 10) -> (1000, 30) -> (2000, 20), given out of order: (20 * 500 + 25 * 1000) / 1500
+    curve = [{"update": 1000, "SR": 30.0}, {"update": 500, "SR": 10.0}, {"update": 2000, "SR": 20.0}]
+    assert validation_area(curve) == pytest.approx((20 * 500 + 25 * 1000) / 1500)
+    assert validation_area([{"update": 500, "SR": 12.5}]) == 12.5
+    assert np.isnan(validation_area([]))
+    assert np.isnan(validation_area([{"update": 500, "SR": None}, {"update": 1000, "SR": 4.0}]))
 
 
 def test_bad_input_says_what_is_wrong(tmp_path):

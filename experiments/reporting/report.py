@@ -162,6 +162,26 @@ TEST = ("SR", "SPL", "SR>=5")
 TRAINING = "training SR"
 
 
+# The area under the validation SR curve, as a mean: the trapezoid over the updates at
+# which the validation split was evaluated (every chunk), divided by their span (%). It
+# says how fast an arm learned, where the selected model's test SR says only how far it
+# got (the budget branch of docs/plans/ceiling_channels.md asks for both).
+VALIDATION_AREA = "validation SR area"
+
+
+def validation_area(validation: list[dict]) -> float:
+    """The mean of one seed's validation SR curve over its span (%): `validation`, the
+    evaluations `[{"update": u, "SR": sr, ...}]` (results.json), trapezoid over u / span;
+    the one SR for one evaluation; NaN for none or an empty bucket."""
+    points = sorted((v["update"], rate(v["SR"])) for v in validation)
+    if not points:
+        return np.nan
+    updates, sr = (np.array(x, float) for x in zip(*points))
+    if len(points) == 1:
+        return float(sr[0])
+    return float(np.sum((sr[1:] + sr[:-1]) * np.diff(updates)) / 2 / (updates[-1] - updates[0]))
+
+
 def load(run: Path) -> dict[str, list[dict]]:
     """Every finished method of the sweep folder `run`: its per-seed results, in name order."""
     folder = Path(run) / "methods"
@@ -176,11 +196,14 @@ def load(run: Path) -> dict[str, list[dict]]:
 
 def values(per_seed: list[dict], column: str, last: int = 250) -> np.ndarray:
     """One value per seed: a test column of the selected model, the training success rate
-    (%) over the `last` updates, or the last chunk's mean of a diagnostic (NaN if unrecorded)."""
+    (%) over the `last` updates, the area under the validation SR curve (`validation_area`),
+    or the last chunk's mean of a diagnostic (NaN if unrecorded)."""
     if column in TEST:
         return np.array([rate(r["selected"]["overall"][column]) for r in per_seed])
     if column == TRAINING:
         return np.array([100 * np.mean(r["training_success_rate"][-last:]) for r in per_seed])
+    if column == VALIDATION_AREA:
+        return np.array([validation_area(r.get("validation") or []) for r in per_seed])
     return np.array([(r.get("diagnostics") or {}).get(column, [np.nan])[-1] for r in per_seed], float)
 
 
@@ -227,8 +250,9 @@ def _robust(results: dict, pairs: list, out: dict, level: str = "##") -> str:
 
 
 def shown_columns(results: dict, last: int = 250) -> list[str]:
-    """The columns of `TEST`, the training SR and `DIAGNOSTICS` that some seed recorded."""
-    columns = (*TEST, TRAINING, *DIAGNOSTICS)
+    """The columns of `TEST`, the training SR, the validation curve's area and
+    `DIAGNOSTICS` that some seed recorded."""
+    columns = (*TEST, TRAINING, VALIDATION_AREA, *DIAGNOSTICS)
     return [c for c in columns if any(np.isfinite(values(rs, c, last)).any() for rs in results.values())]
 
 
