@@ -17,7 +17,7 @@ import jax
 
 from experiments import errors
 from experiments.reporting import tables
-from experiments.running import presets, rundir, selection
+from experiments.running import presets, rundir, selection, sweeps
 from experiments.running.models import read_trained
 from foresit_jax.config import Config
 from foresit_jax.evaluate import agent_params, evaluate
@@ -52,9 +52,7 @@ def main(args: Args) -> dict:
         raise errors.UserError(f"--split must be val or test, got {args.split!r}")
     info = rundir.read_run_info(args.run)
     config = Config(**info["config"])
-    episodes = info["schedule"][f"{args.split}_episodes_per_room"] if args.episodes_per_room is None else args.episodes_per_room
-    if not 1 <= episodes <= presets.MAX_EPISODES:
-        raise errors.UserError(f"--episodes-per-room must lie in 1..{presets.MAX_EPISODES:,}, got {episodes}")
+    episodes = sweeps.episodes_per_room(args.run, args.split, given=args.episodes_per_room)
     if args.seed is not None:
         presets.check_seeds(args.seed)
     # The method's own protocol (sampled; greedy for ORG) writes the plain file names.

@@ -133,20 +133,17 @@ def markdown(report: dict[str, list[dict]], split: str, episodes: int) -> str:
 
 def models_of(args: Args) -> tuple[dict, int]:
     """({method: [Model per seed]}, episodes per room type) of a run or sweep folder."""
-    key = f"{args.split}_episodes_per_room"
     if (args.run / "sweep.json").is_file():
         saved = sweeps.saved(args.run)
         finished = tuple(m for m in saved.methods if sweeps.finished_seeds(args.run / "methods" / m))
         if not finished:
             raise errors.UserError(f"{args.run}: no finished method yet")
         models = models_of_sweep(args.run, args.methods or finished)
-        episodes = getattr(sweeps.method_schedule(next(iter(models)), saved)[1], key)
     else:
         if args.methods:
             raise errors.UserError("--methods is for a sweep folder; a run folder holds one method")
         models = models_of_run(args.run)
-        episodes = rundir.read_run_info(args.run)["schedule"][key]
-    return models, episodes if args.episodes_per_room is None else args.episodes_per_room
+    return models, sweeps.episodes_per_room(args.run, args.split, next(iter(models)), args.episodes_per_room)
 
 
 def main(args: Args) -> dict:

@@ -364,10 +364,9 @@ def sampled_results(folder: Path, methods) -> dict[str, list[dict]]:
     episodes per room type) with actions sampled from the policy. For a method evaluated
     greedily (ORG's protocol) these are the episodes its report row played, with the other
     action rule; for one evaluated sampled, its row's own numbers again."""
-    args = sweeps.saved(folder)
     out, evaluators = {}, {}
     for method, models in models_of_sweep(folder, tuple(methods)).items():
-        episodes = sweeps.method_schedule(method, args)[1].test_episodes_per_room
+        episodes = sweeps.episodes_per_room(folder, "test", method)
         out[method] = []
         for model in models:
             where = Evaluator.scenes_of(model.config)

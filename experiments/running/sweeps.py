@@ -40,7 +40,7 @@ from experiments.reporting.report import (
 from experiments.reporting.tables import write_csv
 from experiments.running import checkpoint, devices, flags, numerics, rundir, selection
 from experiments.running.run import Run, check_continuable, finished_seeds, set_aside
-from experiments.running.presets import SweepConfigFields, check_seeds, check_sizes, config_flag, given, preset
+from experiments.running.presets import MAX_EPISODES, SweepConfigFields, check_seeds, check_sizes, config_flag, given, preset
 from experiments.running.progress import progress_bar
 from foresit_jax.evaluate import Evaluator
 
@@ -84,6 +84,22 @@ def method_schedule(method: str, spec: Sweep):
     config, schedule = preset(spec.preset, method, num_updates=spec.num_updates, setup=spec.setup, **given(spec.config))
     sched = {k: getattr(spec, k) for k in ("test_episodes_per_room", "val_episodes_per_room")}
     return config, dataclasses.replace(schedule, **{k: v for k, v in sched.items() if v is not None})
+
+
+def episodes_per_room(folder: Path, split: str, method: Optional[str] = None, given: Optional[int] = None) -> int:
+    """The episodes per room type that `split` ("val" or "test") is evaluated with in a
+    run folder (its run.json's schedule) or a sweep folder (`method`'s: the preset's, with
+    the sweep's overrides), or `given` (a user's --episodes-per-room) instead; refused
+    outside 1..MAX_EPISODES."""
+    if given is None:
+        key = f"{split}_episodes_per_room"
+        if (Path(folder) / "sweep.json").is_file():
+            given = getattr(method_schedule(method, saved(folder))[1], key)
+        else:
+            given = rundir.read_run_info(folder)["schedule"][key]
+    if not 1 <= given <= MAX_EPISODES:
+        raise errors.UserError(f"--episodes-per-room must lie in 1..{MAX_EPISODES:,}, got {given}")
+    return given
 
 
 # A sweep's arguments that fix what a finished method's results are: a method is reused
