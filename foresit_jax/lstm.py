@@ -10,10 +10,10 @@ computes: the same concatenated kernels, the same dots, the same additions in th
 order. The parameter names are flax's: a flax upgrade that renames or reorders them
 fails `tests/test_lstm.py`, not a run.
 
-`EncoderLSTM` is the encoder's cell with this split path as its methods: acting gets the
-kernels and the input gates through it (`ActorCritic.lstm_kernels`, `ActorCritic.input_gates`;
-its step runs `lstm_step` on kernels made once per window), the replay the unroll too
-(`ActorCritic.replay`); `encoder_lstm_params(params)` is the
+`EncoderLSTM` is the encoder's cell with this split path as its methods, which
+`ActorCritic.encode` runs: at one step (acting, on kernels made once per window by
+`ActorCritic.lstm_kernels`) its `step`, over a window (the loss) its `unroll`;
+`encoder_lstm_params(params)` is the
 one place that knows where the LSTM sits in the agent's parameter tree: with
 `split_encoder_lstm_kernels`, `join_partial_trees` and `with_encoder_lstm_kernels`, for the
 maml base, which splits that tree into the kernels it adapts and the rest.
@@ -223,12 +223,11 @@ class EncoderLSTM(nn.OptimizedLSTMCell):
       (the maml base's adapted kernels) or None;
     input_gates(x, kernels) -> the input's part of the gates `[..., 4H]`, for any number of
       steps at once;
-    unroll(kernels, carry, gates, episode_step, readout, xs) -> the recurrent part over a
-      window of input gates `[T, B, 4H]`, the carry zeroed before each step that starts an
-      episode (`episode_step` `[T, B]` 0), and `readout(s_t, x_t)` of each step (the
-      replay: `ActorCritic.replay`).
-    step(kernels, carry, gates) -> one recurrent step from a step's input gates (acting:
-      `ActorCritic.act`, on `kernels` made once per window, outside the loop).
+    unroll(kernels, carry, gates, first) -> the recurrent part over a window of input
+      gates `[T, B, 4H]`, the carry zeroed before each step that starts an episode
+      (`first` `[T, B]`) (`ActorCritic.encode` over a window: the loss);
+    step(kernels, carry, gates) -> one recurrent step from a step's input gates
+      (`ActorCritic.encode` at T = 1: acting, on `kernels` made once per window).
     Nothing else in the package calls `lstm_step`: the cell owns its recurrence."""
 
     # flax's orthogonal initialiser, drawn a sample at a time under vmap (see `layers.orthogonal`)
@@ -243,20 +242,19 @@ class EncoderLSTM(nn.OptimizedLSTMCell):
     def step(self, kernels: LSTMKernels, carry: LSTMCarry, gates: chex.Array) -> tuple[LSTMCarry, chex.Array]:
         return lstm_step(kernels, carry, gates)
 
-    def unroll(self, kernels: LSTMKernels, carry: LSTMCarry, gates: chex.Array, episode_step: chex.Array, readout,
-               xs=None):  # fmt: skip
-        """(the carry after the window, `(s_t, readout(s_t, x_t))` stacked `[T, ...]`), the
-        recurrent kernel transposed once (`with_transposed_recurrent_kernel`: the unroll is
-        differentiated); `xs`: per-step inputs of `readout` (`[T, ...]` leaves, or None)."""
+    def unroll(self, kernels: LSTMKernels, carry: LSTMCarry, gates: chex.Array,
+               first: chex.Array) -> tuple[LSTMCarry, chex.Array]:  # fmt: skip
+        """(the carry after a window, its states `[T, ..., H]`) from the window's input gates
+        `[T, ..., 4H]`, the carry zeroed before each step that begins an episode (`first`
+        `[T, ...]`), the recurrent kernel transposed once (`with_transposed_recurrent_kernel`:
+        the loss differentiates the unroll)."""
         kernels = with_transposed_recurrent_kernel(kernels)
-        first = episode_step == 0  # [T, B]
 
         def step(carry, step_xs):
-            input_gates, x, first_t = step_xs
-            carry, s_t = lstm_step(kernels, reset_carry(first_t, carry), input_gates)
-            return carry, (s_t, readout(s_t, x))
+            input_gates, first_t = step_xs
+            return lstm_step(kernels, reset_carry(first_t, carry), input_gates)
 
-        return jax.lax.scan(step, carry, (gates, xs, first))
+        return jax.lax.scan(step, carry, (gates, first))
 
 
 def initial_carry(batch_shape, hidden_size: int = 512) -> LSTMCarry:

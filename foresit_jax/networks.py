@@ -6,9 +6,11 @@
   Eq. 3-4 over the current episode's states (MLP on s*_t, ForeSIT).
 * `ImaginationNet`: f_w, 6 tanh layers with a bottleneck, [s_0 : g_tau] -> imagined s.
 * `ActorCritic`: Encoder + PolicyHead + Critic under one parameter tree (theta, omega),
-  with methods `act` (one acting step in one apply: input gates, the LSTM's step, i_tau's
-  entry, the policy), `replay` (a recorded window's states and logits, for the gradient,
-  through the same cell), `critic` (values over a window).
+  reached through two time-major methods that acting and the loss both call, as in
+  PureJaxRL's `ppo_rnn.py`: `encode` (the encoder over T steps: the input gates of all
+  steps in one matmul, then the LSTM's recurrence) and `heads` (the policy's logits on
+  [s_t : i_tau]); acting calls them at T = 1 and imagines i_tau between the two calls, the
+  loss at T = the window on the recorded i_tau. Plus `critic` (values over a window).
 * `build(config) -> Networks`: the one place where a method's pieces (flags,
   `foresit_jax.methods`) become modules: ORG's object graph, SAVN's learned loss, the
   attention critic, where i_tau enters. `Networks` is a record (the modules and the
@@ -278,30 +280,37 @@ class ImaginationNet(nn.Module):
         return x  # [..., layer_sizes[-1]]
 
 
+class EncoderInputs(NamedTuple):
+    """What the encoder reads at each step, time-major: leaves `[T, ..., ...]`."""
+
+    obs: Any  # observation dict, leaves [T, ..., ...]
+    prev_action_probs: chex.Array  # [T, ..., A] (zeros at an episode's first step)
+    imagined: Optional[chex.Array] = None  # [T, ..., H] i_tau for the encoder (imagination_input='encoder'), else None
+
+
 class ActorCritic(nn.Module):
     """theta (encoder + policy) and omega (critic) under one parameter tree.
 
-    Methods (use with `apply(params, ..., method=ActorCritic.policy_logits)` etc.):
-      encode(carry, obs, prev_action_probs, imagined) -> (carry, s_t [..., H])
-      encoder_features(obs, prev_action_probs, imagined) -> LSTM input [..., F]
-      policy_logits(s_t, imagined) -> logits [..., A]
-      lstm_kernels(update) -> the encoder LSTM's kernels, for its split form (foresit_jax.lstm)
-      input_gates(obs, prev_action_probs, imagined, kernels) -> the LSTM's input gates [..., 4H]
-      replay(carry, obs, prev_action_probs, encoder_imagined, head_imagined, episode_step)
-        -> (states, logits) of a recorded window (foresit_jax.train.replayed)
-      act(kernels, carry, obs, prev_action_probs, encoder_imagined, gate_offset, imagine)
-        -> (carry, s_t, logits, extra): one acting step in one apply (foresit_jax.rollout)
-      next_state(kernels, carry, obs, prev_action_probs, encoder_imagined) -> s_t
-      step(carry, obs, prev_action_probs, imagined) -> (carry, s_t, logits)  (encode, then
-        policy_logits, through flax's own cell: the reference the split form is tested against)
+    Methods (use with `apply(params, ..., method="encode")` etc.):
+      encode(carry, inputs: EncoderInputs [T, ...], first [T, ...], kernels, gate_offsets)
+        -> (carry, states [T, ..., H]): acting at T = 1, the loss over a window, the
+        bootstrap and the goal view's latent at T = 1
+      heads(states, imagined) -> logits [..., A]: the policy on [s_t : i_tau]
       critic(states [..., T, H], valid [..., T]) -> CriticOutput
-    `__call__` runs both once (for `init`).
+      lstm_kernels(update) -> the encoder LSTM's kernels (foresit_jax.lstm), made once per
+        acting window, outside its loop, and adapted by the maml base
+      encoder_features(obs, prev_action_probs, imagined) -> the LSTM's input [..., F]
+        (the maml base's low-rank update reads it)
+      interaction_loss(inputs) -> the maml base's L_phi
+    `__call__(carry, obs, prev_action_probs, imagined)` -> (carry, s_t, logits, value): one
+    step through flax's own LSTM cell, for `init`, and the reference the split form is
+    tested against.
 
     `imagination_input` (`Config.imagination_input`): where i_tau enters: 'head' and 'mlp'
     give it to the policy head (linear, or a two-layer MLP of `value_hidden` units, which
     the bases get too), 'encoder' to the encoder (`imagination_features` = the target's
-    embedding width). The `imagined` argument of `encode` and `encoder_features` is the
-    encoder's i_tau, of `policy_logits` the head's; `step` routes its one `imagined` to
+    embedding width). `EncoderInputs.imagined` is the encoder's i_tau; `heads` drops its
+    `imagined` where the head takes none; `__call__` routes its one `imagined` to
     whichever takes it.
     """
 
@@ -332,13 +341,39 @@ class ActorCritic(nn.Module):
         self.value_critic = Critic(self.attention_critic, self.attention_size, value_hidden, self.zero_value_init,
                                    self.key_gradient)  # fmt: skip
 
-    def encode(
-        self, carry: LSTMCarry, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array,
-        imagined: Optional[chex.Array] = None,
-    ) -> tuple[LSTMCarry, chex.Array]:  # fmt: skip
-        """One encoder step -> (carry, s_t). Acting splits `step` in two so that i_tau
-        can be imagined from s_0 before the first action."""
-        return self.encoder(carry, obs, prev_action_probs, imagined)
+    def encode(self, carry: LSTMCarry, inputs: EncoderInputs, first: chex.Array, kernels: Optional[LSTMKernels] = None,
+               gate_offsets: Optional[chex.Array] = None) -> tuple[LSTMCarry, chex.Array]:  # fmt: skip
+        """The encoder over T steps, time-major -> (the carry after them, states
+        `[T, ..., H]`). The encoder up to the LSTM's input gates needs no carry, so it runs
+        over all the steps at once (a few large matmuls instead of T small ones); then the
+        LSTM's recurrence, step by step, the carry zeroed before each step that begins an
+        episode (`first` `[T, ...]` bool). `kernels`: the LSTM's (`lstm_kernels`, made once
+        per acting window, outside its loop; None: this parameter tree's). `gate_offsets`
+        `[T, ..., 4H]`: added to the input gates (the maml base's zeros, whose gradient is
+        the pre-activations'; None: none)."""
+        if kernels is None:
+            kernels = self.lstm_kernels()
+        size = first.size
+
+        def flat(x):  # [T, ..., ...] -> [T * ..., ...]
+            return x.reshape((size,) + x.shape[first.ndim:])
+
+        imagined = None if inputs.imagined is None else flat(inputs.imagined)
+        features = self.encoder.features(jax.tree.map(flat, inputs.obs), flat(inputs.prev_action_probs), imagined)
+        gates = self.encoder.lstm.input_gates(features, kernels)
+        gates = gates.reshape(first.shape + gates.shape[-1:])  # [T, ..., 4H]
+        if gate_offsets is not None:
+            gates = gates + gate_offsets
+        if first.shape[0] == 1:  # one step (acting): no loop
+            carry, s_t = self.encoder.lstm.step(kernels, reset_carry(first[0], carry), gates[0])
+            return carry, s_t[None]
+        return self.encoder.lstm.unroll(kernels, carry, gates, first)
+
+    def heads(self, states: chex.Array, imagined: Optional[chex.Array] = None) -> chex.Array:
+        """pi(. | s_t, i_tau) logits `[..., A]` of states `[..., H]`; `imagined` (the i_tau
+        of each state) is dropped where the head takes none (no imagination, or i_tau in
+        the encoder)."""
+        return self.policy(states, imagined if self.policy.use_imagination else None)
 
     def encoder_features(
         self, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array, imagined: Optional[chex.Array] = None
@@ -346,84 +381,12 @@ class ActorCritic(nn.Module):
         """The encoder up to the LSTM's input `[..., F]` (see `Encoder.features`)."""
         return self.encoder.features(obs, prev_action_probs, imagined)
 
-    def policy_logits(self, s_t: chex.Array, imagined: Optional[chex.Array] = None) -> chex.Array:
-        """pi(. | s_t, i_tau) logits `[..., A]`."""
-        return self.policy(s_t, imagined)
-
     def lstm_kernels(self, update: Optional[LowRankUpdate] = None) -> LSTMKernels:
         """The encoder LSTM's parameters as the concatenated kernels of its split form
         (`foresit_jax.lstm.EncoderLSTM`: input gates for any number of steps at once, then
-        the recurrent step), which acting, the replay and MAML run instead of calling the
-        cell; `update`: a low-rank change of them (the maml base's adapted kernels) or None."""
+        the recurrent step), which `encode` runs instead of calling the cell; `update`: a
+        low-rank change of them (the maml base's adapted kernels) or None."""
         return self.encoder.lstm.kernels(update)
-
-    def input_gates(self, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array, imagined: Optional[chex.Array],
-                    kernels: LSTMKernels) -> chex.Array:  # fmt: skip
-        """The encoder up to the LSTM's input gates `[..., 4H]` under `kernels`: everything
-        of an acting step that does not depend on the carry (`imagined`: the encoder's i_tau)."""
-        return self.encoder.lstm.input_gates(self.encoder.features(obs, prev_action_probs, imagined), kernels)
-
-    def replay(self, carry: LSTMCarry, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array,
-               encoder_imagined: Optional[chex.Array], head_imagined: Optional[chex.Array],
-               episode_step: chex.Array) -> tuple[chex.Array, chex.Array]:  # fmt: skip
-        """(states `[T, B, H]`, logits `[T, B, A]`) of a window from its recorded inputs
-        (leaves `[T, B, ...]`) and the carry before it, as a differentiable function of the
-        parameters (`foresit_jax.train.replayed`): the encoder up to the input gates over all T x B
-        steps at once (a few large matmuls), then the LSTM's recurrent part and the policy
-        step by step (`EncoderLSTM.unroll`; the carry zeroed where `episode_step` is 0)."""
-        num_steps, num_lanes = episode_step.shape
-        size = num_steps * num_lanes
-
-        def flat(x):  # [T, B, ...] -> [T * B, ...]
-            return x.reshape((size,) + x.shape[2:])
-
-        kernels = self.lstm_kernels()
-        encoder_imagined = None if encoder_imagined is None else flat(encoder_imagined)
-        gates = self.input_gates(jax.tree.map(flat, obs), flat(prev_action_probs), encoder_imagined, kernels)
-        gates = gates.reshape(num_steps, num_lanes, -1)  # [T, B, 4H]: one matmul over the whole window
-        _, (states, logits) = self.encoder.lstm.unroll(kernels, carry, gates, episode_step, self.policy, head_imagined)
-        return states, logits
-
-    def act(self, kernels: LSTMKernels, carry: LSTMCarry, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array,
-            encoder_imagined: Optional[chex.Array], gate_offset: Optional[chex.Array], imagine: Callable):  # fmt: skip
-        """One acting step in one apply -> (carry, s_t, logits, extra): the encoder up to the
-        LSTM's input gates under `kernels` (made once per window, outside the loop; the
-        encoder's i_tau `encoder_imagined`, or None), `gate_offset` added to them (the maml
-        base's zeros whose gradient is the pre-activations'; None: none), the LSTM's step,
-        then `imagine(s_t) -> (i_tau [..., H] or None, extra)` (i_tau is imagined from s_0,
-        which this step computes at an episode's start; `foresit_jax.rollout`), then the
-        policy on [s_t : i_tau] (on s_t alone where the head takes no i_tau)."""
-        gates = self.input_gates(obs, prev_action_probs, encoder_imagined, kernels)
-        if gate_offset is not None:
-            gates = gates + gate_offset
-        carry, s_t = self.encoder.lstm.step(kernels, carry, gates)
-        imagined, extra = imagine(s_t)
-        return carry, s_t, self.policy(s_t, imagined if self.policy.use_imagination else None), extra
-
-    def next_state(self, kernels: LSTMKernels, carry: Optional[LSTMCarry], obs: Mapping[str, chex.Array],
-                   prev_action_probs: chex.Array, encoder_imagined: Optional[chex.Array]) -> chex.Array:  # fmt: skip
-        """s_t of one step from `carry` under `kernels`, without the policy `[..., H]`: the
-        state after a window (the critic's bootstrap) and, from a fresh carry (None), the
-        goal view's latent (the `oracle`'s i_tau)."""
-        gates = self.input_gates(obs, prev_action_probs, encoder_imagined, kernels)
-        if carry is None:
-            carry = initial_carry(gates.shape[:-1], self.hidden_size)
-        return self.encoder.lstm.step(kernels, carry, gates)[1]
-
-    def step(
-        self,
-        carry: LSTMCarry,
-        obs: Mapping[str, chex.Array],
-        prev_action_probs: chex.Array,
-        imagined: Optional[chex.Array] = None,
-    ) -> tuple[LSTMCarry, chex.Array, chex.Array]:
-        """`encode` then `policy_logits` -> (carry, s_t, logits); `imagined` goes to the
-        encoder or to the head, by `imagination_input`."""
-        if self.imagination_in_encoder:
-            carry, s_t = self.encoder(carry, obs, prev_action_probs, imagined)
-            return carry, s_t, self.policy(s_t)
-        carry, s_t = self.encoder(carry, obs, prev_action_probs)
-        return carry, s_t, self.policy(s_t, imagined)
 
     def critic(self, states: chex.Array, valid: chex.Array, keys=None, key_mask=None, positions=None) -> CriticOutput:
         return self.value_critic(states, valid, keys, key_mask, positions)
@@ -436,7 +399,14 @@ class ActorCritic(nn.Module):
         return self.learned_loss(inputs)
 
     def __call__(self, carry, obs, prev_action_probs, imagined=None):
-        carry, s_t, logits = self.step(carry, obs, prev_action_probs, imagined)
+        """One step through flax's own cell -> (carry, s_t, logits, value); `imagined` goes to
+        the encoder or to the head, by `imagination_input`."""
+        if self.imagination_in_encoder:
+            carry, s_t = self.encoder(carry, obs, prev_action_probs, imagined)
+            logits = self.policy(s_t)
+        else:
+            carry, s_t = self.encoder(carry, obs, prev_action_probs)
+            logits = self.policy(s_t, imagined)
         out = self.critic(s_t[..., None, :], jnp.ones(s_t.shape[:-1] + (1,), bool))
         if self.learned_loss is not None:  # create phi at init
             segment = jnp.zeros((self.learned_loss.segment, s_t.shape[-1] + logits.shape[-1]), s_t.dtype)

@@ -59,7 +59,7 @@ from foresit_jax.lstm import (
     split_encoder_lstm_kernels,
 )
 from foresit_jax.methods import ImaginationVariant
-from foresit_jax.networks import Networks
+from foresit_jax.networks import EncoderInputs, Networks
 
 
 class AgentParams(NamedTuple):
@@ -242,8 +242,15 @@ def goal_latent(nets: Networks, params, kernels, obs) -> chex.Array:
     hidden = nets.config.hidden_size
     probs = jnp.zeros(lanes + (nets.config.num_actions,), jnp.float32)
     encoder_imagined = jnp.zeros(lanes + (hidden,), jnp.float32) if nets.imagination_in_encoder else None
-    return nets.model.apply(params, kernels, None, GoalViewWrapper.goal_of(obs), probs, encoder_imagined,
-                            method="next_state")  # fmt: skip
+    inputs = one_step(GoalViewWrapper.goal_of(obs), probs, encoder_imagined)
+    first = jnp.ones((1,) + lanes, bool)
+    return nets.model.apply(params, initial_carry(lanes, hidden), inputs, first, kernels, method="encode")[1][0]
+
+
+def one_step(obs, prev_action_probs, encoder_imagined) -> EncoderInputs:
+    """The encoder's inputs of one step of every lane (leaves `[B, ...]`) as a window of
+    one, `[1, B, ...]` (`ActorCritic.encode` at T = 1)."""
+    return EncoderInputs(*jax.tree.map(lambda x: x[None], (obs, prev_action_probs, encoder_imagined)))
 
 
 def cue_latent(nets: Networks, obs) -> chex.Array:
@@ -342,23 +349,22 @@ def act(nets: Networks, acting: AgentParams, env: BoundEnv, actor: ActorState, k
 
 
 def _agent_step(nets: Networks, acting: AgentParams, kernels, actor: ActorState, key: chex.PRNGKey, gate_offset):
-    """The agent's half of a step, one `apply` (`ActorCritic.act`): -> (LSTM carry, s_t,
-    logits, i_tau, s_0, the encoder's i_tau). `key`: i_tau's noise. Acting's window
-    (`act_window`) and the step-by-step policy (`policy`) both run it, so they compute alike."""
+    """The agent's half of a step: `encode` at T = 1, i_tau imagined from its s_t, then
+    `heads` -> (LSTM carry, s_t, logits, i_tau, s_0, the encoder's i_tau). `key`: i_tau's
+    noise. Acting's window (`act_window`) and the step-by-step policy (`policy`) both run
+    it, so they compute alike."""
     first = actor.episode_step == 0  # [B]
     seen_imagined = encoder_imagined(nets, actor)  # [B, H] or None
-
-    def imagine(s_t):  # between the LSTM and the policy: (i_tau for the head, (i_tau, s_0))
-        s_0 = jnp.where(first[:, None], s_t, actor.s_0)
-        goal_latent_fn = None  # the oracle's: computed only where i_tau is renewed
-        if nets.imagination_variant.reads_goal_view:
-            goal_latent_fn = functools.partial(goal_latent, nets, acting.params, kernels, actor.obs)
-        imagined = imagined_at_step(nets, acting, actor, s_t, key, goal_latent_fn)  # [B, H]
-        return imagined, (imagined, s_0)
-
-    lstm, s_t, logits, (imagined, s_0) = nets.model.apply(
-        acting.params, kernels, actor.lstm, actor.obs, actor.prev_probs, seen_imagined, gate_offset, imagine, method="act"
-    )
+    offsets = None if gate_offset is None else gate_offset[None]
+    lstm, states = nets.model.apply(acting.params, actor.lstm, one_step(actor.obs, actor.prev_probs, seen_imagined),
+                                    first[None], kernels, offsets, method="encode")  # fmt: skip
+    s_t = states[0]
+    s_0 = jnp.where(first[:, None], s_t, actor.s_0)
+    goal_latent_fn = None  # the oracle's: computed only where i_tau is renewed
+    if nets.imagination_variant.reads_goal_view:
+        goal_latent_fn = functools.partial(goal_latent, nets, acting.params, kernels, actor.obs)
+    imagined = imagined_at_step(nets, acting, actor, s_t, key, goal_latent_fn)  # [B, H]
+    logits = nets.model.apply(acting.params, s_t, imagined, method="heads")
     return lstm, s_t, logits, imagined, s_0, seen_imagined
 
 
@@ -366,9 +372,9 @@ def act_window(nets: Networks, acting: AgentParams, env: BoundEnv, actor: ActorS
                num_steps: int, options: ActOptions = ActOptions(),
                adapt: Adaptation = Adaptation()) -> tuple[ActorState, Trajectory, WindowEnd]:  # fmt: skip
     """`act` under one parameter set for the whole window (every base's step): each step
-    is one `apply` of the network (`ActorCritic.act`: input gates, the LSTM's step, i_tau,
-    the policy), then the environment's step. `adapt`: what the maml base's inner loop
-    gives a window (`Adaptation`; the default: nothing)."""
+    is the agent's (`_agent_step`: `ActorCritic.encode` at T = 1, i_tau, `ActorCritic.heads`),
+    then the environment's. `adapt`: what the maml base's inner loop gives a window
+    (`Adaptation`; the default: nothing)."""
     params, lanes = acting.params, jnp.arange(actor.episode_step.shape[0])
     env = acting_env(nets, env)
     kernels = nets.model.apply(params, adapt.lstm_update, method="lstm_kernels")  # once, outside the loop
@@ -411,8 +417,9 @@ def act_window(nets: Networks, acting: AgentParams, env: BoundEnv, actor: ActorS
     if options.whole_episodes:  # nothing is bootstrapped: every counted episode ended (or is cut by design)
         next_state = jnp.zeros_like(actor.s_0)
     else:  # s_T, for V(s*_T) at the cut (Eq. 8); the next window computes it again
-        next_state = nets.model.apply(params, kernels, actor.lstm, actor.obs, actor.prev_probs,
-                                      encoder_imagined(nets, actor), method="next_state")  # fmt: skip
+        inputs = one_step(actor.obs, actor.prev_probs, encoder_imagined(nets, actor))
+        next_state = nets.model.apply(params, actor.lstm, inputs, (actor.episode_step == 0)[None], kernels,
+                                      method="encode")[1][0]  # fmt: skip
     return actor, out, WindowEnd(jax.lax.stop_gradient(next_state), actor.episode_step)
 
 

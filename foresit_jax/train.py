@@ -39,7 +39,7 @@ import envs
 from foresit_jax import distributions, imagination, rollout
 from foresit_jax.config import Config
 from foresit_jax.lstm import LSTMCarry
-from foresit_jax.networks import CriticOutput, Networks, build, subgoals_of_rows, window_attention_mask
+from foresit_jax.networks import CriticOutput, EncoderInputs, Networks, build, subgoals_of_rows, window_attention_mask
 from foresit_jax.rollout import ActOptions, ActorState, AgentParams, BoundEnv, Trajectory, WindowEnd, ended_episodes
 
 
@@ -297,8 +297,9 @@ def make_env(config: Config, split: str = "train", room_types=None, training: bo
 
 def replayed(nets: Networks, params, traj: Trajectory, initial_carry: LSTMCarry) -> Trajectory:
     """`traj` (recorded with `record_inputs=True`) with its states `[T, B, H]` and logits
-    `[T, B, A]` recomputed as a differentiable function of `params`, in one `apply`
-    (`ActorCritic.replay`, through the same cell as acting).
+    `[T, B, A]` recomputed as a differentiable function of `params`, through the two
+    methods acting calls at T = 1: `ActorCritic.encode` over the window, then
+    `ActorCritic.heads` on the recorded i_tau.
 
     initial_carry: the LSTM carry `(c, h)` `[B, H]` each before the window's first step
     (`ActorState.lstm` at the window's start). The carry is zeroed before every step that
@@ -307,8 +308,9 @@ def replayed(nets: Networks, params, traj: Trajectory, initial_carry: LSTMCarry)
     if traj.inputs is None:
         raise ValueError("replay needs a trajectory recorded with record_inputs=True")
     seen = jax.lax.stop_gradient(traj.inputs)
-    states, logits = nets.model.apply(params, initial_carry, seen.obs, seen.prev_action_probs, seen.encoder_imagined,
-                                      seen.imagined, traj.episode_step, method="replay")  # fmt: skip
+    inputs = EncoderInputs(seen.obs, seen.prev_action_probs, seen.encoder_imagined)
+    _, states = nets.model.apply(params, initial_carry, inputs, traj.episode_step == 0, method="encode")
+    logits = nets.model.apply(params, states, seen.imagined, method="heads")
     return traj._replace(states=states, logits=logits)
 
 

@@ -161,7 +161,7 @@ def test_evaluation_step_13_runs_under_theta_2_recomputed_independently():
         probs, states, logits = lane_inputs.prev_action_probs[start], [], []
         for t in range(start, stop):
             obs = jax.tree.map(lambda x: x[t], lane_inputs.obs)
-            carry, s_t, logit = nets.model.apply(theta, carry, obs, probs, None, method=ActorCritic.step)
+            carry, s_t, logit, _ = nets.model.apply(theta, carry, obs, probs, None)  # flax's own cell
             probs = jax.nn.softmax(logit)
             states.append(s_t)
             logits.append(logit)

@@ -278,11 +278,12 @@ class CriticTest(chex.TestCase):
 
 
 def unroll_steps(model, params, carry, obs_t, prev_action_probs_t, imagined_t=None):
-    """`ActorCritic.step` scanned over a time-major sequence (one episode per lane, no
-    reset): (final carry, states [T, ..., H], logits [T, ..., A])."""
+    """`ActorCritic.__call__` (one step through flax's own cell) scanned over a time-major
+    sequence (one episode per lane, no reset): (final carry, states [T, ..., H], logits
+    [T, ..., A])."""
 
     def body(carry, inputs):
-        carry, s_t, logits = model.apply(params, carry, *inputs, method=networks.ActorCritic.step)
+        carry, s_t, logits, _ = model.apply(params, carry, *inputs)
         return carry, (s_t, logits)
 
     carry, (states, logits) = jax.lax.scan(body, carry, (obs_t, prev_action_probs_t, imagined_t))
@@ -408,9 +409,9 @@ class ActorCriticTest(chex.TestCase):
         chex.assert_shape(states, (T, B, H))
         chex.assert_shape(logits, (T, B, A))
         c = carry0
-        step = jax.jit(functools.partial(self.model.apply, method=networks.ActorCritic.step))
+        step = jax.jit(self.model.apply)
         for t in range(T):
-            c, s_t, l_t = step(self.params, c, jax.tree.map(lambda x: x[t], obs), probs[t], imagined[t])
+            c, s_t, l_t, _ = step(self.params, c, jax.tree.map(lambda x: x[t], obs), probs[t], imagined[t])
             np.testing.assert_allclose(states[t], s_t, rtol=1e-5, atol=1e-6)
             np.testing.assert_allclose(logits[t], l_t, rtol=1e-5, atol=1e-6)
         np.testing.assert_allclose(carry[1], c[1], rtol=1e-5, atol=1e-6)
@@ -432,17 +433,32 @@ class ActorCriticTest(chex.TestCase):
         kernel = np.asarray(params["params"]["policy"]["actor"]["kernel"])
         self.assertLess(np.abs(kernel).max(), 0.05)
 
-    def test_encode_then_policy_equals_step(self):
-        obs, probs = random_obs(self.rng, (2,)), random_probs(self.rng, (2,))
-        imagined = np.tanh(self.rng.normal(size=(2, H))).astype(np.float32)
-        carry = networks.initial_carry((2,), H)
+    def test_encode_then_heads_equal_the_flax_cells_steps(self):
+        """The one route (`encode` over a window, time-major, the carry zeroed where an
+        episode begins, then `heads`) against flax's own cell step by step (`__call__`),
+        over two episodes in each lane; and `encode` at T = 1, step by step, as acting
+        calls it, gives the same states."""
+        steps, lanes = 6, 2
+        obs, probs = random_obs(self.rng, (steps, lanes)), random_probs(self.rng, (steps, lanes))
+        imagined = np.tanh(self.rng.normal(size=(steps, lanes, H))).astype(np.float32)
+        first = np.zeros((steps, lanes), bool)
+        first[[0, 3], 0] = first[[0, 4], 1] = True
+        carry = jax.tree.map(lambda x: x + 0.3, networks.initial_carry((lanes,), H))  # zeroed at step 0
         apply = jax.jit(self.model.apply, static_argnames="method")
-        carry_a, s_a = apply(self.params, carry, obs, probs, method=networks.ActorCritic.encode)
-        logits_a = apply(self.params, s_a, imagined, method=networks.ActorCritic.policy_logits)
-        carry_b, s_b, logits_b = apply(
-            self.params, carry, obs, probs, imagined, method=networks.ActorCritic.step
-        )
-        chex.assert_trees_all_close((carry_a, s_a, logits_a), (carry_b, s_b, logits_b), rtol=1e-6)
+        inputs = networks.EncoderInputs(obs, probs)
+        carry_a, states = apply(self.params, carry, inputs, jnp.asarray(first), method="encode")
+        logits = apply(self.params, states, imagined, method="heads")
+        c, c_one = carry, carry
+        for t in range(steps):
+            c = jax.tree.map(lambda x: jnp.where(first[t][:, None], 0.0, x), c)
+            c, s_t, l_t, _ = apply(self.params, c, jax.tree.map(lambda x: x[t], obs), probs[t], imagined[t])
+            np.testing.assert_allclose(states[t], s_t, rtol=1e-5, atol=1e-6)
+            np.testing.assert_allclose(logits[t], l_t, rtol=1e-5, atol=1e-6)
+            one = jax.tree.map(lambda x: x[t : t + 1], inputs)
+            c_one, s_one = apply(self.params, c_one, one, jnp.asarray(first[t : t + 1]), method="encode")
+            np.testing.assert_allclose(s_one[0], states[t], rtol=1e-5, atol=1e-6)
+        chex.assert_trees_all_close(carry_a, c, rtol=1e-5, atol=1e-6)
+        chex.assert_trees_all_close(c_one, c, rtol=1e-5, atol=1e-6)
 
     def test_baseline_without_imagination(self):
         model = networks.ActorCritic(hidden_size=H, use_imagination=False, attention_critic=False)

@@ -214,12 +214,13 @@ def test_the_encoder_really_uses_the_detections():
 
     def logits(detections):
         seen = {**obs, "detections": detections}
-        kernels = nets.model.apply(state.params, None, method="lstm_kernels")
-        gates = nets.model.apply(state.params, seen, probs, None, kernels, method="input_gates")
-        from foresit_jax.lstm import encoder_lstm_params, initial_carry, lstm_kernels, lstm_step
+        from foresit_jax.lstm import initial_carry
+        from foresit_jax.networks import EncoderInputs
 
-        _, s_t = lstm_step(lstm_kernels(encoder_lstm_params(state.params)), initial_carry((), config.hidden_size), gates)
-        return nets.model.apply(state.params, s_t, None, method=type(nets.model).policy_logits)
+        inputs = EncoderInputs(*jax.tree.map(lambda x: x[None], (seen, probs)))
+        _, states = nets.model.apply(state.params, initial_carry((), config.hidden_size), inputs, jnp.ones((1,), bool),
+                                     method="encode")  # fmt: skip
+        return nets.model.apply(state.params, states[0], method="heads")
 
     detections = obs["detections"]
     grad = jax.grad(lambda d: jnp.sum(logits(d) * jnp.arange(1.0, 7.0)))(detections)
