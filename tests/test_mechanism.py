@@ -82,7 +82,7 @@ def test_the_mlp_reading_is_a_two_layer_head(method):
     rng = np.random.default_rng(1)
     s_t, i_tau = (np.tanh(rng.normal(size=(3, config.hidden_size))).astype(np.float32) for _ in range(2))
     uses = config.pieces.imagination_variant.uses_imagination
-    got = nets.model.apply(params, s_t, i_tau if uses else None, method=type(nets.model).policy_logits)
+    got = nets.model.apply(params, s_t, i_tau, method="heads")  # i_tau dropped where the head takes none
     p = jax.tree.map(np.asarray, params["params"]["policy"])
     x = np.concatenate([s_t, i_tau], -1) if uses else s_t
     np.testing.assert_allclose(got, np_dense(p["actor"], relu(np_dense(p["hidden"], x))), rtol=1e-4, atol=1e-5)
