@@ -401,12 +401,8 @@ class ActorCritic(nn.Module):
     def __call__(self, carry, obs, prev_action_probs, imagined=None):
         """One step through flax's own cell -> (carry, s_t, logits, value); `imagined` goes to
         the encoder or to the head, by `imagination_input`."""
-        if self.imagination_in_encoder:
-            carry, s_t = self.encoder(carry, obs, prev_action_probs, imagined)
-            logits = self.policy(s_t)
-        else:
-            carry, s_t = self.encoder(carry, obs, prev_action_probs)
-            logits = self.policy(s_t, imagined)
+        carry, s_t = self.encoder(carry, obs, prev_action_probs, imagined if self.imagination_in_encoder else None)
+        logits = self.heads(s_t, imagined)
         out = self.critic(s_t[..., None, :], jnp.ones(s_t.shape[:-1] + (1,), bool))
         if self.learned_loss is not None:  # create phi at init
             segment = jnp.zeros((self.learned_loss.segment, s_t.shape[-1] + logits.shape[-1]), s_t.dtype)

@@ -179,7 +179,7 @@ def validation_area(validation: list[dict]) -> float:
     updates, sr = (np.array(x, float) for x in zip(*points))
     if len(points) == 1:
         return float(sr[0])
-    return float(np.sum((sr[1:] + sr[:-1]) * np.diff(updates)) / 2 / (updates[-1] - updates[0]))
+    return float(np.trapezoid(sr, updates) / (updates[-1] - updates[0]))
 
 
 def load(run: Path) -> dict[str, list[dict]]:
