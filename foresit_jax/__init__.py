@@ -2,7 +2,7 @@
 
 The entry points (what the README uses):
 
-    from foresit_jax import Config, make_train, evaluate
+    from foresit_jax import Config, make_train, make_act, evaluate_policy
     train = make_train(Config(method="a3c+foresit", num_lanes=16, num_updates=100))
     state, metrics = jax.jit(jax.vmap(train))(keys)     # a seed sweep in one program
     grid = GridTrainer(config)                           # learning rates vmapped too
@@ -11,16 +11,15 @@ The entry points (what the README uses):
 The modules hold the pieces, from the ground up: `methods` (base x encoder x critic x
 imagination, as flags), `config` (Config), `lstm` (the encoder LSTM and its split form),
 `org` (ORG's object graph), `imagination` (buffers, f_w training, noise, f_w's loss),
-`maml` (SAVN's inner loop), `networks` (flax modules; `build(config)`), `rollout` (acting:
-records and plain functions), `train` (the learner: returns, advantages and the A3C loss, the
-update, Algorithm 1's imagination step, Trainer), `evaluate` (SR/SPL on held-out scenes), `probes`, `cvae`
-(the paper's C-VAE comparison). `agent` and `losses` keep
-the old `Agent` class and the losses' old home for one release.
+`learned_loss` (SAVN's L_phi), `networks` (flax modules; `build(config)`), `rollout` (acting:
+records and plain functions), `policy` (the agent step by step), `maml` (SAVN's inner loop
+and the maml base's acting), `train` (the learner: returns, advantages and the A3C loss, the
+update, Algorithm 1's imagination step, Trainer), `evaluate` (SR/SPL on held-out scenes; a
+module: its function is `foresit_jax.evaluate.evaluate`), `probes`, `cvae` (the paper's C-VAE
+comparison).
 """
 
 import importlib as _importlib
-import sys as _sys
-import types as _types
 import importlib.util as _util
 from pathlib import Path as _Path
 
@@ -45,9 +44,7 @@ _check_envs()
 # The package face is lazy (PEP 562): `from foresit_jax.config import Config` loads the
 # config and the method parser alone, and a name below loads its module when first used.
 _EXPORTS = {
-    "Agent": "foresit_jax.agent",  # deprecated: foresit_jax.rollout's functions and networks.build
     "Config": "foresit_jax.config",
-    "evaluate": "foresit_jax.evaluate",
     "evaluate_policy": "foresit_jax.evaluate",
     "make_act": "foresit_jax.evaluate",
     "Method": "foresit_jax.methods",
@@ -73,17 +70,3 @@ def __getattr__(name: str):
 
 def __dir__() -> list[str]:
     return sorted(set(globals()) | set(_EXPORTS))
-
-
-class _Face(_types.ModuleType):
-    """`foresit_jax.evaluate` is the function, as the eager face had it, even after the
-    submodule of that name is imported (which sets the package attribute to the module)."""
-
-    def __getattribute__(self, name: str):
-        if name in _SHADOWED:
-            return getattr(_importlib.import_module(_EXPORTS[name]), name)
-        return super().__getattribute__(name)
-
-
-_SHADOWED = frozenset(n for n, module in _EXPORTS.items() if module.rsplit(".", 1)[1] == n)
-_sys.modules[__name__].__class__ = _Face

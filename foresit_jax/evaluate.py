@@ -25,8 +25,7 @@ import numpy as np
 import envs
 from envs.catalog import ROOM_TYPES
 from envs.metrics import summarize  # (also re-exported: foresit_jax.evaluate.summarize)
-from foresit_jax import imagination
-from foresit_jax import rollout
+from foresit_jax import imagination, maml, policy, rollout
 from foresit_jax.config import Config
 from foresit_jax.networks import Networks, build
 from foresit_jax.rollout import ActOptions, AgentParams, BoundEnv, EpisodeStats, episode_stats
@@ -47,9 +46,10 @@ def agent_params(state, sigma2_max: float, evaluation_noise: str = "training_end
 
 class Acting(NamedTuple):
     """A policy in memory (`make_act`, `acting_policy`): `act(params, carry, obs, first, key)
-    -> (action [B], carry)` (`rollout.policy`: pure, batched over lanes; `first` `[B]` marks
-    an episode's first step), `params` what it acts with, `initial_carry(num_lanes)` its
-    carry before a first step, `config` the Config it was trained with. Its first three are
+    -> (action [B], carry)` (`foresit_jax.policy.policy`, or the maml base's
+    `foresit_jax.maml.policy`: pure, batched over lanes; `first` `[B]` marks an episode's
+    first step), `params` what it acts with, `initial_carry(num_lanes)` its carry before a
+    first step, `config` the Config it was trained with. Its first three are
     `evaluate_policy`'s first three arguments."""
 
     act: Callable
@@ -58,16 +58,35 @@ class Acting(NamedTuple):
     config: Config
 
 
+class BaseActing(NamedTuple):
+    """How a base acts, chosen once per Config (`base_acting`): its window (`act`, with
+    `rollout.act_window`'s arguments), its step-by-step policy and that policy's carry, and
+    the most episodes one rollout plays at once (None: all; the maml base copies the
+    parameters per episode)."""
+
+    act: Callable
+    policy: Callable
+    policy_carry: Callable
+    max_lanes: int | None
+
+
+def base_acting(config: Config) -> BaseActing:
+    """The acting of `config`'s base: the maml base adapts its parameters inside each
+    episode (`foresit_jax.maml`); every other base acts under one set (`rollout`, `policy`)."""
+    if config.pieces.base_piece.adapts_in_episode:
+        return BaseActing(maml.act, maml.policy, maml.policy_carry, MAX_ADAPTIVE_LANES)
+    return BaseActing(rollout.act_window, policy.policy, policy.policy_carry, None)
+
+
 def acting_policy(config: Config, params: AgentParams) -> Acting:
     """The agent of `config` acting with `params` (`AgentParams`, the evaluation's noise
     variance set) as its evaluation acts: greedy or sampled by the method's protocol."""
-    nets = build(config)
-    carry = functools.partial(rollout.policy_carry, nets)
-    if config.pieces.base_piece.adapts_in_episode:  # its carry holds theta_i and the running segment's observations
-        env = rollout.acting_env(nets, BoundEnv(Evaluator.for_config(config).env, None)).env
-        shapes = {k: jax.ShapeDtypeStruct(b.shape, b.dtype) for k, b in env.observation_space().spaces.items()}
-        carry = functools.partial(rollout.policy_carry, nets, acting=params, obs=shapes)
-    return Acting(rollout.policy(nets, config.pieces.greedy_evaluation), params, carry, config)
+    nets, base = build(config), base_acting(config)
+    env = rollout.acting_env(nets, BoundEnv(Evaluator.for_config(config).env, None)).env
+    shapes = {k: jax.ShapeDtypeStruct(b.shape, b.dtype) for k, b in env.observation_space().spaces.items()}
+    # (the maml base's carry holds theta_i and the running segment's observations: it reads both)
+    carry = functools.partial(base.policy_carry, nets, acting=params, obs=shapes)
+    return Acting(base.policy(nets, config.pieces.greedy_evaluation), params, carry, config)
 
 
 def make_act(config: Config, state, seed: int | None = None) -> Acting:
@@ -190,17 +209,17 @@ class Evaluator:
         episodes one rollout of all lanes would play (the same reset keys)."""
         key = ("agent", config, num_steps, greedy, None if nets is None else id(nets))
         if key not in self.compiled:
-            nets, env = build(config) if nets is None else nets, self.env
+            nets, env, base = build(config) if nets is None else nets, self.env, base_acting(config)
             options = ActOptions(greedy=greedy, whole_episodes=True, record_inputs=False)
 
             def run_group(params, w_params, env_params, key, sigma2, reset_keys=None):
                 traj = rollout.rollout(nets, AgentParams(params, w_params, sigma2), BoundEnv(env, env_params), key,
-                                       num_steps, options, reset_keys=reset_keys)  # fmt: skip
+                                       num_steps, options, reset_keys=reset_keys, act=base.act)  # fmt: skip
                 return episode_stats(traj)
 
             def run(params, w_params, env_params, key, sigma2):
                 episodes = sigma2.shape[0]
-                groups, group = group_layout(episodes, MAX_ADAPTIVE_LANES if config.pieces.base_piece.adapts_in_episode else None)
+                groups, group = group_layout(episodes, base.max_lanes)
                 if groups == 1:
                     return run_group(params, w_params, env_params, key, sigma2)
                 # The episodes are those of one rollout of all lanes (its reset keys), so
@@ -326,12 +345,12 @@ def policy_episodes(policy_fn: Callable, params, carry, env: BoundEnv, key: chex
     `(params, carry, obs, first, key) -> (action [B], carry)`, padded to `num_steps`, as
     `rollout.rollout` plays them: the lanes reset with `split(split(key)[0], B)`, and the
     steps' keys come from `split(key)[1]` by the policy's `step_keys` schedule
-    (`rollout.StepPolicy`; a plain function gets `rollout.lockstep_keys`: step t gets
+    (`policy.StepPolicy`; a plain function gets `policy.lockstep_keys`: step t gets
     `split(k, num_steps)[t]` and the environment steps with `split(split(that key, 3)[2], B)`);
     only each lane's first episode counts."""
     k_start, k_act = jax.random.split(key)
     obs, env_state = env.reset(jax.random.split(k_start, num_lanes))
-    step_keys = getattr(policy_fn, "step_keys", rollout.lockstep_keys)
+    step_keys = getattr(policy_fn, "step_keys", policy.lockstep_keys)
     policy_keys, env_keys = step_keys(k_act, num_steps, num_lanes)
 
     def step(state, keys):
@@ -363,7 +382,7 @@ def evaluate_policy(
     seed s: `experiments.load`'s `test_key(s)`): {"overall": ..., room: ..., "by_length": ...}.
 
     policy_fn: `(params, carry, obs, first, key) -> (action [B], carry)`, batched over lanes
-    (`rollout.policy(nets)` is the agent's; see `policy_episodes` for the keys it gets);
+    (`base_acting(config).policy(nets)` is the agent's; see `policy_episodes` for the keys it gets);
     initial_carry: `num_lanes -> carry`. The agent's own policy gives `Evaluator.evaluate`'s
     numbers exactly (tests/test_policy.py). The privileged `oracle` reads the goal view: its
     observations come from the environment wrapped as `rollout.acting_env` wraps it."""

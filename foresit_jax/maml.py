@@ -5,13 +5,9 @@ Read from allenai/savn (models/savn.py, models/tcn.py, runners/savn_train.py,
 runners/train_util.py, runners/savn_val.py, agents/agent.py) and kept as it is there:
 
 * After every step the agent records [h_t : pi_t] (the LSTM output and the action
-  probabilities of that step, H + A values; nothing detached). `LearnedLoss` reads the
-  last `segment` (6) of them as a `[6, H + A]` block whose 6 steps are the CHANNELS of a
-  1-d convolution that slides over the H + A features (SAVN's `ll_tc`: Conv1d 6->10,
-  kernel 2, dilation 1, then 10->1, kernel 2, dilation 2, each causal (left zero padding,
-  PyTorch's pad-and-chomp) and followed by a leaky ReLU of slope 0.01; no weight norm,
-  dropout or residual: SAVN's `TemporalBlock.net` uses its first conv only). L_phi is the
-  L2 norm of the `[H + A]` output.
+  probabilities of that step, H + A values; nothing detached). L_phi
+  (`foresit_jax.learned_loss.LearnedLoss`, a module of the network) reads the last
+  `segment` (6) of them.
 * Inner loop: after steps 6, 12, 18 and 24 of an episode that has not ended (at most
   `maml_inner_updates` = 4), theta_{i+1} = theta_i - 1e-4 grad_theta L_phi(the 6 steps run
   under theta_i), keeping the graph (second order). The gradient is with respect to
@@ -26,8 +22,12 @@ runners/train_util.py, runners/savn_val.py, agents/agent.py) and kept as it is t
   the inner `jax.grad` runs inside the acting scan's segments and the outer gradient goes
   through it (exact second order; `Config.maml_first_order` stops the inner gradient's
   own gradient, MAML's first-order approximation, off by default).
-* Test time runs the same inner loop (`rollout.rollout` calls the same `adaptive_act`), with
-  no meta-step; actions are sampled (SAVN's validation samples too).
+* Test time runs the same inner loop (the Evaluator's `rollout.rollout` calls `act`, as the
+  Trainer does), with no meta-step; actions are sampled (SAVN's validation samples too).
+
+This module is the maml base's acting: `act`, the window the Trainer and the Evaluator
+choose for this base (it calls `rollout.act_window` once per segment), and `policy` with
+`policy_carry`, the same agent step by step (as `foresit_jax.policy` is the a3c base's).
 
 Adapted kernels. Each lane adapts its own theta_i, but the encoder LSTM's two kernels (the
 input kernel alone is `[F, 4H]`, 25 MB at the paper's sizes) are never copied per lane:
@@ -54,7 +54,6 @@ Choices where SAVN's code leaves one open or where ours differs, each with its r
   parameters w, which never adapt: f_w is trained by its buffers (Algorithm 1), not by
   the meta-gradient, and the policy's loss never reaches w (i_tau is a stop-gradient
   input). The policy head's weights on i_tau adapt like the rest of the policy.
-* The norm is sqrt(sum x^2 + 1e-12): SAVN's plain sqrt has an infinite gradient at 0.
 * The optimiser is the trainer's (Adam with the config's learning rate and global-norm
   clipping), shared with every other method so that comparisons differ in the method
   only; SAVN's SharedAdam (AMSGrad, eps 1e-3, no clipping) is not reproduced.
@@ -68,15 +67,15 @@ Choices where SAVN's code leaves one open or where ours differs, each with its r
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import Any, Callable, NamedTuple, Optional
 
 import chex
-import flax.linen as nn
 import jax
 import jax.numpy as jnp
 from flax import traverse_util
 
-from foresit_jax import distributions
+from foresit_jax import distributions, imagination, learned_loss, rollout
 from foresit_jax.lstm import (
     LowRankUpdate,
     encoder_lstm_params,
@@ -86,66 +85,19 @@ from foresit_jax.lstm import (
     split_encoder_lstm_kernels,
     with_encoder_lstm_kernels,
 )
-
-LEARNED_LOSS_SCOPE = "learned_loss"  # params["params"]["learned_loss"]: phi
-
-
-def _torch_default_init(fan_in: int):
-    """PyTorch's default Conv1d init, U(+-1/sqrt(fan_in)) for weights and biases: SAVN's
-    ll_* layers keep it (its own init runs before they are created)."""
-    bound = 1.0 / jnp.sqrt(fan_in)
-    return lambda key, shape, dtype=jnp.float32: jax.random.uniform(key, shape, dtype, -bound, bound)
-
-
-class CausalConv1d(nn.Module):
-    """`nn.Conv(features, (kernel_size,), kernel_dilation=dilation, padding=causal)` on
-    `[length, in]`, with the same parameters (kernel `[K, in, out]`, bias, created in the
-    same order, so the same init), written as K shifted matmuls: `lax.conv` has no
-    batching rule for the transposed convolutions of a second-order gradient whose kernel
-    is batched twice (per seed of a sweep and per lane of the inner loop), and these
-    convolutions are tiny."""
-
-    features: int
-    kernel_size: int
-    dilation: int
-    param_init: Callable
-
-    @nn.compact
-    def __call__(self, x: chex.Array) -> chex.Array:
-        length, in_features = x.shape
-        kernel = self.param("kernel", self.param_init, (self.kernel_size, in_features, self.features))
-        bias = self.param("bias", self.param_init, (self.features,))
-        pad = (self.kernel_size - 1) * self.dilation
-        x = jnp.pad(x, ((pad, 0), (0, 0)))
-        taps = [x[k * self.dilation : k * self.dilation + length] @ kernel[k] for k in range(self.kernel_size)]
-        return sum(taps) + bias
-
-
-class LearnedLoss(nn.Module):
-    """L_phi: `[segment, F]` (F = H + A) -> scalar, SAVN's `learned_loss` (see module doc).
-
-    The segment's steps are the input channels; the convolutions slide over the F
-    features, causally (output j sees features <= j)."""
-
-    segment: int = 6
-    channels: tuple[int, ...] = (10, 1)
-    kernel_size: int = 2
-
-    @nn.compact
-    def __call__(self, inputs: chex.Array) -> chex.Array:
-        chex.assert_rank(inputs, 2)
-        if inputs.shape[0] != self.segment:
-            raise ValueError(f"LearnedLoss expects {self.segment} steps, got inputs of shape {inputs.shape}")
-        x = inputs.T  # [F, segment]: length F, channels = steps (flax convolutions are channels-last)
-        in_channels = self.segment
-        for level, out_channels in enumerate(self.channels):
-            dilation = 2**level
-            init = _torch_default_init(in_channels * self.kernel_size)
-            x = CausalConv1d(out_channels, self.kernel_size, dilation, init, name=f"conv{level}")(x)
-            x = nn.leaky_relu(x, 0.01)
-            in_channels = out_channels
-        return jnp.sqrt(jnp.sum(jnp.square(x)) + 1e-12)
-
+from foresit_jax.networks import Networks
+from foresit_jax.policy import PolicyCarry, StepPolicy, as_actor, policy_step, reset, with_noise, zero_carry
+from foresit_jax.rollout import (
+    ActOptions,
+    ActorState,
+    Adaptation,
+    AgentParams,
+    BoundEnv,
+    StepInputs,
+    Trajectory,
+    WindowEnd,
+    agent_step,
+)
 
 def interaction_inputs(states: chex.Array, logits: chex.Array) -> chex.Array:
     """[h_t : pi_t] per step, `[..., H + A]` (what L_phi reads)."""
@@ -154,7 +106,7 @@ def interaction_inputs(states: chex.Array, logits: chex.Array) -> chex.Array:
 
 def adapts(path: tuple[str, ...]) -> bool:
     """Whether the inner loop adapts the parameter at `path` (everything but phi)."""
-    return LEARNED_LOSS_SCOPE not in path
+    return learned_loss.SCOPE not in path
 
 
 def inner_step(params, grads, lr: float, apply: chex.Array = True):
@@ -204,22 +156,6 @@ def _unlane(tree):
     return jax.tree.map(lambda x: x[:, 0], tree)  # [B, 1, ...] -> [B, ...]
 
 
-class Adaptation(NamedTuple):
-    """What the maml base's inner loop gives a window it acts under adapted parameters
-    (`adaptive_act`; `foresit_jax.rollout.act_window` reads it); every field may be None.
-
-    alive: `[B]` bool, with `whole_episodes`, which lanes' counted episode is still running
-      at the window's start (None: all; a window that continues an earlier one of the same
-      whole-episode rollout passes what that one left);
-    lstm_update: a low-rank change of the LSTM's kernels (the lanes' adapted kernels);
-    gate_offsets: `[num_steps, B, 4H]` added to each step's gate pre-activations (zeros
-      whose gradient is the pre-activations')."""
-
-    alive: Optional[chex.Array] = None
-    lstm_update: Optional[LowRankUpdate] = None
-    gate_offsets: Optional[chex.Array] = None
-
-
 @dataclasses.dataclass(frozen=True)
 class InnerLoop:
     """SAVN's inner loop as `adaptive_act` runs it (the maml base's settings, from the
@@ -235,19 +171,32 @@ class InnerLoop:
         return cls(config.maml_segment, config.maml_inner_updates, config.maml_inner_lr, config.maml_first_order)
 
 
-def adaptive_act(
-    nets, acting, env, actor, key: chex.PRNGKey, num_steps: int, options, act_window: Callable
-) -> tuple[Any, Any, Any, list[AdaptedParams]]:
+def act(nets: Networks, acting: AgentParams, env: BoundEnv, actor: ActorState, key: chex.PRNGKey, num_steps: int,
+        options: ActOptions = ActOptions()) -> tuple[ActorState, Trajectory, WindowEnd]:  # fmt: skip
+    """The maml base's window, with `rollout.act_window`'s arguments and returns: one whole
+    episode per lane under SAVN's inner loop (`adaptive_act`), in training and evaluation.
+    The noise variance, unless given, is Eq. 7's from each lane's success tracker (it
+    changes only when an episode ends)."""
+    if not options.whole_episodes or options.step_keys is not None:
+        raise ValueError("the maml base acts in whole episodes (rollout='episodes'), without step_keys")
+    if acting.noise_variance is None:
+        rho = jax.vmap(imagination.success_rate)(actor.tracker)
+        acting = acting._replace(noise_variance=imagination.noise_variance(rho, nets.config.sigma2_max))
+    actor, traj, end, _ = adaptive_act(nets, acting, env, actor, key, num_steps, options)
+    return actor, traj, end
+
+
+def adaptive_act(nets: Networks, acting: AgentParams, env: BoundEnv, actor: ActorState, key: chex.PRNGKey,
+                 num_steps: int, options: ActOptions) -> tuple[ActorState, Trajectory, WindowEnd, list[AdaptedParams]]:  # fmt: skip
     """One whole episode per lane (from `actor`, every lane at an episode start) with
     SAVN's inner loop (`InnerLoop.of(nets.config)`), acting as `acting` (`AgentParams`:
-    theta_0, w, the noise variance, `[]` or `[B]`, never None: `rollout.act` sets Eq. 7's)
-    in `env` (`BoundEnv`) with `options` (`ActOptions`: greedy, record_inputs; whole
-    episodes): each segment is one `act_window` (that of
-    `foresit_jax.rollout`, passed in: acting imports this module) under the lane's theta_i
-    (`rollout.Adaptation`), its L_phi and the encoder's inputs read through `nets.model`.
-    Returns (actor after the window, Trajectory `[num_steps, B]`, its WindowEnd, the
-    parameters each lane used: `AdaptedParams`, theta_0 first, then theta_i after each
-    update slot (unchanged in lanes whose episode had ended))."""
+    theta_0, w, the noise variance, `[]` or `[B]`, never None: `act` sets Eq. 7's) in `env`
+    with `options` (greedy, record_inputs; whole episodes): each segment is one
+    `rollout.act_window` under the lane's theta_i (`rollout.Adaptation`), its L_phi and the
+    encoder's inputs read through `nets.model`. Returns (actor after the window, Trajectory
+    `[num_steps, B]`, its WindowEnd, the parameters each lane used: `AdaptedParams`,
+    theta_0 first, then theta_i after each update slot (unchanged in lanes whose episode
+    had ended))."""
     loop = InnerLoop.of(nets.config)
     num_lanes = actor.episode_step.shape[0]
     variance = jnp.broadcast_to(jnp.asarray(acting.noise_variance, jnp.float32), (num_lanes,))[:, None]  # [B, 1]
@@ -259,7 +208,7 @@ def adaptive_act(
     def window(lanes, update, lane_actor, key, variance, alive, steps, record, gate_offsets=None):  # one lane
         lane_acting = acting._replace(params=join_partial_trees(shared, lanes), noise_variance=variance)
         lane_options = options._replace(whole_episodes=True, record_inputs=record)
-        return act_window(nets, lane_acting, env, lane_actor, key, steps, lane_options,
+        return rollout.act_window(nets, lane_acting, env, lane_actor, key, steps, lane_options,
                           Adaptation(alive, update, gate_offsets))  # fmt: skip
 
     def segment(lanes, update, lane_actor, key, variance, alive):  # one lane
@@ -297,7 +246,7 @@ def adaptive_act(
     return _unlane(lane_actor), traj, end, thetas
 
 
-def segment_update(nets, loop: InnerLoop, shared, lanes, h_before: chex.Array, run: Callable):
+def segment_update(nets: Networks, loop: InnerLoop, shared, lanes, h_before: chex.Array, run: Callable):
     """One lane's inner step after a segment: (the gradient of L_phi with respect to the
     lane's adapted parameters but the LSTM kernels, those kernels' step as factors
     (`LowRankUpdate`, see "Adapted kernels"), `run`'s segment and aux), with the meta-gradient through
@@ -307,7 +256,7 @@ def segment_update(nets, loop: InnerLoop, shared, lanes, h_before: chex.Array, r
     under theta_i = `shared` + `lanes` with the offsets added to its gate pre-activations;
     `segment` has `states` `[segment, 1, H]`, `logits` and the encoder's `inputs` (a
     `Trajectory` recorded with inputs): `adaptive_act` runs it in the environment, the
-    step-by-step policy (`foresit_jax.rollout.policy`) on the segment's recorded
+    step-by-step policy (`policy`) on the segment's recorded
     observations. h_before: `[1, H]` the LSTM output entering the segment."""
 
     def loss(lanes, gate_offsets):
@@ -325,7 +274,7 @@ def segment_update(nets, loop: InnerLoop, shared, lanes, h_before: chex.Array, r
     return grads, rows, segment, aux
 
 
-def _kernel_update(nets, loop: InnerLoop, params, h_before, traj, gate_grads) -> LowRankUpdate:
+def _kernel_update(nets: Networks, loop: InnerLoop, params, h_before, traj, gate_grads) -> LowRankUpdate:
     """The LSTM kernels' inner step of one lane's segment, as factors (module doc, "Adapted
     kernels"): the gradients sum_t x_t^T delta_t and sum_t h_{t-1}^T delta_t, kept as the
     segment's inputs x_t `[segment, F]` (under `params`, the lane's theta_i), carries
@@ -346,3 +295,161 @@ def _joined(segments):
     per_step = jax.tree.map(lambda *xs: jnp.concatenate(xs, axis=1), *[traj for traj, _ in segments])  # [B, T, 1, ...]
     per_step = jax.tree.map(lambda x: jnp.swapaxes(x[:, :, 0], 0, 1), per_step)  # [T, B, ...]
     return per_step, jax.tree.map(lambda x: x[:, 0], segments[-1][1])
+
+
+# ---------------------------------------------------------------------- the maml base, step by step
+
+
+class AdaptiveCarry(NamedTuple):
+    """What the maml base's `policy` carries, per lane (leaves `[B, ...]`): the policy's
+    carry, the lane's adapted parameters theta_i (as `adaptive_act` keeps them: every
+    parameter but the LSTM kernels, and the kernels' low-rank change, zero rows beyond the
+    updates made so far), and the running segment, which the next inner step learns from."""
+
+    policy: PolicyCarry
+    lanes: Any  # theta_i but the encoder LSTM's kernels, leaves [B, ...]
+    update: LowRankUpdate  # [B, segment * updates, ...] the kernels' change so far
+    segment_start: PolicyCarry  # the carry that entered the running segment's first step
+    seen_obs: Any  # [B, segment, ...] the running segment's observations
+    seen_keys: chex.Array  # [B, segment, 2] its steps' keys
+
+
+def adaptive_keys(loop: InnerLoop, key: chex.PRNGKey, num_steps: int,
+                  num_lanes: int) -> tuple[chex.Array, chex.Array]:  # fmt: skip
+    """The keys `adaptive_act` gives a whole-episode rollout, for a step-by-step replay:
+    one key per segment (the update slots' and the rest's, `split(key, slots + 1)`), split
+    per lane, then per step: (the policy's `[T, B, 2]`, one per lane; the environment's
+    `[T, B, 2]`, `split(split(step key, 3)[2], 1)[0]`, each lane stepped alone)."""
+    slots = update_steps(num_steps, loop.segment, loop.updates)
+    lengths = [loop.segment] * len(slots) + [num_steps - loop.segment * len(slots)]
+    keys = jax.random.split(key, len(slots) + 1)
+    per_segment = [jnp.swapaxes(jax.vmap(lambda k, n=n: jax.random.split(k, n))(jax.random.split(k, num_lanes)), 0, 1)
+                   for k, n in zip(keys, lengths)]  # fmt: skip
+    policy_keys = jnp.concatenate(per_segment)  # [T, B, 2]
+    env_key = lambda k: jax.random.split(jax.random.split(k, 3)[2], 1)[0]  # noqa: E731
+    return policy_keys, jax.vmap(jax.vmap(env_key))(policy_keys)
+
+
+def policy_carry(nets: Networks, num_lanes: int, acting: Optional[AgentParams] = None, obs=None) -> AdaptiveCarry:
+    """The maml base's carry before any step: `foresit_jax.policy`'s zeros, each lane's
+    theta_0 and an empty segment. It needs `acting` (its theta_0) and `obs`, one unbatched
+    observation of the environment or its shapes (`jax.eval_shape`), to shape the segment."""
+    if acting is None or obs is None:
+        raise ValueError(f"method {nets.method.name!r}: the maml base's carry holds each lane's adapted parameters and "
+                         "its running segment; give maml.policy_carry(nets, num_lanes, acting=AgentParams(...), "
+                         "obs=one observation) (experiments.load's initial_carry does)")  # fmt: skip
+    loop, hidden = InnerLoop.of(nets.config), nets.config.hidden_size
+    carry = zero_carry(nets, num_lanes)
+    _, lanes = split_encoder_lstm_kernels(acting.params)
+    kernels = lstm_kernels(encoder_lstm_params(acting.params))
+    rows, dtype = loop.segment * loop.updates, kernels.input_kernel.dtype
+    update = LowRankUpdate(jnp.zeros((num_lanes, rows, kernels.input_kernel.shape[0]), dtype),
+                           jnp.zeros((num_lanes, rows, hidden), dtype), jnp.zeros((num_lanes, rows, 4 * hidden), dtype))
+    return AdaptiveCarry(
+        policy=carry,
+        lanes=lane_copies(lanes, num_lanes),
+        update=update,
+        segment_start=carry,
+        seen_obs=jax.tree.map(lambda x: jnp.zeros((num_lanes, loop.segment) + tuple(x.shape), x.dtype), obs),
+        seen_keys=jnp.zeros((num_lanes, loop.segment, 2), jnp.uint32),
+    )
+
+
+class _Replayed(NamedTuple):
+    """A segment replayed on its recorded observations (what `segment_update` reads)."""
+
+    states: chex.Array  # [segment, 1, H]
+    logits: chex.Array  # [segment, 1, A]
+    inputs: StepInputs  # [segment, 1, ...]
+
+
+def _replayed_segment(nets: Networks, acting: AgentParams, kernels, start: PolicyCarry, seen_obs, seen_keys,
+                      gate_offsets) -> _Replayed:  # fmt: skip
+    """`act_window`'s agent half over one lane's recorded segment (`[1, ...]` leaves; obs
+    `[segment, 1, ...]`, keys `[segment, 2]`), the episode running throughout: the same
+    states and logits, as functions of `acting.params`, without the environment."""
+    carries_gradient = nets.method.action_probs_carry_gradient
+
+    def step(actor, xs):
+        obs, key, gate_offset = xs
+        actor = actor._replace(obs=obs)
+        k_imag = jax.random.split(key, 3)[0]
+        lstm, s_t, logits, imagined, s_0, seen_imagined = agent_step(nets, acting, kernels, actor, k_imag, gate_offset)
+        seen = StepInputs(obs, actor.prev_probs, imagined if nets.imagination_in_head else None, seen_imagined)
+        probs = distributions.probs(logits)
+        if not carries_gradient:
+            probs = jax.lax.stop_gradient(probs)
+        actor = actor._replace(lstm=lstm, prev_probs=probs, imagined=imagined, s_0=s_0,
+                               episode_step=actor.episode_step + 1)  # fmt: skip
+        return actor, _Replayed(s_t, logits, seen)
+
+    first_obs = jax.tree.map(lambda x: x[0], seen_obs)
+    _, out = jax.lax.scan(step, as_actor(start, first_obs), (seen_obs, seen_keys, gate_offsets))
+    return out
+
+
+def _where_lanes(mask: chex.Array, new, old):
+    """`new` where `mask` `[B]` is true, else `old` (trees of leaves `[B, ...]`)."""
+    return jax.tree.map(lambda n, o: jnp.where(mask.reshape((-1,) + (1,) * (o.ndim - 1)), n, o), new, old)
+
+
+def policy(nets: Networks, greedy: bool = False) -> StepPolicy:
+    """The maml base step by step, as `foresit_jax.policy.policy` (same arguments; its
+    carry is `policy_carry`'s): each lane adapts its own parameters after steps 6, 12, 18
+    and 24 of its episode, by `segment_update` on the segment it has just played (replayed
+    from the observations the carry kept), and starts every episode from theta_0. Each
+    lane acts alone, as `adaptive_act`'s lanes do, with its own key: `step_keys`
+    (`adaptive_keys`) gives one `[B, 2]` per step, and the replay is exact."""
+    loop = InnerLoop.of(nets.config)
+    lane = lambda tree, axis=0: jax.tree.map(lambda x: jnp.expand_dims(x, axis), tree)  # noqa: E731  a lane of 1
+
+    def act(acting: AgentParams, carry: AdaptiveCarry, obs, first: chex.Array, keys: chex.Array):
+        num_lanes = first.shape[0]
+        acting = with_noise(acting, num_lanes)
+        shared, theta_0 = split_encoder_lstm_kernels(acting.params)
+        # A new episode starts from theta_0.
+        lanes = _where_lanes(first, lane_copies(theta_0, num_lanes), carry.lanes)
+        update = _where_lanes(first, jax.tree.map(jnp.zeros_like, carry.update), carry.update)
+        step_carry = reset(carry.policy, first)
+        episode_step = step_carry.episode_step
+        slot = episode_step // loop.segment  # the updates made before this step
+        adapting = (episode_step > 0) & (episode_step % loop.segment == 0) & (slot <= loop.updates)
+
+        def lane_params(lanes, update):
+            params = join_partial_trees(shared, lanes)
+            return params, nets.model.apply(params, update, method="lstm_kernels")
+
+        def lane_update(lanes, update, start, seen_obs, seen_keys, variance, slot):  # one lane: theta_i -> theta_i+1
+            def run(lanes, gate_offsets):
+                params, kernels = lane_params(lanes, update)
+                lane_acting = acting._replace(params=params, noise_variance=variance[None])
+                segment = _replayed_segment(nets, lane_acting, kernels, lane(start), lane(seen_obs, 1), seen_keys,
+                                            gate_offsets)  # fmt: skip
+                return segment, None
+
+            grads, rows, _, _ = segment_update(nets, loop, shared, lanes, lane(start.lstm[1]), run)
+            at = (slot - 1) * loop.segment
+            update = jax.tree.map(lambda u, r: jax.lax.dynamic_update_slice_in_dim(u, r, at, 0), update, rows)
+            return inner_step(lanes, grads, loop.lr), update
+
+        def adapted():
+            new = jax.vmap(lane_update)(lanes, update, carry.segment_start, carry.seen_obs, carry.seen_keys,
+                                        acting.noise_variance, slot)  # fmt: skip
+            return _where_lanes(adapting, new, (lanes, update))
+
+        lanes, update = jax.lax.cond(jnp.any(adapting), adapted, lambda: (lanes, update))
+
+        def lane_step(lanes, update, step_carry, obs, key, variance):  # one lane, as adaptive_act's act alone
+            params, kernels = lane_params(lanes, update)
+            lane_acting = acting._replace(params=params, noise_variance=variance[None])
+            action, next_carry = policy_step(nets, lane_acting, kernels, lane(step_carry), lane(obs), key, greedy)
+            return action[0], jax.tree.map(lambda x: x[0], next_carry)
+
+        action, next_carry = jax.vmap(lane_step)(lanes, update, step_carry, obs, keys, acting.noise_variance)
+        at, rows = episode_step % loop.segment, jnp.arange(num_lanes)  # the step's place in its segment
+        seen_obs = jax.tree.map(lambda buf, o: buf.at[rows, at].set(o), carry.seen_obs, obs)
+        seen_keys = carry.seen_keys.at[rows, at].set(keys)
+        segment_start = _where_lanes(at == 0, step_carry, carry.segment_start)
+        return action, AdaptiveCarry(next_carry, lanes, update, segment_start, seen_obs, seen_keys)
+
+    return StepPolicy(act, functools.partial(adaptive_keys, loop))

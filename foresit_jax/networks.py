@@ -39,7 +39,7 @@ from foresit_jax.layers import Dense, GridDense, orthogonal
 from foresit_jax.lstm import (  # noqa: F401 (initial_carry, reset_carry: re-exported)
     EncoderLSTM, LowRankUpdate, LSTMCarry, LSTMKernels, initial_carry, reset_carry,
 )
-from foresit_jax.maml import LearnedLoss
+from foresit_jax.learned_loss import LearnedLoss
 from foresit_jax.methods import Method, ImaginationVariant
 from foresit_jax.org import ObjectGraph
 
@@ -393,7 +393,7 @@ class ActorCritic(nn.Module):
 
     def interaction_loss(self, inputs: chex.Array) -> chex.Array:
         """The maml base's learned loss L_phi over one segment of [s_t : pi_t] (see
-        `foresit_jax.maml.LearnedLoss`); only with `learned_loss` set."""
+        `foresit_jax.learned_loss.LearnedLoss`); only with `learned_loss` set."""
         if self.learned_loss is None:
             raise ValueError("ActorCritic.interaction_loss needs the maml base's learned_loss module")
         return self.learned_loss(inputs)

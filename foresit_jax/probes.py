@@ -4,7 +4,7 @@ Three questions, each answerable from a finished run without training:
 
 * Does the policy use i_tau? Evaluate the same model on the same episodes with i_tau
   from the trained f_w, with the noise off, from an untrained f_w, and shuffled across
-  episodes (`ShuffledImagination`: each episode imagines from another episode's s_0 and
+  episodes (`shuffled`: each episode imagines from another episode's s_0 and
   target). A policy that ignores i_tau scores the same under all four.
 * Does f_w predict its targets? `imagination_fit`: on sub-goal items the agent's own
   successful episodes offer (held out: f_w never trained on them), f_w's error against
@@ -32,8 +32,7 @@ import numpy as np
 import optax
 
 from foresit_jax import imagination
-from foresit_jax.config import Config
-from foresit_jax.networks import Networks, build
+from foresit_jax.networks import Networks
 
 
 def shuffled(nets: Networks) -> Networks:
@@ -42,12 +41,6 @@ def shuffled(nets: Networks) -> Networks:
     the same way): i_tau shuffled across episodes, with the distribution of f_w's outputs
     kept. Only for probing a trained model (`rollout`'s i_tau reads `Networks.permute`)."""
     return dataclasses.replace(nets, permute=lambda x: jnp.roll(x, 1, axis=0))
-
-
-def ShuffledImagination(config: Config) -> Networks:  # noqa: N802 (the old class's name, kept for callers)
-    """`shuffled(build(config))`: the networks of `config` with i_tau shuffled across
-    episodes (was a subclass of the deprecated `Agent`)."""
-    return shuffled(build(config))
 
 
 def r_squared(predicted: np.ndarray, target: np.ndarray, reference: np.ndarray) -> float:

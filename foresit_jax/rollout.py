@@ -8,7 +8,7 @@ modules, the Config, f_w) and drive any environment with the GridNav API (``rese
 Acting takes three records: `AgentParams` (what acts: theta/omega, f_w's w, the noise
 variance), `BoundEnv` (the environment bound to its parameters once) and `ActOptions` (how:
 greedy or sampled, packed windows or whole episodes, whether to record the inputs).
-`act` runs every lane for a window of `num_steps` steps from an `ActorState` and returns
+`act_window` runs every lane for a window of `num_steps` steps from an `ActorState` and returns
 the next `ActorState`, the window's `Trajectory` (what each step recorded) and its
 `WindowEnd` (the state after it). Lanes never idle: episodes follow one
 another inside a window (the environment auto-resets), and an episode cut at the window's
@@ -22,10 +22,11 @@ imagined from s_0 with the lane's current noise variance (Eq. 6-7; every K steps
 first episode counts (`valid`); what follows it in the window is padding. Evaluation uses
 it (`rollout`), and so does training with `Config.rollout='episodes'` (the reference).
 
-How a window is acted is the base's: the a3c base runs `act_window` under one parameter
-set; the maml base adapts each lane's parameters inside its episode
-(`foresit_jax.maml.adaptive_act`, which calls `act_window` for each segment). `act`
-chooses by the base's flag, the one place that reads it for acting.
+This module is the a3c base's acting, and every base's step: `act_window` runs a window
+under one parameter set. The maml base adapts each lane's parameters inside its episode
+(`foresit_jax.maml.act`, which calls `act_window` for each segment, giving it an
+`Adaptation`); the Trainer and the Evaluator choose between the two once, by the base.
+The same agent step by step, for a user's own loop, is `foresit_jax.policy`.
 
     nets = networks.build(config)
     params, w = nets.init(key, obs)
@@ -34,7 +35,6 @@ chooses by the base's flag, the one place that reads it for acting.
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 from typing import Any, Callable, NamedTuple, Optional
 
@@ -45,19 +45,8 @@ from flax import struct
 
 import envs.metrics
 from envs.wrappers import CueWrapper, GoalViewWrapper
-from foresit_jax import distributions, imagination, maml
-from foresit_jax.maml import Adaptation  # an acting record, defined beside the inner loop that fills it
-from foresit_jax.lstm import (
-    LowRankUpdate,
-    LSTMCarry,
-    encoder_lstm_params,
-    initial_carry,
-    join_partial_trees,
-    lane_copies,
-    lstm_kernels,
-    reset_carry,
-    split_encoder_lstm_kernels,
-)
+from foresit_jax import distributions, imagination
+from foresit_jax.lstm import LowRankUpdate, LSTMCarry, initial_carry, lane_copies, reset_carry
 from foresit_jax.methods import ImaginationVariant
 from foresit_jax.networks import EncoderInputs, Networks
 
@@ -96,6 +85,22 @@ class ActOptions(NamedTuple):
     record_inputs: bool = True  # keep each step's encoder and policy inputs (Trajectory.inputs, the replay's)
     step_keys: Optional[chex.Array] = None  # [num_steps, 2] the steps' keys instead of split(key) (so that
     # two windows can replay exactly one longer window's steps)
+
+
+class Adaptation(NamedTuple):
+    """What the maml base's inner loop gives a window it acts under adapted parameters
+    (`foresit_jax.maml.adaptive_act` fills it; `act_window` reads it); every field may be None.
+
+    alive: `[B]` bool, with `whole_episodes`, which lanes' counted episode is still running
+      at the window's start (None: all; a window that continues an earlier one of the same
+      whole-episode rollout passes what that one left);
+    lstm_update: a low-rank change of the LSTM's kernels (the lanes' adapted kernels);
+    gate_offsets: `[num_steps, B, 4H]` added to each step's gate pre-activations (zeros
+      whose gradient is the pre-activations')."""
+
+    alive: Optional[chex.Array] = None
+    lstm_update: Optional[LowRankUpdate] = None
+    gate_offsets: Optional[chex.Array] = None
 
 
 class ActorState(NamedTuple):
@@ -329,29 +334,10 @@ def imagined_at_step(nets: Networks, acting: AgentParams, actor: ActorState, s_t
     return jax.lax.cond(jnp.any(renew), renewed, lambda: actor.imagined)
 
 
-def act(nets: Networks, acting: AgentParams, env: BoundEnv, actor: ActorState, key: chex.PRNGKey, num_steps: int,
-        options: ActOptions = ActOptions()) -> tuple[ActorState, Trajectory, WindowEnd]:  # fmt: skip
-    """Run every lane `num_steps` steps from `actor` (see the module docstring); returns
-    (the actor state after the window, the window's Trajectory, what follows it).
-
-    The a3c base runs `act_window` under one parameter set; the maml base adapts each
-    lane's parameters inside its episode (`foresit_jax.maml.adaptive_act`): whole episodes
-    only, without step_keys, in training and evaluation."""
-    if not nets.method.base_piece.adapts_in_episode:
-        return act_window(nets, acting, env, actor, key, num_steps, options)
-    if not options.whole_episodes or options.step_keys is not None:
-        raise ValueError("the maml base acts in whole episodes (rollout='episodes'), without step_keys")
-    if acting.noise_variance is None:  # Eq. 7 from each lane's tracker (it changes only when the episode ends)
-        rho = jax.vmap(imagination.success_rate)(actor.tracker)
-        acting = acting._replace(noise_variance=imagination.noise_variance(rho, nets.config.sigma2_max))
-    actor, traj, end, _ = maml.adaptive_act(nets, acting, env, actor, key, num_steps, options, act_window)
-    return actor, traj, end
-
-
-def _agent_step(nets: Networks, acting: AgentParams, kernels, actor: ActorState, key: chex.PRNGKey, gate_offset):
+def agent_step(nets: Networks, acting: AgentParams, kernels, actor: ActorState, key: chex.PRNGKey, gate_offset):
     """The agent's half of a step: `encode` at T = 1, i_tau imagined from its s_t, then
     `heads` -> (LSTM carry, s_t, logits, i_tau, s_0, the encoder's i_tau). `key`: i_tau's
-    noise. Acting's window (`act_window`) and the step-by-step policy (`policy`) both run
+    noise. Acting's window (`act_window`) and the step-by-step policy (`foresit_jax.policy`) both run
     it, so they compute alike."""
     first = actor.episode_step == 0  # [B]
     seen_imagined = encoder_imagined(nets, actor)  # [B, H] or None
@@ -371,8 +357,10 @@ def _agent_step(nets: Networks, acting: AgentParams, kernels, actor: ActorState,
 def act_window(nets: Networks, acting: AgentParams, env: BoundEnv, actor: ActorState, key: chex.PRNGKey,
                num_steps: int, options: ActOptions = ActOptions(),
                adapt: Adaptation = Adaptation()) -> tuple[ActorState, Trajectory, WindowEnd]:  # fmt: skip
-    """`act` under one parameter set for the whole window (every base's step): each step
-    is the agent's (`_agent_step`: `ActorCritic.encode` at T = 1, i_tau, `ActorCritic.heads`),
+    """Run every lane `num_steps` steps from `actor` under one parameter set (see the module
+    docstring; the a3c base's window, and each segment of the maml base's): returns (the
+    actor state after the window, the window's Trajectory, what follows it). Each step
+    is the agent's (`agent_step`: `ActorCritic.encode` at T = 1, i_tau, `ActorCritic.heads`),
     then the environment's. `adapt`: what the maml base's inner loop gives a window
     (`Adaptation`; the default: nothing)."""
     params, lanes = acting.params, jnp.arange(actor.episode_step.shape[0])
@@ -384,7 +372,7 @@ def act_window(nets: Networks, acting: AgentParams, env: BoundEnv, actor: ActorS
         actor, alive = carry
         key, gate_offset = xs
         k_imag, k_act, k_env = jax.random.split(key, 3)
-        lstm, s_t, logits, imagined, s_0, seen_imagined = _agent_step(nets, acting, kernels, actor, k_imag, gate_offset)
+        lstm, s_t, logits, imagined, s_0, seen_imagined = agent_step(nets, acting, kernels, actor, k_imag, gate_offset)
         policy_input = imagined if in_head else None
         action = distributions.greedy(logits) if options.greedy else distributions.sample(k_act, logits)
         memory = remember(actor, s_t, lanes)
@@ -435,270 +423,25 @@ def remember(actor: ActorState, s_t: chex.Array, lanes: chex.Array) -> Optional[
 
 def rollout(nets: Networks, acting: AgentParams, env: BoundEnv, key, num_steps: int,
             options: ActOptions = ActOptions(whole_episodes=True, record_inputs=False),
-            num_lanes: Optional[int] = None, reset_keys: Optional[chex.Array] = None) -> Trajectory:  # fmt: skip
+            reset_keys: Optional[chex.Array] = None, act: Optional[Callable] = None) -> Trajectory:  # fmt: skip
     """One whole episode per lane from a fresh start, padded to `num_steps` (evaluation),
-    with `acting.noise_variance` `[B]` (or a scalar with `num_lanes`); `options`: greedy or
-    sampled, inputs recorded or not (whole episodes always). The lanes reset with
-    `split(split(key)[0], B)` unless `reset_keys` `[B, ...]` are given."""
+    with `acting.noise_variance` `[B]` (a scalar with `reset_keys`); `options`: greedy or
+    sampled, inputs recorded or not (whole episodes always). The B lanes reset with
+    `split(split(key)[0], B)` unless `reset_keys` `[B, ...]` are given. act: the base's
+    window (`act_window`, the default, or `foresit_jax.maml.act`), with act_window's
+    first seven arguments."""
     if acting.noise_variance is None:
         raise ValueError("rollout: give AgentParams.noise_variance, the evaluation's fixed variance")
     noise_variance = jnp.asarray(acting.noise_variance, jnp.float32)
-    if num_lanes is None:
-        if noise_variance.ndim != 1:
-            raise ValueError("rollout: give num_lanes, or noise_variance with one entry per lane")
+    if reset_keys is not None:
+        num_lanes = reset_keys.shape[0]
+    elif noise_variance.ndim == 1:
         num_lanes = noise_variance.shape[0]
+    else:
+        raise ValueError("rollout: give noise_variance with one entry per lane, or the lanes' reset_keys")
     acting = acting._replace(noise_variance=jnp.broadcast_to(noise_variance, (num_lanes,)))
     k_start, k_act = jax.random.split(key)
     actor = start(nets, k_start, env, num_lanes, reset_keys=reset_keys)
     options = options._replace(whole_episodes=True)
-    _, traj, _ = act(nets, acting, env, actor, k_act, num_steps, options)
+    _, traj, _ = (act or act_window)(nets, acting, env, actor, k_act, num_steps, options)
     return traj
-
-
-# ---------------------------------------------------------------------- a policy, step by step
-
-
-class PolicyCarry(NamedTuple):
-    """What `policy` carries from one step to the next, per lane (leaves `[B, ...]`)."""
-
-    lstm: LSTMCarry  # (c, h) [B, H] each
-    prev_probs: chex.Array  # [B, A] the previous step's action probabilities
-    imagined: chex.Array  # [B, H] the running episode's i_tau
-    s_0: chex.Array  # [B, H] the running episode's first state
-    episode_step: chex.Array  # [B] int32 the step's position in its episode
-
-
-class AdaptiveCarry(NamedTuple):
-    """What the maml base's `policy` carries, per lane (leaves `[B, ...]`): the policy's
-    carry, the lane's adapted parameters theta_i (as `maml.adaptive_act` keeps them: every
-    parameter but the LSTM kernels, and the kernels' low-rank change, zero rows beyond the
-    updates made so far), and the running segment, which the next inner step learns from."""
-
-    policy: PolicyCarry
-    lanes: Any  # theta_i but the encoder LSTM's kernels, leaves [B, ...]
-    update: LowRankUpdate  # [B, segment * updates, ...] the kernels' change so far
-    segment_start: PolicyCarry  # the carry that entered the running segment's first step
-    seen_obs: Any  # [B, segment, ...] the running segment's observations
-    seen_keys: chex.Array  # [B, segment, 2] its steps' keys
-
-
-def lockstep_keys(key: chex.PRNGKey, num_steps: int, num_lanes: int) -> tuple[chex.Array, chex.Array]:
-    """The keys `rollout` gives a window under one parameter set (the a3c base), for a
-    step-by-step replay: (the policy's `[T, 2]`, `split(key, T)`; the environment's
-    `[T, B, 2]`, `split(split(step key, 3)[2], B)`)."""
-    keys = jax.random.split(key, num_steps)
-    return keys, jax.vmap(lambda k: jax.random.split(jax.random.split(k, 3)[2], num_lanes))(keys)
-
-
-def adaptive_keys(loop: maml.InnerLoop, key: chex.PRNGKey, num_steps: int,
-                  num_lanes: int) -> tuple[chex.Array, chex.Array]:  # fmt: skip
-    """The keys `maml.adaptive_act` gives a whole-episode rollout, for a step-by-step replay:
-    one key per segment (the update slots' and the rest's, `split(key, slots + 1)`), split
-    per lane, then per step: (the policy's `[T, B, 2]`, one per lane; the environment's
-    `[T, B, 2]`, `split(split(step key, 3)[2], 1)[0]`, each lane stepped alone)."""
-    slots = maml.update_steps(num_steps, loop.segment, loop.updates)
-    lengths = [loop.segment] * len(slots) + [num_steps - loop.segment * len(slots)]
-    keys = jax.random.split(key, len(slots) + 1)
-    per_segment = [jnp.swapaxes(jax.vmap(lambda k, n=n: jax.random.split(k, n))(jax.random.split(k, num_lanes)), 0, 1)
-                   for k, n in zip(keys, lengths)]  # fmt: skip
-    policy_keys = jnp.concatenate(per_segment)  # [T, B, 2]
-    env_key = lambda k: jax.random.split(jax.random.split(k, 3)[2], 1)[0]  # noqa: E731
-    return policy_keys, jax.vmap(jax.vmap(env_key))(policy_keys)
-
-
-@dataclasses.dataclass(frozen=True)
-class StepPolicy:
-    """A batched policy function, `(acting, carry, obs, first, key) -> (action [B], carry)`
-    (call it), with the key schedule that replays `rollout`'s episodes exactly:
-    `step_keys(key, num_steps, num_lanes) -> (the policy's keys [T, ...], the
-    environment's [T, B, 2])` (`foresit_jax.evaluate.policy_episodes` reads it)."""
-
-    act: Callable
-    step_keys: Callable = lockstep_keys
-
-    def __call__(self, acting, carry, obs, first, key):
-        return self.act(acting, carry, obs, first, key)
-
-
-def policy_carry(nets: Networks, num_lanes: int, acting: Optional[AgentParams] = None, obs=None):
-    """The carry before any step (`first` at the first step resets it anyway): a
-    `PolicyCarry` of zeros; for the maml base an `AdaptiveCarry`, which needs `acting`
-    (its theta_0) and `obs`, one unbatched observation of the environment or its shapes
-    (`jax.eval_shape`), to shape the segment it keeps."""
-    hidden = nets.config.hidden_size
-    zeros = jnp.zeros((num_lanes, hidden), jnp.float32)
-    probs = jnp.zeros((num_lanes, nets.config.num_actions), jnp.float32)
-    carry = PolicyCarry(initial_carry((num_lanes,), hidden), probs, zeros, zeros, jnp.zeros((num_lanes,), jnp.int32))
-    if not nets.method.base_piece.adapts_in_episode:
-        return carry
-    if acting is None or obs is None:
-        raise ValueError(f"method {nets.method.name!r}: the maml base's carry holds each lane's adapted parameters and "
-                         "its running segment; give policy_carry(nets, num_lanes, acting=AgentParams(...), obs=one "
-                         "observation) (experiments.load's initial_carry does)")  # fmt: skip
-    loop = maml.InnerLoop.of(nets.config)
-    shared, lanes = split_encoder_lstm_kernels(acting.params)
-    kernels = lstm_kernels(encoder_lstm_params(acting.params))
-    rows, dtype = loop.segment * loop.updates, kernels.input_kernel.dtype
-    update = LowRankUpdate(jnp.zeros((num_lanes, rows, kernels.input_kernel.shape[0]), dtype),
-                           jnp.zeros((num_lanes, rows, hidden), dtype), jnp.zeros((num_lanes, rows, 4 * hidden), dtype))
-    return AdaptiveCarry(
-        policy=carry,
-        lanes=lane_copies(lanes, num_lanes),
-        update=update,
-        segment_start=carry,
-        seen_obs=jax.tree.map(lambda x: jnp.zeros((num_lanes, loop.segment) + tuple(x.shape), x.dtype), obs),
-        seen_keys=jnp.zeros((num_lanes, loop.segment, 2), jnp.uint32),
-    )
-
-
-def _with_noise(acting: AgentParams, lanes: int) -> AgentParams:
-    if acting.noise_variance is None:
-        raise ValueError("policy: give AgentParams.noise_variance, the evaluation's fixed variance")
-    variance = jnp.broadcast_to(jnp.asarray(acting.noise_variance, jnp.float32), (lanes,))
-    return acting._replace(noise_variance=variance)
-
-
-def _reset(carry: PolicyCarry, first: chex.Array) -> PolicyCarry:
-    """The carry as a step sees it: zeroed where `first` begins an episode."""
-    probs = jnp.where(first[:, None], 0.0, carry.prev_probs)
-    return carry._replace(lstm=reset_carry(first, carry.lstm), prev_probs=probs,
-                          episode_step=jnp.where(first, 0, carry.episode_step))  # fmt: skip
-
-
-def _actor(carry: PolicyCarry, obs) -> ActorState:
-    return ActorState(env_state=None, obs=obs, lstm=carry.lstm, prev_probs=carry.prev_probs, imagined=carry.imagined,
-                      s_0=carry.s_0, episode_step=carry.episode_step, memory=None, tracker=None)  # fmt: skip
-
-
-def _policy_step(nets: Networks, acting: AgentParams, kernels, carry: PolicyCarry, obs, key, greedy: bool):
-    """One step of the agent on a reset carry: (action [B], the next carry). `key` is split
-    in 3 as acting splits it: i_tau's noise, the action's sample, the environment's."""
-    k_imag, k_act, _ = jax.random.split(key, 3)
-    lstm, _, logits, imagined, s_0, _ = _agent_step(nets, acting, kernels, _actor(carry, obs), k_imag, None)
-    action = distributions.greedy(logits) if greedy else distributions.sample(k_act, logits)
-    probs = jax.lax.stop_gradient(distributions.probs(logits))
-    return action, PolicyCarry(lstm, probs, imagined, s_0, carry.episode_step + 1)
-
-
-class _Replayed(NamedTuple):
-    """A segment replayed on its recorded observations (what `maml.segment_update` reads)."""
-
-    states: chex.Array  # [segment, 1, H]
-    logits: chex.Array  # [segment, 1, A]
-    inputs: StepInputs  # [segment, 1, ...]
-
-
-def _replayed_segment(nets: Networks, acting: AgentParams, kernels, start: PolicyCarry, seen_obs, seen_keys,
-                      gate_offsets) -> _Replayed:  # fmt: skip
-    """`act_window`'s agent half over one lane's recorded segment (`[1, ...]` leaves; obs
-    `[segment, 1, ...]`, keys `[segment, 2]`), the episode running throughout: the same
-    states and logits, as functions of `acting.params`, without the environment."""
-    carries_gradient = nets.method.action_probs_carry_gradient
-
-    def step(actor, xs):
-        obs, key, gate_offset = xs
-        actor = actor._replace(obs=obs)
-        k_imag = jax.random.split(key, 3)[0]
-        lstm, s_t, logits, imagined, s_0, seen_imagined = _agent_step(nets, acting, kernels, actor, k_imag, gate_offset)
-        seen = StepInputs(obs, actor.prev_probs, imagined if nets.imagination_in_head else None, seen_imagined)
-        probs = distributions.probs(logits)
-        if not carries_gradient:
-            probs = jax.lax.stop_gradient(probs)
-        actor = actor._replace(lstm=lstm, prev_probs=probs, imagined=imagined, s_0=s_0,
-                               episode_step=actor.episode_step + 1)  # fmt: skip
-        return actor, _Replayed(s_t, logits, seen)
-
-    first_obs = jax.tree.map(lambda x: x[0], seen_obs)
-    _, out = jax.lax.scan(step, _actor(start, first_obs), (seen_obs, seen_keys, gate_offsets))
-    return out
-
-
-def _where_lanes(mask: chex.Array, new, old):
-    """`new` where `mask` `[B]` is true, else `old` (trees of leaves `[B, ...]`)."""
-    return jax.tree.map(lambda n, o: jnp.where(mask.reshape((-1,) + (1,) * (o.ndim - 1)), n, o), new, old)
-
-
-def _adaptive_policy(nets: Networks, greedy: bool) -> StepPolicy:
-    """The maml base step by step (`policy`): each lane adapts its own parameters after
-    steps 6, 12, 18 and 24 of its episode, by `maml.segment_update` on the segment it has
-    just played (replayed from the observations the carry kept), and starts every episode
-    from theta_0. Each lane acts alone, as `maml.adaptive_act`'s lanes do, with its own key
-    (`adaptive_keys`), so that the replay is exact."""
-    loop = maml.InnerLoop.of(nets.config)
-    lane = lambda tree, axis=0: jax.tree.map(lambda x: jnp.expand_dims(x, axis), tree)  # noqa: E731  a lane of 1
-
-    def act(acting: AgentParams, carry: AdaptiveCarry, obs, first: chex.Array, keys: chex.Array):
-        num_lanes = first.shape[0]
-        acting = _with_noise(acting, num_lanes)
-        shared, theta_0 = split_encoder_lstm_kernels(acting.params)
-        # A new episode starts from theta_0.
-        lanes = _where_lanes(first, lane_copies(theta_0, num_lanes), carry.lanes)
-        update = _where_lanes(first, jax.tree.map(jnp.zeros_like, carry.update), carry.update)
-        step_carry = _reset(carry.policy, first)
-        episode_step = step_carry.episode_step
-        slot = episode_step // loop.segment  # the updates made before this step
-        adapts = (episode_step > 0) & (episode_step % loop.segment == 0) & (slot <= loop.updates)
-
-        def lane_params(lanes, update):
-            params = join_partial_trees(shared, lanes)
-            return params, nets.model.apply(params, update, method="lstm_kernels")
-
-        def lane_update(lanes, update, start, seen_obs, seen_keys, variance, slot):  # one lane: theta_i -> theta_i+1
-            def run(lanes, gate_offsets):
-                params, kernels = lane_params(lanes, update)
-                lane_acting = acting._replace(params=params, noise_variance=variance[None])
-                segment = _replayed_segment(nets, lane_acting, kernels, lane(start), lane(seen_obs, 1), seen_keys,
-                                            gate_offsets)  # fmt: skip
-                return segment, None
-
-            grads, rows, _, _ = maml.segment_update(nets, loop, shared, lanes, lane(start.lstm[1]), run)
-            at = (slot - 1) * loop.segment
-            update = jax.tree.map(lambda u, r: jax.lax.dynamic_update_slice_in_dim(u, r, at, 0), update, rows)
-            return maml.inner_step(lanes, grads, loop.lr), update
-
-        def adapted():
-            new = jax.vmap(lane_update)(lanes, update, carry.segment_start, carry.seen_obs, carry.seen_keys,
-                                        acting.noise_variance, slot)  # fmt: skip
-            return _where_lanes(adapts, new, (lanes, update))
-
-        lanes, update = jax.lax.cond(jnp.any(adapts), adapted, lambda: (lanes, update))
-
-        def lane_step(lanes, update, step_carry, obs, key, variance):  # one lane, as adaptive_act's act alone
-            params, kernels = lane_params(lanes, update)
-            lane_acting = acting._replace(params=params, noise_variance=variance[None])
-            action, next_carry = _policy_step(nets, lane_acting, kernels, lane(step_carry), lane(obs), key, greedy)
-            return action[0], jax.tree.map(lambda x: x[0], next_carry)
-
-        action, next_carry = jax.vmap(lane_step)(lanes, update, step_carry, obs, keys, acting.noise_variance)
-        at, rows = episode_step % loop.segment, jnp.arange(num_lanes)  # the step's place in its segment
-        seen_obs = jax.tree.map(lambda buf, o: buf.at[rows, at].set(o), carry.seen_obs, obs)
-        seen_keys = carry.seen_keys.at[rows, at].set(keys)
-        segment_start = _where_lanes(at == 0, step_carry, carry.segment_start)
-        return action, AdaptiveCarry(next_carry, lanes, update, segment_start, seen_obs, seen_keys)
-
-    return StepPolicy(act, functools.partial(adaptive_keys, loop))
-
-
-def policy(nets: Networks, greedy: bool = False) -> StepPolicy:
-    """The agent as a pure, batched policy function:
-    `(acting, carry, obs, first, key) -> (action [B], carry)`.
-
-    acting: `AgentParams` with the noise variance `[B]` (or `[]`) set (evaluation's);
-    carry: `policy_carry(nets, B)` to start (with the maml base, `policy_carry(nets, B,
-    acting, obs)`); obs: the environment's observations, leaves `[B, ...]` (for the
-    privileged `oracle`, from an environment wrapped by `acting_env`); first: `[B]` bool,
-    the step begins an episode (the carry is reset there); key: the step's key, split in 3
-    as acting splits it: i_tau's noise, the action's sample, and (unused here) the
-    environment's. The returned `StepPolicy`'s `step_keys` gives the keys that replay
-    `rollout`'s episodes exactly (`foresit_jax.evaluate.policy_episodes`): one `[2]` key per
-    step, or, with the maml base, which adapts each lane's parameters inside its episode
-    (the adapted parameters live in the carry), one `[B, 2]` per step, a key per lane."""
-    if nets.method.base_piece.adapts_in_episode:
-        return _adaptive_policy(nets, greedy)
-
-    def act(acting: AgentParams, carry: PolicyCarry, obs, first: chex.Array, key: chex.PRNGKey):
-        acting = _with_noise(acting, first.shape[0])
-        kernels = nets.model.apply(acting.params, None, method="lstm_kernels")
-        return _policy_step(nets, acting, kernels, _reset(carry, first), obs, key, greedy)
-
-    return StepPolicy(act)

@@ -1,6 +1,7 @@
 """Synchronous batched actor-critic standing in for A3C (PureJaxRL shape).
 
-One update = every lane acts for a window of `num_steps` steps (`rollout.act`; with
+One update = every lane acts for a window of `num_steps` steps (the base's window:
+`rollout.act_window`, or `maml.act` where the parameters adapt inside episodes; with
 `Config.rollout='packed'` lanes never idle: episodes follow one another and an episode
 cut at the window's edge continues in the next update, its cut bootstrapped with
 V(s*_T), Eq. 8), then one gradient step on the mean A3C loss over the window (Eq. 8-9),
@@ -36,7 +37,7 @@ import jax.numpy as jnp
 import optax
 
 import envs
-from foresit_jax import distributions, imagination, rollout
+from foresit_jax import distributions, imagination, maml, rollout
 from foresit_jax.config import Config
 from foresit_jax.lstm import LSTMCarry
 from foresit_jax.networks import CriticOutput, EncoderInputs, Networks, build, subgoals_of_rows, window_attention_mask
@@ -381,7 +382,9 @@ class Trainer:
         self.env = env
         self.env_params = env_params
         self.networks = build(config)
-        self.agent = self.networks  # the old name of the record acting reads (trainer.agent.imagine: f_w)
+        # The base's window, chosen once: SAVN's inner loop adapts the parameters inside
+        # each episode (maml.act, whole episodes); every other base acts under one set.
+        self.act_window = maml.act if config.pieces.base_piece.adapts_in_episode else rollout.act_window
         # The attention critic remembers a running episode's states across windows: at most
         # the time limit's worth. Whole-episode updates carry nothing across updates.
         self.memory_size = limit if self.packed and config.pieces.attention_critic else 0
@@ -434,7 +437,7 @@ class Trainer:
             key) -> tuple[ActorState, Trajectory, WindowEnd]:  # fmt: skip
         """One window of every lane (inputs recorded, for the replay and the buffers)."""
         options = ActOptions(whole_episodes=not self.packed, record_inputs=True)
-        return rollout.act(self.networks, acting, env, actor, key, self.config.num_steps, options)
+        return self.act_window(self.networks, acting, env, actor, key, self.config.num_steps, options)
 
     def loss_and_grad(self, params, w_params, env: BoundEnv, actor: ActorState, key):
         """((loss, WindowResult), grads) of one window with respect to `params`, by the

@@ -1,6 +1,6 @@
 """foresit_jax.rollout: parameter trees per method, the shared rollout (invariants against
 the environment's rules), the replay's values, the critic, and episode statistics
-against hand-computed values; the deprecated `foresit_jax.agent.Agent` shim."""
+against hand-computed values."""
 
 import functools
 
@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import train_helpers as H
+from foresit_jax.config import Config
 from foresit_jax.lstm import initial_carry
 from foresit_jax.networks import build
 from foresit_jax.rollout import (
@@ -191,24 +192,8 @@ def test_greedy_rollout_takes_the_most_likely_action(rollout):
     assert (sampled.actions[sampled.valid] != sampled.logits.argmax(-1)[sampled.valid]).any()
 
 
-# ---------------------------------------------------------------------- the deprecated shim
-@pytest.mark.slow
-def test_the_deprecated_agent_warns_and_rolls_out_as_the_rollout_function():
-    """`foresit_jax.agent.Agent` (kept for one release) warns, and its `rollout` is
-    `rollout.rollout` over `networks.build(config)`: the same Trajectory, bit for bit."""
-    from foresit_jax.agent import Agent
-
-    config = H.tiny_config("a3c+foresit", num_lanes=2)
-    with pytest.warns(FutureWarning, match="deprecated"):
-        agent = Agent(config)
-    nets = build(config)
-    env, env_params = H.bathroom_env()
-    params, w_params = nets.init(jax.random.PRNGKey(0), observation())
-    H.assert_trees_bitwise_equal(agent.init(jax.random.PRNGKey(0), observation()), (params, w_params))
-    acting, bound, key = AgentParams(params, w_params, jnp.full((2,), 0.5)), BoundEnv(env, env_params), jax.random.key(1)
-    old = jax.jit(lambda a: agent.rollout(a, bound, key, 8, record_inputs=True), compiler_options=H.FAST_COMPILE)
-    new = jax.jit(lambda a: rollout_of(nets, a, bound, key, 8, ActOptions(record_inputs=True)),
-                  compiler_options=H.FAST_COMPILE)  # fmt: skip
-    got, want = old(acting), new(acting)
-    assert isinstance(got, Trajectory) and got.inputs is not None
-    H.assert_trees_bitwise_equal(got, want)
+def test_a_config_refuses_an_unknown_evaluation_noise_or_imagination_input():
+    with pytest.raises(ValueError, match="evaluation_noise"):
+        Config(evaluation_noise="none")
+    with pytest.raises(ValueError, match="imagination_input"):
+        Config(imagination_input="policy")

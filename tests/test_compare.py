@@ -10,7 +10,7 @@ from scipy import stats as sp
 
 from experiments import compare
 from experiments.reporting import stats
-from experiments.running import errors
+from experiments import errors
 
 SEEDS = (3, 4, 5, 6)
 

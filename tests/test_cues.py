@@ -169,7 +169,7 @@ def test_acting_records_the_cue_of_every_step(savn_kit, imagination_input):
     params, w_params = jax.jit(nets.init, compiler_options=H.FAST_COMPILE)(
         jax.random.PRNGKey(1), jax.tree.map(lambda x: x[0], actor.obs))
     acting = AgentParams(params, w_params, jnp.zeros((config.num_lanes,)))
-    act = jax.jit(lambda a, k: rollout.act(nets, acting, env, a, k, 20, ActOptions(record_inputs=True)),
+    act = jax.jit(lambda a, k: rollout.act_window(nets, acting, env, a, k, 20, ActOptions(record_inputs=True)),
                   compiler_options=H.FAST_COMPILE)  # fmt: skip
     inputs = act(actor, jax.random.PRNGKey(3))[1].inputs
     cue = np.asarray(inputs.obs["cue"])

@@ -29,7 +29,8 @@ from experiments import evaluate as evaluate_cli
 from experiments import sweep
 from experiments import train as train_cli
 from experiments.reporting import cvae_comparison, figures, report, tables
-from experiments.running import checkpoint, errors, numerics, presets, progress, rundir, selection, sweeps
+from experiments import errors
+from experiments.running import checkpoint, numerics, presets, progress, rundir, selection, sweeps
 from experiments.errors import RunNotFound
 from experiments.running.run import COUNTS, RUN_FORMAT, initial_states
 from foresit_jax.config import Config

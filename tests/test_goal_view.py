@@ -125,7 +125,7 @@ def test_oracle_i_tau_with_the_noise_off_is_one_network_step_on_the_goal_view(sa
     actor = rollout.start(nets, jax.random.PRNGKey(2), env, config.num_lanes)
     assert set(actor.obs) >= {"goal_view", "view", "target"}  # start wrapped the env itself
     acting = AgentParams(params, w_params, jnp.zeros((config.num_lanes,)))
-    act = jax.jit(lambda a, k: rollout.act(nets, acting, env, a, k, 20, ActOptions(record_inputs=True)),
+    act = jax.jit(lambda a, k: rollout.act_window(nets, acting, env, a, k, 20, ActOptions(record_inputs=True)),
                   compiler_options=H.FAST_COMPILE)  # compile-bound: its checks compare values made here
     _, traj = act(actor, jax.random.PRNGKey(3))[:2]
     inputs = traj.inputs
@@ -145,7 +145,7 @@ def test_oracle_i_tau_with_the_noise_off_is_one_network_step_on_the_goal_view(sa
     assert (step == 0).sum() > config.num_lanes  # several episodes began inside the window
     # With the noise on, i_tau is that latent plus noise, fixed for the episode.
     noisy = AgentParams(params, w_params, jnp.full((config.num_lanes,), 0.25))
-    traj = jax.jit(lambda a, k: rollout.act(nets, noisy, env, a, k, 20, ActOptions(record_inputs=True)),
+    traj = jax.jit(lambda a, k: rollout.act_window(nets, noisy, env, a, k, 20, ActOptions(record_inputs=True)),
                    compiler_options=H.FAST_COMPILE)(actor, jax.random.PRNGKey(3))[1]
     if imagination_input == "head":
         diff = np.asarray(traj.inputs.imagined) - np.asarray(expected)

@@ -10,7 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from experiments.running import errors, rundir, sweeps
+from experiments import errors
+from experiments.running import rundir, sweeps
 
 REPO = Path(__file__).resolve().parents[1]
 PACKAGE = REPO / "experiments"

@@ -1,14 +1,10 @@
 """The losses (foresit_jax.train: returns, advantages, Eq. 8-9; foresit_jax.imagination.smooth_l1) against brute-force loops and hand-computed values."""
 
-import importlib
-import sys
-
 import chex
 import hypothesis.strategies as st
 import jax
 import jax.numpy as jnp
 import numpy as np
-import pytest
 from absl.testing import parameterized
 from hypothesis import given, settings
 
@@ -269,13 +265,3 @@ class A3CLossTest(chex.TestCase):
         # Padding steps get no gradient.
         pad = self.valid == 0
         np.testing.assert_array_equal(np.asarray(g_logits)[pad], 0.0)
-
-
-def test_the_old_losses_module_warns_and_re_exports_the_same_functions():
-    """`foresit_jax.losses` (0.2's home) stays one release: it warns and hands back the very
-    functions of `foresit_jax.train` and `foresit_jax.imagination`."""
-    sys.modules.pop("foresit_jax.losses", None)
-    with pytest.warns(FutureWarning, match="foresit_jax.train"):
-        old = importlib.import_module("foresit_jax.losses")
-    assert old.a3c_loss is train.a3c_loss and old.advantages_and_returns is train.advantages_and_returns
-    assert old.smooth_l1 is imagination.smooth_l1

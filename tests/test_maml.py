@@ -12,19 +12,21 @@ import pytest
 from flax import traverse_util
 
 import train_helpers as H
-from foresit_jax import imagination, maml, rollout
+from foresit_jax import imagination, learned_loss, maml, rollout
+from foresit_jax.evaluate import Evaluator
 from foresit_jax.networks import ActorCritic, build
 from foresit_jax.rollout import ActOptions, AgentParams, BoundEnv
+from foresit_jax.train import Trainer
 
 WHOLE = ActOptions(whole_episodes=True)  # the maml base acts in whole episodes
 
 
 def _adaptive_act(nets, params, w_params, env, actor, key, num_steps, options=WHOLE):
     """`maml.adaptive_act` acting as training does: each lane's noise variance Eq. 7's
-    from its success tracker (what `rollout.act` fills in)."""
+    from its success tracker (what `maml.act` fills in)."""
     rho = jax.vmap(imagination.success_rate)(actor.tracker)
     acting = AgentParams(params, w_params, imagination.noise_variance(rho, nets.config.sigma2_max))
-    return maml.adaptive_act(nets, acting, env, actor, key, num_steps, options, rollout.act_window)
+    return maml.adaptive_act(nets, acting, env, actor, key, num_steps, options)
 
 
 # ---------------------------------------------------------------------- the learned loss
@@ -46,7 +48,7 @@ def _numpy_learned_loss(phi, inputs):
 
 
 def test_learned_loss_matches_numpy_and_is_causal_over_features():
-    module = maml.LearnedLoss(segment=6)
+    module = learned_loss.LearnedLoss(segment=6)
     inputs = jax.random.normal(jax.random.PRNGKey(1), (6, 22))
     phi = module.init(jax.random.PRNGKey(0), inputs)
     assert phi["params"]["conv0"]["kernel"].shape == (2, 6, 10)  # 6 steps -> 10 channels, kernel 2
@@ -64,9 +66,9 @@ def test_causal_conv_is_flax_conv_with_causal_padding(dilation):
     test_experiments.test_a_sweep_spread_over_two_host_devices_equals_the_one_device_sweep)."""
     import flax.linen as nn
 
-    init = maml._torch_default_init(12)
+    init = learned_loss._torch_default_init(12)
     x = jax.random.normal(jax.random.PRNGKey(1), (20, 6))
-    ours = maml.CausalConv1d(10, 2, dilation, init)
+    ours = learned_loss.CausalConv1d(10, 2, dilation, init)
     flax_conv = nn.Conv(10, (2,), kernel_dilation=(dilation,), padding=((dilation, 0),), kernel_init=init, bias_init=init)
     p_ours, p_flax = ours.init(jax.random.PRNGKey(0), x), flax_conv.init(jax.random.PRNGKey(0), x)
     jax.tree.map(np.testing.assert_array_equal, p_ours, p_flax)
@@ -189,8 +191,9 @@ def test_evaluation_step_13_runs_under_theta_2_recomputed_independently():
 
 @pytest.mark.slow
 def test_agent_rollout_adapts_through_the_same_code_path(monkeypatch):
-    """Evaluation (`rollout.rollout`) and training (`rollout.act`) both run adaptive_act (traced
-    only: what is compiled is what is traced); packed windows are refused."""
+    """Evaluation (the Evaluator's `rollout.rollout`) and training (the Trainer's window) both
+    run adaptive_act through `maml.act`, the base's window that both choose (traced only:
+    what is compiled is what is traced); packed windows are refused."""
     config, nets, env, env_params, params, w_params, actor = _setup(lanes=4, training=False)
     calls, bound = [], BoundEnv(env, env_params)
     real = maml.adaptive_act
@@ -201,13 +204,15 @@ def test_agent_rollout_adapts_through_the_same_code_path(monkeypatch):
 
     monkeypatch.setattr(maml, "adaptive_act", spy)
     key = jax.random.PRNGKey(7)
-    traj = jax.eval_shape(lambda p: rollout.rollout(nets, AgentParams(p, w_params, 0.0), bound, key, 20, num_lanes=4),
-                          params)  # fmt: skip
-    assert calls == [20] and traj.logits.shape == (20, 4, 6)
-    jax.eval_shape(lambda p: rollout.act(nets, AgentParams(p, w_params), bound, actor, key, 30, WHOLE), params)
-    assert calls == [20, 30]
+    evaluation = Evaluator.for_config(config).agent_rollout(config, 20, greedy=False)
+    stats = jax.eval_shape(evaluation, params, w_params, env_params, key, jnp.zeros(4))
+    assert calls == [20] and stats.success.shape == (4,)
+    trainer = Trainer(config)
+    assert trainer.act_window is maml.act
+    jax.eval_shape(lambda p: trainer.act(AgentParams(p, w_params), bound, actor, key), params)
+    assert calls == [20, config.num_steps]
     with pytest.raises(ValueError, match="whole episodes"):
-        rollout.act(nets, AgentParams(params, w_params), bound, actor, key, 5)  # packed windows: refused
+        maml.act(nets, AgentParams(params, w_params), bound, actor, key, 5)  # packed windows: refused
 
 
 # ---------------------------------------------------------------------- the meta-gradient
@@ -347,7 +352,7 @@ def test_maml_evaluation_runs_its_episodes_in_groups(monkeypatch):
     reset = jax.random.split(k_start, 5)
     group = jax.jit(lambda k, r: ev.episode_stats(rollout.rollout(nets, AgentParams(params, w_params, 0.0),
                                                                   BoundEnv(evaluator.env, room), k, 8,
-                                                                  num_lanes=r.shape[0], reset_keys=r)),
+                                                                  reset_keys=r, act=maml.act)),
                     compiler_options=H.FAST_COMPILE)  # fmt: skip
     for g, k in enumerate(jax.random.split(k_act, 3)):
         lanes = slice(2 * g, min(2 * g + 2, 5))

@@ -109,7 +109,7 @@ def test_i_tau_while_acting_is_f_w_of_the_episode_state_it_was_renewed_at(method
     def act(variance, key):
         bound = BoundEnv(env, env_params)
         actor = rollout.start(nets, jax.random.PRNGKey(5), bound, lanes)
-        return rollout.act(nets, AgentParams(params, w_params, variance), bound, actor, key, 30)[1]
+        return rollout.act_window(nets, AgentParams(params, w_params, variance), bound, actor, key, 30)[1]
 
     traj = jax.tree.map(np.asarray, act(jnp.zeros(lanes), jax.random.PRNGKey(6)))
     seen = traj.inputs
@@ -211,11 +211,12 @@ def test_evaluation_noise_off_zeroes_the_variance():
 # ---------------------------------------------------------------------- probes
 @pytest.mark.slow
 def test_shuffled_imagination_imagines_from_another_episode():
-    """The probe's networks (`probes.ShuffledImagination`) make each lane's i_tau where
+    """The probe's networks (`probes.shuffled`) make each lane's i_tau where
     acting makes it (`rollout._imagine`, noise off) from the previous lane's s_0 and target;
     the unshuffled networks from the lane's own."""
     config = H.tiny_config("a3c+foresit")
-    nets, shuffled = build(config), probes.ShuffledImagination(config)
+    nets = build(config)
+    shuffled = probes.shuffled(nets)
     rng = np.random.default_rng(0)
     s_0, goal = (jnp.asarray(rng.normal(size=(5, n)), jnp.float32) for n in (config.hidden_size, 300))
     _, w = nets.init(jax.random.PRNGKey(0), jax.tree.map(lambda x: x[0], observation()))

@@ -128,26 +128,22 @@ def test_no_code_outside_the_pieces_tests_a_base_or_encoder_name():
 
 
 @pytest.mark.slow
-def test_acting_goes_through_the_bases_flag(monkeypatch):
-    """`rollout.act` runs the a3c base as one `act_window` per window (wrapped to count its
-    calls; traced only), and hands the maml base to `maml.adaptive_act` (a stand-in that
-    records its call), with `rollout.act_window` for its segments and Eq. 7's variance filled in."""
+def test_the_trainer_and_the_evaluator_choose_the_bases_window_once(monkeypatch):
+    """The a3c base's window is `rollout.act_window`, run once per window (wrapped to count
+    its calls; traced only); the maml base's is `maml.act`, which hands `maml.adaptive_act`
+    (a stand-in that records its call) Eq. 7's variance and runs no window beside it. The
+    Trainer and the Evaluator (`base_acting`) choose the same one."""
     import jax
 
     import train_helpers as H
     from foresit_jax import maml, rollout
-    from foresit_jax.networks import build
+    from foresit_jax.evaluate import base_acting
     from foresit_jax.rollout import ActOptions, AgentParams, BoundEnv
+    from foresit_jax.train import Trainer
 
     env, env_params = H.bathroom_env()
     env = BoundEnv(env, env_params)
     obs, _ = env.env.reset(jax.random.key(0), env_params)
-
-    def acting_of(config):
-        nets = build(config)
-        params, w_params = nets.init(jax.random.key(1), obs)
-        return nets, AgentParams(params, w_params), rollout.start(nets, jax.random.key(2), env, 2)
-
     calls, real_window = [], rollout.act_window
 
     def counting(*args, **kwargs):
@@ -155,10 +151,18 @@ def test_acting_goes_through_the_bases_flag(monkeypatch):
         return real_window(*args, **kwargs)
 
     monkeypatch.setattr(rollout, "act_window", counting)
-    nets, acting, actor = acting_of(H.tiny_config("a3c", num_lanes=2, num_steps=3))
-    traj = jax.eval_shape(lambda a: rollout.act(nets, a, env, actor, jax.random.key(3), 3, ActOptions(greedy=True))[1],
-                          acting)  # fmt: skip
-    assert len(calls) == 1 and calls[0].greedy is True and traj.actions.shape == (3, 2)
+
+    def acting_of(config):
+        trainer = Trainer(config)
+        nets = trainer.networks
+        params, w_params = nets.init(jax.random.key(1), obs)
+        assert base_acting(config).act is trainer.act_window
+        return trainer, AgentParams(params, w_params), rollout.start(nets, jax.random.key(2), env, 2)
+
+    trainer, acting, actor = acting_of(H.tiny_config("a3c", num_lanes=2, num_steps=3, rollout="packed"))
+    assert trainer.act_window is counting
+    traj = jax.eval_shape(lambda a: trainer.act(a, env, actor, jax.random.key(3))[1], acting)
+    assert len(calls) == 1 and calls[0].record_inputs is True and traj.actions.shape == (3, 2)
 
     adaptive = []
 
@@ -167,13 +171,14 @@ def test_acting_goes_through_the_bases_flag(monkeypatch):
         return args[3], "traj", "end", []  # (actor, Trajectory, WindowEnd, thetas): nothing is run
 
     monkeypatch.setattr(maml, "adaptive_act", stand_in)
-    nets, acting, actor = acting_of(H.tiny_config("a3c+maml", num_lanes=2))
+    trainer, acting, actor = acting_of(H.tiny_config("a3c+maml", num_lanes=2))
+    assert trainer.act_window is maml.act
     options = ActOptions(greedy=True, whole_episodes=True)
-    assert rollout.act(nets, acting, env, actor, jax.random.key(3), 3, options)[1:] == ("traj", "end")
+    assert maml.act(trainer.networks, acting, env, actor, jax.random.key(3), 3, options)[1:] == ("traj", "end")
     (got,) = adaptive
-    assert got[0] is nets and got[5:7] == (3, options) and got[7] is counting  # rollout's act_window (here wrapped)
+    assert got[0] is trainer.networks and got[5:7] == (3, options)
     assert got[1].noise_variance is not None and got[1].noise_variance.shape == (2,)
-    assert len(calls) == 1  # the base's own window was not run beside it
+    assert len(calls) == 1  # no a3c window was run beside it
 
 
 def test_noise_on_the_input_is_algorithm_1s_and_on_the_output_eq_6s():

@@ -61,7 +61,7 @@ def _act(num_steps):
     trainer = H.trainer(PACKED)
 
     def act(params, w_params, env_params, actor, step_keys):
-        return rollout.act(trainer.networks, AgentParams(params, w_params), trainer.bind(env_params), actor, step_keys[0],
+        return rollout.act_window(trainer.networks, AgentParams(params, w_params), trainer.bind(env_params), actor, step_keys[0],
                            num_steps, ActOptions(step_keys=step_keys))  # fmt: skip
 
     return jax.jit(act, compiler_options=H.FAST_COMPILE)

@@ -1,5 +1,6 @@
-"""The agent as a step-by-step policy (`rollout.policy`), any policy on the reports' episodes
-(`evaluate.evaluate_policy`), and a trained policy loaded from a run folder
+"""The agent as a step-by-step policy (`foresit_jax.policy.policy`; the maml base's
+`maml.policy`), any policy on the reports' episodes (`evaluate.evaluate_policy`), and a
+trained policy loaded from a run folder
 (`experiments.load`): each replays what the library's own rollout and evaluation play,
 exactly (issue 61).
 """
@@ -17,7 +18,7 @@ import numpy as np
 import pytest
 
 import train_helpers as H
-from foresit_jax import rollout
+from foresit_jax import maml, policy, rollout
 from foresit_jax.evaluate import Evaluator, evaluate_policy, policy_episodes
 from foresit_jax.networks import build
 from foresit_jax.rollout import AgentParams, BoundEnv, episode_stats
@@ -51,10 +52,11 @@ def test_the_policy_step_by_step_plays_rollouts_episodes_exactly(method):
     nets, acting, env, env_params = _acting(config)
     lanes, steps, key = 12, 30, jax.random.PRNGKey(5)
     bound = rollout.acting_env(nets, BoundEnv(env, env_params))
-    want = jax.jit(lambda a: episode_stats(rollout.rollout(nets, a, bound, key, steps, num_lanes=lanes)),
+    acting = acting._replace(noise_variance=jnp.full(lanes, acting.noise_variance))
+    want = jax.jit(lambda a: episode_stats(rollout.rollout(nets, a, bound, key, steps)),
                    compiler_options=H.FAST_COMPILE)(acting)  # fmt: skip
-    act = rollout.policy(nets)
-    got = jax.jit(lambda a: policy_episodes(act, a, rollout.policy_carry(nets, lanes), bound, key, steps, lanes),
+    act = policy.policy(nets)
+    got = jax.jit(lambda a: policy_episodes(act, a, policy.policy_carry(nets, lanes), bound, key, steps, lanes),
                   compiler_options=H.FAST_COMPILE)(acting)  # fmt: skip
     for name in ("success", "length", "optimal_length", "ended", "spl", "room_type"):
         np.testing.assert_array_equal(np.asarray(getattr(got, name)), np.asarray(getattr(want, name)), err_msg=name)
@@ -76,12 +78,13 @@ def test_the_maml_policy_adapts_in_its_carry_and_plays_rollouts_episodes_exactly
     obs, _ = env.reset(jax.random.PRNGKey(0), env_params)
 
     def played(nets):
-        return jax.jit(lambda a: episode_stats(rollout.rollout(nets, a, bound, key, steps, num_lanes=lanes)),
+        return jax.jit(lambda a: episode_stats(rollout.rollout(nets, a, bound, key, steps, act=maml.act)),
                        compiler_options=H.FAST_COMPILE)(acting)  # fmt: skip
 
+    acting = acting._replace(noise_variance=jnp.full(lanes, acting.noise_variance))
     want = played(nets)
-    act = rollout.policy(nets)
-    carry = rollout.policy_carry(nets, lanes, acting, jax.eval_shape(lambda: obs))
+    act = maml.policy(nets)
+    carry = maml.policy_carry(nets, lanes, acting, jax.eval_shape(lambda: obs))
     got = jax.jit(lambda a, c: policy_episodes(act, a, c, bound, key, steps, lanes),
                   compiler_options=H.FAST_COMPILE)(acting, carry)  # fmt: skip
     for name in ("success", "length", "optimal_length", "ended", "spl", "room_type"):
@@ -95,10 +98,8 @@ def test_the_maml_policy_adapts_in_its_carry_and_plays_rollouts_episodes_exactly
 def test_the_maml_keys_are_adaptive_acts():
     """`adaptive_keys` by hand: segment j's key is split(key, slots + 1)[j], split per lane,
     then per step; the environment's is split(split(step key, 3)[2], 1)[0]."""
-    from foresit_jax.maml import InnerLoop
-
-    loop, key, lanes, steps = InnerLoop(segment=2, updates=2, lr=1.0, first_order=False), jax.random.PRNGKey(3), 3, 7
-    policy_keys, env_keys = rollout.adaptive_keys(loop, key, steps, lanes)
+    loop, key, lanes, steps = maml.InnerLoop(segment=2, updates=2, lr=1.0, first_order=False), jax.random.PRNGKey(3), 3, 7
+    policy_keys, env_keys = maml.adaptive_keys(loop, key, steps, lanes)
     assert policy_keys.shape == (steps, lanes, 2) and env_keys.shape == (steps, lanes, 2)
     segments = jax.random.split(key, 3)  # slots after steps 2 and 4, then the rest (3 steps)
     for t, (j, n, i) in enumerate([(0, 2, 0), (0, 2, 1), (1, 2, 0), (1, 2, 1), (2, 3, 0), (2, 3, 1), (2, 3, 2)]):
@@ -110,12 +111,16 @@ def test_the_maml_keys_are_adaptive_acts():
 
 
 def test_the_maml_carry_needs_its_parameters_and_a_missing_noise_variance_is_refused():
+    maml_nets = build(H.tiny_config("a3c+maml"))
     with pytest.raises(ValueError, match="maml base"):
-        rollout.policy_carry(build(H.tiny_config("a3c+maml")), 2)
+        maml.policy_carry(maml_nets, 2)
+    for wrong in (policy.policy, policy.policy_carry):  # the a3c base's step cannot run the maml base
+        with pytest.raises(ValueError, match="foresit_jax.maml"):
+            wrong(maml_nets, 2)
     nets = build(H.tiny_config("a3c+foresit"))  # refused before the parameters or observations are read
     with pytest.raises(ValueError, match="noise_variance"):
-        rollout.policy(nets)(AgentParams(None, None, None), rollout.policy_carry(nets, 2), None, jnp.ones(2, bool),
-                             jax.random.PRNGKey(0))  # fmt: skip
+        policy.policy(nets)(AgentParams(None, None, None), policy.policy_carry(nets, 2), None, jnp.ones(2, bool),
+                            jax.random.PRNGKey(0))  # fmt: skip
 
 
 @pytest.mark.slow
@@ -124,7 +129,7 @@ def test_evaluate_policy_gives_the_evaluators_numbers():
     nets, acting, _, _ = _acting(config)
     key = jax.random.PRNGKey(9)
     want = Evaluator.for_config(config).evaluate(acting, config, "test", key, 8, by_length=True)
-    got = evaluate_policy(rollout.policy(nets), acting, functools.partial(rollout.policy_carry, nets), config, "test",
+    got = evaluate_policy(policy.policy(nets), acting, functools.partial(policy.policy_carry, nets), config, "test",
                           key, 8)  # fmt: skip
     assert _same(got, want), (got, want)
     assert 0.0 < want["overall"]["SR"] + want["overall"]["episodes"]
@@ -164,9 +169,9 @@ def test_load_reproduces_the_runs_test_results(tmp_path, method):
     train_cli.main(train_cli.Args(method=method, preset="tiny", seed=3, out=out, progress=False))
     results = json.loads((out / "results.json").read_text())["results"][0]
     for which, reported in (("best", "selected"), ("last", "last")):
-        policy = experiments.load(out, seed=3, which=which)
-        got = evaluate_policy(policy.act, policy.params, policy.initial_carry, policy.config, "test", policy.test_key,
-                              policy.test_episodes_per_room)  # fmt: skip
+        loaded = experiments.load(out, seed=3, which=which)
+        got = evaluate_policy(loaded.act, loaded.params, loaded.initial_carry, loaded.config, "test", loaded.test_key,
+                              loaded.test_episodes_per_room)  # fmt: skip
         for metric in ("SR", "SPL"):
             assert got["overall"][metric] == pytest.approx(results[reported]["overall"][metric], abs=1e-9), which
     with pytest.raises(UserError, match="seeds"):

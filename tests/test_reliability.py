@@ -29,7 +29,8 @@ from benchmarks import search_learner
 from experiments import evaluate as evaluate_cli
 from experiments import sweep
 from experiments import train as train_cli
-from experiments.running import checkpoint, errors, loop, rundir
+from experiments import errors
+from experiments.running import checkpoint, loop, rundir
 from experiments.running.run import counts_of, initial_states, rewind
 from foresit_jax.config import Config
 
@@ -72,7 +73,8 @@ HOLDER = """
 import os, sys, time
 from pathlib import Path
 sys.path.insert(0, {repo!r})
-from experiments.running import checkpoint, errors, loop, rundir
+from experiments import errors
+from experiments.running import checkpoint, loop, rundir
 Path({ready!r}, str(os.getpid())).write_text("")
 while not Path({go!r}).exists():
     time.sleep(0.001)
@@ -118,7 +120,8 @@ def test_a_run_held_by_another_process_is_refused_in_one_line_and_left_as_it_was
         import sys, time
         sys.path.insert(0, {str(REPO)!r})
         from pathlib import Path
-        from experiments.running import checkpoint, errors, loop, rundir
+        from experiments import errors
+        from experiments.running import checkpoint, loop, rundir
         rundir.claim(Path({str(out)!r}))
         print("holding", flush=True)
         time.sleep(30)
@@ -457,7 +460,7 @@ def test_without_fcntl_the_folder_lock_is_filelocks(tmp_path, monkeypatch):
     """Native Windows has no fcntl: claim() falls back to filelock on the same .lock file,
     and a second holder is refused in one line."""
     filelock = pytest.importorskip("filelock")
-    from experiments.running import errors
+    from experiments import errors
 
     monkeypatch.setattr(rundir, "fcntl", None)
     monkeypatch.setattr(rundir, "_held", {})

@@ -12,7 +12,8 @@ from pathlib import Path
 import pytest
 
 from experiments import sweep
-from experiments.running import errors, rundir, selection, sweeps
+from experiments import errors
+from experiments.running import rundir, selection, sweeps
 
 # Cheap in-process CLI calls (tests/conftest.py).
 pytestmark = pytest.mark.usefixtures("cheap_experiments")

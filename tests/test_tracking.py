@@ -12,7 +12,8 @@ from pathlib import Path
 import pytest
 
 from experiments import train as train_cli
-from experiments.running import errors, rundir, tracking
+from experiments import errors
+from experiments.running import rundir, tracking
 
 
 # Cheap in-process CLI calls for every test of this module (tests/conftest.py).

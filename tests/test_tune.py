@@ -10,7 +10,8 @@ from scipy import stats as sp
 
 from experiments import sweep, tune
 from experiments.reporting import tuning
-from experiments.running import errors, sweeps
+from experiments import errors
+from experiments.running import sweeps
 
 SEEDS = (0, 1, 2, 3)
 

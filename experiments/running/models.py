@@ -111,7 +111,7 @@ def models_of_sweep(folder: Path, methods: tuple[str, ...]) -> dict[str, list[Mo
 
 class Policy(NamedTuple):
     """A trained policy (`load`): `act(params, carry, obs, first, key) -> (action [B], carry)`
-    is pure and batched over lanes (`foresit_jax.rollout.policy`: `first` `[B]` marks an
+    is pure and batched over lanes (`foresit_jax.policy.policy`, or `foresit_jax.maml.policy`: `first` `[B]` marks an
     episode's first step, where the carry resets; with the maml base the carry holds each
     lane's adapted parameters, and `key` is one per lane, `[B, 2]`: `act.step_keys` gives
     the keys a rollout uses); `params` what it acts with (theta/omega, f_w's w, the
