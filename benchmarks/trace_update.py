@@ -12,7 +12,7 @@ For each method (at a preset's sizes, tiny by default):
   chain to the optimiser, then the update's body; `CliPath`);
 * a short sha256 of each lowered program: a chunk of training (`Trainer.run`), the
   evaluation rollout (`Evaluator.agent_rollout`) and the sub-goal collection
-  (`Trainer.collect_subgoal_items`). Equal hashes before and after a refactor mean the
+  (`train.collect_subgoal_items`). Equal hashes before and after a refactor mean the
   same compiled program (the lowered text carries no source locations), so no speed or
   numbers can have changed; run it at both commits (`PYTHONPATH=<checkout>`).
 """
@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import inspect
+import functools
 import os
 import runpy
 import sys
@@ -38,7 +39,7 @@ import foresit_jax
 from experiments.running.presets import preset
 from foresit_jax.evaluate import Evaluator
 from foresit_jax.methods import parse_method
-from foresit_jax.train import make_trainer
+from foresit_jax.train import collect_subgoal_items, make_trainer
 
 
 @dataclasses.dataclass(frozen=True)
@@ -167,7 +168,8 @@ def program_hashes(trainer, state) -> dict[str, str]:
     rollout = evaluator.agent_rollout(config, 30, config.pieces.greedy_evaluation)
     room = evaluator.room_params("val", (config.room_types or ("bathroom",))[0])
     evaluate = rollout.lower(state.params, state.imagination_params, room, jax.random.PRNGKey(1), jnp.zeros(8)).as_text()
-    subgoals = jax.jit(trainer.collect_subgoal_items, static_argnums=2).lower(state, trainer.env_params, 2).as_text()
+    subgoals = jax.jit(functools.partial(collect_subgoal_items, trainer), static_argnums=2)
+    subgoals = subgoals.lower(state, trainer.env_params, 2).as_text()
     return {"train": _short(train), "evaluate": _short(evaluate), "subgoals": _short(subgoals)}
 
 

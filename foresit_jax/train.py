@@ -509,26 +509,6 @@ class Trainer:
         new_state = RunnerState(params, opt_state, w_params, buffers, next_actor, key, state.update + 1)
         return new_state, metrics
 
-    def collect_subgoal_items(self, state: RunnerState, env_params, num_windows: int):
-        """What `num_windows` windows played by the agent of `state` (not updated) offer
-        the buffers: ((s_0, g_tau, ŝ_tau, add), (t*, step)), each `[num_windows, T, B, ...]`:
-        the items (`subgoal_items`; the data of the paper's C-VAE comparison), the position
-        of each step's sub-goal in its episode (`subgoal_steps`) and the step's own
-        position (at an `add` step, the Done step's: the episode's length - 1)."""
-
-        env = self.bind(env_params)
-
-        def window(carry, _):
-            actor, key, k_act = self.begin_window(*carry, env)
-            next_actor, traj, end = self.act(AgentParams(state.params, state.imagination_params), env, actor, k_act)
-            _, (alpha, key_states, _) = self.window_loss(state.params, traj, end, actor.memory)  # the critic's alpha
-            _, stats = ended_episodes(traj)
-            items = subgoal_items(self.networks.imagination_variant.subgoal_mode, traj, alpha, key_states, stats.success)
-            return (next_actor, key), (items, (subgoal_steps(traj, end, alpha), traj.episode_step))
-
-        _, items = jax.lax.scan(window, (state.actor, state.key), None, length=num_windows)
-        return items
-
     def store_and_train(self, w_params, buffers, items):
         """Algorithm 1 for each step of the window in time order: lanes whose episode
         ended successfully there add (s_0, g_tau, ŝ_tau) to their buffer; full buffers
@@ -574,16 +554,38 @@ class Trainer:
         env_params, num_updates (static)) -> (states, metrics `[seeds, num_updates]`).
         Built once per Trainer, so that every chunk (and every sweep of this Trainer)
         reuses its compiled programs; the seed axis may be sharded over devices."""
-        return self.seeds_runner(None)
-
-    def seeds_runner(self, on_update: Callable | None):
-        """`run_seeds` with `on_update` (see `run`)."""
-        return jax.jit(jax.vmap(functools.partial(self.run, on_update=on_update), in_axes=(0, None, None)),
-                       static_argnums=2)  # fmt: skip
+        return seeds_runner(self, None)
 
     def train(self, key: chex.PRNGKey) -> tuple[RunnerState, dict]:
         """The whole run in one jittable function: init, then `config.num_updates` updates."""
         return self.run(self.init(key), self.env_params, self.config.num_updates)
+
+
+def seeds_runner(trainer: Trainer, on_update: Callable | None):
+    """`trainer.run_seeds` with `on_update` (see `Trainer.run`): jitted, vmapped over the seeds."""
+    return jax.jit(jax.vmap(functools.partial(trainer.run, on_update=on_update), in_axes=(0, None, None)),
+                   static_argnums=2)  # fmt: skip
+
+
+def collect_subgoal_items(trainer: Trainer, state: RunnerState, env_params, num_windows: int):
+    """What `num_windows` windows that `trainer` plays with the agent of `state` (not updated) offer
+    the buffers: ((s_0, g_tau, ŝ_tau, add), (t*, step)), each `[num_windows, T, B, ...]`:
+    the items (`subgoal_items`; the data of the paper's C-VAE comparison), the position
+    of each step's sub-goal in its episode (`subgoal_steps`) and the step's own
+    position (at an `add` step, the Done step's: the episode's length - 1)."""
+
+    env = trainer.bind(env_params)
+
+    def window(carry, _):
+        actor, key, k_act = trainer.begin_window(*carry, env)
+        next_actor, traj, end = trainer.act(AgentParams(state.params, state.imagination_params), env, actor, k_act)
+        _, (alpha, key_states, _) = trainer.window_loss(state.params, traj, end, actor.memory)  # the critic's alpha
+        _, stats = ended_episodes(traj)
+        items = subgoal_items(trainer.networks.imagination_variant.subgoal_mode, traj, alpha, key_states, stats.success)
+        return (next_actor, key), (items, (subgoal_steps(traj, end, alpha), traj.episode_step))
+
+    _, items = jax.lax.scan(window, (state.actor, state.key), None, length=num_windows)
+    return items
 
 
 class GridTrainer(Trainer):

@@ -372,7 +372,7 @@ def test_the_progress_callback_sees_every_update_and_changes_no_number():
     states = jax.vmap(trainer.init)(jax.random.split(jax.random.PRNGKey(4), 2))
     seen.clear()
     plain = trainer.run_seeds(states, trainer.env_params, 2)
-    reported = trainer.seeds_runner(lambda u: seen.append(np.asarray(u).tolist()))(states, trainer.env_params, 2)
+    reported = train_module.seeds_runner(trainer, lambda u: seen.append(np.asarray(u).tolist()))(states, trainer.env_params, 2)
     jax.block_until_ready(reported)
     H.assert_trees_bitwise_equal(plain, reported)
     assert sorted(seen) == [1, 1, 2, 2], seen  # vmapped: once per seed and update

@@ -4,20 +4,23 @@ fit a C-VAE and two f_w, compare their held-out losses; `foresit_jax.cvae` has t
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import numpy as np
 
 from experiments.reporting.tables import markdown_table
 from foresit_jax import cvae
+from foresit_jax.train import collect_subgoal_items
 
 MIN_ITEMS = 10
 
 
 def collect_items(trainer, state, windows: int, seed: int) -> tuple[np.ndarray, ...]:
     """(s_0, g_tau, ŝ_tau) `[n, ...]` of the successful episodes the agent of training
-    state `state` (not updated) ends in `windows` windows (`Trainer.collect_subgoal_items`)."""
+    state `state` (not updated) ends in `windows` windows (`foresit_jax.train.collect_subgoal_items`)."""
     state = state._replace(key=jax.random.fold_in(state.key, seed))
-    collect = jax.jit(trainer.collect_subgoal_items, static_argnums=2)
+    collect = jax.jit(functools.partial(collect_subgoal_items, trainer), static_argnums=2)
     items, _ = collect(state, trainer.env_params, windows)
     s_0, goal, subgoal, add = (np.asarray(x) for x in items)
     add = add.astype(bool)

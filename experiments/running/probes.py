@@ -8,6 +8,7 @@ of what `probe` returns."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 
 import jax
@@ -20,6 +21,7 @@ from experiments.running.models import Model
 from foresit_jax.evaluate import Evaluator, agent_params
 from foresit_jax.imagination import make_imagination_optimizer
 from foresit_jax.networks import build
+from foresit_jax.train import collect_subgoal_items
 from foresit_jax.probes import (
     fit_imagination_offline, halves, imagination_fit, only_fit_items, r_squared, replay_online_fit,
     shuffled, signal_to_noise, subgoal_position_histogram,
@@ -82,11 +84,11 @@ def fit_options(model: Model, w_init, items, passes: int) -> dict[str, float]:
 
 def imagination_items(model: Model, windows: int, options_passes: int = 0) -> dict:
     """f_w's fit, its signal beside the noise, and the sub-goal positions, on the items of
-    `windows` fresh training windows (`Trainer.collect_subgoal_items`); with
+    `windows` fresh training windows (`foresit_jax.train.collect_subgoal_items`); with
     `options_passes`, `fit_options` too."""
     trainer, state = model.trainer, model.state
     state = state._replace(key=jax.random.fold_in(state.key, 7))  # windows f_w never saw
-    collect = jax.jit(trainer.collect_subgoal_items, static_argnums=2)
+    collect = jax.jit(functools.partial(collect_subgoal_items, trainer), static_argnums=2)
     items, (t_star, step) = jax.tree.map(np.asarray, collect(state, trainer.env_params, windows))
     s_0, goal, subgoal, add = items
     add = add.astype(bool)

@@ -41,7 +41,7 @@ from experiments.running import checkpoint, devices, loop, numerics, rundir, sel
 from experiments.running.presets import Schedule
 from foresit_jax.config import Config
 from foresit_jax.evaluate import agent_params
-from foresit_jax.train import make_trainer
+from foresit_jax.train import make_trainer, seeds_runner
 
 # run.json's "format": 2 is this one. A `train` folder written before (run.json with one
 # "seed", best/ and validation.jsonl) still reads (`models`, evaluate), but does not resume.
@@ -294,7 +294,7 @@ class Run:
             stacked = lambda tree: jax.tree.map(lambda x: x[None], tree)  # noqa: E731
         else:
             states = devices.shard_seeds(states, mesh)
-            run = trainer.seeds_runner(on_update) if on_update else trainer.run_seeds
+            run = seeds_runner(trainer, on_update) if on_update else trainer.run_seeds
             seed_params, stacked = seed_params_of, lambda tree: tree
         history, checkpoints = progress["history"], folder / "checkpoints"
 
