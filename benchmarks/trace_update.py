@@ -105,10 +105,21 @@ class CliPath:
       at that call, outermost first (the command, the run loop, the Trainer), then those
       entered from the first `Trainer.update` until the call (the update's body: acting,
       the environment's step, the networks, the loss), each once. Issue 60 counted 17 this
-      way before the redesign (this count gives 16 at f511043)."""
+      way before the redesign (this count gives 16 at f511043).
+    config: what a reader needs besides to know what the Config says, not already on the
+      reader's path: the files on the call stack wherever a `Config` is made (its
+      `__post_init__`, before the first update: the command's flags, the preset, the
+      method's defaults), and those its making enters (the method's parser).
+    Issue 70 counts `reader` and `config` together, for a3c+foresit."""
 
     entered: list[str]
     reader: list[str]
+    config: list[str] = dataclasses.field(default_factory=list)
+
+    @property
+    def to_read(self) -> list[str]:
+        """The reader's path and the Config's sources, each once."""
+        return self.reader + self.config
 
 
 def files_from_cli(method: str, preset: str = "tiny") -> CliPath:
@@ -117,10 +128,26 @@ def files_from_cli(method: str, preset: str = "tiny") -> CliPath:
     root = os.path.dirname(os.path.dirname(os.path.abspath(experiments.__file__)))
     packages = tuple(os.path.join(root, p) + os.sep for p in ("experiments", "foresit_jax", "envs"))
     update_file = os.path.join(root, "foresit_jax", "train.py")
+    config_file = os.path.join(root, "foresit_jax", "config.py")
     entered: list[str] = []
     body: list[str] = []
     stack: list[str] = []
-    state = {"on": True, "in_update": False}
+    config: list[str] = []  # the Config's sources: the stacks that make a Config, and what its making enters
+    state = {"on": True, "in_update": False, "in_config": 0}
+
+    def project_stack(frame) -> list[str]:
+        files = []
+        while frame is not None:
+            file = frame.f_code.co_filename
+            if file.startswith(packages) and os.path.relpath(file, root) not in files:
+                files.append(os.path.relpath(file, root))
+            frame = frame.f_back
+        return files[::-1]  # outermost first
+
+    def leaving_config(frame, event, arg):
+        if event == "return":
+            state["in_config"] -= 1
+        return leaving_config
 
     def tracer(frame, event, arg):
         if not state["on"] or event != "call":
@@ -128,16 +155,18 @@ def files_from_cli(method: str, preset: str = "tiny") -> CliPath:
         path, name = frame.f_code.co_filename, frame.f_code.co_name
         if name == "apply_updates" and f"{os.sep}optax{os.sep}" in path:
             state["on"] = False
-            caller = frame.f_back
-            while caller is not None:
-                file = caller.f_code.co_filename
-                if file.startswith(packages) and os.path.relpath(file, root) not in stack:
-                    stack.append(os.path.relpath(file, root))
-                caller = caller.f_back
+            stack.extend(project_stack(frame.f_back)[::-1])
         elif name not in ("<module>", "__getattr__") and path.startswith(packages):
             file = os.path.relpath(path, root)
             state["in_update"] |= name == "update" and path == update_file
-            for seen in (entered, body) if state["in_update"] else (entered,):
+            if not state["in_update"] and name == "__post_init__" and path == config_file:
+                config.extend(f for f in project_stack(frame) if f not in config)
+                state["in_config"] += 1
+                return leaving_config
+            seen_by = [entered, body] if state["in_update"] else [entered]
+            if state["in_config"]:
+                seen_by.append(config)
+            for seen in seen_by:
                 if file not in seen:
                     seen.append(file)
         return None
@@ -156,7 +185,8 @@ def files_from_cli(method: str, preset: str = "tiny") -> CliPath:
             sys.settrace(None)
             threading.settrace(None)
             sys.argv = argv
-    return CliPath(entered, list(dict.fromkeys(stack[::-1] + body)))
+    reader = list(dict.fromkeys(stack[::-1] + body))
+    return CliPath(entered, reader, [f for f in config if f not in reader])
 
 
 def program_hashes(trainer, state) -> dict[str, str]:
@@ -192,8 +222,11 @@ def main(args: Args) -> dict:
         if args.cli_path:
             path = files_from_cli(method, args.preset)
             report[method]["cli_files"], report[method]["reader_files"] = path.entered, path.reader
+            report[method]["config_files"] = path.config
             print(f"  from `python -m experiments.train` to optax.apply_updates: {len(path.entered)} project files "
                   f"run; a reader follows {len(path.reader)} (the call chain, then the update): " + ", ".join(path.reader))  # fmt: skip
+            print(f"  and {len(path.config)} more to know what the Config says: " + ", ".join(path.config)
+                  + f" ({len(path.to_read)} in all)")  # fmt: skip
     return report
 
 

@@ -34,19 +34,24 @@ def test_the_path_of_an_update_and_hashes_that_tell_programs_apart(capsys):
 @pytest.mark.slow
 def test_the_path_from_the_cli_to_the_optimiser():
     """`--cli-path`: the project files whose functions run from `python -m experiments.train`'s
-    entry to the first `optax.apply_updates`, in the order entered, and the reader's path
-    (the call chain to the optimiser, then the update's body; docs/design.md walks it)."""
-    path = trace_update.files_from_cli("a3c", "tiny")
-    entered, reader = path.entered, path.reader
+    entry to the first `optax.apply_updates`, in the order entered, the reader's path (the
+    call chain to the optimiser, then the update's body; docs/design.md walks it), and the
+    Config's sources besides (where a Config is made, and what its making enters), for
+    a3c+foresit (issue 70's count)."""
+    path = trace_update.files_from_cli("a3c+foresit", "tiny")
+    entered, reader, config = path.entered, path.reader, path.config
     assert len(entered) == len(set(entered)) and len(reader) == len(set(reader))
     assert {"experiments/train.py", "experiments/running/run.py", "foresit_jax/config.py", "foresit_jax/train.py",
             "foresit_jax/rollout.py", "foresit_jax/networks.py", "envs/gridnav.py"} <= set(entered)
-    assert "foresit_jax/maml.py" not in entered and "foresit_jax/agent.py" not in entered  # neither runs for a3c
+    assert "foresit_jax/maml.py" not in entered and "foresit_jax/policy.py" not in entered  # neither runs for a3c+foresit
     assert set(reader) <= set(entered)
     # the chain first (the command, its run, the Trainer), then the update's body
     assert reader[:3] == ["experiments/errors.py", "experiments/train.py", "experiments/running/run.py"]
     assert reader.index("foresit_jax/train.py") < reader.index("foresit_jax/rollout.py")
-    assert {"foresit_jax/lstm.py", "envs/gridnav.py", "envs/dynamics.py"} <= set(reader)
+    assert {"foresit_jax/lstm.py", "foresit_jax/imagination.py", "envs/gridnav.py", "envs/dynamics.py"} <= set(reader)
     # setup is not what one update is: the run folder's helpers and the scene banks are run, not followed
     assert not {"experiments/running/rundir.py", "envs/bank.py"} & set(reader)
-    assert len(reader) <= 12  # issue 60's target (16 at f511043, measured this way)
+    # what the Config says: the preset, the Config's defaults and checks, the method's parser
+    assert {"experiments/running/presets.py", "foresit_jax/config.py", "foresit_jax/methods.py"} <= set(config)
+    assert not set(config) & set(reader) and path.to_read == reader + config
+    assert len(reader) <= 12 and len(path.to_read) <= 15  # 15 at 4b5e70b; issue 70's target is 12 (docs/design.md)
