@@ -60,7 +60,7 @@ from experiments.reporting.paper_tables import (
     sampled_markdown, table1, table2, table3,
 )  # fmt: skip
 from experiments.reporting.tables import markdown_table, write_csv
-from experiments.running import devices, flags, numerics, probes, rundir, selection, sweeps
+from experiments.running import devices, flags, numerics, probe_runs, rundir, selection, sweeps
 from experiments.running.models import models_of_sweep
 from experiments.running.presets import split_arm
 from foresit_jax import rollout as rollout_lib
@@ -406,7 +406,7 @@ def probe_section(args: Args, results: dict) -> str:
     models = {}
     for m in methods:
         models.update(by_method(args, models_of_sweep(args.out / SETUP_OF[m], (arm_of(args, m),))))
-    report = probes.probe(models, args.probe_episodes_per_room, args.cvae_windows)
+    report = probe_runs.probe(models, args.probe_episodes_per_room, args.cvae_windows)
     rundir.write_json(args.out / "probe.json", report)
     return probing.markdown(report, args.probe_episodes_per_room, args.cvae_windows, level=2)
 

@@ -30,7 +30,7 @@ from typing import Optional
 
 from experiments import errors
 from experiments.reporting import probing
-from experiments.running import probes, rundir
+from experiments.running import probe_runs, rundir
 from experiments.running.models import models_of_run, models_of_sweep
 
 @dataclasses.dataclass(frozen=True)
@@ -75,7 +75,7 @@ def main(args: Args) -> dict:
     if not models:
         raise errors.UserError(f"{args.run}: no finished method with imagination or the attention critic to probe")
     rundir.claim(folder)  # the one writer of the folder, and writable, before the probe's work
-    report = probes.probe(models, args.episodes_per_room, args.windows, args.fit_passes if args.fit_options else 0)
+    report = probe_runs.probe(models, args.episodes_per_room, args.windows, args.fit_passes if args.fit_options else 0)
     md = probing.markdown(report, args.episodes_per_room, args.windows)
     folder.mkdir(parents=True, exist_ok=True)
     rundir.write_json(out_json, {"episodes_per_room": args.episodes_per_room, "windows": args.windows,

@@ -490,11 +490,11 @@ def test_sweep_diagnostics_table_by_hand():
 
 @pytest.mark.slow
 def test_fit_options_replay_each_option_on_the_fit_items_and_score_the_held_out_ones():
-    """`experiments.running.probes.fit_options` on items `[windows, T, B]`: one R^2 per option of
+    """`experiments.running.probe_runs.fit_options` on items `[windows, T, B]`: one R^2 per option of
     FIT_OPTIONS; 'as trained' is the run's own procedure replayed on the even items and
     scored on the odd ones against their mean, as a direct computation gives it."""
     from experiments.running import models
-    from experiments.running import probes as probe_runs
+    from experiments.running import probe_runs
 
     config = H.tiny_config("a3c+foresit", buffer_size=8)
     trainer = H.trainer(config)

@@ -168,3 +168,28 @@ def test_pieces_become_modules_in_networks_build_alone():
             if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in makers:
                 made.setdefault(node.func.id, set()).add(module)
     assert made == {name: {"networks"} for name in makers}
+
+
+def _stem(name: str) -> str:
+    """A module's name without a plural's ending (probes -> probe, boxes -> box; progress stays)."""
+    if name.endswith(("sses", "shes", "ches", "xes")):
+        return name[:-2]
+    if name.endswith("s") and not name.endswith("ss"):
+        return name[:-1]
+    return name
+
+
+def test_no_two_modules_share_a_stem_or_its_plural():
+    """Inside foresit_jax/ and experiments/ (the CLIs, top-level modules with a `__main__`
+    guard, apart: their names are the commands), no two modules share a stem or its plural."""
+    root = PACKAGE.parent
+    cli = {p for p in (root / "experiments").glob("*.py") if '__name__ == "__main__"' in p.read_text()}
+    modules = [p for folder in ("foresit_jax", "experiments") for p in (root / folder).rglob("*.py")
+               if p.name != "__init__.py" and p not in cli]  # fmt: skip
+    assert len(modules) > 30 and len(cli) >= 10
+    by_stem = {}
+    for path in modules:
+        by_stem.setdefault(_stem(path.stem), []).append(str(path.relative_to(root)))
+    assert not {s: p for s, p in by_stem.items() if len(p) > 1}
+    assert _stem("probes") == _stem("probe") and _stem("sweeps") == _stem("sweep") and _stem("boxes") == "box"
+    assert _stem("stats") == "stat" and _stem("tuning") == "tuning" and _stem("progress") == "progress"

@@ -1,4 +1,4 @@
-"""The report of the imagination probes (`experiments.running.probes` runs them over trained
+"""The report of the imagination probes (`experiments.running.probe_runs` runs them over trained
 models): test SR under each condition of i_tau (`CONDITIONS`), f_w against its targets on
 held-out items, f_w's training options replayed (`FIT_OPTIONS`), where the sub-goal falls,
 as Markdown (`markdown`)."""
