@@ -29,7 +29,7 @@ import functools
 import sys
 import time
 from pathlib import Path
-from typing import Optional, Protocol, Sequence
+from typing import Any, Callable, Optional, Protocol, Sequence
 
 import jax
 import jax.numpy as jnp
@@ -146,6 +146,25 @@ def set_aside(folder: Path, updates: int) -> None:
 
 
 @dataclasses.dataclass
+class Training:
+    """What `Run.train` carries from one chunk to the next (`Run.resume` makes it): the
+    environment's parameters, the chunk's program (`run(states, env_params, n) -> (states,
+    metrics [seeds, n])`), the seeds' evaluation parameters of the states (`seed_params`,
+    stacked over the seeds) and the states as checkpointed (`stacked`), the states, each
+    seed's selection, progress.json's contents, the checkpoint manager and the label."""
+
+    env_params: Any
+    run: Callable
+    seed_params: Callable
+    stacked: Callable
+    states: Any
+    best: list
+    progress: dict
+    manager: Any
+    label: str
+
+
+@dataclasses.dataclass
 class Run:
     """The seeds `seeds` of one arm (`config`, `schedule`) in `folder`; `label` names the
     arm in messages and on the progress bar, `preset` is recorded in run.json."""
@@ -236,8 +255,22 @@ class Run:
         (a one-item list of the chunks this invocation may still run, or [None]) ran out
         first. After each chunk: the recorders, then a checkpoint of the states and the
         selected models, then progress.json. `bar` is `progress.progress_bar`'s, over every
-        update it counts (a sweep's bar counts all its arms)."""
-        config, schedule, seeds, folder = self.config, self.schedule, list(self.seeds), self.folder
+        update it counts (a sweep's bar counts all its arms).
+
+        The run loop, per chunk: learn, check, validate and select (`chunk`), then record and
+        checkpoint (`record`), from what `resume` restored."""
+        training = self.resume(bar, recorders)
+        for n in loop.chunk_sizes(training.progress["done"], self.config.num_updates, self.schedule.chunk_updates,
+                                  budget):  # fmt: skip
+            chunk, validations = self.chunk(training, evaluator, n)
+            self.record(training, chunk, validations, bar, recorders)
+        return training.progress["done"] >= self.config.num_updates
+
+    def resume(self, bar, recorders: Sequence[Recorder] = ()) -> "Training":
+        """The folder made ready to train on (run.json written, a finished run's results set
+        aside if it was extended), and what training carries from chunk to chunk restored from
+        its last intact checkpoint (fresh states when it has none)."""
+        config, seeds, folder = self.config, list(self.seeds), self.folder
         label = f"{self.label}: " if self.label else ""
         done_results = folder / "results.json"
         if done_results.is_file() and rundir.read_json(done_results, rundir.RESULTS_KEYS)["updates"] < config.num_updates:
@@ -252,12 +285,8 @@ class Run:
         if previous != rundir.jsonable(info):
             rundir.write_json(folder / "run.json", info)
         trainer = make_trainer(config)
-        env_params = trainer.env_params
-        single = len(seeds) == 1
-        mesh = devices.seed_mesh(len(seeds))
         states, best_params = initial_states(trainer, seeds)
         select = functools.partial(agent_params, sigma2_max=config.sigma2_max, evaluation_noise=config.evaluation_noise)
-        seed_params_of = jax.vmap(select)
         manager = self.manager()
         progress = self.progress()  # its protocol: checked by the program (`selection.check_resumable`)
         # A kill between a chunk's checkpoint and its progress.json leaves a newer checkpoint
@@ -282,7 +311,7 @@ class Run:
         # the state's update count is this run's, the bar may count several runs').
         offset = bar.position() - progress["done"]
         on_update = (lambda update: bar.at(offset + np.max(update))) if bar.enabled else None
-        if single:  # the unvmapped program, the seed axis outside it
+        if len(seeds) == 1:  # the unvmapped program, the seed axis outside it
             states = jax.tree.map(lambda x: x[0], states)
             jitted = jax.jit(functools.partial(trainer.run, on_update=on_update), static_argnums=2)
 
@@ -293,50 +322,56 @@ class Run:
             seed_params = lambda states: jax.tree.map(lambda x: x[None], select(states))  # noqa: E731
             stacked = lambda tree: jax.tree.map(lambda x: x[None], tree)  # noqa: E731
         else:
-            states = devices.shard_seeds(states, mesh)
+            states = devices.shard_seeds(states, devices.seed_mesh(len(seeds)))
             run = seeds_runner(trainer, on_update) if on_update else trainer.run_seeds
-            seed_params, stacked = seed_params_of, lambda tree: tree
-        history, checkpoints = progress["history"], folder / "checkpoints"
+            seed_params, stacked = jax.vmap(select), lambda tree: tree
+        return Training(trainer.env_params, run, seed_params, stacked, states, best, progress, manager, label)
 
-        # The run loop: per chunk, learn, check, validate and select, record, checkpoint.
-        for n in loop.chunk_sizes(progress["done"], config.num_updates, schedule.chunk_updates, budget):
-            done, started = progress["done"], time.time()
-            states, metrics = run(states, env_params, n)
-            metrics = jax.tree.map(np.asarray, metrics)  # [seeds, n]
-            # A non-finite loss or parameter stops here, before anything of the chunk is recorded.
-            warning = loop.check(metrics, states, done, n, manager=manager, checkpoints=checkpoints, seeds=seeds,
-                                 label=label)  # fmt: skip
-            chunk = loop.Chunk(metrics, done + n, n, warning, started)
-            # Each seed validated, its best model kept (`selection`).
-            params_now = seed_params(states)
-            validations = []
-            for i, seed in enumerate(seeds):
-                params = devices.seed_slice(params_now, i)
-                val = selection.validate(evaluator, params, config, seed, schedule.val_episodes_per_room)
-                validations.append({"update": chunk.done, **val["overall"]})
-                best[i].offer(val["overall"]["SR"], chunk.done, params)
-            # Recorded, then checkpointed (states and selected models), then progress.json: a
-            # kill between the two repeats the chunk (`Recorder.record`, `loop.resume_point`).
-            for recorder in recorders:
-                recorder.record(chunk, validations)
-            progress["curves"].append(metrics["charts/success_rate"].tolist())
-            for name in filter(metrics.__contains__, DIAGNOSTICS):  # each seed's mean over the chunk
-                progress.setdefault("diagnostics", {}).setdefault(name, []).append(metrics[name].mean(axis=1).tolist())
-            for name in COUNTS:  # each seed's total over the chunk
-                progress.setdefault("counts", {}).setdefault(name, []).append(metrics[name].sum(axis=1).tolist())
-            for h, val in zip(history, validations):
-                h.append(val)
-            best_params = jax.tree.map(lambda *x: np.stack(x), *[b.params for b in best])
-            checkpoint.save(manager, chunk.done, {"states": stacked(states), "best": best_params})
-            progress.update(done=chunk.done, best_sr=[b.sr for b in best], best_update=[b.update for b in best])
-            rundir.write_json(folder / "progress.json", progress)
-            useful = float(np.sum(metrics["frames/useful"]))  # steps that entered the loss, every seed's
-            bar(chunk.n, {**({"method": self.label} if self.label else {}),
-                          "useful fps": f"{useful / (time.time() - chunk.started):,.0f}",
-                          "SR": f"{metrics['charts/success_rate'].mean():.3f}",
-                          "val SR": f"{np.mean([v['SR'] for v in validations]):.1f}%",
-                          **({"warning": "diverging"} if chunk.warning else {})})  # fmt: skip
-        return progress["done"] >= config.num_updates
+    def chunk(self, training: "Training", evaluator, n: int) -> tuple[loop.Chunk, list[dict]]:
+        """`n` updates of every seed, checked (a non-finite loss or parameter stops here,
+        before anything of the chunk is recorded), then each seed validated and its best
+        model kept (`selection`): (the chunk, each seed's validation)."""
+        done, started = training.progress["done"], time.time()
+        training.states, metrics = training.run(training.states, training.env_params, n)
+        metrics = jax.tree.map(np.asarray, metrics)  # [seeds, n]
+        warning = loop.check(metrics, training.states, done, n, manager=training.manager,
+                             checkpoints=self.folder / "checkpoints", seeds=list(self.seeds), label=training.label)  # fmt: skip
+        chunk = loop.Chunk(metrics, done + n, n, warning, started)
+        params_now = training.seed_params(training.states)
+        validations = []
+        for i, seed in enumerate(self.seeds):
+            params = devices.seed_slice(params_now, i)
+            val = selection.validate(evaluator, params, self.config, seed, self.schedule.val_episodes_per_room)
+            validations.append({"update": chunk.done, **val["overall"]})
+            training.best[i].offer(val["overall"]["SR"], chunk.done, params)
+        return chunk, validations
+
+    def record(self, training: "Training", chunk: loop.Chunk, validations: list[dict], bar,
+               recorders: Sequence[Recorder] = ()) -> None:  # fmt: skip
+        """A chunk recorded (the recorders), then checkpointed (states and selected models),
+        then progress.json: a kill between the two repeats the chunk (`Recorder.record`,
+        `loop.resume_point`); then the progress bar."""
+        metrics, progress = chunk.metrics, training.progress
+        for recorder in recorders:
+            recorder.record(chunk, validations)
+        progress["curves"].append(metrics["charts/success_rate"].tolist())
+        for name in filter(metrics.__contains__, DIAGNOSTICS):  # each seed's mean over the chunk
+            progress.setdefault("diagnostics", {}).setdefault(name, []).append(metrics[name].mean(axis=1).tolist())
+        for name in COUNTS:  # each seed's total over the chunk
+            progress.setdefault("counts", {}).setdefault(name, []).append(metrics[name].sum(axis=1).tolist())
+        for h, val in zip(progress["history"], validations):
+            h.append(val)
+        best_params = jax.tree.map(lambda *x: np.stack(x), *[b.params for b in training.best])
+        checkpoint.save(training.manager, chunk.done, {"states": training.stacked(training.states), "best": best_params})
+        progress.update(done=chunk.done, best_sr=[b.sr for b in training.best],
+                        best_update=[b.update for b in training.best])  # fmt: skip
+        rundir.write_json(self.folder / "progress.json", progress)
+        useful = float(np.sum(metrics["frames/useful"]))  # steps that entered the loss, every seed's
+        bar(chunk.n, {**({"method": self.label} if self.label else {}),
+                      "useful fps": f"{useful / (time.time() - chunk.started):,.0f}",
+                      "SR": f"{metrics['charts/success_rate'].mean():.3f}",
+                      "val SR": f"{np.mean([v['SR'] for v in validations]):.1f}%",
+                      **({"warning": "diverging"} if chunk.warning else {})})  # fmt: skip
 
     def test(self, evaluator) -> dict:
         """Test each seed's selected and last model (on the test episodes of its seed, with SR
