@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from experiments import foresight
+from experiments.reporting import foresight_bound as bound
 
 pytest.importorskip("sklearn")
 
@@ -25,7 +26,7 @@ def synthetic(rng, n, planted: bool, groups: int = 12):
     sem[rows, 1, np.where(side == 0, 1, WIDTH - 2)] = anchor
     sem[rows, 1, np.where(side == 0, WIDTH - 2, 1)] = other
     depth = rng.uniform(0, 4, size=(n, 3, WIDTH))
-    data = foresight.features(sem, depth, target, CLASSES, TARGETS, STRUCTURAL)
+    data = bound.features(sem, depth, target, CLASSES, TARGETS, STRUCTURAL)
     walls = (sem == 1)
     more_right = walls[..., WIDTH // 2:].sum((1, 2)) > walls[..., :WIDTH // 2].sum((1, 2))
     label = side if planted else more_right.astype(int)
@@ -38,7 +39,7 @@ def test_the_bound_recovers_a_planted_relation_and_reports_zero_without_one(plan
     rng = np.random.default_rng(0)
     train, test = synthetic(rng, 1500, planted), synthetic(rng, 1500, planted)
     test["group"] = test["group"] + 100  # held-out groups
-    r = foresight.foresight_bound(train, test, "turn")
+    r = bound.foresight_bound(train, test, "turn")
     assert r["train_samples"] == r["test_samples"] == 1500 and r["test_groups"] == 12
     lo, hi = r["gain_ci"]
     if planted:  # the view alone sees both categories, one on each side: a coin toss
@@ -52,7 +53,7 @@ def test_rows_labelled_minus_one_are_left_out():
     train, test = synthetic(rng, 600, True), synthetic(rng, 600, True)
     test["turn"][:100] = -1
     train["turn"][:50] = -1
-    r = foresight.foresight_bound(train, test, "turn")
+    r = bound.foresight_bound(train, test, "turn")
     assert (r["train_samples"], r["test_samples"]) == (550, 500)
     kept = test["turn"][test["turn"] >= 0]  # the shares count the kept test rows only
     assert r["test_shares"] == pytest.approx([np.mean(kept == 0), np.mean(kept == 1)])
@@ -64,7 +65,7 @@ def test_rows_labelled_minus_one_are_left_out():
     ((-3, 1), 0, "ahead"), ((-1, 3), 0, "right"), ((3, -1), 6, "left"),
 ])  # fmt: skip
 def test_bearing_sectors_by_hand(offset, heading, sector):
-    assert foresight.BEARINGS[foresight.bearing_sector(np.array(offset), heading)] == sector
+    assert bound.BEARINGS[bound.bearing_sector(np.array(offset), heading)] == sector
 
 
 def test_cluster_bootstrap_is_the_groups_spread():
@@ -72,7 +73,7 @@ def test_cluster_bootstrap_is_the_groups_spread():
     (much narrower) spread of the rows."""
     values = np.repeat([0.0, 1.0], 500)
     groups = np.repeat([0, 1], 500)
-    lo, hi = foresight.cluster_bootstrap(values, groups, np.random.default_rng(0))
+    lo, hi = bound.cluster_bootstrap(values, groups, np.random.default_rng(0))
     assert lo == 0.0 and hi == 1.0
 
 
@@ -118,12 +119,12 @@ def test_docs_quote_the_measured_bound(data_file, labels):
         for what in ("turn", "bearing"):
             r = data[name]["results"][what]
             row = (f"| {label} | {what} | {r['test_samples']} ({r['test_groups']} layouts) | "
-                   + " | ".join(f"{100 * r[k]:.1f}" for k in ("majority", *foresight.FEATURE_SETS))
+                   + " | ".join(f"{100 * r[k]:.1f}" for k in ("majority", *bound.FEATURE_SETS))
                    + f" | {_gain(r)} |")
             assert row in doc, row
             for subset, part in r.get("subsets", {}).items():
                 row = (f"| {label} | {what}, {subset} | {part['samples']} ({100 * part['share']:.0f}%) | | "
-                       + " | ".join(f"{100 * part[k]:.1f}" for k in foresight.FEATURE_SETS) + f" | {_gain(part)} |")
+                       + " | ".join(f"{100 * part[k]:.1f}" for k in bound.FEATURE_SETS) + f" | {_gain(part)} |")
                 assert row in doc, row
 
 
@@ -138,7 +139,7 @@ def test_subsets_split_the_gain_where_the_relation_can_show():
         data["turn"] = np.where(hidden, rng.integers(0, 2, 2000), data["turn"])
         data["subsets"] = {"shown": ~hidden, "hidden": hidden}
     test["group"] = test["group"] + 100
-    r = foresight.foresight_bound(train, test, "turn")
+    r = bound.foresight_bound(train, test, "turn")
     shown, hidden = r["subsets"]["shown"], r["subsets"]["hidden"]
     assert shown["samples"] + hidden["samples"] == r["test_samples"] == 2000
     assert shown["gain"] > 0.3 and shown["gain_ci"][0] > 0.2 and abs(hidden["gain"]) < 0.06
@@ -156,7 +157,7 @@ def test_anchor_in_view_reads_the_relation_table():
     sem[1, 1, 2] = bed  # a bed, which no toaster stands by
     sem[2, 1, 2] = counter  # a counter, with a pillow as the target
     target = np.array([cats.index("Toaster"), cats.index("Toaster"), cats.index("Pillow")])
-    np.testing.assert_array_equal(foresight.anchor_in_view(sem, target, "savn"), [True, False, False])
+    np.testing.assert_array_equal(bound.anchor_in_view(sem, target, "savn"), [True, False, False])
 
 
 def test_a_perception_range_leaves_near_objects_and_all_furniture_resolved():
@@ -166,12 +167,12 @@ def test_a_perception_range_leaves_near_objects_and_all_furniture_resolved():
     its one-hot), and the sides show it as its own class."""
     sem = np.array([[[4, 5, 6, 1]]])  # [N=1, rows=1, W=4]
     depth = np.array([[[3.0, 8.0, 9.0, 2.0]]])
-    seen, classes = foresight.within_range(sem, depth, 6.0, 7, 2, 4)
+    seen, classes = bound.within_range(sem, depth, 6.0, 7, 2, 4)
     np.testing.assert_array_equal(seen, [[[4, 7, 6, 1]]])
     assert classes == 8
-    untouched, same = foresight.within_range(sem, depth, None, 7, 2, 4)
+    untouched, same = bound.within_range(sem, depth, None, 7, 2, 4)
     assert untouched is sem and same == 7
-    f = foresight.features(seen, depth, np.array([0]), classes, 2, 4, unresolved=7)
+    f = bound.features(seen, depth, np.array([0]), classes, 2, 4, unresolved=7)
     onehots = f["geometry"][0, : 4 * 5].reshape(4, 5)  # per pixel: nothing, wall, floor, furniture, object
     np.testing.assert_array_equal(onehots.argmax(1), [4, 4, 3, 1])
     sides = f["view"][0, f["geometry"].shape[1]:].reshape(2, classes)
@@ -208,5 +209,5 @@ def test_the_levers_verdict_follows_the_measured_gains():
         assert (str(args["priors"]), args["perception_range"]) == (line[1], float(line[2])) and args["layout"] == "room"
         assert f"the {what}'s gain is {_gain(data[name]['results'][what])} points" in doc
     rooms, houses = (data[name]["results"]["bearing"] for name in ("room-priors-range6", "house-priors-range6"))
-    ahead = [round(100 * r["test_shares"][foresight.BEARINGS.index("ahead")]) for r in (rooms, houses)]
+    ahead = [round(100 * r["test_shares"][bound.BEARINGS.index("ahead")]) for r in (rooms, houses)]
     assert f"the target lies ahead in only {ahead[0]}% (rooms) to {ahead[1]}% (houses)" in doc

@@ -14,7 +14,7 @@ import pytest
 
 import envs
 from envs import catalog as C
-from experiments.foresight import within_range
+from experiments.reporting.foresight_bound import within_range
 from foresit_jax import train as T
 from foresit_jax.config import Config
 from foresit_jax.evaluate import Evaluator
