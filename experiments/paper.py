@@ -43,16 +43,10 @@ from __future__ import annotations
 
 import dataclasses
 import importlib.util
-import functools
 import sys
 import time
 from pathlib import Path
 
-import jax
-import jax.numpy as jnp
-import numpy as np
-
-from envs.catalog import ROOM_TYPES, categories
 from experiments import errors
 from experiments.reporting import cvae_comparison, probing, report, stats
 from experiments.reporting.paper_tables import (
@@ -60,13 +54,10 @@ from experiments.reporting.paper_tables import (
     sampled_markdown, table1, table2, table3,
 )  # fmt: skip
 from experiments.reporting.tables import markdown_table, write_csv
-from experiments.running import devices, flags, numerics, probe_runs, rundir, selection, sweeps
+from experiments.running import devices, flags, numerics, paper_figures, probe_runs, rundir, sweeps
 from experiments.running.models import models_of_sweep
 from experiments.running.presets import split_arm
-from foresit_jax import rollout as rollout_lib
-from foresit_jax.networks import build
-from foresit_jax.rollout import ActOptions, BoundEnv
-from foresit_jax.evaluate import Evaluator
+
 
 @dataclasses.dataclass(frozen=True)
 class Args:
@@ -221,8 +212,7 @@ def _run(args: Args) -> dict | None:
     return write_report(args, results)
 
 
-# ---------------------------------------------------------------------- the report
-# ---------------------------------------------------------------------- L^g buckets
+# ---------------------------------------------------------------------- the report: L^g buckets
 def by_length_section(args: Args, results: dict) -> str:
     """For each +ForeSIT pair: a PNG of SR and SPL by L^g bucket with 95% bands over seeds,
     and the paired difference per bucket."""
@@ -242,8 +232,7 @@ def by_length_section(args: Args, results: dict) -> str:
     return md or "(no +ForeSIT pair was run)\n"
 
 
-# ---------------------------------------------------------------------- claims
-# ---------------------------------------------------------------------- figures 3 and 4
+# ---------------------------------------------------------------------- the models of figures 3 and 4
 def _first_seed(args: Args, method: str):
     """(config, trainer, last training state, selected AgentParams) of the first seed."""
     arm = arm_of(args, method)
@@ -254,127 +243,6 @@ def _first_seed(args: Args, method: str):
 def _method_args(args: Args, method: str) -> sweeps.Sweep:
     setup = SETUP_OF[method]
     return sweep_args(args, setup, tuple(m for m in GROUPS[setup] if m not in args.exclude))
-
-
-def trajectories_figure(args: Args, base: str, other: str, path: Path) -> str:
-    """Figure 3: both methods' first seeds (selected models) play the same test episodes,
-    one per room type: the first of `trajectory_candidates` whose L^g >= 5 (a fixed rule,
-    not a choice of good-looking ones); each method acts by its own evaluation protocol."""
-    from envs.render import render_topdown  # matplotlib, imported at its top
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    loaded = {m: _first_seed(args, m)[::3] for m in (base, other)}  # (config, selected params)
-    evaluator = Evaluator.for_config(next(iter(loaded.values()))[0])
-    env, n = evaluator.env, args.trajectory_candidates
-    key = selection.test_key(args.seed)
-    rooms = next(iter(loaded.values()))[0].room_types or ROOM_TYPES
-    rollouts = {m: jax.jit(functools.partial(rollout_lib.rollout, build(config),
-                                            options=ActOptions(greedy=config.pieces.greedy_evaluation)),
-                           static_argnames="num_steps") for m, (config, _) in loaded.items()}  # fmt: skip
-    replay = jax.jit(functools.partial(_replay_positions, env))
-    panels, lines = [], []
-    for room, k in zip(rooms, jax.random.split(key, len(rooms))):
-        env_params = evaluator.room_params("test", room)
-        num_steps = int(jnp.max(env_params.max_steps))
-        reset_keys = jax.random.split(jax.random.fold_in(k, 0), n)
-        _, start = jax.vmap(env.reset, in_axes=(0, None))(reset_keys, env_params)
-        long = np.flatnonzero(np.asarray(start.optimal_length) >= 5)
-        if not len(long):
-            continue
-        i = int(long[0])
-        row = []
-        for method, (config, params) in loaded.items():
-            acting = params._replace(noise_variance=jnp.full((n,), params.noise_variance))
-            traj = rollouts[method](acting, BoundEnv(env, env_params), k, num_steps=num_steps, reset_keys=reset_keys)
-            actions, valid, success = (np.asarray(x)[:, i] for x in (traj.actions, traj.valid, traj.success))
-            steps = int(valid.sum())
-            poses = np.asarray(replay(env_params, reset_keys[i], actions))[: steps + 1]
-            ok = bool((success & valid).any())
-            state = jax.tree.map(lambda x: x[i], start)
-            title = f"{method}: {'success' if ok else 'failure'}, {steps} actions (L^g {int(state.optimal_length)})"
-            row.append(render_topdown(env_params, int(state.scene), state=state, trajectory=poses, title=title))
-            lines.append(f"{room} {method}: {'success' if ok else 'failure'} in {steps} actions, L^g {int(state.optimal_length)}")
-        panels.append(row)
-    fig = Figure(figsize=(10, 4.2 * len(panels)))
-    FigureCanvasAgg(fig)
-    for r, row in enumerate(panels):
-        for c, image in enumerate(row):
-            ax = fig.add_subplot(len(panels), 2, 2 * r + c + 1)
-            ax.imshow(image)
-            ax.axis("off")
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    return "; ".join(lines)
-
-
-def _replay_positions(env, env_params, reset_key, actions):
-    """[T + 1, 2] the cells the agent stood on, the start included, for actions `[T]` (the
-    dynamics are deterministic: the episode replayed from its reset key and actions; the
-    rows after the episode's last action are the caller's to drop)."""
-    _, state = env.reset(reset_key, env_params)
-
-    def step(state, action):
-        _, state, *_ = env.step_env(reset_key, state, action, env_params)
-        return state, state.agent_pos
-
-    _, cells = jax.lax.scan(step, state, actions)
-    return jnp.concatenate([state.agent_pos[None], cells])
-
-
-def tsne_figure(args: Args, config, trainer, state, items, path: Path) -> int:
-    """Figure 4: t-SNE of f_w([s_0 : g_tau]) and of the critic-selected sub-goals ŝ_tau of
-    `items` (`cvae_comparison.collect_items`: successful training episodes of the first
-    seed's last agent, what f_w learns from), coloured by target category; returns the
-    number of items drawn."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-    from sklearn.manifold import TSNE
-
-    method = config.method
-    s_0, goal, subgoal = (x[: args.tsne_points] for x in items)
-    n = len(s_0)
-    if n < 5:
-        return n
-    imagined = np.asarray(build(config).imagine(state.imagination_params, s_0, goal))
-    vectors = np.asarray(trainer.env_params.bank.target_vectors)
-    category = np.argmin(((goal[:, None, :] - vectors[None]) ** 2).sum(-1), axis=1)
-    names = categories(config.setup)
-    points = TSNE(perplexity=min(30.0, (2 * n - 1) / 3), init="pca", random_state=args.seed).fit_transform(
-        np.concatenate([imagined, subgoal]))  # fmt: skip
-    fig = Figure(figsize=(7, 6))
-    FigureCanvasAgg(fig)
-    ax = fig.add_subplot()
-    cmap = __import__("matplotlib").colormaps["tab20"]
-    for j, c in enumerate(np.unique(category)):
-        m = category == c
-        ax.scatter(*points[:n][m].T, marker="o", s=14, color=cmap(j % 20), label=names[c])
-        ax.scatter(*points[n:][m].T, marker="x", s=14, color=cmap(j % 20))
-    ax.set_title(f"{method}: imagined f_w (o) and selected sub-goals (x), {n} items")
-    ax.legend(fontsize=6, ncol=2, markerscale=0.8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    return n
-
-
-# ---------------------------------------------------------------------- sampled actions
-def sampled_results(folder: Path, methods) -> dict[str, list[dict]]:
-    """{method: [per seed: {"seed", "overall"}]}: each finished seed's selected model of a
-    sweep's `methods` on its own test episodes (`selection.test_key`, the sweep's test
-    episodes per room type) with actions sampled from the policy. For a method evaluated
-    greedily (ORG's protocol) these are the episodes its report row played, with the other
-    action rule; for one evaluated sampled, its row's own numbers again."""
-    out, evaluators = {}, {}
-    for method, models in models_of_sweep(folder, tuple(methods)).items():
-        episodes = sweeps.episodes_per_room(folder, "test", method)
-        out[method] = []
-        for model in models:
-            where = Evaluator.scenes_of(model.config)
-            evaluator = evaluators.setdefault(where, Evaluator(*where))
-            result = evaluator.evaluate(model.selected, model.config, "test", selection.test_key(model.seed), episodes,
-                                        greedy=False)  # fmt: skip
-            out[method].append({"seed": model.seed, "overall": rundir.jsonable(result["overall"])})
-    return out
 
 
 def sampled_section(args: Args, results: dict) -> str:
@@ -388,7 +256,7 @@ def sampled_section(args: Args, results: dict) -> str:
     sampled = {}
     for setup in dict.fromkeys(SETUP_OF[m] for m in greedy):
         arms = [arm_of(args, m) for m in greedy if SETUP_OF[m] == setup]
-        sampled.update(by_method(args, sampled_results(args.out / setup, arms)))
+        sampled.update(by_method(args, paper_figures.sampled_results(args.out / setup, arms)))
     md, rows = sampled_markdown(results, sampled)
     write_csv(args.out / "sampled.csv", rows)
     return (title + "ORG's code acts greedily at evaluation (the argmax of the policy), SAVN's samples; greedy play can "
@@ -455,7 +323,7 @@ def write_report(args: Args, results: dict) -> dict:
                   + (cvae_comparison.markdown(result, config, args.cvae_windows, level=3) if "direct" in result
                      else f"Not run: {result['items']} successful episodes in {args.cvae_windows} windows.\n"))  # fmt: skip
         print("Figure 4: t-SNE", flush=True)
-        n = tsne_figure(args, config, trainer, state, items, out / "fig4_tsne.png")
+        n = paper_figures.tsne_figure(config, trainer, state, items, out / "fig4_tsne.png", args.tsne_points, args.seed)
         md.append(f"## Figure 4: t-SNE of imagined states and selected sub-goals ({foresit}, seed {args.seed})\n\n"
                   + (f"![t-SNE](fig4_tsne.png)\n\n{n} items.\n" if n >= 5 else f"Not drawn: {n} items.\n"))  # fmt: skip
     md.append("## Figure 3: trajectories on the same test episodes\n")
@@ -463,7 +331,8 @@ def write_report(args: Args, results: dict) -> dict:
         if base in results and other in results:
             name = f"fig3_{base}_vs_{other}.png".replace("+", "_")
             print(f"Figure 3: {base} and {other}", flush=True)
-            summary = trajectories_figure(args, base, other, out / name)
+            loaded = {m: _first_seed(args, m)[::3] for m in (base, other)}  # (config, selected params)
+            summary = paper_figures.trajectories_figure(loaded, args.seed, args.trajectory_candidates, out / name)
             md.append(f"![{base} and {other}]({name})\n\n{base} left, {other} right (seed {args.seed}; the arrow is the "
                       f"start pose, the target framed in red). {summary}.\n\n")  # fmt: skip
     md.append("## Learning curves (mean and band of one std over seeds)\n\n"

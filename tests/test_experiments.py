@@ -547,13 +547,13 @@ def test_a_sweep_arm_trains_its_own_config_and_is_probed_from_its_checkpoints(tm
 
 @pytest.mark.slow
 def test_sampled_results_of_a_sweep_replay_its_sampled_test_evaluation(tiny_sweep):
-    """paper.sampled_results (the report's ORG rows with sampled actions): every finished
+    """paper_figures.sampled_results (the report's ORG rows with sampled actions): every finished
     seed's selected model on its own test episodes, actions sampled. a3c is evaluated
     sampled by its protocol, so these are the sweep's own test results again: the same
     models, episodes and keys."""
-    from experiments import paper
+    from experiments.running import paper_figures
 
-    sampled = paper.sampled_results(tiny_sweep, ["a3c"])
+    sampled = paper_figures.sampled_results(tiny_sweep, ["a3c"])
     per_seed = json.loads((tiny_sweep / "methods" / "a3c" / "results.json").read_text())["results"]
     assert [r["seed"] for r in sampled["a3c"]] == [r["seed"] for r in per_seed] == [SEED, SEED + 1]
     for mine, theirs in zip(sampled["a3c"], per_seed):

@@ -23,7 +23,7 @@ CHECKED = ("foresit_jax", "experiments", "benchmarks", "envs")
 ALLOWED = {
     ("experiments/__init__.py", "__getattr__", "experiments.running"):
         "defers jax and the library to `experiments.load`: every `python -m experiments.<program>` imports the package",
-    ("experiments/paper.py", "trajectories_figure", "envs.render"):
+    ("experiments/running/paper_figures.py", "trajectories_figure", "envs.render"):
         "defers matplotlib (envs.render imports it at its top) to the figure that draws",
     ("envs/gymnax_compat.py", "make_gymnax", "envs"): "cycle: envs/__init__ imports gymnax_compat",
     ("envs/gymnax_compat.py", "register_gymnax", "envs"): "cycle: envs/__init__ imports gymnax_compat",

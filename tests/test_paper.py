@@ -13,7 +13,7 @@ import pytest
 import envs
 from envs.metrics import LENGTH_BUCKETS, bucket_label, by_length
 from experiments import paper
-from experiments.running import numerics
+from experiments.running import numerics, paper_figures
 from experiments.reporting import paper_tables
 from test_experiments import cli_error
 
@@ -164,7 +164,7 @@ def test_trajectory_replay_follows_the_environment_step_by_step():
     env, params = envs.make("GridNav-v0", setup="savn", split="test", room_types=("bathroom",), training=False)
     key = jax.random.PRNGKey(4)
     actions = jax.numpy.array([0, 0, 0, 2, 2] * 6)  # MoveAhead and turns, no Done: the episode runs on
-    got = np.asarray(paper._replay_positions(env, params, key, actions))
+    got = np.asarray(paper_figures.replay_positions(env, params, key, actions))
     _, state = env.reset(key, params)
     want = [np.asarray(state.agent_pos)]
     for a in np.asarray(actions):
