@@ -91,7 +91,10 @@ def play(model, split: str, episodes: int, compiled: dict) -> dict:
                  "d": d, "in_room": in_room}  # fmt: skip
         parts.append({name: np.asarray(v) for name, v in batch.items()})
     width = max(p["valid"].shape[1] for p in parts)  # rooms' time limits differ: pad the shorter
-    pad = lambda x: np.pad(x, ((0, 0), (0, width - x.shape[1])))
+
+    def pad(x):
+        return np.pad(x, ((0, 0), (0, width - x.shape[1])))
+
     return {name: np.concatenate([pad(p[name]) for p in parts]) for name in parts[0]}
 
 

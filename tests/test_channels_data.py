@@ -54,7 +54,7 @@ def test_stage_1_is_quoted_with_its_verdicts(tmp_path, capsys):
         assert row in doc, row
     start = out["pairs"][f"{START} - {CRITIC}"]
     assert start["SPL"]["ci_low"] > 0 and start["SR"]["ci_low"] < 0 < start["SR"]["ci_high"]  # the docs' words
-    assert f"+4.4 [+1.9, +6.8] SPL, a gain that excludes 0" in flat and study_data.interval(start["SPL"]) == "+4.4 [+1.9, +6.8]"
+    assert "+4.4 [+1.9, +6.8] SPL, a gain that excludes 0" in flat and study_data.interval(start["SPL"]) == "+4.4 [+1.9, +6.8]"
     # "The critic reproduces bit for bit": the range-4 study's critic (79dce9c), seed for seed
     earlier = report.load(study_data.unpack("ceiling_range4.tar.xz", tmp_path / "range4", (CRITIC,
                                             "a3c+oracle@learning_rate=3e-4")))  # fmt: skip

@@ -16,7 +16,6 @@ import train_helpers as H
 from envs import catalog as C
 from envs.wrappers import CUES, CueWrapper
 from foresit_jax import rollout
-from foresit_jax.config import Config
 from foresit_jax.methods import parse_method
 from foresit_jax.networks import build
 from foresit_jax.rollout import ActOptions, AgentParams, BoundEnv

@@ -208,7 +208,6 @@ def test_gymnax_1s_own_step_over_step_env_and_is_truncated_is_the_six_value_step
 
 @pytest.mark.parametrize("gymnax_installed", [True, False], ids=["as_installed", "hidden"])
 def test_without_step_api_the_step_has_five_values_whatever_is_installed(monkeypatch, gymnax_installed):
-    version = GYMNAX if gymnax_installed else None
     if not gymnax_installed:
         monkeypatch.setattr(gymnax_compat, "installed_gymnax_version", lambda: None)
     with no_warning():

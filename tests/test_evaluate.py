@@ -81,10 +81,10 @@ def test_evaluate_on_the_validation_split(tiny_agent):
     config, params = tiny_agent
     results = evaluate(params, config, "val", jax.random.PRNGKey(0), episodes_per_room=2)
     assert set(results) == {"bathroom", "overall"}
-    for metrics in results.values():
-        assert set(metrics) == KEYS
-        assert metrics["episodes"] == 2
-        assert 0.0 <= metrics["SPL"] <= metrics["SR"] <= 100.0
+    for room in results.values():
+        assert set(room) == KEYS
+        assert room["episodes"] == 2
+        assert 0.0 <= room["SPL"] <= room["SR"] <= 100.0
     np.testing.assert_equal(results["overall"], results["bathroom"])  # (NaN == NaN here)
     # Same key, same episodes.
     np.testing.assert_equal(evaluate(params, config, "val", jax.random.PRNGKey(0), episodes_per_room=2), results)
