@@ -38,7 +38,7 @@ from experiments.running.models import models_of_run, models_of_sweep
 from foresit_jax import rollout as rollout_lib
 from foresit_jax.networks import build
 from foresit_jax.rollout import ActOptions, BoundEnv
-from foresit_jax.evaluate import Evaluator
+from foresit_jax.evaluate import Evaluator, base_acting
 from foresit_jax.probes import EARLY_STEPS, episode_endings, replay_oracle
 
 
@@ -71,7 +71,7 @@ def play(model, split: str, episodes: int, compiled: dict) -> dict:
         where = Evaluator.scenes_of(config)
         evaluator = compiled.get(where) or Evaluator(*where)
         compiled[where] = evaluator
-        rollout = jax.jit(functools.partial(rollout_lib.rollout, build(config),
+        rollout = jax.jit(functools.partial(rollout_lib.rollout, build(config), act=base_acting(config).act,
                                             options=ActOptions(greedy=config.pieces.greedy_evaluation)),
                           static_argnames="num_steps")  # fmt: skip
         compiled[config] = (evaluator, rollout, jax.jit(functools.partial(replay_oracle, evaluator.env)))

@@ -432,6 +432,9 @@ def rollout(nets: Networks, acting: AgentParams, env: BoundEnv, key, num_steps: 
     first seven arguments."""
     if acting.noise_variance is None:
         raise ValueError("rollout: give AgentParams.noise_variance, the evaluation's fixed variance")
+    if act is None and nets.method.base_piece.adapts_in_episode:
+        raise ValueError(f"rollout: method {nets.method.name!r} adapts its parameters inside each episode (the maml "
+                         "base): pass act=foresit_jax.maml.act (foresit_jax.evaluate.base_acting(config).act)")
     noise_variance = jnp.asarray(acting.noise_variance, jnp.float32)
     if reset_keys is not None:
         num_lanes = reset_keys.shape[0]

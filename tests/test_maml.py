@@ -213,6 +213,8 @@ def test_agent_rollout_adapts_through_the_same_code_path(monkeypatch):
     assert calls == [20, config.num_steps]
     with pytest.raises(ValueError, match="whole episodes"):
         maml.act(nets, AgentParams(params, w_params), bound, actor, key, 5)  # packed windows: refused
+    with pytest.raises(ValueError, match="act=foresit_jax.maml.act"):  # a3c's window would not adapt: refused
+        rollout.rollout(nets, AgentParams(params, w_params, jnp.zeros(4)), bound, key, 20)
 
 
 # ---------------------------------------------------------------------- the meta-gradient

@@ -15,7 +15,7 @@ from envs.catalog import ROOM_TYPES, categories
 from experiments.running import rundir, selection, sweeps
 from experiments.running.models import models_of_sweep
 from foresit_jax import rollout as rollout_lib
-from foresit_jax.evaluate import Evaluator
+from foresit_jax.evaluate import Evaluator, base_acting
 from foresit_jax.networks import build
 from foresit_jax.rollout import ActOptions, BoundEnv
 
@@ -34,7 +34,7 @@ def trajectories_figure(loaded: dict, seed: int, candidates: int, path: Path) ->
     env, n = evaluator.env, candidates
     key = selection.test_key(seed)
     rooms = next(iter(loaded.values()))[0].room_types or ROOM_TYPES
-    rollouts = {m: jax.jit(functools.partial(rollout_lib.rollout, build(config),
+    rollouts = {m: jax.jit(functools.partial(rollout_lib.rollout, build(config), act=base_acting(config).act,
                                             options=ActOptions(greedy=config.pieces.greedy_evaluation)),
                            static_argnames="num_steps") for m, (config, _) in loaded.items()}  # fmt: skip
     replay = jax.jit(functools.partial(replay_positions, env))
