@@ -160,6 +160,8 @@ def files_from_cli(method: str, preset: str = "tiny") -> CliPath:
             file = os.path.relpath(path, root)
             state["in_update"] |= name == "update" and path == update_file
             if not state["in_update"] and name == "__post_init__" and path == config_file:
+                if file not in entered:
+                    entered.append(file)
                 config.extend(f for f in project_stack(frame) if f not in config)
                 state["in_config"] += 1
                 return leaving_config

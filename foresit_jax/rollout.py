@@ -363,6 +363,10 @@ def act_window(nets: Networks, acting: AgentParams, env: BoundEnv, actor: ActorS
     is the agent's (`agent_step`: `ActorCritic.encode` at T = 1, i_tau, `ActorCritic.heads`),
     then the environment's. `adapt`: what the maml base's inner loop gives a window
     (`Adaptation`; the default: nothing)."""
+    if adapt.alive is None and nets.method.base_piece.adapts_in_episode:
+        raise ValueError(f"act_window plays one parameter set, and method {nets.method.name!r} adapts its parameters "
+                         "inside each episode (the maml base): use foresit_jax.maml.act (Trainer.act_window, "
+                         "foresit_jax.evaluate.base_acting(config).act)")
     params, lanes = acting.params, jnp.arange(actor.episode_step.shape[0])
     env = acting_env(nets, env)
     kernels = nets.model.apply(params, adapt.lstm_update, method="lstm_kernels")  # once, outside the loop

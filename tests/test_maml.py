@@ -215,6 +215,8 @@ def test_agent_rollout_adapts_through_the_same_code_path(monkeypatch):
         maml.act(nets, AgentParams(params, w_params), bound, actor, key, 5)  # packed windows: refused
     with pytest.raises(ValueError, match="act=foresit_jax.maml.act"):  # a3c's window would not adapt: refused
         rollout.rollout(nets, AgentParams(params, w_params, jnp.zeros(4)), bound, key, 20)
+    with pytest.raises(ValueError, match="use foresit_jax.maml.act"):  # nor one window of it
+        rollout.act_window(nets, AgentParams(params, w_params, jnp.zeros(4)), bound, actor, key, 20, WHOLE)
 
 
 # ---------------------------------------------------------------------- the meta-gradient
