@@ -64,32 +64,57 @@ def measure(bench: BenchDevices) -> dict:
         states, metrics = jax.block_until_ready(run(states, trainer.env_params, bench.updates))
         times.append(time.perf_counter() - start)
         useful = float(np.sum(metrics["frames/useful"]))
-    return {"devices": int(mesh.devices.size), "local_devices": jax.device_count(), "compile_s": compile_s,
-            "best_s": min(times), "useful_fps": useful / min(times)}  # fmt: skip
+    return {
+        "devices": int(mesh.devices.size),
+        "local_devices": jax.device_count(),
+        "compile_s": compile_s,
+        "best_s": min(times),
+        "useful_fps": useful / min(times),
+    }
 
 
 def main(bench: BenchDevices) -> list[dict]:
     rows = []
     for n in bench.devices:
-        env = {**os.environ, "XLA_FLAGS": f"{os.environ.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count={n}"}
-        code = ("import json, tyro; from benchmarks import bench_devices as B; "
-                "print('RESULT', json.dumps(B.measure(tyro.cli(B.BenchDevices))))")  # fmt: skip
-        argv = [f"--seeds={bench.seeds}", f"--method={bench.method}", f"--preset={bench.preset}",
-                f"--updates={bench.updates}", f"--repeats={bench.repeats}"]  # fmt: skip
-        proc = subprocess.run([sys.executable, "-c", code, *argv], env=env, capture_output=True, text=True,
-                              cwd=Path(__file__).resolve().parents[1])  # the root, where `benchmarks` imports from
+        env = {
+            **os.environ,
+            "XLA_FLAGS": f"{os.environ.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count={n}",
+        }
+        code = (
+            "import json, tyro; from benchmarks import bench_devices as B; "
+            "print('RESULT', json.dumps(B.measure(tyro.cli(B.BenchDevices))))"
+        )
+        argv = [
+            f"--seeds={bench.seeds}",
+            f"--method={bench.method}",
+            f"--preset={bench.preset}",
+            f"--updates={bench.updates}",
+            f"--repeats={bench.repeats}",
+        ]
+        proc = subprocess.run(
+            [sys.executable, "-c", code, *argv],
+            env=env,
+            capture_output=True,
+            text=True,
+            cwd=Path(__file__).resolve().parents[1],
+        )  # the root, where `benchmarks` imports from
         if proc.returncode != 0:
             raise SystemExit(f"error: the run with {n} host devices failed:\n{proc.stderr[-2000:]}")
         row = json.loads(proc.stdout.split("RESULT", 1)[1])
         rows.append(row)
-        print(f"{n} host device(s): {row['devices']} used, compile {row['compile_s']:.1f} s, "
-              f"{row['best_s']:.2f} s per {bench.updates} updates, {row['useful_fps']:,.0f} useful frames/s", flush=True)  # fmt: skip
+        print(
+            f"{n} host device(s): {row['devices']} used, compile {row['compile_s']:.1f} s, "
+            f"{row['best_s']:.2f} s per {bench.updates} updates, {row['useful_fps']:,.0f} useful frames/s",
+            flush=True,
+        )
     print(f"\n{bench.method}, preset {bench.preset}, {bench.seeds} seeds vmapped, {bench.updates} updates per call\n")
     print("| host devices | used | compile s | s per call | useful frames/s (all seeds) | speed vs first |")
     print("|---|---|---|---|---|---|")
     for row in rows:
-        print(f"| {row['local_devices']} | {row['devices']} | {row['compile_s']:.1f} | {row['best_s']:.2f} | "
-              f"{row['useful_fps']:,.0f} | {rows[0]['best_s'] / row['best_s']:.2f}x |")  # fmt: skip
+        print(
+            f"| {row['local_devices']} | {row['devices']} | {row['compile_s']:.1f} | {row['best_s']:.2f} | "
+            f"{row['useful_fps']:,.0f} | {rows[0]['best_s'] / row['best_s']:.2f}x |"
+        )
     return rows
 
 

@@ -101,13 +101,28 @@ def time_once(compiled, args: tuple, key, batch_size: int, steps: int) -> float:
     return batch_size * steps / (time.perf_counter() - start)
 
 
-def gridnav_rollout(precomputed_views: bool, setup: str, split: str, batch_size: int, steps: int, layout: str = "room",
-                    priors: bool = False, perception_range: float | None = None):  # fmt: skip
+def gridnav_rollout(
+    precomputed_views: bool,
+    setup: str,
+    split: str,
+    batch_size: int,
+    steps: int,
+    layout: str = "room",
+    priors: bool = False,
+    perception_range: float | None = None,
+):
     """(jitted rollout(params, carry, key) -> carry, (params, carry)) for GridNav-v0.
 
     The scene bank is an argument, not a constant folded into the program."""
-    env, params = envs.make("GridNav-v0", setup=setup, split=split, precomputed_views=precomputed_views, layout=layout,
-                            priors=priors, perception_range=perception_range)  # fmt: skip
+    env, params = envs.make(
+        "GridNav-v0",
+        setup=setup,
+        split=split,
+        precomputed_views=precomputed_views,
+        layout=layout,
+        priors=priors,
+        perception_range=perception_range,
+    )
     vstep = jax.vmap(env.step, in_axes=(0, 0, 0, None))
 
     @jax.jit
@@ -166,7 +181,11 @@ def main(config: BenchConfig) -> int:
     if config.compare == "xminigrid" and not have_xminigrid():
         print(f"error: {XMINIGRID_INSTALL}", file=sys.stderr)
         return 2
-    if not config.batch_sizes or min(config.batch_sizes) < 1 or min(config.steps, config.raycast_steps, config.repeats) < 1:
+    if (
+        not config.batch_sizes
+        or min(config.batch_sizes) < 1
+        or min(config.steps, config.raycast_steps, config.repeats) < 1
+    ):
         print("error: --batch-sizes, --steps, --raycast-steps and --repeats must be positive", file=sys.stderr)
         return 2
     modes = {"precomputed": (True,), "raycast": (False,), "both": (True, False)}[config.mode]
@@ -183,14 +202,20 @@ def main(config: BenchConfig) -> int:
                 for precomputed in modes:
                     for reach in (None, *config.perception_ranges):
                         steps = config.steps if precomputed else config.raycast_steps
-                        name = (f"GridNav {'precomputed' if precomputed else 'raycast'}"
-                                + ("" if layout == "room" else " house") + (" priors" if priors else "")
-                                + ("" if reach is None else f" range {reach:g}"))  # fmt: skip
+                        name = (
+                            f"GridNav {'precomputed' if precomputed else 'raycast'}"
+                            + ("" if layout == "room" else " house")
+                            + (" priors" if priors else "")
+                            + ("" if reach is None else f" range {reach:g}")
+                        )
                         build = lambda p=precomputed, n=steps, lay=layout, pr=priors, r=reach: gridnav_rollout(  # noqa: E731
-                            p, config.setup, config.split, batch_size, n, lay, pr, r)
+                            p, config.setup, config.split, batch_size, n, lay, pr, r
+                        )
                         jobs.append((name, steps, build))
         if config.compare == "xminigrid":
-            jobs.append((f"xminigrid {XMINIGRID_ENV}", config.steps, lambda: xminigrid_rollout(batch_size, config.steps)))
+            jobs.append(
+                (f"xminigrid {XMINIGRID_ENV}", config.steps, lambda: xminigrid_rollout(batch_size, config.steps))
+            )
         # Compile everything of this batch size first, then time round-robin: on a shared
         # machine the load drifts, and interleaving exposes every env to the same drift.
         compiled = []
@@ -207,9 +232,13 @@ def main(config: BenchConfig) -> int:
             print(f"  measured {name:32s} B={batch_size:<5d} best {max(rates):14,.0f} steps/s", flush=True)
 
     print()
-    rows = [[m.name, m.batch_size, steps, f"{m.best_sps:,.0f}", f"{m.median_sps:,.0f}", f"{m.compile_s:.2f}"]
-            for m, steps in results]  # fmt: skip
-    print(markdown_table(rows, ("env", "batch", "steps", "best steps/s", "median steps/s", "compile s"), align="<>>>>>"))
+    rows = [
+        [m.name, m.batch_size, steps, f"{m.best_sps:,.0f}", f"{m.median_sps:,.0f}", f"{m.compile_s:.2f}"]
+        for m, steps in results
+    ]
+    print(
+        markdown_table(rows, ("env", "batch", "steps", "best steps/s", "median steps/s", "compile s"), align="<>>>>>")
+    )
     if config.compare == "xminigrid":
         print()
         print(f"ratio ours / {XMINIGRID_ENV} (best steps/s)")
@@ -218,9 +247,11 @@ def main(config: BenchConfig) -> int:
             if m.name.startswith("GridNav"):
                 print(f"  {m.name:20s} B={m.batch_size:<5d} {m.best_sps / reference[m.batch_size]:6.2f}x")
     best = {(m.name, m.batch_size): m.best_sps for m, _ in results}
-    for wanted, label, suffix in ((set(config.layouts) == {"room", "house"}, "houses / rooms", " house"),
-                                  (set(config.priors) == {False, True}, "priors / today's layouts", " priors"),
-                                  *((True, f"range {r:g} / no range", f" range {r:g}") for r in config.perception_ranges)):
+    for wanted, label, suffix in (
+        (set(config.layouts) == {"room", "house"}, "houses / rooms", " house"),
+        (set(config.priors) == {False, True}, "priors / today's layouts", " priors"),
+        *((True, f"range {r:g} / no range", f" range {r:g}") for r in config.perception_ranges),
+    ):
         if not wanted:
             continue
         print()

@@ -77,15 +77,22 @@ def main(bench: BenchGrid) -> dict:
             if name == "grid":
                 frames = float(np.sum(np.asarray(metrics["frames/useful"])))
     best = {k: min(v) for k, v in timed.items()}
-    print(f"{bench.method}, preset {bench.preset}: {len(bench.rates)} rates x {bench.seeds} seeds, "
-          f"{bench.updates} updates per chunk, best of {bench.repeats} ({jax.devices()[0].device_kind})")  # fmt: skip
+    print(
+        f"{bench.method}, preset {bench.preset}: {len(bench.rates)} rates x {bench.seeds} seeds, "
+        f"{bench.updates} updates per chunk, best of {bench.repeats} ({jax.devices()[0].device_kind})"
+    )
     print("| way | s per chunk (whole grid) | useful frames/s | compile + first call s |")
     print("|---|---|---|---|")
     for name in ("arms", "grid"):
         print(f"| {name} | {best[name]:.2f} | {frames / best[name]:,.0f} | {compile_s[name]:.1f} |")
     print(f"grid / arms speed: {best['arms'] / best['grid']:.2f}x")
-    return {"best_s": best, "compile_s": compile_s, "useful_frames": frames, "speedup": best["arms"] / best["grid"],
-            "rates": np.asarray(jnp.asarray(rates)).tolist()}  # fmt: skip
+    return {
+        "best_s": best,
+        "compile_s": compile_s,
+        "useful_frames": frames,
+        "speedup": best["arms"] / best["grid"],
+        "rates": np.asarray(jnp.asarray(rates)).tolist(),
+    }
 
 
 if __name__ == "__main__":

@@ -45,8 +45,11 @@ def main(bench: BenchLearning) -> dict:
         for seed in range(bench.seeds):
             args = Args(base_preset=bench.preset, method=method, seeds=1, frames=bench.frames, chunk=bench.chunk)
             run = run_variant(args, {}, keys=jax.random.PRNGKey(seed)[None])
-            print(f"{method} seed {seed}: compile {run['compile_s']} s, reached {run['reached']}, "
-                  f"final SR {run['final_sr_mean']}% after {run['seconds']} s / {run['frames']:,} frames", flush=True)  # fmt: skip
+            print(
+                f"{method} seed {seed}: compile {run['compile_s']} s, reached {run['reached']}, "
+                f"final SR {run['final_sr_mean']}% after {run['seconds']} s / {run['frames']:,} frames",
+                flush=True,
+            )
             runs.append(run)
         results[method] = runs
     print()
@@ -55,8 +58,10 @@ def main(bench: BenchLearning) -> dict:
     for method, runs in results.items():
         for goal in GOALS:
             hits = [r["reached"][str(goal)] for r in runs if str(goal) in r["reached"]]
-            print(f"| {method} | {100 * goal:.0f}% | {len(hits)}/{len(runs)} | {mean_std([h[0] for h in hits])} | "
-                  f"{mean_std([h[1] for h in hits])} |")  # fmt: skip
+            print(
+                f"| {method} | {100 * goal:.0f}% | {len(hits)}/{len(runs)} | {mean_std([h[0] for h in hits])} | "
+                f"{mean_std([h[1] for h in hits])} |"
+            )
     return results
 
 

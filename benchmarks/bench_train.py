@@ -165,7 +165,9 @@ def combinations(bench: BenchConfig):
         if (label, lanes) in seen:
             continue
         seen.add((label, lanes))
-        overrides = dict(num_lanes=lanes, num_updates=bench.updates, rollout=rollout, gradient=gradient, setup=bench.setup)
+        overrides = dict(
+            num_lanes=lanes, num_updates=bench.updates, rollout=rollout, gradient=gradient, setup=bench.setup
+        )
         if rollout == "episodes":
             overrides["num_steps"] = TRAIN_TIME_LIMIT  # one whole episode per lane
         elif bench.num_steps:
@@ -204,19 +206,31 @@ def main(bench: BenchConfig) -> list[Measurement]:
     results = []
     for label, config, trainer, state, compiled, compile_s, metrics, _ in programs:
         key = label + str(config.num_lanes)
-        results.append(Measurement(
-            label, config.num_lanes, config.num_steps, bench.updates, compile_s, min(times[key]),
-            statistics.median(times[key]), float(np.sum(metrics["frames/useful"])),
-            config.num_lanes * config.num_steps * bench.updates, temp_megabytes(compiled), min(env_times[key]),
-        ))  # fmt: skip
+        results.append(
+            Measurement(
+                label,
+                config.num_lanes,
+                config.num_steps,
+                bench.updates,
+                compile_s,
+                min(times[key]),
+                statistics.median(times[key]),
+                float(np.sum(metrics["frames/useful"])),
+                config.num_lanes * config.num_steps * bench.updates,
+                temp_megabytes(compiled),
+                min(env_times[key]),
+            )
+        )
     print_table(results)
     return results
 
 
 def print_table(results: list[Measurement]) -> None:
     print()
-    print("| method, rollout, gradient | lanes | T | useful frames/s | stepped frames/s | useful % | updates/s | "
-          "compile s | temp MB | env % | x first |")  # fmt: skip
+    print(
+        "| method, rollout, gradient | lanes | T | useful frames/s | stepped frames/s | useful % | updates/s | "
+        "compile s | temp MB | env % | x first |"
+    )
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     first = results[0]
     per_useful = lambda m: m.best_s / max(m.useful_frames, 1.0)  # noqa: E731
@@ -227,8 +241,10 @@ def print_table(results: list[Measurement]) -> None:
             f"{100 * m.useful_frames / m.stepped_frames:.0f}% | {m.updates / m.best_s:.1f} | {m.compile_s:.1f} | "
             f"{temp} | {100 * m.env_s / m.best_s:.1f}% | {per_useful(first) / per_useful(m):.2f} |"
         )
-    print("\n(best of the repeats; median update times are within "
-          f"{max(100 * (m.median_s / m.best_s - 1) for m in results):.0f}% of the best)")  # fmt: skip
+    print(
+        "\n(best of the repeats; median update times are within "
+        f"{max(100 * (m.median_s / m.best_s - 1) for m in results):.0f}% of the best)"
+    )
 
 
 if __name__ == "__main__":

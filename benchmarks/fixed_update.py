@@ -24,8 +24,16 @@ from foresit_jax.config import Config
 from foresit_jax.methods import parse_method
 from foresit_jax.train import make_trainer
 
-TINY = dict(num_lanes=4, room_types=("bathroom",), hidden_size=32, attention_size=32, value_hidden=32,
-            imagination_layer_sizes=(32, 16, 8, 16, 32, 32), buffer_size=2, imagination_epochs=1)  # fmt: skip
+TINY = dict(
+    num_lanes=4,
+    room_types=("bathroom",),
+    hidden_size=32,
+    attention_size=32,
+    value_hidden=32,
+    imagination_layer_sizes=(32, 16, 8, 16, 32, 32),
+    buffer_size=2,
+    imagination_epochs=1,
+)
 
 # (name, method, setup, Config fields of the arm)
 ARMS = (
@@ -53,7 +61,9 @@ def directions(path: str, size: int) -> np.ndarray:
 
 
 def leaves(tree) -> dict[str, np.ndarray]:
-    return {jax.tree_util.keystr(p): np.asarray(x, np.float64).ravel() for p, x in jax.tree_util.tree_leaves_with_path(tree)}
+    return {
+        jax.tree_util.keystr(p): np.asarray(x, np.float64).ravel() for p, x in jax.tree_util.tree_leaves_with_path(tree)
+    }
 
 
 def fixed_update(config: Config) -> dict[str, np.ndarray]:
@@ -66,8 +76,12 @@ def fixed_update(config: Config) -> dict[str, np.ndarray]:
     (loss, window), grads = jax.jit(trainer.loss_and_grad)(state.params, state.imagination_params, env, actor, k_act)
     flat = leaves(grads)
     digest = np.array([[np.linalg.norm(g), *(directions(path, g.size) @ g)] for path, g in flat.items()])
-    return {"loss": np.float64(loss), "actions": np.asarray(window.traj.actions, np.int8),
-            "leaves": np.array(list(flat)), "digest": digest}  # fmt: skip
+    return {
+        "loss": np.float64(loss),
+        "actions": np.asarray(window.traj.actions, np.int8),
+        "leaves": np.array(list(flat)),
+        "digest": digest,
+    }
 
 
 def main() -> None:

@@ -173,9 +173,10 @@ def make_train(config, env, env_params):
                         logp = log_prob(logits, traj_batch.action)
                         clip = config["CLIP_EPS"]
                         value_pred_clipped = traj_batch.value + (value - traj_batch.value).clip(-clip, clip)
-                        value_loss = 0.5 * jnp.maximum(
-                            jnp.square(value - targets), jnp.square(value_pred_clipped - targets)
-                        ).mean()
+                        value_loss = (
+                            0.5
+                            * jnp.maximum(jnp.square(value - targets), jnp.square(value_pred_clipped - targets)).mean()
+                        )
                         ratio = jnp.exp(logp - traj_batch.log_prob)
                         gae = (gae - gae.mean()) / (gae.std() + 1e-8)
                         loss_actor = -jnp.minimum(ratio * gae, jnp.clip(ratio, 1.0 - clip, 1.0 + clip) * gae).mean()
@@ -251,11 +252,17 @@ def main(args: Args) -> dict:
     if args.out is not None and args.out.exists():
         raise SystemExit(f"{args.out} exists: pass another --out, or move it away")
     config, schedule = preset("quick", "a3c")
-    env, env_params = envs.make_gymnax(setup=config.setup, split="train", room_types=config.room_types or None,
-                                       step_api="done")  # fmt: skip
+    env, env_params = envs.make_gymnax(
+        setup=config.setup, split="train", room_types=config.room_types or None, step_api="done"
+    )
     gridnav = env.gridnav
-    report = {"ppo_config": dict(CONFIG, TOTAL_TIMESTEPS=args.total_timesteps), "seeds": list(args.seeds),
-              "jax": jax.__version__, "device": str(jax.devices()[0]), "by_lr": {}}  # fmt: skip
+    report = {
+        "ppo_config": dict(CONFIG, TOTAL_TIMESTEPS=args.total_timesteps),
+        "seeds": list(args.seeds),
+        "jax": jax.__version__,
+        "device": str(jax.devices()[0]),
+        "by_lr": {},
+    }
     keys = jnp.stack([selection.run_key(s) for s in args.seeds])
     none = lambda n: None  # noqa: E731  (no carry)
     trained = {}
@@ -266,26 +273,56 @@ def main(args: Args) -> dict:
         seconds = time.perf_counter() - t0
         params = out["runner_state"][0].params
         trained[lr] = params
-        val = [_sr(evaluate_policy(make_policy(gridnav), jax.tree.map(lambda x: x[i], params), none, config, "val",
-                                   selection.validation_key(s), schedule.val_episodes_per_room))
-               for i, s in enumerate(args.seeds)]  # fmt: skip
+        val = [
+            _sr(
+                evaluate_policy(
+                    make_policy(gridnav),
+                    jax.tree.map(lambda x: x[i], params),
+                    none,
+                    config,
+                    "val",
+                    selection.validation_key(s),
+                    schedule.val_episodes_per_room,
+                )
+            )
+            for i, s in enumerate(args.seeds)
+        ]
         report["by_lr"][str(lr)] = {"train_seconds": seconds, "val_sr": val}
-        print(f"lr {lr:g}: trained {len(args.seeds)} seeds x {num_updates(ppo) * ppo['NUM_ENVS'] * ppo['NUM_STEPS']:,} "
-              f"frames in {seconds:.0f} s; validation SR {np.mean(val):.1f} ({', '.join(f'{v:.1f}' for v in val)})",
-              flush=True)  # fmt: skip
+        print(
+            f"lr {lr:g}: trained {len(args.seeds)} seeds x {num_updates(ppo) * ppo['NUM_ENVS'] * ppo['NUM_STEPS']:,} "
+            f"frames in {seconds:.0f} s; validation SR {np.mean(val):.1f} ({', '.join(f'{v:.1f}' for v in val)})",
+            flush=True,
+        )
     best = max(args.learning_rates, key=lambda lr: np.mean(report["by_lr"][str(lr)]["val_sr"]))
     report["learning_rate"] = best
     for name, greedy in [("sampled", False)] + ([("greedy", True)] if args.greedy else []):
-        tests = [evaluate_policy(make_policy(gridnav, greedy), jax.tree.map(lambda x: x[i], trained[best]), none,
-                                 config, "test", selection.test_key(s), schedule.test_episodes_per_room)
-                 for i, s in enumerate(args.seeds)]  # fmt: skip
+        tests = [
+            evaluate_policy(
+                make_policy(gridnav, greedy),
+                jax.tree.map(lambda x: x[i], trained[best]),
+                none,
+                config,
+                "test",
+                selection.test_key(s),
+                schedule.test_episodes_per_room,
+            )
+            for i, s in enumerate(args.seeds)
+        ]
         sr = np.array([_sr(t) for t in tests])
         spl = np.array([t["overall"]["SPL"] for t in tests])
         s = stats.summary(sr)
-        report[name] = {"test_sr": sr.tolist(), "test_spl": spl.tolist(), "sr": s, "spl": stats.summary(spl),
-                        "tests": tests}  # fmt: skip
-        print(f"test ({name}, lr {best:g}): SR {s['mean']:.1f} ± {s['std']:.1f} [{s['ci_low']:.1f}, {s['ci_high']:.1f}], "
-              f"SPL {spl.mean():.1f}; seeds {list(args.seeds)}", flush=True)  # fmt: skip
+        report[name] = {
+            "test_sr": sr.tolist(),
+            "test_spl": spl.tolist(),
+            "sr": s,
+            "spl": stats.summary(spl),
+            "tests": tests,
+        }
+        print(
+            f"test ({name}, lr {best:g}): SR {s['mean']:.1f} ± {s['std']:.1f} [{s['ci_low']:.1f}, {s['ci_high']:.1f}], "
+            f"SPL {spl.mean():.1f}; seeds {list(args.seeds)}",
+            flush=True,
+        )
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps(report, indent=1, default=float))

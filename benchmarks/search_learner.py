@@ -75,11 +75,13 @@ def run_variant(args: Args, overrides: dict, keys=None) -> dict:
         frames += float(np.asarray(metrics["frames/useful"]).sum(1).mean())
         elapsed = time.perf_counter() - start
         mean = float(success.mean())
-        curve.append([round(elapsed, 1), int(frames), round(100 * mean, 1), [round(100 * float(x), 1) for x in success]])
+        curve.append(
+            [round(elapsed, 1), int(frames), round(100 * mean, 1), [round(100 * float(x), 1) for x in success]]
+        )
         for goal in GOALS:
             if str(goal) not in reached and mean >= goal:
                 reached[str(goal)] = [round(elapsed, 1), int(frames)]
-    last = curve[-max(1, len(curve) // 10):]  # the last tenth of the run
+    last = curve[-max(1, len(curve) // 10) :]  # the last tenth of the run
     final = np.mean([c[3] for c in last], axis=0)
     return {
         "overrides": overrides,

@@ -175,8 +175,16 @@ def files_from_cli(method: str, preset: str = "tiny") -> CliPath:
 
     with tempfile.TemporaryDirectory() as out:
         argv = sys.argv
-        sys.argv = ["experiments.train", "--method", method, "--preset", preset, "--out", os.path.join(out, "run"),
-                    "--no-progress"]  # fmt: skip
+        sys.argv = [
+            "experiments.train",
+            "--method",
+            method,
+            "--preset",
+            preset,
+            "--out",
+            os.path.join(out, "run"),
+            "--no-progress",
+        ]
         sys.settrace(tracer)
         threading.settrace(tracer)
         try:
@@ -199,7 +207,9 @@ def program_hashes(trainer, state) -> dict[str, str]:
     evaluator = Evaluator.for_config(config)
     rollout = evaluator.agent_rollout(config, 30, config.pieces.greedy_evaluation)
     room = evaluator.room_params("val", (config.room_types or ("bathroom",))[0])
-    evaluate = rollout.lower(state.params, state.imagination_params, room, jax.random.PRNGKey(1), jnp.zeros(8)).as_text()
+    evaluate = rollout.lower(
+        state.params, state.imagination_params, room, jax.random.PRNGKey(1), jnp.zeros(8)
+    ).as_text()
     subgoals = jax.jit(functools.partial(collect_subgoal_items, trainer), static_argnums=2)
     subgoals = subgoals.lower(state, trainer.env_params, 2).as_text()
     return {"train": _short(train), "evaluate": _short(evaluate), "subgoals": _short(subgoals)}
@@ -216,8 +226,10 @@ def main(args: Args) -> dict:
         report[method] = {"files": crossed, "hashes": program_hashes(trainer, state)}
         functions = sum(f for f, _ in crossed.values())
         lines = sum(n for _, n in crossed.values())
-        print(f"{method} ({args.preset}): one update crosses {functions} functions, {lines} lines, "
-              f"in {len(crossed)} files of foresit_jax")  # fmt: skip
+        print(
+            f"{method} ({args.preset}): one update crosses {functions} functions, {lines} lines, "
+            f"in {len(crossed)} files of foresit_jax"
+        )
         for name, (f, n) in crossed.items():
             print(f"  {name:18s} {f:3d} functions {n:5d} lines")
         print("  lowered programs: " + ", ".join(f"{k} {v}" for k, v in report[method]["hashes"].items()))
@@ -225,10 +237,15 @@ def main(args: Args) -> dict:
             path = files_from_cli(method, args.preset)
             report[method]["cli_files"], report[method]["reader_files"] = path.entered, path.reader
             report[method]["config_files"] = path.config
-            print(f"  from `python -m experiments.train` to optax.apply_updates: {len(path.entered)} project files "
-                  f"run; a reader follows {len(path.reader)} (the call chain, then the update): " + ", ".join(path.reader))  # fmt: skip
-            print(f"  and {len(path.config)} more to know what the Config says: " + ", ".join(path.config)
-                  + f" ({len(path.to_read)} in all)")  # fmt: skip
+            print(
+                f"  from `python -m experiments.train` to optax.apply_updates: {len(path.entered)} project files "
+                f"run; a reader follows {len(path.reader)} (the call chain, then the update): " + ", ".join(path.reader)
+            )
+            print(
+                f"  and {len(path.config)} more to know what the Config says: "
+                + ", ".join(path.config)
+                + f" ({len(path.to_read)} in all)"
+            )
     return report
 
 

@@ -32,8 +32,14 @@ from envs.gridnav import EnvParams, EnvState, GridNav, time_limits
 REGISTERED = ("GridNav-v0",)
 
 
-def make(env_id: str = "GridNav-v0", setup: str = "savn", split: str = "train", room_types=None,
-         training: bool | None = None, **env_kwargs):
+def make(
+    env_id: str = "GridNav-v0",
+    setup: str = "savn",
+    split: str = "train",
+    room_types=None,
+    training: bool | None = None,
+    **env_kwargs,
+):
     """Build the environment and the params of one split.
 
     Args:
@@ -64,7 +70,21 @@ if "gymnax" in sys.modules:  # importing gymnax costs seconds: register only if 
     register_gymnax()
 
 __all__ = [
-    "ACTIONS", "ROOM_TYPES", "SPLITS", "EnvParams", "EnvState", "GridNav", "SceneBank", "catalog",
-    "make", "make_gymnax", "metrics", "pose_from_index", "pose_index", "register_gymnax", "spaces",
-    "time_limits", "wrappers",
-]  # fmt: skip
+    "ACTIONS",
+    "ROOM_TYPES",
+    "SPLITS",
+    "EnvParams",
+    "EnvState",
+    "GridNav",
+    "SceneBank",
+    "catalog",
+    "make",
+    "make_gymnax",
+    "metrics",
+    "pose_from_index",
+    "pose_index",
+    "register_gymnax",
+    "spaces",
+    "time_limits",
+    "wrappers",
+]

@@ -30,8 +30,15 @@ from envs import bank_cache as cache
 from envs import catalog as C
 from envs.dynamics import pose_from_index, pose_index, transition
 from envs.raycast import (
-    DEPTH_RESOLUTION, NUM_ROWS, ROW_BANDS, ROW_MAX_DIST, ROW_MIN_DIST, column_angles_deg, ray_cells, view_rows,
-)  # fmt: skip
+    DEPTH_RESOLUTION,
+    NUM_ROWS,
+    ROW_BANDS,
+    ROW_MAX_DIST,
+    ROW_MIN_DIST,
+    column_angles_deg,
+    ray_cells,
+    view_rows,
+)
 from envs.houses import generate_house
 from envs.priors import target_encodings as prior_target_encodings
 from envs.scenes import generate_layout
@@ -147,15 +154,23 @@ def _expected_arrays(setup: str, scene_numbers, grid_size: int, view_width: int,
     i8, i32 = np.dtype(np.int8), np.dtype(np.int32)
     furniture = {"furniture_sem": ((s, g, g), i8)} if priors else {}
     return furniture | {
-        "numbers": ((s,), i32), "room_type": ((s,), i32), "cell_type": ((s, g, g), i8),
-        "obj_cat": ((s, g, g), i8), "obj_band": ((s, g, g), i8), "cell_room": ((s, g, g), i8),
-        "room_types": ((s, MAX_ROOMS), i32), "target_room": ((s, k), i32), "targets": ((s, k), i32),
-        "num_targets": ((s,), i32), "view_sem": ((s, p, NUM_ROWS, view_width), i8),
+        "numbers": ((s,), i32),
+        "room_type": ((s,), i32),
+        "cell_type": ((s, g, g), i8),
+        "obj_cat": ((s, g, g), i8),
+        "obj_band": ((s, g, g), i8),
+        "cell_room": ((s, g, g), i8),
+        "room_types": ((s, MAX_ROOMS), i32),
+        "target_room": ((s, k), i32),
+        "targets": ((s, k), i32),
+        "num_targets": ((s,), i32),
+        "view_sem": ((s, p, NUM_ROWS, view_width), i8),
         "view_depth": ((s, p, NUM_ROWS, view_width), np.dtype(np.uint8)),
-        "distance": ((s, k, p), np.dtype(np.int16)), "starts": ((s, k, p // 2), i32),
+        "distance": ((s, k, p), np.dtype(np.int16)),
+        "starts": ((s, k, p // 2), i32),
         "num_starts": ((s, k), i32),
         "target_vectors": ((len(C.categories(setup)), C.target_encodings(setup).shape[1]), np.dtype(np.float32)),
-    }  # fmt: skip
+    }
 
 
 def _max_targets(setup: str, scene_numbers) -> int:
@@ -166,8 +181,14 @@ def _max_targets(setup: str, scene_numbers) -> int:
 
 
 @functools.lru_cache(maxsize=16)
-def build_bank(setup: str, scene_numbers: tuple[int, ...], grid_size: int, view_width: int,
-               target_rooms: tuple[int, ...] = ALL_ROOM_TYPES, priors: bool = False) -> dict:  # fmt: skip
+def build_bank(
+    setup: str,
+    scene_numbers: tuple[int, ...],
+    grid_size: int,
+    view_width: int,
+    target_rooms: tuple[int, ...] = ALL_ROOM_TYPES,
+    priors: bool = False,
+) -> dict:
     """Numpy arrays of a SceneBank, cached in memory and on disk (see the module doc).
 
     The first build of a split takes seconds (all four room types of the train split: about
@@ -190,8 +211,14 @@ def generate_scene(number: int, setup: str, grid_size: int, priors: bool = False
     return (generate_house if C.is_house(number) else generate_layout)(number, setup, grid_size, priors)
 
 
-def compute_bank(setup: str, scene_numbers: tuple[int, ...], grid_size: int, view_width: int,
-                 target_rooms: tuple[int, ...] = ALL_ROOM_TYPES, priors: bool = False) -> dict:  # fmt: skip
+def compute_bank(
+    setup: str,
+    scene_numbers: tuple[int, ...],
+    grid_size: int,
+    view_width: int,
+    target_rooms: tuple[int, ...] = ALL_ROOM_TYPES,
+    priors: bool = False,
+) -> dict:
     """Numpy arrays of a SceneBank, built from scratch (no cache).  A scene's targets are the
     categories present in it whose room has a type in ``target_rooms``."""
     categories = C.categories(setup)
@@ -202,8 +229,9 @@ def compute_bank(setup: str, scene_numbers: tuple[int, ...], grid_size: int, vie
         layout = generate_scene(number, setup, grid_size, priors)
         furniture_sem = None
         if priors:
-            furniture_sem = np.where(layout.furniture >= 0, C.furniture_sem(setup, 0) + layout.furniture,
-                                     C.SEM_FURNITURE).astype(np.int8)  # fmt: skip
+            furniture_sem = np.where(
+                layout.furniture >= 0, C.furniture_sem(setup, 0) + layout.furniture, C.SEM_FURNITURE
+            ).astype(np.int8)
             out["furniture_sem"].append(furniture_sem)
         sem, depth_code = _scene_views(layout.cell_type, layout.obj_cat, layout.obj_band, view_width, furniture_sem)
         sem, depth_code = np.asarray(sem), np.asarray(depth_code)
@@ -235,12 +263,22 @@ def compute_bank(setup: str, scene_numbers: tuple[int, ...], grid_size: int, vie
         room_types = np.full(MAX_ROOMS, -1, np.int32)
         room_types[: len(layout.room_types)] = layout.room_types
         for name, value in (
-            ("numbers", layout.number), ("room_type", layout.room_type), ("cell_type", layout.cell_type),
-            ("obj_cat", layout.obj_cat), ("obj_band", layout.obj_band), ("cell_room", layout.cell_room),
-            ("room_types", room_types), ("target_room", target_room), ("targets", targets),
-            ("num_targets", k), ("view_sem", sem), ("view_depth", depth_code), ("distance", distance),
-            ("starts", starts), ("num_starts", num_starts),
-        ):  # fmt: skip
+            ("numbers", layout.number),
+            ("room_type", layout.room_type),
+            ("cell_type", layout.cell_type),
+            ("obj_cat", layout.obj_cat),
+            ("obj_band", layout.obj_band),
+            ("cell_room", layout.cell_room),
+            ("room_types", room_types),
+            ("target_room", target_room),
+            ("targets", targets),
+            ("num_targets", k),
+            ("view_sem", sem),
+            ("view_depth", depth_code),
+            ("distance", distance),
+            ("starts", starts),
+            ("num_starts", num_starts),
+        ):
             out[name].append(value)
     arrays = {name: np.stack(values) for name, values in out.items()}
     arrays["numbers"] = arrays["numbers"].astype(np.int32)
@@ -268,8 +306,9 @@ def _start_poses(ok, room_of_start, target_room: int, seed) -> np.ndarray:
     return np.concatenate([np.flatnonzero(away), near])
 
 
-def make_bank(setup: str, scene_numbers, grid_size: int, view_width: int, target_rooms=ALL_ROOM_TYPES,
-              priors: bool = False) -> SceneBank:  # fmt: skip
+def make_bank(
+    setup: str, scene_numbers, grid_size: int, view_width: int, target_rooms=ALL_ROOM_TYPES, priors: bool = False
+) -> SceneBank:
     scene_numbers = tuple(int(n) for n in scene_numbers)
     arrays = build_bank(setup, scene_numbers, grid_size, view_width, tuple(int(r) for r in target_rooms), bool(priors))
     return SceneBank(**{k: jnp.asarray(v) for k, v in arrays.items()})

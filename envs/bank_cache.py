@@ -32,8 +32,16 @@ BANK_CACHE_FORMAT = 1  # bump when the file layout (not the arrays) changes
 CACHE_DIR_ENV = "FORESIT_CACHE_DIR"  # root of the disk cache; banks go to its "banks" folder
 NO_CACHE_ENV = "FORESIT_NO_CACHE"  # "1" (anything but "", "0", "false", "no"): no disk cache
 # The modules whose source determines a bank's arrays (hashed into the cache key).
-_GENERATOR_SOURCES = ("scenes.py", "houses.py", "priors.py", "grid.py", "bank.py", "dynamics.py", "raycast.py",
-                      "catalog.py")
+_GENERATOR_SOURCES = (
+    "scenes.py",
+    "houses.py",
+    "priors.py",
+    "grid.py",
+    "bank.py",
+    "dynamics.py",
+    "raycast.py",
+    "catalog.py",
+)
 
 
 def bank_cache_dir() -> Path | None:
@@ -60,8 +68,9 @@ def _generator_digest() -> str:
     return digest.hexdigest()
 
 
-def bank_cache_key(setup: str, scene_numbers, grid_size: int, view_width: int, target_rooms=(0, 1, 2, 3),
-                   priors: bool = False) -> str:  # fmt: skip
+def bank_cache_key(
+    setup: str, scene_numbers, grid_size: int, view_width: int, target_rooms=(0, 1, 2, 3), priors: bool = False
+) -> str:
     """Hex sha256 of every input that determines the arrays of a bank (see the module doc)."""
     inputs = {
         "format": BANK_CACHE_FORMAT,
@@ -77,8 +86,9 @@ def bank_cache_key(setup: str, scene_numbers, grid_size: int, view_width: int, t
     return hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()
 
 
-def bank_cache_path(setup: str, scene_numbers, grid_size: int, view_width: int,
-                    target_rooms=(0, 1, 2, 3), priors: bool = False) -> Path | None:  # fmt: skip
+def bank_cache_path(
+    setup: str, scene_numbers, grid_size: int, view_width: int, target_rooms=(0, 1, 2, 3), priors: bool = False
+) -> Path | None:
     """Where the bank of these inputs is (or would be) cached; None when caching is off."""
     folder = bank_cache_dir()
     if folder is None:

@@ -36,9 +36,7 @@ NUM_ACTIONS = len(ACTIONS)
 NUM_HEADINGS = 8  # 45 degree steps, 0 = north (row - 1), clockwise
 NUM_HORIZONS = 2  # 0 = level, 1 = 30 degrees down
 # (d_row, d_col) of one MoveAhead for each heading.
-HEADING_DELTAS = np.array(
-    [(-1, 0), (-1, 1), (0, 1), (1, 1), (1, 0), (1, -1), (0, -1), (-1, -1)], dtype=np.int32
-)
+HEADING_DELTAS = np.array([(-1, 0), (-1, 1), (0, 1), (1, 1), (1, 0), (1, -1), (0, -1), (-1, -1)], dtype=np.int32)
 
 # Semantic classes of a view pixel before the object categories.
 SEM_NOTHING, SEM_WALL, SEM_FLOOR, SEM_FURNITURE = range(4)
@@ -48,9 +46,20 @@ NUM_STRUCTURAL = 4
 # semantic class of its own there, after the categories (``furniture_sem``); today's layouts
 # show all furniture as SEM_FURNITURE.
 FURNITURE_KINDS = (
-    "CounterTop", "DiningTable", "Shelf", "Sofa", "ArmChair", "CoffeeTable", "TVStand", "Bed", "SideTable",
-    "Dresser", "Desk", "Toilet", "Bathtub",
-)  # fmt: skip
+    "CounterTop",
+    "DiningTable",
+    "Shelf",
+    "Sofa",
+    "ArmChair",
+    "CoffeeTable",
+    "TVStand",
+    "Bed",
+    "SideTable",
+    "Dresser",
+    "Desk",
+    "Toilet",
+    "Bathtub",
+)
 
 # Cell types of the occupancy grid.
 CELL_FLOOR, CELL_WALL, CELL_FURNITURE, CELL_OBJECT = range(4)
@@ -66,27 +75,74 @@ SAVN_TARGETS = {
 }
 
 ORG_CATEGORIES = (
-    "AlarmClock", "Book", "Bowl", "CellPhone", "Chair", "CoffeeMachine", "DeskLamp",
-    "FloorLamp", "Fridge", "GarbageCan", "Kettle", "Laptop", "LightSwitch", "Microwave",
-    "Pan", "Plate", "Pot", "RemoteControl", "Sink", "StoveBurner", "Television", "Toaster",
-)  # fmt: skip
+    "AlarmClock",
+    "Book",
+    "Bowl",
+    "CellPhone",
+    "Chair",
+    "CoffeeMachine",
+    "DeskLamp",
+    "FloorLamp",
+    "Fridge",
+    "GarbageCan",
+    "Kettle",
+    "Laptop",
+    "LightSwitch",
+    "Microwave",
+    "Pan",
+    "Plate",
+    "Pot",
+    "RemoteControl",
+    "Sink",
+    "StoveBurner",
+    "Television",
+    "Toaster",
+)
 ORG_TARGETS = {
-    KITCHEN: ("Bowl", "Chair", "CoffeeMachine", "Fridge", "GarbageCan", "Kettle", "LightSwitch",
-              "Microwave", "Pan", "Plate", "Pot", "Sink", "StoveBurner", "Toaster"),
-    LIVING_ROOM: ("Book", "Bowl", "Chair", "FloorLamp", "GarbageCan", "Laptop", "LightSwitch",
-                  "RemoteControl", "Television"),
-    BEDROOM: ("AlarmClock", "Book", "CellPhone", "Chair", "DeskLamp", "GarbageCan", "Laptop",
-              "LightSwitch"),
+    KITCHEN: (
+        "Bowl",
+        "Chair",
+        "CoffeeMachine",
+        "Fridge",
+        "GarbageCan",
+        "Kettle",
+        "LightSwitch",
+        "Microwave",
+        "Pan",
+        "Plate",
+        "Pot",
+        "Sink",
+        "StoveBurner",
+        "Toaster",
+    ),
+    LIVING_ROOM: (
+        "Book",
+        "Bowl",
+        "Chair",
+        "FloorLamp",
+        "GarbageCan",
+        "Laptop",
+        "LightSwitch",
+        "RemoteControl",
+        "Television",
+    ),
+    BEDROOM: ("AlarmClock", "Book", "CellPhone", "Chair", "DeskLamp", "GarbageCan", "Laptop", "LightSwitch"),
     BATHROOM: ("GarbageCan", "LightSwitch", "Sink"),
-}  # fmt: skip
+}
 
 # Where each category stands.  Floor objects block movement; mid objects stand on
 # furniture; high objects hang on walls.
 CATEGORY_BAND = {
-    "GarbageCan": BAND_FLOOR, "Box": BAND_FLOOR, "HousePlant": BAND_FLOOR,
-    "FloorLamp": BAND_FLOOR, "Chair": BAND_FLOOR, "ToiletPaper": BAND_FLOOR,
-    "Television": BAND_HIGH, "LightSwitch": BAND_HIGH, "Microwave": BAND_HIGH,
-}  # fmt: skip  (everything else: BAND_MID)
+    "GarbageCan": BAND_FLOOR,
+    "Box": BAND_FLOOR,
+    "HousePlant": BAND_FLOOR,
+    "FloorLamp": BAND_FLOOR,
+    "Chair": BAND_FLOOR,
+    "ToiletPaper": BAND_FLOOR,
+    "Television": BAND_HIGH,
+    "LightSwitch": BAND_HIGH,
+    "Microwave": BAND_HIGH,
+}  # (everything else: BAND_MID)
 
 
 def category_band(name: str) -> int:
@@ -161,8 +217,9 @@ def house_size_of(number: int) -> int:
     """The number of rooms of house ``number`` (2001-2030: 2, ... 4001-4030: 4)."""
     size, layout = divmod(int(number), 1000)
     if size not in HOUSE_SIZES or not 1 <= layout <= 30:
-        raise ValueError(f"{number} is not a house number (2-room houses 2001-2030, 3-room 3001-3030, "
-                         "4-room 4001-4030)")  # fmt: skip
+        raise ValueError(
+            f"{number} is not a house number (2-room houses 2001-2030, 3-room 3001-3030, 4-room 4001-4030)"
+        )
     return size
 
 

@@ -330,8 +330,10 @@ class GridNav:
         ``check_actions``, a value outside 0..5 (at run time, through a host callback)."""
         action = jnp.asarray(action)
         if not jnp.issubdtype(action.dtype, jnp.integer):
-            raise TypeError(f"GridNav.step: the action must be an integer in 0..{C.NUM_ACTIONS - 1}, got dtype "
-                            f"{action.dtype}; cast it (e.g. jnp.argmax(...) or .astype(jnp.int32))")  # fmt: skip
+            raise TypeError(
+                f"GridNav.step: the action must be an integer in 0..{C.NUM_ACTIONS - 1}, got dtype "
+                f"{action.dtype}; cast it (e.g. jnp.argmax(...) or .astype(jnp.int32))"
+            )
         action = action.astype(jnp.int32)
         if self.check_actions:
             jax.debug.callback(_raise_on_bad_action, action)
@@ -350,9 +352,15 @@ class GridNav:
             s = state.scene
             furniture_sem = None if bank.furniture_sem is None else bank.furniture_sem[s]
             sem, depth = cast_view(
-                bank.cell_type[s], bank.obj_cat[s], bank.obj_band[s],
-                state.agent_pos, state.heading, state.horizon, self.view_width, furniture_sem,
-            )  # fmt: skip
+                bank.cell_type[s],
+                bank.obj_cat[s],
+                bank.obj_band[s],
+                state.agent_pos,
+                state.heading,
+                state.horizon,
+                self.view_width,
+                furniture_sem,
+            )
         if self.perception_range is None:  # static: today's program, untouched
             return sem, depth
         is_object = (sem >= C.NUM_STRUCTURAL) & (sem < C.NUM_STRUCTURAL + self.num_categories)
@@ -424,10 +432,14 @@ def check_perception_range(perception_range) -> float | None:
     positive finite number."""
     if perception_range is None:
         return None
-    if isinstance(perception_range, bool) or not isinstance(perception_range, (int, float)) \
-            or not 0 < perception_range < float("inf"):
-        raise ValueError(f"perception_range must be None (off) or a positive number of cells (0.25 m), "
-                         f"got {perception_range!r}")  # fmt: skip
+    if (
+        isinstance(perception_range, bool)
+        or not isinstance(perception_range, (int, float))
+        or not 0 < perception_range < float("inf")
+    ):
+        raise ValueError(
+            f"perception_range must be None (off) or a positive number of cells (0.25 m), got {perception_range!r}"
+        )
     return float(perception_range)
 
 
@@ -435,8 +447,10 @@ def _raise_on_bad_action(action) -> None:
     action = np.asarray(action)
     bad = (action < 0) | (action >= C.NUM_ACTIONS)
     if bad.any():
-        raise ValueError(f"GridNav.step: action {action[bad].ravel()[0]} is outside 0..{C.NUM_ACTIONS - 1} "
-                         f"({int(bad.sum())} of {action.size} in this call)")  # fmt: skip
+        raise ValueError(
+            f"GridNav.step: action {action[bad].ravel()[0]} is outside 0..{C.NUM_ACTIONS - 1} "
+            f"({int(bad.sum())} of {action.size} in this call)"
+        )
 
 
 def check_room_types(room_types) -> tuple[int, ...]:
@@ -471,5 +485,13 @@ def _room_index(room) -> int:
     return int(room)
 
 
-__all__ = ["EnvParams", "EnvState", "GridNav", "GRID_SIZES", "check_perception_range", "check_room_types", "time_limits",
-           "UNREACHABLE"]
+__all__ = [
+    "EnvParams",
+    "EnvState",
+    "GridNav",
+    "GRID_SIZES",
+    "check_perception_range",
+    "check_room_types",
+    "time_limits",
+    "UNREACHABLE",
+]

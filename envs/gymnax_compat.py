@@ -105,7 +105,7 @@ def installed_step_api() -> str:
 
 
 def _resolve_step_api(step_api: str | None) -> str:
-    """"done" or "terminated_truncated" for a ``step_api`` argument (None: not passed)."""
+    """ "done" or "terminated_truncated" for a ``step_api`` argument (None: not passed)."""
     if step_api is not None and step_api not in STEP_APIS:
         raise ValueError(f"step_api must be one of {STEP_APIS}, got {step_api!r}")
     if step_api is None:
@@ -263,8 +263,9 @@ class GymnaxGridNav:
     def discount(self, state, params=None) -> jax.Array:
         """0 where ``is_terminated``, else 1 (so always 1), as gymnax's."""
         terminated = self.is_terminated(state, params)
-        return jax.lax.select(terminated, jnp.zeros(terminated.shape, jnp.float32),
-                              jnp.ones(terminated.shape, jnp.float32))
+        return jax.lax.select(
+            terminated, jnp.zeros(terminated.shape, jnp.float32), jnp.ones(terminated.shape, jnp.float32)
+        )
 
     def state_space(self, params=None):
         """A ``Dict`` space of ``EnvState``'s fields, in its order (the space classes of
@@ -299,9 +300,17 @@ class GymnaxGridNav:
         return f"GymnaxGridNav({self.gridnav.setup!r}, step_api={self.step_api!r})"
 
 
-def make_gymnax(env_id: str = "GridNav-v0", *, step_api: str | None = None, final_observation: bool | None = None,
-                setup: str = "savn", split: str = "train", room_types=None, training: bool | None = None,
-                **env_kwargs):
+def make_gymnax(
+    env_id: str = "GridNav-v0",
+    *,
+    step_api: str | None = None,
+    final_observation: bool | None = None,
+    setup: str = "savn",
+    split: str = "train",
+    room_types=None,
+    training: bool | None = None,
+    **env_kwargs,
+):
     """``(env, params)`` as ``gymnax.make`` returns them (see the module docstring).
 
     Args:
@@ -326,8 +335,15 @@ def make_gymnax(env_id: str = "GridNav-v0", *, step_api: str | None = None, fina
     step_api = _resolve_step_api(step_api)
     if final_observation is None:
         final_observation = step_api == "terminated_truncated"
-    env, params = make(env_id, setup=setup, split=split, room_types=room_types, training=training,
-                       final_observation=bool(final_observation), **env_kwargs)
+    env, params = make(
+        env_id,
+        setup=setup,
+        split=split,
+        room_types=room_types,
+        training=training,
+        final_observation=bool(final_observation),
+        **env_kwargs,
+    )
     wrapped = GymnaxGridNav(env, params, step_api)
     return wrapped, wrapped.default_params
 
@@ -356,5 +372,14 @@ def register_gymnax() -> bool:
     return True
 
 
-__all__ = ["DEFAULT_STEP_API", "STEP_APIS", "GymnaxEnvParams", "GymnaxGridNav", "default_step_api",
-           "installed_gymnax_version", "installed_step_api", "make_gymnax", "register_gymnax"]
+__all__ = [
+    "DEFAULT_STEP_API",
+    "STEP_APIS",
+    "GymnaxEnvParams",
+    "GymnaxGridNav",
+    "default_step_api",
+    "installed_gymnax_version",
+    "installed_step_api",
+    "make_gymnax",
+    "register_gymnax",
+]

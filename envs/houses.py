@@ -100,8 +100,9 @@ def generate_house(number: int, setup: str, grid_size: int = HOUSE_GRID_SIZE, pr
     for index, room in enumerate(types):
         names = [n for n in C.SETUPS[setup][1][room] if categories.index(n) not in target_room]
         elsewhere = (cell_room >= 0) & (cell_room != index)
-        cell, placed = place_objects(cell, obj_cat, obj_band, setup, names, rng, cell_room == index, elsewhere,
-                                     keep_free, furniture)  # fmt: skip
+        cell, placed = place_objects(
+            cell, obj_cat, obj_band, setup, names, rng, cell_room == index, elsewhere, keep_free, furniture
+        )
         target_room.update(dict.fromkeys(placed, index))
     if not walkable_connected(cell):
         raise AssertionError(f"house {number}: the floor is not connected")

@@ -66,19 +66,35 @@ class Piece:
 # the room from it (the counters in an L, the dining table across; the TV stand facing the
 # sofa, the coffee table before it; the dresser facing the bed, side tables beside it).
 PRIOR_FURNITURE = {
-    C.KITCHEN: (Piece("CounterTop", 1, 5, True), Piece("CounterTop", 1, 4, True, near="CounterTop"),
-                Piece("DiningTable", 2, 3, False, opposite="CounterTop"), Piece("Shelf", 1, 4, True, near="DiningTable"),
-                Piece("Shelf", 1, 3, True, near="DiningTable")),
-    C.LIVING_ROOM: (Piece("Sofa", 1, 4, True), Piece("TVStand", 1, 3, True, opposite="Sofa"),
-                    Piece("CoffeeTable", 2, 2, False, near="Sofa"), Piece("ArmChair", 1, 1, False, near="CoffeeTable"),
-                    Piece("SideTable", 1, 1, False, near="Sofa"), Piece("Shelf", 1, 2, True, near="TVStand"),
-                    Piece("DiningTable", 2, 3, False)),
-    C.BEDROOM: (Piece("Bed", 3, 2, True, head=True), Piece("SideTable", 1, 1, True, near="Bed"),
-                Piece("Dresser", 1, 3, True, opposite="Bed"), Piece("Desk", 1, 2, True, near="Dresser"),
-                Piece("SideTable", 1, 1, False, near="Bed")),
-    C.BATHROOM: (Piece("Bathtub", 1, 3, True), Piece("CounterTop", 1, 2, True, opposite="Bathtub"),
-                 Piece("Toilet", 1, 1, True, near="CounterTop")),
-}  # fmt: skip
+    C.KITCHEN: (
+        Piece("CounterTop", 1, 5, True),
+        Piece("CounterTop", 1, 4, True, near="CounterTop"),
+        Piece("DiningTable", 2, 3, False, opposite="CounterTop"),
+        Piece("Shelf", 1, 4, True, near="DiningTable"),
+        Piece("Shelf", 1, 3, True, near="DiningTable"),
+    ),
+    C.LIVING_ROOM: (
+        Piece("Sofa", 1, 4, True),
+        Piece("TVStand", 1, 3, True, opposite="Sofa"),
+        Piece("CoffeeTable", 2, 2, False, near="Sofa"),
+        Piece("ArmChair", 1, 1, False, near="CoffeeTable"),
+        Piece("SideTable", 1, 1, False, near="Sofa"),
+        Piece("Shelf", 1, 2, True, near="TVStand"),
+        Piece("DiningTable", 2, 3, False),
+    ),
+    C.BEDROOM: (
+        Piece("Bed", 3, 2, True, head=True),
+        Piece("SideTable", 1, 1, True, near="Bed"),
+        Piece("Dresser", 1, 3, True, opposite="Bed"),
+        Piece("Desk", 1, 2, True, near="Dresser"),
+        Piece("SideTable", 1, 1, False, near="Bed"),
+    ),
+    C.BATHROOM: (
+        Piece("Bathtub", 1, 3, True),
+        Piece("CounterTop", 1, 2, True, opposite="Bathtub"),
+        Piece("Toilet", 1, 1, True, near="CounterTop"),
+    ),
+}
 
 
 @dataclass(frozen=True)
@@ -192,8 +208,12 @@ def _side_on_wall(cell, r, c, h, w, head: bool) -> bool:
     """Whether a whole side of the h x w block at (r, c) lies against wall cells: a long
     side (a short one with ``head``; any side of a square)."""
     wall = cell == C.CELL_WALL
-    sides = {"top": wall[r - 1, c : c + w].all(), "bottom": wall[r + h, c : c + w].all(),
-             "left": wall[r : r + h, c - 1].all(), "right": wall[r : r + h, c + w].all()}  # fmt: skip
+    sides = {
+        "top": wall[r - 1, c : c + w].all(),
+        "bottom": wall[r + h, c : c + w].all(),
+        "left": wall[r : r + h, c - 1].all(),
+        "right": wall[r : r + h, c + w].all(),
+    }
     if h == w:
         return any(sides.values())
     across_rows = (w > h) != head  # the wanted side runs along a row (top or bottom)

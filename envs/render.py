@@ -82,8 +82,9 @@ def agent_pixel(agent_pos, cell_px: int) -> tuple[float, float]:
     return (row + 0.5) * cell_px, (col + 0.5) * cell_px
 
 
-def heading_arrow(agent_pos, heading, length: float = 0.46, back: float = 0.26, half_width: float = 0.26,
-                  notch: float = 0.06) -> np.ndarray:  # fmt: skip
+def heading_arrow(
+    agent_pos, heading, length: float = 0.46, back: float = 0.26, half_width: float = 0.26, notch: float = 0.06
+) -> np.ndarray:
     """float [4, 2] (x, y) corners of the agent's dart (an arrowhead), tip first, in data coordinates.
 
     The tip lies ``length`` cells from the cell centre along the heading, the two back
@@ -189,7 +190,11 @@ def render_topdown(
     image = np.zeros((rows, cols, 3), np.uint8)
     for kind, rgb in CELL_RGB.items():
         image[cell_type == kind] = rgb
-    kinds = None if bank.furniture_sem is None else np.asarray(bank.furniture_sem[scene_index]) - (C.NUM_STRUCTURAL + num_categories)
+    kinds = (
+        None
+        if bank.furniture_sem is None
+        else np.asarray(bank.furniture_sem[scene_index]) - (C.NUM_STRUCTURAL + num_categories)
+    )
     if kinds is not None:  # layouts with priors: each furniture kind its own shade, named once per piece
         shades = np.round(255 * furniture_colors()).astype(np.uint8)
         image[kinds >= 0] = shades[kinds[kinds >= 0]]
@@ -199,8 +204,17 @@ def render_topdown(
             k = kinds[r, c]
             if (r > 0 and kinds[r - 1, c] == k) or (c > 0 and kinds[r, c - 1] == k):
                 continue  # named at the piece's first cell
-            ax.text(c - 0.45, r - 0.45, C.FURNITURE_KINDS[k], ha="left", va="top", fontsize=max(4.0, 0.17 * cell_px),
-                    style="italic", color="#3a2a1a", zorder=2)  # fmt: skip
+            ax.text(
+                c - 0.45,
+                r - 0.45,
+                C.FURNITURE_KINDS[k],
+                ha="left",
+                va="top",
+                fontsize=max(4.0, 0.17 * cell_px),
+                style="italic",
+                color="#3a2a1a",
+                zorder=2,
+            )
     ax.set_xlim(c0 - 0.5, c1 - 0.5)
     ax.set_ylim(r1 - 0.5, r0 - 0.5)  # row 0 at the top
     if decorations:  # thin lines between cells, a tick on every cell
@@ -220,28 +234,45 @@ def render_topdown(
                 Rectangle((c - 0.5, r - 0.5), 1, 1, fill=False, edgecolor=_rgb01(TARGET_RGB), linewidth=2.5, zorder=3)
             )
         ax.plot(
-            [c], [r], marker=BAND_MARKERS.get(band, "o"), markersize=marker_size, color=colors[cat],
-            markeredgecolor="black", markeredgewidth=0.6, linestyle="none", zorder=4,
-        )  # fmt: skip
+            [c],
+            [r],
+            marker=BAND_MARKERS.get(band, "o"),
+            markersize=marker_size,
+            color=colors[cat],
+            markeredgecolor="black",
+            markeredgewidth=0.6,
+            linestyle="none",
+            zorder=4,
+        )
         if labels:
             above = c % 2 == 0  # neighbours in a row alternate above/below: labels do not overlap
             ax.annotate(
-                categories[cat], (c, r), xytext=(0, (1 if above else -1) * (0.45 * cell_px * 72 / DPI + 1)),
-                textcoords="offset points", ha="center", va="bottom" if above else "top",
-                fontsize=max(5.0, 0.22 * cell_px), zorder=5,
+                categories[cat],
+                (c, r),
+                xytext=(0, (1 if above else -1) * (0.45 * cell_px * 72 / DPI + 1)),
+                textcoords="offset points",
+                ha="center",
+                va="bottom" if above else "top",
+                fontsize=max(5.0, 0.22 * cell_px),
+                zorder=5,
                 fontweight="bold" if target is not None and cat == int(target) else "normal",
                 color=_rgb01(TARGET_RGB) if target is not None and cat == int(target) else "black",
                 bbox=dict(boxstyle="round,pad=0.1", facecolor="white", alpha=0.7, linewidth=0),
-            )  # fmt: skip
+            )
 
     if trajectory is not None:
         traj = np.asarray(trajectory, np.float64).reshape(-1, 2)
         if len(traj):
             ax.plot(traj[:, 1], traj[:, 0], color=_rgb01(TRAJECTORY_RGB), linewidth=2.0, alpha=0.85, zorder=6)
             ax.plot(
-                [traj[0, 1]], [traj[0, 0]], marker="o", markersize=0.3 * cell_px * 72 / DPI,
-                color=_rgb01(TRAJECTORY_RGB), linestyle="none", zorder=6,
-            )  # fmt: skip
+                [traj[0, 1]],
+                [traj[0, 0]],
+                marker="o",
+                markersize=0.3 * cell_px * 72 / DPI,
+                color=_rgb01(TRAJECTORY_RGB),
+                linestyle="none",
+                zorder=6,
+            )
 
     if state is not None:
         corners = heading_arrow(np.asarray(state.agent_pos), int(np.asarray(state.heading)))
@@ -264,28 +295,44 @@ def render_topdown(
         ax.set_ylabel("row", fontsize=8)
         ax.tick_params(labelsize=6)
         present = sorted({int(v) for v in obj_cat[obj_cat >= 0]})
-        handles = [Patch(facecolor=_rgb01(CELL_RGB[k]), edgecolor="black", label=n) for k, n in
-                   ((C.CELL_WALL, "wall"), (C.CELL_FURNITURE, "furniture"), (C.CELL_FLOOR, "floor"))]  # fmt: skip
+        handles = [
+            Patch(facecolor=_rgb01(CELL_RGB[k]), edgecolor="black", label=n)
+            for k, n in ((C.CELL_WALL, "wall"), (C.CELL_FURNITURE, "furniture"), (C.CELL_FLOOR, "floor"))
+        ]
         handles += [
-            Line2D([], [], marker=BAND_MARKERS.get(int(obj_band[obj_cat == k][0]), "o"), color=colors[k],
-                   markeredgecolor="black", linestyle="none", label=categories[k])
+            Line2D(
+                [],
+                [],
+                marker=BAND_MARKERS.get(int(obj_band[obj_cat == k][0]), "o"),
+                color=colors[k],
+                markeredgecolor="black",
+                linestyle="none",
+                label=categories[k],
+            )
             for k in present
-        ]  # fmt: skip
-        handles += [Line2D([], [], marker=m, color="white", markeredgecolor="black", linestyle="none", label=BAND_NAMES[b])
-                    for b, m in BAND_MARKERS.items()]  # fmt: skip
+        ]
+        handles += [
+            Line2D([], [], marker=m, color="white", markeredgecolor="black", linestyle="none", label=BAND_NAMES[b])
+            for b, m in BAND_MARKERS.items()
+        ]
         if target is not None:
             handles.append(Patch(facecolor="none", edgecolor=_rgb01(TARGET_RGB), linewidth=2, label="target"))
         if trajectory is not None:
             handles.append(Line2D([], [], color=_rgb01(TRAJECTORY_RGB), linewidth=2, label="trajectory"))
         if state is not None:
             handles.append(Line2D([], [], marker=">", color=_rgb01(AGENT_RGB), linestyle="none", label="agent"))
-        fig.legend(handles=handles, loc="upper left", fontsize=7, frameon=False,
-                   bbox_to_anchor=((left + grid_w + 10) / width, 1 - top / height))  # fmt: skip
+        fig.legend(
+            handles=handles,
+            loc="upper left",
+            fontsize=7,
+            frameon=False,
+            bbox_to_anchor=((left + grid_w + 10) / width, 1 - top / height),
+        )
     return _finish(fig, canvas, path)
 
 
 def scene_name(number: int, room_types) -> str:
-    """"FloorPlan201 (living room)" or "House3004 (kitchen, bedroom, bathroom)"."""
+    """ "FloorPlan201 (living room)" or "House3004 (kitchen, bedroom, bathroom)"."""
     rooms = ", ".join(C.ROOM_TYPES[int(t)].replace("_", " ") for t in room_types if t >= 0)
     return f"{'House' if C.is_house(number) else 'FloorPlan'}{number} ({rooms})"
 
@@ -326,9 +373,14 @@ def view_image(sem, depth, num_categories: int) -> np.ndarray:
 
 
 def render_view(
-    obs_or_view_sem_depth, categories, path=None, *, max_depth: float | None = None, title: str | None = None,
+    obs_or_view_sem_depth,
+    categories,
+    path=None,
+    *,
+    max_depth: float | None = None,
+    title: str | None = None,
     pixel_px: int = 40,
-) -> np.ndarray:  # fmt: skip
+) -> np.ndarray:
     """The first-person view (3 rows x W columns) as a colour picture with a legend.
 
     Args:
@@ -359,7 +411,9 @@ def render_view(
     for r in range(rows):
         for c in range(width):
             dark = image[r, c].mean() < 0.45
-            ax.text(c, r, f"{shown[r, c]:.2g}", ha="center", va="center", fontsize=6, color="white" if dark else "black")
+            ax.text(
+                c, r, f"{shown[r, c]:.2g}", ha="center", va="center", fontsize=6, color="white" if dark else "black"
+            )
     ax.set_xticks(range(width))
     ax.set_yticks(range(rows))
     ax.set_yticklabels(["top", "middle", "bottom"] if rows == 3 else range(rows))
@@ -370,11 +424,22 @@ def render_view(
     palette = view_image(np.arange(len(names))[None], np.zeros((1, len(names))), len(categories))[0]
     present = sorted({int(v) for v in sem.reshape(-1)})
     handles = [Patch(facecolor=palette[k], edgecolor="black", label=names[k]) for k in present if k < len(names)]
-    fig.legend(handles=handles, loc="upper left", fontsize=7, frameon=False,
-               bbox_to_anchor=((left + view_w + 10) / fig_w, 1 - top / fig_h))  # fmt: skip
+    fig.legend(
+        handles=handles,
+        loc="upper left",
+        fontsize=7,
+        frameon=False,
+        bbox_to_anchor=((left + view_w + 10) / fig_w, 1 - top / fig_h),
+    )
     return _finish(fig, canvas, path)
 
 
 __all__ = [
-    "AGENT_RGB", "agent_pixel", "category_colors", "heading_arrow", "render_topdown", "render_view", "view_image",
-]  # fmt: skip
+    "AGENT_RGB",
+    "agent_pixel",
+    "category_colors",
+    "heading_arrow",
+    "render_topdown",
+    "render_view",
+    "view_image",
+]

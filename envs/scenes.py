@@ -34,11 +34,18 @@ MIN_GRID_SIZE = 20  # the largest living room (16 x 18 interior) plus its walls
 # (random orientation and place); a piece that would cut the floor in two is skipped.
 FURNITURE = {
     C.KITCHEN: [(1, 5, True), (1, 4, True), (1, 4, True), (1, 3, True), (2, 3, False), (1, 2, False)],
-    C.LIVING_ROOM: [(1, 4, True), (2, 2, False), (1, 3, True), (1, 2, False), (1, 1, False),
-                    (1, 2, True), (2, 3, False)],
+    C.LIVING_ROOM: [
+        (1, 4, True),
+        (2, 2, False),
+        (1, 3, True),
+        (1, 2, False),
+        (1, 1, False),
+        (1, 2, True),
+        (2, 3, False),
+    ],
     C.BEDROOM: [(3, 2, True), (1, 1, True), (1, 3, True), (1, 2, True), (1, 1, False)],
     C.BATHROOM: [(1, 3, True), (1, 2, True), (1, 1, True)],
-}  # fmt: skip
+}
 
 
 @dataclass(frozen=True)
@@ -91,7 +98,9 @@ def generate_layout(number: int, setup: str, grid_size: int = MIN_GRID_SIZE, pri
             cell[door : door + 3, c] = C.CELL_FLOOR
 
     if priors:
-        cell, furniture = P.furnish_with_kinds(cell, np.full(cell.shape, -1, np.int8), room, rng, (top, left, rows, cols))
+        cell, furniture = P.furnish_with_kinds(
+            cell, np.full(cell.shape, -1, np.int8), room, rng, (top, left, rows, cols)
+        )
     else:
         cell, furniture = furnish(cell, room, rng, (top, left, rows, cols)), None
     obj_cat = np.full(cell.shape, -1, np.int8)
@@ -99,11 +108,13 @@ def generate_layout(number: int, setup: str, grid_size: int = MIN_GRID_SIZE, pri
     interior = np.zeros(cell.shape, bool)
     interior[1:-1, 1:-1] = True
     rng = _rng("priors-objects" if priors else "objects", setup, number)
-    cell, placed = place_objects(cell, obj_cat, obj_band, setup, C.SETUPS[setup][1][room], rng, interior,
-                                 furniture=furniture)  # fmt: skip
+    cell, placed = place_objects(
+        cell, obj_cat, obj_band, setup, C.SETUPS[setup][1][room], rng, interior, furniture=furniture
+    )
     cell_room = np.where(_rect_mask(cell.shape, (top, left, rows, cols)) & (cell != C.CELL_WALL), 0, -1)
-    return Layout(number, room, cell, obj_cat, obj_band, cell_room.astype(np.int8), (room,), dict.fromkeys(placed, 0),
-                  furniture)  # fmt: skip
+    return Layout(
+        number, room, cell, obj_cat, obj_band, cell_room.astype(np.int8), (room,), dict.fromkeys(placed, 0), furniture
+    )
 
 
 def _rect_mask(shape, rect) -> np.ndarray:

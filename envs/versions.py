@@ -25,8 +25,10 @@ def incompatible_pair(jax_version: tuple[int, ...] | None, flax_version: tuple[i
         return None
     if jax_version >= (0, 11) and flax_version < (0, 12, 7):
         jax_text, flax_text = ".".join(map(str, jax_version)), ".".join(map(str, flax_version))
-        return (f"flax {flax_text} does not run on jax {jax_text} (jax.core.get_opaque_trace_state is gone "
-                f"since jax 0.11): pip install 'flax>=0.12.7' (or pin jax below 0.11)")
+        return (
+            f"flax {flax_text} does not run on jax {jax_text} (jax.core.get_opaque_trace_state is gone "
+            f"since jax 0.11): pip install 'flax>=0.12.7' (or pin jax below 0.11)"
+        )
     return None
 
 

@@ -33,11 +33,26 @@ import optax
 import envs
 
 CONFIG = {
-    "NUM_LANES": 32, "NUM_STEPS": 16, "NUM_UPDATES": 3000, "LR": 1e-3, "MAX_GRAD_NORM": 50.0,
-    "GAMMA": 0.99, "ENT_COEF": 0.01, "VF_COEF": 0.5, "HIDDEN": 128, "ATTENTION": 128, "VALUE_HIDDEN": 128,
-    "IMAGINATION_LAYERS": (128, 64, 32, 64, 128, 128), "BUFFER_SIZE": 32, "IMAGINATION_EPOCHS": 5,
-    "IMAGINATION_LR": 1e-3, "SIGMA2_MAX": 0.9, "SUCCESS_WINDOW": 100, "ROOM_TYPES": None, "SETUP": "savn",
-}  # fmt: skip
+    "NUM_LANES": 32,
+    "NUM_STEPS": 16,
+    "NUM_UPDATES": 3000,
+    "LR": 1e-3,
+    "MAX_GRAD_NORM": 50.0,
+    "GAMMA": 0.99,
+    "ENT_COEF": 0.01,
+    "VF_COEF": 0.5,
+    "HIDDEN": 128,
+    "ATTENTION": 128,
+    "VALUE_HIDDEN": 128,
+    "IMAGINATION_LAYERS": (128, 64, 32, 64, 128, 128),
+    "BUFFER_SIZE": 32,
+    "IMAGINATION_EPOCHS": 5,
+    "IMAGINATION_LR": 1e-3,
+    "SIGMA2_MAX": 0.9,
+    "SUCCESS_WINDOW": 100,
+    "ROOM_TYPES": None,
+    "SETUP": "savn",
+}
 
 
 # ----------------------------------------------------------------------------- 1. networks
@@ -55,8 +70,9 @@ class Encoder(nn.Module):
 
     def __call__(self, carry, obs, prev_probs):
         image = nn.relu(self.view_conv(obs["view"]))  # [.., 3, W, 64]
-        vector = jnp.concatenate([nn.relu(self.target_embed(obs["target"])),
-                                  nn.relu(self.action_embed(prev_probs))], -1)  # [.., 74]
+        vector = jnp.concatenate(
+            [nn.relu(self.target_embed(obs["target"])), nn.relu(self.action_embed(prev_probs))], -1
+        )  # [.., 74]
         tiled = jnp.broadcast_to(vector[..., None, None, :], image.shape[:-1] + vector.shape[-1:])
         x = nn.relu(self.pointwise_conv(jnp.concatenate([image, tiled], -1)))  # [.., 3, W, 64]
         return self.lstm(carry, x.reshape(x.shape[:-3] + (-1,)))  # (carry, s_t [.., H])
@@ -200,18 +216,29 @@ def act(config, env, env_params, network, f_w, params, w_params, lanes: Lanes, k
         action = jnp.argmax(logits + jax.random.gumbel(k_act, logits.shape), -1).astype(jnp.int32)
         memory = lanes.memory.at[jnp.arange(num_lanes), jnp.minimum(lanes.episode_step, memory_size - 1)].set(s_t)
         obs, env_state, reward, terminated, truncated, info = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
-            jax.random.split(k_env, num_lanes), lanes.env_state, action, env_params)
+            jax.random.split(k_env, num_lanes), lanes.env_state, action, env_params
+        )
         done = terminated | truncated
         t = lanes.tracker  # record each finished episode's outcome
         outcomes = t.outcomes.at[jnp.arange(num_lanes), t.next_index].set(
-            jnp.where(done, info["success"].astype(jnp.float32), t.outcomes[jnp.arange(num_lanes), t.next_index]))
+            jnp.where(done, info["success"].astype(jnp.float32), t.outcomes[jnp.arange(num_lanes), t.next_index])
+        )
         window = t.outcomes.shape[-1]
         tracker = Tracker(outcomes, (t.next_index + done) % window, jnp.minimum(t.count + done, window))
-        seen = Transition(lanes.obs, lanes.prev_probs, imagined, action, reward, done, info["success"],
-                          lanes.episode_step, s_0)
-        lanes = Lanes(env_state, obs, jax.tree.map(lambda x: jnp.where(done[:, None], 0.0, x), lstm),
-                      jnp.where(done[:, None], 0.0, jax.nn.softmax(logits)), imagined, s_0,
-                      jnp.where(done, 0, lanes.episode_step + 1), memory, tracker)
+        seen = Transition(
+            lanes.obs, lanes.prev_probs, imagined, action, reward, done, info["success"], lanes.episode_step, s_0
+        )
+        lanes = Lanes(
+            env_state,
+            obs,
+            jax.tree.map(lambda x: jnp.where(done[:, None], 0.0, x), lstm),
+            jnp.where(done[:, None], 0.0, jax.nn.softmax(logits)),
+            imagined,
+            s_0,
+            jnp.where(done, 0, lanes.episode_step + 1),
+            memory,
+            tracker,
+        )
         return lanes, seen
 
     lanes, traj = jax.lax.scan(step, lanes, jax.random.split(key, config["NUM_STEPS"]))
@@ -243,8 +270,14 @@ def loss_fn(config, network, params, traj: Transition, start: Lanes, s_next, nex
     states = jnp.concatenate([states, s_next[None]]).swapaxes(0, 1)  # [B, T + 1, H], s_T last
     steps = jnp.concatenate([traj.episode_step, next_step[None]]).swapaxes(0, 1)  # [B, T + 1]
     keys = jnp.concatenate([start.memory, states], 1)  # earlier windows' states, then the window's
-    values, alpha = network.apply(params, states, keys, attention_mask(steps, start.memory.shape[1]),
-                                  steps.astype(jnp.float32), method=ActorCritic.critic)
+    values, alpha = network.apply(
+        params,
+        states,
+        keys,
+        attention_mask(steps, start.memory.shape[1]),
+        steps.astype(jnp.float32),
+        method=ActorCritic.critic,
+    )
     value, bootstrap = values[:, :-1].T, values[:, -1]  # V(s*_t) [T, B], V(s*_T) [B]
 
     def discounted(R, x):  # R_t = r_t + gamma (1 - done_t) R_{t+1}; nothing follows Done or the limit
@@ -289,11 +322,16 @@ def train_imagination(config, f_w, w_params, buffers: Buffers, items):
         s_0, goal, subgoal, add = item  # [B, ...]
         add = add & (b.count < b.s_0.shape[1])
         put = lambda store, x: store.at[jnp.arange(add.shape[0]), b.count % store.shape[1]].set(  # noqa: E731
-            jnp.where(add[:, None], x, store[jnp.arange(add.shape[0]), b.count % store.shape[1]]))
+            jnp.where(add[:, None], x, store[jnp.arange(add.shape[0]), b.count % store.shape[1]])
+        )
         b = Buffers(put(b.s_0, s_0), put(b.goal, goal), put(b.subgoal, subgoal), b.count + add)
         full = b.count == b.s_0.shape[1]
-        w = jax.lax.fori_loop(0, add.shape[0], lambda i, w: jax.lax.cond(
-            full[i], lambda: train_lane(w, (b.s_0[i], b.goal[i], b.subgoal[i])), lambda: w), w)
+        w = jax.lax.fori_loop(
+            0,
+            add.shape[0],
+            lambda i, w: jax.lax.cond(full[i], lambda: train_lane(w, (b.s_0[i], b.goal[i], b.subgoal[i])), lambda: w),
+            w,
+        )
         b = jax.tree.map(lambda x: jnp.where(full.reshape((-1,) + (1,) * (x.ndim - 1)), 0, x), b)
         return (w, b), None
 
@@ -325,8 +363,17 @@ def make_train(config):
         obs, env_state = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k_lanes, b), env_params)
         zeros = jnp.zeros((b, h))
         tracker = Tracker(jnp.zeros((b, config["SUCCESS_WINDOW"])), jnp.zeros(b, jnp.int32), jnp.zeros(b, jnp.int32))
-        lanes = Lanes(env_state, obs, (zeros, zeros), jnp.zeros((b, env.num_actions)), zeros, zeros,
-                      jnp.zeros(b, jnp.int32), jnp.zeros((b, memory_size, h)), tracker)
+        lanes = Lanes(
+            env_state,
+            obs,
+            (zeros, zeros),
+            jnp.zeros((b, env.num_actions)),
+            zeros,
+            zeros,
+            jnp.zeros(b, jnp.int32),
+            jnp.zeros((b, memory_size, h)),
+            tracker,
+        )
         n, d = config["BUFFER_SIZE"], obs["target"].shape[-1]
         buffers = Buffers(jnp.zeros((b, n, h)), jnp.zeros((b, n, d)), jnp.zeros((b, n, h)), jnp.zeros(b, jnp.int32))
         return RunnerState(params, optimizer.init(params), w_params, buffers, lanes, key)
@@ -364,4 +411,6 @@ if __name__ == "__main__":
     for chunk in range(CONFIG["NUM_UPDATES"] // 100):
         state, metrics = run(state)
         rate = float(metrics["success_rate"] @ metrics["episodes"] / metrics["episodes"].sum())
-        print(f"updates {100 * (chunk + 1):5d}  training success rate {100 * rate:5.1f}%  loss {metrics['loss'].mean():.3f}")
+        print(
+            f"updates {100 * (chunk + 1):5d}  training success rate {100 * rate:5.1f}%  loss {metrics['loss'].mean():.3f}"
+        )

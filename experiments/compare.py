@@ -37,8 +37,15 @@ from pathlib import Path
 from experiments import errors
 from experiments.reporting import stats
 from experiments.reporting.report import (
-    TEST, diagnostic_label, format_mean_std, format_pair, load, paired_report, shown_columns, values,
-)  # fmt: skip
+    TEST,
+    diagnostic_label,
+    format_mean_std,
+    format_pair,
+    load,
+    paired_report,
+    shown_columns,
+    values,
+)
 from experiments.reporting.tables import arm_label, markdown_table
 
 
@@ -64,8 +71,9 @@ def _split(spec: str, parts: int, flag: str, results: dict) -> list[str]:
         raise errors.UserError(f"{flag} {spec!r}: give {parts} method names joined by ':'")
     for name in names:
         if name not in results:
-            raise errors.UserError(f"{flag}: {name!r} is not a finished method of this sweep; it has "
-                                   + ", ".join(results))  # fmt: skip
+            raise errors.UserError(
+                f"{flag}: {name!r} is not a finished method of this sweep; it has " + ", ".join(results)
+            )
     seeds = [[r["seed"] for r in results[n]] for n in names]
     if any(s != seeds[0] for s in seeds):
         raise errors.UserError(f"{flag} {spec!r}: the methods have different seeds ({seeds}); pairs need the same")
@@ -87,14 +95,27 @@ def main(args: Args) -> dict:
     for method, per_seed in results.items():
         per = " / ".join(f"{x:.1f}" for x in values(per_seed, "SR"))
         counts = [r.get("counts") or {} for r in per_seed]
-        experience = ("" if not all("frames/useful" in c for c in counts) else
-                      ", ".join(f"{c['frames/useful'] / 1e6:.2f}M / {int(c['charts/episodes'])}" for c in counts))  # fmt: skip
-        rows.append([arm_label(method), ", ".join(str(r["seed"]) for r in per_seed), per,
-                     *(format_mean_std(values(per_seed, c, args.last)) for c in shown), experience])  # fmt: skip
+        experience = (
+            ""
+            if not all("frames/useful" in c for c in counts)
+            else ", ".join(f"{c['frames/useful'] / 1e6:.2f}M / {int(c['charts/episodes'])}" for c in counts)
+        )
+        rows.append(
+            [
+                arm_label(method),
+                ", ".join(str(r["seed"]) for r in per_seed),
+                per,
+                *(format_mean_std(values(per_seed, c, args.last)) for c in shown),
+                experience,
+            ]
+        )
     names = [diagnostic_label(c) for c in shown]
-    md = (f"# {args.run}: per method (mean ± sample std over seeds)\n\n"
-          + markdown_table(rows, ["method", "seeds", "SR per seed", *names, "frames / episodes per seed"]) + "\n"
-          + f"(training SR: the last {args.last} updates; diagnostics: the last chunk's mean)\n")  # fmt: skip
+    md = (
+        f"# {args.run}: per method (mean ± sample std over seeds)\n\n"
+        + markdown_table(rows, ["method", "seeds", "SR per seed", *names, "frames / episodes per seed"])
+        + "\n"
+        + f"(training SR: the last {args.last} updates; diagnostics: the last chunk's mean)\n"
+    )
 
     out: dict = {"pairs": {}, "did": {}, "ceiling": {}}
     if pairs:
@@ -104,12 +125,22 @@ def main(args: Args) -> dict:
         cells = []
         for a, b, c, d in dids:
             name = f"({d} - {c}) - ({b} - {a})"
-            out["did"][name] = {col: stats.paired(*(values(results[y], col) - values(results[x], col)
-                                                    for x, y in ((a, b), (c, d)))) for col in TEST}  # fmt: skip
-            cells.append([name, *(format_pair(out["did"][name][col]) for col in TEST),
-                          *(f"{out['did'][name][col]['p']:.3f}" for col in TEST)])  # fmt: skip
-        md += ("\n## Difference of differences, seed by seed [95% CI]\n\n"
-               + markdown_table(cells, ["differences", *TEST, *(f"p ({c})" for c in TEST)]) + "\n")  # fmt: skip
+            out["did"][name] = {
+                col: stats.paired(*(values(results[y], col) - values(results[x], col) for x, y in ((a, b), (c, d))))
+                for col in TEST
+            }
+            cells.append(
+                [
+                    name,
+                    *(format_pair(out["did"][name][col]) for col in TEST),
+                    *(f"{out['did'][name][col]['p']:.3f}" for col in TEST),
+                ]
+            )
+        md += (
+            "\n## Difference of differences, seed by seed [95% CI]\n\n"
+            + markdown_table(cells, ["differences", *TEST, *(f"p ({c})" for c in TEST)])
+            + "\n"
+        )
     if ceilings:
         md += ceiling_markdown(results, ceilings, out["ceiling"])
     print(md)
@@ -127,11 +158,17 @@ def ceiling_markdown(results: dict, ceilings: list, out: dict) -> str:
             share = stats.share_closed(values(results[b], col) - base, values(results[c], col) - base)
             out[name][col] = {**share, "arm": b}
             top = f"{share['ceiling']:+.1f} [{share['ceiling_low']:+.1f}, {share['ceiling_high']:+.1f}]"
-            closed = (f"{share['share']:.2f} [{share['share_low']:.2f}, {share['share_high']:.2f}]"
-                      if share["resolved"] else "ceiling not resolved")  # fmt: skip
+            closed = (
+                f"{share['share']:.2f} [{share['share_low']:.2f}, {share['share_high']:.2f}]"
+                if share["resolved"]
+                else "ceiling not resolved"
+            )
             cells.append([name, col, top, b, closed])
-    return ("\n## The ceiling and the share of it an arm closes (paired seeds; share: exact paired bootstrap [95%])\n\n"
-            + markdown_table(cells, ["ceiling", "", "C - A [95% CI]", "arm B", "(B - A) / (C - A)"]) + "\n")
+    return (
+        "\n## The ceiling and the share of it an arm closes (paired seeds; share: exact paired bootstrap [95%])\n\n"
+        + markdown_table(cells, ["ceiling", "", "C - A [95% CI]", "arm B", "(B - A) / (C - A)"])
+        + "\n"
+    )
 
 
 def cli(argv=None) -> None:

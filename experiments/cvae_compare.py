@@ -45,8 +45,10 @@ def main(args: Args) -> dict:
     info = rundir.read_run_info(args.run)
     config = Config(**info["config"])
     if not config.pieces.imagination_variant.trains_imagination:
-        raise errors.UserError(f"{args.run} is a {config.method} run, whose f_w is not trained on sub-goals; "
-                               "use a run of a method with ForeSIT's imagination (e.g. a3c+foresit)")  # fmt: skip
+        raise errors.UserError(
+            f"{args.run} is a {config.method} run, whose f_w is not trained on sub-goals; "
+            "use a run of a method with ForeSIT's imagination (e.g. a3c+foresit)"
+        )
     if args.windows < 1 or args.epochs < 1:
         raise errors.UserError(f"--windows and --epochs must be >= 1, got {args.windows} and {args.epochs}")
     out = args.run / "cvae_comparison.json"
@@ -54,13 +56,17 @@ def main(args: Args) -> dict:
         raise errors.UserError(f"{out} exists; pass --overwrite to replace it")
     trained = read_trained(args.run)
     if len(trained.seeds) != 1:
-        raise errors.UserError(f"{args.run} holds {len(trained.seeds)} seeds; cvae_compare reads a run of one (train's)")
+        raise errors.UserError(
+            f"{args.run} holds {len(trained.seeds)} seeds; cvae_compare reads a run of one (train's)"
+        )
     step, state = trained.update, jax.tree.map(lambda x: x[0], trained.states)
     items = cvae_comparison.collect_items(trained.trainer, state, args.windows, args.seed)
     result = cvae_comparison.compare(config, items, args.epochs, args.seed)
     if "direct" not in result:
-        raise errors.UserError(f"only {result['items']} successful episodes in {args.windows} windows (at least {cvae_comparison.MIN_ITEMS} "
-                               "needed); raise --windows")  # fmt: skip
+        raise errors.UserError(
+            f"only {result['items']} successful episodes in {args.windows} windows (at least {cvae_comparison.MIN_ITEMS} "
+            "needed); raise --windows"
+        )
     result["update"] = step
     rundir.write_json(out, result)
     md = cvae_comparison.markdown(result, config, args.windows)

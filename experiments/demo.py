@@ -105,9 +105,14 @@ def oracle_rollout(env, num_lanes: int, num_steps: int):
             _, state_next, _, terminated, truncated, info = vstep(keys, state, action, params)
             _, after, *_ = vstep_state(keys, state, action, params)  # the pose before any auto-reset
             ending = active & (terminated | truncated)
-            record = {k: jnp.where(ending, info[name], record[k])
-                      for k, name in (("success", "success"), ("length", "episode_length"),
-                                      ("optimal_length", "optimal_length"))}  # fmt: skip
+            record = {
+                k: jnp.where(ending, info[name], record[k])
+                for k, name in (
+                    ("success", "success"),
+                    ("length", "episode_length"),
+                    ("optimal_length", "optimal_length"),
+                )
+            }
             pose = (after.agent_pos, after.heading, after.horizon)
             return (state_next, active & ~ending, record), pose
 
@@ -134,12 +139,25 @@ def metrics(outcomes: EpisodeStats) -> dict[str, float]:
 
 
 def results_table(results: dict, layout: str = "room") -> str:
-    cols = ("SR", "SPL", "SR>=5", "SPL>=5", "mean L^g", "L^g>=5 %", *(("L^g>=10 %",) if layout == "house" else ()),
-            "episodes")  # fmt: skip
+    cols = (
+        "SR",
+        "SPL",
+        "SR>=5",
+        "SPL>=5",
+        "mean L^g",
+        "L^g>=5 %",
+        *(("L^g>=10 %",) if layout == "house" else ()),
+        "episodes",
+    )
     rows = [
-        [policy, room.replace("_", " "), *(f"{results[policy][room][c]:.1f}" if c != "episodes" else str(results[policy][room][c]) for c in cols)]
-        for policy in POLICIES for room in ("overall",) + C.ROOM_TYPES
-    ]  # fmt: skip
+        [
+            policy,
+            room.replace("_", " "),
+            *(f"{results[policy][room][c]:.1f}" if c != "episodes" else str(results[policy][room][c]) for c in cols),
+        ]
+        for policy in POLICIES
+        for room in ("overall",) + C.ROOM_TYPES
+    ]
     return markdown_table(rows, ["policy", "room type", *cols])
 
 
@@ -147,8 +165,10 @@ def calibration(results: dict, layout: str = "room") -> list[tuple[str, bool]]:
     """(description, passed) of each calibration check (a layout's own, see the module doc)."""
     random_sr = results["random"]["overall"]["SR"]
     oracle = results["oracle"]["overall"]
-    oracle_check = (f"oracle SR {oracle['SR']:.1f}% and SPL {oracle['SPL']:.1f}% are 100%",
-                    oracle["SR"] == 100.0 and oracle["SPL"] == 100.0)  # fmt: skip
+    oracle_check = (
+        f"oracle SR {oracle['SR']:.1f}% and SPL {oracle['SPL']:.1f}% are 100%",
+        oracle["SR"] == 100.0 and oracle["SPL"] == 100.0,
+    )
     if layout == "house":
         long10 = oracle["L^g>=10 %"]
         return [
@@ -171,14 +191,19 @@ def calibration(results: dict, layout: str = "room") -> list[tuple[str, bool]]:
 def main(config: DemoConfig) -> int:
     start = time.perf_counter()
     if config.episodes < len(C.ROOM_TYPES):
-        print(f"error: --episodes must be at least {len(C.ROOM_TYPES)} (one per room type), got {config.episodes}",
-              file=sys.stderr)  # fmt: skip
+        print(
+            f"error: --episodes must be at least {len(C.ROOM_TYPES)} (one per room type), got {config.episodes}",
+            file=sys.stderr,
+        )
         return 2
     files = output_files(config.out)
     existing = [f for f in files if f.exists()]
     if existing and not config.overwrite:
-        print(f"error: {existing[0]} exists ({len(existing)} of the demo's files are in {config.out}); "
-              "pass --overwrite to replace them or choose another --out", file=sys.stderr)  # fmt: skip
+        print(
+            f"error: {existing[0]} exists ({len(existing)} of the demo's files are in {config.out}); "
+            "pass --overwrite to replace them or choose another --out",
+            file=sys.stderr,
+        )
         return 2
     config.out.mkdir(parents=True, exist_ok=True)
 
@@ -186,9 +211,19 @@ def main(config: DemoConfig) -> int:
     lanes = max(per_room)
     timings = {}
     t = time.perf_counter()
-    rooms = {room: envs.make("GridNav-v0", setup=config.setup, split="test", room_types=(room,), training=False,
-                             layout=config.layout, priors=config.priors,
-                             perception_range=config.perception_range) for room in C.ROOM_TYPES}  # fmt: skip
+    rooms = {
+        room: envs.make(
+            "GridNav-v0",
+            setup=config.setup,
+            split="test",
+            room_types=(room,),
+            training=False,
+            layout=config.layout,
+            priors=config.priors,
+            perception_range=config.perception_range,
+        )
+        for room in C.ROOM_TYPES
+    }
     env = rooms[C.ROOM_TYPES[0]][0]
     timings["scene banks"] = time.perf_counter() - t
     num_steps = max(int(np.max(params.max_steps)) for _, params in rooms.values())
@@ -217,8 +252,12 @@ def main(config: DemoConfig) -> int:
             results[policy][room] = metrics(outcomes)
             pooled[policy].append(outcomes)
             if policy == "oracle":
-                pictures[room] = (params, jax.tree.map(lambda x: np.asarray(x[0]), (obs, state)),
-                                  [np.asarray(p[:, 0]) for p in poses], int(outcomes.length[0]))  # fmt: skip
+                pictures[room] = (
+                    params,
+                    jax.tree.map(lambda x: np.asarray(x[0]), (obs, state)),
+                    [np.asarray(p[:, 0]) for p in poses],
+                    int(outcomes.length[0]),
+                )
         timings[f"{policy} rollouts (compile included)"] = time.perf_counter() - t
         results[policy]["overall"] = metrics(jax.tree.map(lambda *x: np.concatenate(x), *pooled[policy]))
 
@@ -229,24 +268,41 @@ def main(config: DemoConfig) -> int:
         scene = int(state.scene)
         name = render.scene_name(int(np.asarray(params.bank.numbers[scene])), np.asarray(params.bank.room_types[scene]))
         target = env.categories[int(state.target)]
-        title = (f"{name}, target {target}: oracle, "
-                 f"{length} actions (L^g = {int(state.optimal_length)})\narrow: final pose; dot: start")  # fmt: skip
-        render.render_topdown(params, scene, state=final, trajectory=trajectory, path=config.out / f"topdown_{room}.png",
-                              categories=env.categories, title=title)  # fmt: skip
-        render.render_view(obs, env.categories, path=config.out / f"view_{room}.png", max_depth=env.max_depth,
-                           title=f"{name.split(' (')[0]}, target {target}: first-person view at the start")  # fmt: skip
+        title = (
+            f"{name}, target {target}: oracle, "
+            f"{length} actions (L^g = {int(state.optimal_length)})\narrow: final pose; dot: start"
+        )
+        render.render_topdown(
+            params,
+            scene,
+            state=final,
+            trajectory=trajectory,
+            path=config.out / f"topdown_{room}.png",
+            categories=env.categories,
+            title=title,
+        )
+        render.render_view(
+            obs,
+            env.categories,
+            path=config.out / f"view_{room}.png",
+            max_depth=env.max_depth,
+            title=f"{name.split(' (')[0]}, target {target}: first-person view at the start",
+        )
     timings["pictures"] = time.perf_counter() - t
 
     table = results_table(results, config.layout)
     checks = calibration(results, config.layout)
     check_lines = [f"[{'PASS' if ok else 'FAIL'}] {text}" for text, ok in checks]
     family = f"{config.layout}s with priors" if config.priors else f"{config.layout}s"
-    header = (f"GridNav-v0 {config.setup} setup, {family}, test split, {config.episodes} episodes "
-              f"({', '.join(f'{n} {r}' for n, r in zip(per_room, C.ROOM_TYPES))}), evaluation time limits")  # fmt: skip
+    header = (
+        f"GridNav-v0 {config.setup} setup, {family}, test split, {config.episodes} episodes "
+        f"({', '.join(f'{n} {r}' for n, r in zip(per_room, C.ROOM_TYPES))}), evaluation time limits"
+    )
     (config.out / "results.md").write_text(
         f"# Demo: random and oracle policies\n\n{header}\n\n{table}\n\n## Calibration\n\n"
-        + "\n".join(f"- {line}" for line in check_lines) + "\n"
-    )  # fmt: skip
+        + "\n".join(f"- {line}" for line in check_lines)
+        + "\n"
+    )
     print(header)
     print()
     print(table)

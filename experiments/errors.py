@@ -49,8 +49,11 @@ def run_cli(args_class, main, argv=None):
     except RuntimeError as e:  # XLA's out-of-memory, raised as jaxlib's XlaRuntimeError
         if "RESOURCE_EXHAUSTED" not in str(e):
             raise
-        refuse(f"out of memory ({str(e).splitlines()[0][:160]}); lower --num-lanes or --seeds, or train on a larger "
-               "device", status=1)  # fmt: skip
+        refuse(
+            f"out of memory ({str(e).splitlines()[0][:160]}); lower --num-lanes or --seeds, or train on a larger "
+            "device",
+            status=1,
+        )
     except OSError as e:  # disk full, read-only, not a directory: one line, not a traceback
         if e.errno not in _USER_ERRNOS:
             raise
@@ -97,19 +100,32 @@ def say_ignored(ignored: list[str], out) -> None:
     """One line on stderr naming the flags --resume ignored (`ignored`: `--flag value (the
     run has ...)`), if any."""
     if ignored:
-        print(f"note: --resume continues {out} with the arguments it was started with; ignored {', '.join(ignored)}",
-              file=sys.stderr, flush=True)  # fmt: skip
+        print(
+            f"note: --resume continues {out} with the arguments it was started with; ignored {', '.join(ignored)}",
+            file=sys.stderr,
+            flush=True,
+        )
 
 
 # What the user's disk or paths did, not a bug: reported in one line.
-_USER_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.ENOTDIR, errno.EISDIR,
-                errno.EEXIST, errno.ENOENT}  # fmt: skip
+_USER_ERRNOS = {
+    errno.ENOSPC,
+    errno.EDQUOT,
+    errno.EROFS,
+    errno.EACCES,
+    errno.EPERM,
+    errno.ENOTDIR,
+    errno.EISDIR,
+    errno.EEXIST,
+    errno.ENOENT,
+}
 
 
 def os_message(e: OSError) -> str:
     where = f"{e.filename}: " if e.filename else ""
-    return f"{where}{e.strerror or e}" + (" (free some space, then continue with --resume)"
-                                          if e.errno in (errno.ENOSPC, errno.EDQUOT) else "")  # fmt: skip
+    return f"{where}{e.strerror or e}" + (
+        " (free some space, then continue with --resume)" if e.errno in (errno.ENOSPC, errno.EDQUOT) else ""
+    )
 
 
 def read_json(path: Path, keys: tuple[str, ...] = ()):
@@ -120,8 +136,10 @@ def read_json(path: Path, keys: tuple[str, ...] = ()):
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
         raise UserError(f"{path} is not valid JSON ({e}); it was damaged after it was written") from None
     if not isinstance(value, dict):
-        raise UserError(f"{path} holds a JSON {type(value).__name__}, not the object this project wrote; it was "
-                        "damaged after it was written")  # fmt: skip
+        raise UserError(
+            f"{path} holds a JSON {type(value).__name__}, not the object this project wrote; it was "
+            "damaged after it was written"
+        )
     missing = [k for k in keys if k not in value]
     if missing:
         raise UserError(f"{path} lacks {', '.join(missing)}; it was damaged after it was written")

@@ -66,8 +66,10 @@ def main(args: Args) -> dict:
 
     trained = read_trained(args.run)
     if len(trained.seeds) != 1:
-        raise errors.UserError(f"{args.run} holds {len(trained.seeds)} seeds; evaluate reads a run of one (train's); "
-                               "for a sweep's arms use experiments.compare or experiments.paper")  # fmt: skip
+        raise errors.UserError(
+            f"{args.run} holds {len(trained.seeds)} seeds; evaluate reads a run of one (train's); "
+            "for a sweep's arms use experiments.compare or experiments.paper"
+        )
     if args.which == "best":
         step, chosen = trained.selected_updates[0], jax.tree.map(lambda x: x[0], trained.selected)
     else:

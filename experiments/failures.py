@@ -71,9 +71,15 @@ def play(model, split: str, episodes: int, compiled: dict) -> dict:
         where = Evaluator.scenes_of(config)
         evaluator = compiled.get(where) or Evaluator(*where)
         compiled[where] = evaluator
-        rollout = jax.jit(functools.partial(rollout_lib.rollout, build(config), act=base_acting(config).act,
-                                            options=ActOptions(greedy=config.pieces.greedy_evaluation)),
-                          static_argnames="num_steps")  # fmt: skip
+        rollout = jax.jit(
+            functools.partial(
+                rollout_lib.rollout,
+                build(config),
+                act=base_acting(config).act,
+                options=ActOptions(greedy=config.pieces.greedy_evaluation),
+            ),
+            static_argnames="num_steps",
+        )
         compiled[config] = (evaluator, rollout, jax.jit(functools.partial(replay_oracle, evaluator.env)))
     evaluator, rollout, replay = compiled[config]
     key = selection.test_key(model.seed) if split == "test" else selection.validation_key(model.seed)
@@ -87,8 +93,14 @@ def play(model, split: str, episodes: int, compiled: dict) -> dict:
         traj = rollout(acting, BoundEnv(evaluator.env, env_params), k, num_steps=num_steps, reset_keys=reset_keys)
         d, in_room = replay(env_params, reset_keys, traj.actions.T)
         p_done = jax.nn.softmax(traj.logits, -1)[..., -1]
-        batch = {"valid": traj.valid.T, "success": traj.success.T, "actions": traj.actions.T, "p_done": p_done.T,
-                 "d": d, "in_room": in_room}  # fmt: skip
+        batch = {
+            "valid": traj.valid.T,
+            "success": traj.success.T,
+            "actions": traj.actions.T,
+            "p_done": p_done.T,
+            "d": d,
+            "in_room": in_room,
+        }
         parts.append({name: np.asarray(v) for name, v in batch.items()})
     width = max(p["valid"].shape[1] for p in parts)  # rooms' time limits differ: pad the shorter
 
@@ -112,25 +124,62 @@ def markdown(report: dict[str, list[dict]], split: str, episodes: int) -> str:
     for method, per_seed in report.items():
         for r in per_seed:
             a, f, p = r["all"], r["failed Done"], r["p_done"]
-            ends.append([method, r["seed"], a["episodes"], *(_pct(a[k]) for k in ("success", "failed Done", "time-out"))])
-            dones.append([method, r["seed"], f["episodes"], _num(f["median actions"]), _pct(f["early share"]),
-                          _num(f["median d at Done"]), _pct(f["in target room share"]), _num(p["would succeed"], 3),
-                          _num(p["would fail"], 3), _num(p["would fail, early"], 3)])  # fmt: skip
+            ends.append(
+                [method, r["seed"], a["episodes"], *(_pct(a[k]) for k in ("success", "failed Done", "time-out"))]
+            )
+            dones.append(
+                [
+                    method,
+                    r["seed"],
+                    f["episodes"],
+                    _num(f["median actions"]),
+                    _pct(f["early share"]),
+                    _num(f["median d at Done"]),
+                    _pct(f["in target room share"]),
+                    _num(p["would succeed"], 3),
+                    _num(p["would fail"], 3),
+                    _num(p["would fail, early"], 3),
+                ]
+            )
             for group in ("start in target room", "start away"):
                 g = r[group]
                 if g["episodes"]:
-                    starts.append([method, r["seed"], group.removeprefix("start "), g["episodes"],
-                                   *(_pct(g[k]) for k in ("success", "failed Done", "time-out"))])  # fmt: skip
-    md = [f"# How the episodes end ({split} split, {episodes} episodes per room type)\n",
-          markdown_table(ends, ["method", "seed", "episodes", "success %", "failed Done %", "time-out %"]) + "\n",
-          "The failed Dones (actions into the episode, median; the share within the first "
-          f"{EARLY_STEPS}; the oracle's actions to success at the Done, median; the share said in the target's room), "
-          f"and the policy's mean probability of Done where Done would succeed, where it would not, and at the first "
-          f"{EARLY_STEPS} steps where it would not:\n",
-          markdown_table(dones, ["method", "seed", "failed Dones", "actions", f"within {EARLY_STEPS} %", "to success",
-                                 "in target room %", "P(Done) would succeed", "would fail", "would fail, early"]) + "\n",
-          "By where the episode starts:\n",
-          markdown_table(starts, ["method", "seed", "start", "episodes", "success %", "failed Done %", "time-out %"]) + "\n"]  # fmt: skip
+                    starts.append(
+                        [
+                            method,
+                            r["seed"],
+                            group.removeprefix("start "),
+                            g["episodes"],
+                            *(_pct(g[k]) for k in ("success", "failed Done", "time-out")),
+                        ]
+                    )
+    md = [
+        f"# How the episodes end ({split} split, {episodes} episodes per room type)\n",
+        markdown_table(ends, ["method", "seed", "episodes", "success %", "failed Done %", "time-out %"]) + "\n",
+        "The failed Dones (actions into the episode, median; the share within the first "
+        f"{EARLY_STEPS}; the oracle's actions to success at the Done, median; the share said in the target's room), "
+        f"and the policy's mean probability of Done where Done would succeed, where it would not, and at the first "
+        f"{EARLY_STEPS} steps where it would not:\n",
+        markdown_table(
+            dones,
+            [
+                "method",
+                "seed",
+                "failed Dones",
+                "actions",
+                f"within {EARLY_STEPS} %",
+                "to success",
+                "in target room %",
+                "P(Done) would succeed",
+                "would fail",
+                "would fail, early",
+            ],
+        )
+        + "\n",
+        "By where the episode starts:\n",
+        markdown_table(starts, ["method", "seed", "start", "episodes", "success %", "failed Done %", "time-out %"])
+        + "\n",
+    ]
     return "\n".join(md)
 
 
@@ -161,8 +210,10 @@ def main(args: Args) -> dict:
         raise errors.UserError(f"--episodes-per-room must be >= 1, got {episodes}")
     rundir.claim(folder)  # the one writer of the folder, and writable, before the work
     compiled = {}
-    report = {method: [{"seed": m.seed, **episode_endings(**play(m, args.split, episodes, compiled))} for m in seeds]
-              for method, seeds in models.items()}  # fmt: skip
+    report = {
+        method: [{"seed": m.seed, **episode_endings(**play(m, args.split, episodes, compiled))} for m in seeds]
+        for method, seeds in models.items()
+    }
     md = markdown(report, args.split, episodes)
     folder.mkdir(parents=True, exist_ok=True)
     rundir.write_json(out_json, {"split": args.split, "episodes_per_room": episodes, "methods": report})

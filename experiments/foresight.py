@@ -82,20 +82,25 @@ def collect(env, params, resets: int, key, perception_range: Optional[float] = N
     where a row is left out), the scene of each start (`group`) and whether the target is
     out of view (only those rows keep labels); with `perception_range`, the views as
     `within_range` sees them (a target beyond it is out of view)."""
+
     def one(k):
         obs, state = env.reset(k, params)
         sem, depth = env.view(state, params)
         here = env.shortest_path_length(state, params)
-        after = [env.shortest_path_length(env.step(k, state, jnp.int32(a), params)[1], params)
-                 for a in (C.ROTATE_LEFT, C.ROTATE_RIGHT)]  # fmt: skip
+        after = [
+            env.shortest_path_length(env.step(k, state, jnp.int32(a), params)[1], params)
+            for a in (C.ROTATE_LEFT, C.ROTATE_RIGHT)
+        ]
         return sem, depth, state.target, state.scene, state.agent_pos, state.heading, here, jnp.stack(after)
 
     sem, depth, target, scene, pos, heading, here, after = jax.tree.map(
-        np.asarray, jax.jit(jax.vmap(one))(jax.random.split(key, resets)))
+        np.asarray, jax.jit(jax.vmap(one))(jax.random.split(key, resets))
+    )
     bank = params.bank
     obj_cat = np.asarray(bank.obj_cat)
-    seen, num_classes = within_range(sem, depth, perception_range, env.num_semantic, env.num_categories,
-                                     C.NUM_STRUCTURAL)  # fmt: skip
+    seen, num_classes = within_range(
+        sem, depth, perception_range, env.num_semantic, env.num_categories, C.NUM_STRUCTURAL
+    )
     out_of_view = ~(seen == C.NUM_STRUCTURAL + target[:, None, None]).any(axis=(1, 2))
     turn = np.where(after[:, 0] < after[:, 1], 0, np.where(after[:, 1] < after[:, 0], 1, -1))
     bearing = np.full(resets, -1)
@@ -108,8 +113,12 @@ def collect(env, params, resets: int, key, perception_range: Optional[float] = N
     keep = out_of_view & (here > 1)
     unresolved = None if perception_range is None else env.num_semantic
     data = features(seen, depth, target, num_classes, env.num_categories, C.NUM_STRUCTURAL, unresolved)
-    data.update(turn=np.where(keep, turn, -1), bearing=np.where(keep, bearing, -1),
-                group=np.asarray(bank.numbers)[scene], out_of_view=out_of_view)  # fmt: skip
+    data.update(
+        turn=np.where(keep, turn, -1),
+        bearing=np.where(keep, bearing, -1),
+        group=np.asarray(bank.numbers)[scene],
+        out_of_view=out_of_view,
+    )
     if getattr(env, "priors", False):  # where the first view shows a piece the target stands by
         anchor = anchor_in_view(sem, target, env.setup)
         data["subsets"] = {"anchor in view": anchor, "anchor not in view": ~anchor}
@@ -121,8 +130,9 @@ def main(args: Args) -> dict:
     if importlib.util.find_spec("sklearn") is None:
         raise errors.UserError("experiments.foresight needs scikit-learn: pip install -e '.[paper]'")
     if args.perception_range is not None and not args.perception_range > 0:
-        raise errors.UserError(f"--perception-range {args.perception_range}: give a positive number of cells, or leave "
-                               "it out for no range")  # fmt: skip
+        raise errors.UserError(
+            f"--perception-range {args.perception_range}: give a positive number of cells, or leave it out for no range"
+        )
     if args.resets < 100:
         raise errors.UserError(f"--resets {args.resets}: give at least 100 starts per split")
     presets.check_seeds(args.seed)
@@ -131,23 +141,28 @@ def main(args: Args) -> dict:
             raise errors.UserError(f"--out {args.out} is a file, not a folder; choose another --out")
         taken = [name for name in ("foresight.md", "foresight.json") if (args.out / name).exists()]
         if taken and not args.overwrite:
-            raise errors.UserError(f"{args.out} already holds {', '.join(taken)}; pass --overwrite to replace them, or "
-                                   "choose another --out")  # fmt: skip
+            raise errors.UserError(
+                f"{args.out} already holds {', '.join(taken)}; pass --overwrite to replace them, or "
+                "choose another --out"
+            )
     t0 = time.time()
     data = {}
     for i, split in enumerate(("train", "test")):
-        env, params = envs.make("GridNav-v0", setup=args.setup, split=split, layout=args.layout, training=False,
-                                priors=args.priors)  # fmt: skip
-        data[split] = collect(env, params, args.resets, jax.random.fold_in(jax.random.PRNGKey(args.seed), i),
-                              args.perception_range)  # fmt: skip
-    results = {label: foresight_bound(data["train"], data["test"], label, args.seed)
-               for label in ("turn", "bearing")}  # fmt: skip
+        env, params = envs.make(
+            "GridNav-v0", setup=args.setup, split=split, layout=args.layout, training=False, priors=args.priors
+        )
+        data[split] = collect(
+            env, params, args.resets, jax.random.fold_in(jax.random.PRNGKey(args.seed), i), args.perception_range
+        )
+    results = {label: foresight_bound(data["train"], data["test"], label, args.seed) for label in ("turn", "bearing")}
     md = markdown(results, time.time() - t0, args.setup, args.layout, args.priors, args.resets, args.perception_range)
     print(md)
     if args.out is not None:
         args.out.mkdir(parents=True, exist_ok=True)
         (args.out / "foresight.md").write_text(md)
-        rundir.write_json(args.out / "foresight.json", {"args": rundir.jsonable(dataclasses.asdict(args)), "results": results})
+        rundir.write_json(
+            args.out / "foresight.json", {"args": rundir.jsonable(dataclasses.asdict(args)), "results": results}
+        )
     return results
 
 

@@ -50,9 +50,21 @@ from pathlib import Path
 from experiments import errors
 from experiments.reporting import cvae_comparison, probing, report, stats
 from experiments.reporting.paper_tables import (
-    GROUPS, PAIRS, PROBED, SETUP_OF, TABLE3, by_length_png, by_length_rows, claims, claims_markdown, fmt_pair,
-    sampled_markdown, table1, table2, table3,
-)  # fmt: skip
+    GROUPS,
+    PAIRS,
+    PROBED,
+    SETUP_OF,
+    TABLE3,
+    by_length_png,
+    by_length_rows,
+    claims,
+    claims_markdown,
+    fmt_pair,
+    sampled_markdown,
+    table1,
+    table2,
+    table3,
+)
 from experiments.reporting.tables import markdown_table, write_csv
 from experiments.running import devices, flags, numerics, paper_figures, probe_runs, rundir, sweeps
 from experiments.running.models import models_of_sweep
@@ -125,8 +137,9 @@ def sweep_args(args: Args, setup: str, methods: tuple[str, ...]) -> sweeps.Sweep
     fields = ("seeds", "preset", "seed", "num_updates", "test_episodes_per_room", "val_episodes_per_room")
     reuse = reuse_sweeps(args, setup)
     methods = tuple(arm_of(args, m) for m in methods)
-    return sweeps.Sweep(methods=methods, setup=setup, out=args.out / setup, reuse=reuse,
-                        **{k: getattr(args, k) for k in fields})  # fmt: skip
+    return sweeps.Sweep(
+        methods=methods, setup=setup, out=args.out / setup, reuse=reuse, **{k: getattr(args, k) for k in fields}
+    )
 
 
 def reuse_sweeps(args: Args, setup: str) -> tuple[Path, ...]:
@@ -144,22 +157,27 @@ def reuse_sweeps(args: Args, setup: str) -> tuple[Path, ...]:
 def check(args: Args) -> None:
     unknown = [m for m in args.exclude if m not in SETUP_OF]
     if unknown:
-        raise errors.UserError(f"--exclude {' '.join(unknown)}: not a method of the paper's tables; "
-                               f"they are {', '.join(SETUP_OF)}")  # fmt: skip
+        raise errors.UserError(
+            f"--exclude {' '.join(unknown)}: not a method of the paper's tables; they are {', '.join(SETUP_OF)}"
+        )
     if not any(m not in args.exclude for m in SETUP_OF):
         raise errors.UserError("--exclude leaves no method to run")
     armed = [split_arm(a)[0] for a in args.arms]  # split_arm's ValueError names a malformed arm
     wrong = [a for a, m in zip(args.arms, armed) if m not in SETUP_OF or m in args.exclude]
     if wrong:
-        raise errors.UserError(f"--arms {' '.join(wrong)}: each arm's method must be a method of the paper's tables "
-                               "that runs (not excluded)")  # fmt: skip
+        raise errors.UserError(
+            f"--arms {' '.join(wrong)}: each arm's method must be a method of the paper's tables "
+            "that runs (not excluded)"
+        )
     if len(set(armed)) != len(armed):
         raise errors.UserError("--arms: give each method at most one arm")
     if args.seeds < 1:
         raise errors.UserError(f"--seeds must be >= 1, got {args.seeds}")
     for run in map(Path, args.reuse):
         if not (run / "paper.json").is_file() and not (run / "sweep.json").is_file():
-            raise errors.UserError(f"--reuse {run}: neither a paper run (no paper.json) nor a sweep folder (no sweep.json)")
+            raise errors.UserError(
+                f"--reuse {run}: neither a paper run (no paper.json) nor a sweep folder (no sweep.json)"
+            )
         if run.resolve() == Path(args.out).resolve():
             raise errors.UserError(f"--reuse {run}: the run being written (--out); to continue it use --resume")
     for setup, group in GROUPS.items():  # each setup's sweep checks its sources' protocol (and its own)
@@ -181,7 +199,9 @@ def main(args: Args) -> dict | None:
         args = rundir.resumed_args(args, "paper.json", "paper run", keep=flags.INVOCATION)
     check(args)
     if importlib.util.find_spec("sklearn") is None:  # Figure 4's t-SNE, drawn after the training
-        raise errors.UserError("the paper report needs scikit-learn (Figure 4's t-SNE): pip install 'foresit_jax[paper]'")
+        raise errors.UserError(
+            "the paper report needs scikit-learn (Figure 4's t-SNE): pip install 'foresit_jax[paper]'"
+        )
     for method in SETUP_OF:  # fail before any training
         sweeps.method_schedule(arm_of(args, method), sweeps.Sweep(preset=args.preset, setup=SETUP_OF[method]))
     if not args.resume:
@@ -201,8 +221,13 @@ def _run(args: Args) -> dict | None:
             continue
         print(f"== {setup} setup: {', '.join(methods)}", flush=True)
         spec = sweep_args(args, setup, methods)
-        ran = sweeps.run(spec, resume=(spec.out / "sweep.json").exists(), stop_after_chunks=args.stop_after_chunks,
-                         progress=args.progress, allow_large=args.allow_large)  # fmt: skip
+        ran = sweeps.run(
+            spec,
+            resume=(spec.out / "sweep.json").exists(),
+            stop_after_chunks=args.stop_after_chunks,
+            progress=args.progress,
+            allow_large=args.allow_large,
+        )
         if ran is None:
             print("stopped (continue with --resume)")
             return None
@@ -224,11 +249,15 @@ def by_length_section(args: Args, results: dict) -> str:
             continue
         name = f"by_length_{base}_vs_{other}.png".replace("+", "_")
         by_length_png(args.out / name, [r for r in rows if r["method"] in (base, other)])
-        cells = [[bucket, episodes, *(f"{fmt_pair(p)} ({stats.verdict(p)})" for p in pairs)]
-                 for bucket, episodes, *pairs in report.paired_by_length(results, base, other)]  # fmt: skip
-        md += (f"### {other} against {base}\n\n![SR and SPL by L^g]({name})\n\n"
-               + markdown_table(cells, ["L^g", "episodes (all seeds)", "SR difference [95% CI], p", "SPL difference"])
-               + "\n\n")  # fmt: skip
+        cells = [
+            [bucket, episodes, *(f"{fmt_pair(p)} ({stats.verdict(p)})" for p in pairs)]
+            for bucket, episodes, *pairs in report.paired_by_length(results, base, other)
+        ]
+        md += (
+            f"### {other} against {base}\n\n![SR and SPL by L^g]({name})\n\n"
+            + markdown_table(cells, ["L^g", "episodes (all seeds)", "SR difference [95% CI], p", "SPL difference"])
+            + "\n\n"
+        )
     return md or "(no +ForeSIT pair was run)\n"
 
 
@@ -236,7 +265,9 @@ def by_length_section(args: Args, results: dict) -> str:
 def _first_seed(args: Args, method: str):
     """(config, trainer, last training state, selected AgentParams) of the first seed."""
     arm = arm_of(args, method)
-    config, trainer, states, best = sweeps.load_method(arm, _method_args(args, method), args.out / SETUP_OF[method] / "methods" / arm)
+    config, trainer, states, best = sweeps.load_method(
+        arm, _method_args(args, method), args.out / SETUP_OF[method] / "methods" / arm
+    )
     return config, trainer, devices.seed_slice(states, 0), devices.seed_slice(best, 0)
 
 
@@ -248,7 +279,9 @@ def _method_args(args: Args, method: str) -> sweeps.Sweep:
 def sampled_section(args: Args, results: dict) -> str:
     """ORG's rows (evaluated greedily, as ORG's code does) evaluated with sampled actions
     too, on the same test episodes (also written to sampled.csv)."""
-    greedy = [m for m in results if sweeps.method_schedule(m, sweep_args(args, SETUP_OF[m], (m,)))[0].pieces.greedy_evaluation]
+    greedy = [
+        m for m in results if sweeps.method_schedule(m, sweep_args(args, SETUP_OF[m], (m,)))[0].pieces.greedy_evaluation
+    ]
     title = "## ORG's rows with sampled actions\n\n"
     if not greedy:
         return title + "Not run: no method evaluated greedily (ORG's rows) was trained.\n"
@@ -259,9 +292,11 @@ def sampled_section(args: Args, results: dict) -> str:
         sampled.update(by_method(args, paper_figures.sampled_results(args.out / setup, arms)))
     md, rows = sampled_markdown(results, sampled)
     write_csv(args.out / "sampled.csv", rows)
-    return (title + "ORG's code acts greedily at evaluation (the argmax of the policy), SAVN's samples; greedy play can "
-            "loop where sampling escapes. Each seed's selected model on the same test episodes with each rule; mean "
-            "± sample std over seeds, the difference paired over seeds.\n\n" + md)  # fmt: skip
+    return (
+        title + "ORG's code acts greedily at evaluation (the argmax of the policy), SAVN's samples; greedy play can "
+        "loop where sampling escapes. Each seed's selected model on the same test episodes with each rule; mean "
+        "± sample std over seeds, the difference paired over seeds.\n\n" + md
+    )
 
 
 # ---------------------------------------------------------------------- report.md
@@ -283,16 +318,23 @@ def write_report(args: Args, results: dict) -> dict:
     out = args.out
     seeds = f"{args.seed}-{args.seed + args.seeds - 1}" if args.seeds > 1 else str(args.seed)
     excluded = [m for m in SETUP_OF if m not in results]
-    md = [f"# ForeSIT on GridNav: the paper's evaluation (preset {args.preset}, seeds {seeds})\n",
-          f"Test split, each seed's model selected on validation (`experiments.running.selection`); mean ± sample std "
-          f"[95% Student-t interval] over {args.seeds} seed(s). Not run: {', '.join(excluded) or 'none'}.\n"]  # fmt: skip
+    md = [
+        f"# ForeSIT on GridNav: the paper's evaluation (preset {args.preset}, seeds {seeds})\n",
+        f"Test split, each seed's model selected on validation (`experiments.running.selection`); mean ± sample std "
+        f"[95% Student-t interval] over {args.seeds} seed(s). Not run: {', '.join(excluded) or 'none'}.\n",
+    ]
     if args.arms:
-        md.append("Methods run with fields of their own (`--arms`; the rows keep the method's name): "
-                  + "; ".join(f"{split_arm(a)[0]} at {a.partition('@')[2]}" for a in args.arms) + ".\n")  # fmt: skip
+        md.append(
+            "Methods run with fields of their own (`--arms`; the rows keep the method's name): "
+            + "; ".join(f"{split_arm(a)[0]} at {a.partition('@')[2]}" for a in args.arms)
+            + ".\n"
+        )
 
     compared = [*PAIRS, *(("a3c+org+foresit", m) for m in TABLE3[1:-1])]  # the claims' pairs
-    md.append(numerics.markdown(results, compared)
-              + sweeps.assembled_markdown({m: out / SETUP_OF[m] / "methods" / arm_of(args, m) for m in results}))  # fmt: skip
+    md.append(
+        numerics.markdown(results, compared)
+        + sweeps.assembled_markdown({m: out / SETUP_OF[m] / "methods" / arm_of(args, m) for m in results})
+    )
     t1, rows1 = table1(results)
     write_csv(out / "table1.csv", rows1)
     md.append("## Table 1\n\n" + t1)
@@ -319,13 +361,20 @@ def write_report(args: Args, results: dict) -> dict:
         items = cvae_comparison.collect_items(trainer, state, args.cvae_windows, args.seed)
         result = cvae_comparison.compare(config, items, args.cvae_epochs, args.seed)
         rundir.write_json(out / "cvae_comparison.json", result)
-        md.append(f"## The C-VAE comparison ({foresit}, seed {args.seed})\n\n"
-                  + (cvae_comparison.markdown(result, config, args.cvae_windows, level=3) if "direct" in result
-                     else f"Not run: {result['items']} successful episodes in {args.cvae_windows} windows.\n"))  # fmt: skip
+        md.append(
+            f"## The C-VAE comparison ({foresit}, seed {args.seed})\n\n"
+            + (
+                cvae_comparison.markdown(result, config, args.cvae_windows, level=3)
+                if "direct" in result
+                else f"Not run: {result['items']} successful episodes in {args.cvae_windows} windows.\n"
+            )
+        )
         print("Figure 4: t-SNE", flush=True)
         n = paper_figures.tsne_figure(config, trainer, state, items, out / "fig4_tsne.png", args.tsne_points, args.seed)
-        md.append(f"## Figure 4: t-SNE of imagined states and selected sub-goals ({foresit}, seed {args.seed})\n\n"
-                  + (f"![t-SNE](fig4_tsne.png)\n\n{n} items.\n" if n >= 5 else f"Not drawn: {n} items.\n"))  # fmt: skip
+        md.append(
+            f"## Figure 4: t-SNE of imagined states and selected sub-goals ({foresit}, seed {args.seed})\n\n"
+            + (f"![t-SNE](fig4_tsne.png)\n\n{n} items.\n" if n >= 5 else f"Not drawn: {n} items.\n")
+        )
     md.append("## Figure 3: trajectories on the same test episodes\n")
     for base, other in PAIRS:
         if base in results and other in results:
@@ -333,10 +382,18 @@ def write_report(args: Args, results: dict) -> dict:
             print(f"Figure 3: {base} and {other}", flush=True)
             loaded = {m: _first_seed(args, m)[::3] for m in (base, other)}  # (config, selected params)
             summary = paper_figures.trajectories_figure(loaded, args.seed, args.trajectory_candidates, out / name)
-            md.append(f"![{base} and {other}]({name})\n\n{base} left, {other} right (seed {args.seed}; the arrow is the "
-                      f"start pose, the target framed in red). {summary}.\n\n")  # fmt: skip
-    md.append("## Learning curves (mean and band of one std over seeds)\n\n"
-              + "".join(f"![{setup}]({setup}/learning_curves.png)\n\n" for setup in GROUPS if (out / setup / "learning_curves.png").exists()))  # fmt: skip
+            md.append(
+                f"![{base} and {other}]({name})\n\n{base} left, {other} right (seed {args.seed}; the arrow is the "
+                f"start pose, the target framed in red). {summary}.\n\n"
+            )
+    md.append(
+        "## Learning curves (mean and band of one std over seeds)\n\n"
+        + "".join(
+            f"![{setup}]({setup}/learning_curves.png)\n\n"
+            for setup in GROUPS
+            if (out / setup / "learning_curves.png").exists()
+        )
+    )
     text = "\n".join(md)
     (out / "report.md").write_text(text)
     print(text)

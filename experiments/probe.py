@@ -33,6 +33,7 @@ from experiments.reporting import probing
 from experiments.running import probe_runs, rundir
 from experiments.running.models import models_of_run, models_of_sweep
 
+
 @dataclasses.dataclass(frozen=True)
 class Args:
     """Probe whether a trained agent uses its imagination, and what f_w learned."""
@@ -78,8 +79,15 @@ def main(args: Args) -> dict:
     report = probe_runs.probe(models, args.episodes_per_room, args.windows, args.fit_passes if args.fit_options else 0)
     md = probing.markdown(report, args.episodes_per_room, args.windows)
     folder.mkdir(parents=True, exist_ok=True)
-    rundir.write_json(out_json, {"episodes_per_room": args.episodes_per_room, "windows": args.windows,
-                                 "fit_passes": args.fit_passes if args.fit_options else 0, "methods": report})  # fmt: skip
+    rundir.write_json(
+        out_json,
+        {
+            "episodes_per_room": args.episodes_per_room,
+            "windows": args.windows,
+            "fit_passes": args.fit_passes if args.fit_options else 0,
+            "methods": report,
+        },
+    )
     out_md.write_text(md)
     print(md)
     print(f"wrote {out_md} and {out_json} ({time.time() - t0:.0f} s)")

@@ -49,14 +49,21 @@ def main(args: Args) -> list[dict] | None:
     returns Table 1's rows (None when stopped by --stop-after-chunks)."""
     if args.resume:  # the sweep's own arguments; a flag given that contradicts them is refused
         wanted = args.num_updates  # more updates than the sweep has extend it, once the rest is checked
-        args = rundir.resumed_args(dataclasses.replace(args, num_updates=None), "sweep.json", "sweep",
-                                   keep=flags.INVOCATION)  # fmt: skip
+        args = rundir.resumed_args(
+            dataclasses.replace(args, num_updates=None), "sweep.json", "sweep", keep=flags.INVOCATION
+        )
         if wanted is not None:
             extended = sweeps.extend(args.out, wanted, args.allow_large)
             args = dataclasses.replace(args, num_updates=extended.num_updates, reuse=extended.reuse)
     spec = sweeps.Sweep(**{f.name: getattr(args, f.name) for f in dataclasses.fields(sweeps.Sweep)})
-    return sweeps.run(spec, resume=args.resume, overwrite=args.overwrite, stop_after_chunks=args.stop_after_chunks,
-                      progress=args.progress, allow_large=args.allow_large)  # fmt: skip
+    return sweeps.run(
+        spec,
+        resume=args.resume,
+        overwrite=args.overwrite,
+        stop_after_chunks=args.stop_after_chunks,
+        progress=args.progress,
+        allow_large=args.allow_large,
+    )
 
 
 def cli(argv=None) -> None:

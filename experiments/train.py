@@ -82,8 +82,9 @@ class Args:
 def build(args: Args):
     """Config and Schedule from the arguments (or from the run folder when resuming)."""
     check_seeds(args.seed)
-    config, schedule = preset(args.preset, args.method, num_updates=args.num_updates, setup=args.setup,
-                              **given(args.config))  # fmt: skip
+    config, schedule = preset(
+        args.preset, args.method, num_updates=args.num_updates, setup=args.setup, **given(args.config)
+    )
     sched = {k: getattr(args, k) for k in ("chunk_updates", "test_episodes_per_room", "val_episodes_per_room")}
     schedule = dataclasses.replace(schedule, **{k: v for k, v in sched.items() if v is not None})
     for name in ("chunk_updates", "test_episodes_per_room", "val_episodes_per_room"):
@@ -96,8 +97,13 @@ def build(args: Args):
 def run_flags(info: dict) -> dict:
     """The values a run (its run.json, `info`) has for train's own flags."""
     config, schedule = info["config"], info["schedule"]
-    return {"method": info["arm"], "setup": config["setup"], "preset": info["preset"], "seed": info["seeds"][0],
-            **{k: schedule[k] for k in ("chunk_updates", "test_episodes_per_room", "val_episodes_per_room")}}  # fmt: skip
+    return {
+        "method": info["arm"],
+        "setup": config["setup"],
+        "preset": info["preset"],
+        "seed": info["seeds"][0],
+        **{k: schedule[k] for k in ("chunk_updates", "test_episodes_per_room", "val_episodes_per_room")},
+    }
 
 
 def resume_conflicts(args: Args, info: dict) -> list[str]:
@@ -106,10 +112,16 @@ def resume_conflicts(args: Args, info: dict) -> list[str]:
     `--flag value (the run has ...)`; --num-updates is not one (it extends the run)."""
     config, run = info["config"], run_flags(info)
     defaults = Args()
-    clash = [f"--{k.replace('_', '-')} {getattr(args, k)} (the run has {v})" for k, v in run.items()
-             if getattr(args, k) != getattr(defaults, k) and getattr(args, k) != v]  # fmt: skip
-    return clash + [f"--{k.replace('_', '-')} {v} (the run has {config[k]})" for k, v in given(args.config).items()
-                    if rundir.jsonable(v) != config[k]]  # fmt: skip
+    clash = [
+        f"--{k.replace('_', '-')} {getattr(args, k)} (the run has {v})"
+        for k, v in run.items()
+        if getattr(args, k) != getattr(defaults, k) and getattr(args, k) != v
+    ]
+    return clash + [
+        f"--{k.replace('_', '-')} {v} (the run has {config[k]})"
+        for k, v in given(args.config).items()
+        if rundir.jsonable(v) != config[k]
+    ]
 
 
 def resume_ignored(args: Args, info: dict) -> list[str]:
@@ -117,8 +129,11 @@ def resume_ignored(args: Args, info: dict) -> list[str]:
     whose values differ from the run's: --resume ignores them, saying so."""
     run = run_flags(info)
     defaults = Args()
-    return [f"--{k.replace('_', '-')} {getattr(args, k)} (the run has {v})" for k, v in run.items()
-            if k in errors.given_flags() and getattr(args, k) == getattr(defaults, k) != v]  # fmt: skip
+    return [
+        f"--{k.replace('_', '-')} {getattr(args, k)} (the run has {v})"
+        for k, v in run.items()
+        if k in errors.given_flags() and getattr(args, k) == getattr(defaults, k) != v
+    ]
 
 
 class Metrics:
@@ -157,22 +172,28 @@ def start(args: Args) -> tuple[Run, bool]:
     rundir.prepare_run_dir(out, resume=True, overwrite=args.overwrite)
     run = read(out)  # refuses a folder of before `run.RUN_FORMAT`, in one line
     if len(run.seeds) != 1 or (out.parent.name == "methods" and (out.parent.parent / "sweep.json").is_file()):
-        raise errors.UserError(f"{out} is a sweep's arm ({len(run.seeds)} seed(s)); continue its sweep with "
-                               "experiments.sweep --resume --out <the sweep folder>")  # fmt: skip
+        raise errors.UserError(
+            f"{out} is a sweep's arm ({len(run.seeds)} seed(s)); continue its sweep with "
+            "experiments.sweep --resume --out <the sweep folder>"
+        )
     info = rundir.read_run_info(out)
     selection.check_resumable(run.progress().get("selection_protocol"), str(out))
     clash = resume_conflicts(args, info)
     if clash:
-        raise errors.UserError(f"--resume continues {out} with its own settings; drop {', '.join(clash)} "
-                               "(only --num-updates may differ: it extends the run)")  # fmt: skip
+        raise errors.UserError(
+            f"--resume continues {out} with its own settings; drop {', '.join(clash)} "
+            "(only --num-updates may differ: it extends the run)"
+        )
     errors.say_ignored(resume_ignored(args, info), out)
     if args.num_updates is not None and args.num_updates != run.config.num_updates:
         check_sizes(dataclasses.replace(run.config, num_updates=args.num_updates), allow_large=args.allow_large)
         had = run.config.num_updates
         kept = out / f"report_{had}_updates"
         run = run.extend(args.num_updates, keep=REPORT_FILES)
-        print(f"extending {out} to {run.config.num_updates} updates (it had {had})"
-              + (f"; its {had}-update report is kept in {kept.name}/" if kept.is_dir() else ""))  # fmt: skip
+        print(
+            f"extending {out} to {run.config.num_updates} updates (it had {had})"
+            + (f"; its {had}-update report is kept in {kept.name}/" if kept.is_dir() else "")
+        )
     return run, True
 
 
@@ -186,8 +207,10 @@ def main(args: Args) -> dict:
     run, resumed = start(args)
     config, seed = run.config, run.seeds[0]
     if resumed and run.results() is not None and (out / "results_test.json").is_file():
-        print(f"{out} is finished ({config.num_updates} updates) and its results are written; nothing to do "
-              "(pass --num-updates N to extend it)")  # fmt: skip
+        print(
+            f"{out} is finished ({config.num_updates} updates) and its results are written; nothing to do "
+            "(pass --num-updates N to extend it)"
+        )
         return rundir.read_json(out / "results_test.json")["results"]
     evaluator = Evaluator.for_config(config)  # held for the run: validation compiles once
     t_start = time.time()
@@ -217,16 +240,25 @@ def report(run: Run, done: dict, evaluator, seconds: float) -> dict:
     (result,) = done["results"]
     step = result["selected_update"]
     test = {room: m for room, m in result["selected"].items() if room != "by_length"}
-    random = evaluator.evaluate_random_policy(config, "test", selection.test_key(seed), run.schedule.test_episodes_per_room)
+    random = evaluator.evaluate_random_policy(
+        config, "test", selection.test_key(seed), run.schedule.test_episodes_per_room
+    )
     rundir.write_json(out / "results_test.json", {"selected_update": step, "results": test, "random_policy": random})
-    title = (f"{tables.arm_label(config.method)}, preset {run.preset}, seed {seed}: test split (model of update {step}, "
-             "best validation SR)")
-    text = tables.results_markdown(test, title) + "\n" + tables.results_markdown(random, "Uniformly random policy, same rooms", level=2)
+    title = (
+        f"{tables.arm_label(config.method)}, preset {run.preset}, seed {seed}: test split (model of update {step}, "
+        "best validation SR)"
+    )
+    text = (
+        tables.results_markdown(test, title)
+        + "\n"
+        + tables.results_markdown(random, "Uniformly random policy, same rooms", level=2)
+    )
     (out / "results_test.md").write_text(text)
     y = np.array(result["training_success_rate"], float)
     vals = [(v["update"], v["SR"] / 100.0) for v in result["validation"]]
-    figures.learning_curve_png(out / "learning_curve.png", {config.method: (np.arange(1, len(y) + 1), figures.smooth(y))},
-                               val_points=vals)  # fmt: skip
+    figures.learning_curve_png(
+        out / "learning_curve.png", {config.method: (np.arange(1, len(y) + 1), figures.smooth(y))}, val_points=vals
+    )
     print(text)
     print(f"wrote {out}/results_test.md, results_test.json, learning_curve.png, metrics.csv ({seconds:.0f} s)")
     return rundir.read_json(out / "results_test.json")["results"]

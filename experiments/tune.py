@@ -40,6 +40,7 @@ from experiments.reporting import tuning
 from experiments.running import devices, flags, rundir, sweeps
 from experiments.running.presets import split_arm
 
+
 @dataclasses.dataclass(frozen=True)
 class Args:
     """Train every method at every grid value over the same seeds, choose each method's value on validation, pair them."""
@@ -91,7 +92,9 @@ def parse_grid(specs) -> list[tuple[str, list[str]]]:
 
 def points(grid) -> list[str]:
     """The grid's points, in order (the last field varying fastest): 'field=v,...' each."""
-    return [",".join(f"{f}={v}" for f, v in zip(dict(grid), combo)) for combo in itertools.product(*dict(grid).values())]
+    return [
+        ",".join(f"{f}={v}" for f, v in zip(dict(grid), combo)) for combo in itertools.product(*dict(grid).values())
+    ]
 
 
 def arm(method: str, point: str) -> str:
@@ -108,14 +111,18 @@ def arms(args: Args, grid) -> dict[str, dict[str, str]]:
         _, own = split_arm(method)
         clash = sorted(set(own) & set(dict(grid)))
         if clash:
-            raise errors.UserError(f"--methods {method}: sets {', '.join(clash)}, which --grid varies; drop it from one")
+            raise errors.UserError(
+                f"--methods {method}: sets {', '.join(clash)}, which --grid varies; drop it from one"
+            )
         table[method] = {p: arm(method, p) for p in points(grid)}
         configs = {}
         for point, name in table[method].items():  # a ValueError names what is wrong
             config, _ = sweeps.method_schedule(name, sweep_args(args, (name,), Path(".")))
             same = [p for p, c in configs.items() if c == config]
             if same:
-                raise errors.UserError(f"--grid: {method} at {point} trains what it trains at {same[0]}; give distinct values")
+                raise errors.UserError(
+                    f"--grid: {method} at {point} trains what it trains at {same[0]}; give distinct values"
+                )
             configs[point] = config
     return table
 
@@ -123,15 +130,25 @@ def arms(args: Args, grid) -> dict[str, dict[str, str]]:
 def sweep_args(args: Args, methods: tuple[str, ...], folder: Path) -> sweeps.Sweep:
     """The sweep of `methods` (arms) in `folder` under the tune's protocol."""
     reuse = tuple(f / "sweep" if (Path(f) / "tune.json").is_file() else Path(f) for f in map(Path, args.reuse))
-    return sweeps.Sweep(methods=methods, setup=args.setup, seeds=args.seeds, preset=args.preset, seed=args.seed,
-                        out=folder, reuse=reuse, num_updates=args.num_updates,
-                        test_episodes_per_room=args.test_episodes_per_room, val_episodes_per_room=args.val_episodes_per_room)  # fmt: skip
+    return sweeps.Sweep(
+        methods=methods,
+        setup=args.setup,
+        seeds=args.seeds,
+        preset=args.preset,
+        seed=args.seed,
+        out=folder,
+        reuse=reuse,
+        num_updates=args.num_updates,
+        test_episodes_per_room=args.test_episodes_per_room,
+        val_episodes_per_room=args.val_episodes_per_room,
+    )
 
 
 def tune_report(args: Args, grid, table: dict, results: dict) -> tuple[str, dict]:
     """tune.md's text and tune.json's numbers (`experiments.reporting.tuning.tune_report`)."""
-    return tuning.tune_report(args.methods, [f for f, _ in grid], points(grid), args.preset, args.setup,
-                              args.out / "sweep", table, results)  # fmt: skip
+    return tuning.tune_report(
+        args.methods, [f for f, _ in grid], points(grid), args.preset, args.setup, args.out / "sweep", table, results
+    )
 
 
 def main(args: Args) -> dict | None:
@@ -150,15 +167,25 @@ def main(args: Args) -> dict | None:
     if not args.resume:
         rundir.prepare_run_dir(args.out, resume=False, overwrite=args.overwrite, marker="tune.json", kind="tune")
         rundir.write_started_args(args.out / "tune.json", args, flags.INVOCATION)
-    print(f"tuning {', '.join(f for f, _ in grid)}: {len(args.methods)} method(s) x {len(points(grid))} value(s) "
-          f"= {len(names)} arms, {args.seeds} seed(s) each", flush=True)  # fmt: skip
-    ran = sweeps.run(sweep_args(args, names, folder), resume=(folder / "sweep.json").is_file(),
-                     stop_after_chunks=args.stop_after_chunks, progress=args.progress,
-                     allow_large=args.allow_large)  # fmt: skip
+    print(
+        f"tuning {', '.join(f for f, _ in grid)}: {len(args.methods)} method(s) x {len(points(grid))} value(s) "
+        f"= {len(names)} arms, {args.seeds} seed(s) each",
+        flush=True,
+    )
+    ran = sweeps.run(
+        sweep_args(args, names, folder),
+        resume=(folder / "sweep.json").is_file(),
+        stop_after_chunks=args.stop_after_chunks,
+        progress=args.progress,
+        allow_large=args.allow_large,
+    )
     if ran is None:
         print("continue with: python -m experiments.tune --resume --out " + str(args.out))
         return None
-    results = {a: rundir.read_json(args.out / "sweep" / "methods" / a / "results.json", rundir.RESULTS_KEYS)["results"] for a in names}
+    results = {
+        a: rundir.read_json(args.out / "sweep" / "methods" / a / "results.json", rundir.RESULTS_KEYS)["results"]
+        for a in names
+    }
     md, out = tune_report(args, grid, table, results)
     (args.out / "tune.md").write_text(md)
     rundir.write_json(args.out / "tune_results.json", out)

@@ -197,43 +197,68 @@ class Config:
         # The same check as envs.gridnav.check_perception_range, written again here because
         # importing envs loads jax, and a Config is jax-free (tests/test_structure.py).
         if self.perception_range is not None and (
-                isinstance(self.perception_range, bool) or not isinstance(self.perception_range, (int, float))
-                or not 0 < self.perception_range < math.inf):  # fmt: skip
-            raise ValueError(f"perception_range must be None (off) or a positive number of cells, "
-                             f"got {self.perception_range!r}.")  # fmt: skip
+            isinstance(self.perception_range, bool)
+            or not isinstance(self.perception_range, (int, float))
+            or not 0 < self.perception_range < math.inf
+        ):
+            raise ValueError(
+                f"perception_range must be None (off) or a positive number of cells, got {self.perception_range!r}."
+            )
         if pieces.required_setup not in (None, self.setup):
             raise ValueError(
                 f"method {self.method!r} needs setup {pieces.required_setup!r} (its {pieces.encoder!r} "
                 f"encoder reads the detector features), got setup {self.setup!r}."
             )
-        for name, valid, supported in (("rollout", ROLLOUTS, pieces.rollouts), ("gradient", GRADIENTS, pieces.gradients)):
+        for name, valid, supported in (
+            ("rollout", ROLLOUTS, pieces.rollouts),
+            ("gradient", GRADIENTS, pieces.gradients),
+        ):
             value = getattr(self, name)
             if value not in valid:
                 raise ValueError(f"{name} must be one of {valid}, got {value!r}.")
             if value not in supported:
                 needs = ", ".join(f"{k}={v!r}" for k, v in pieces.required_config.items())
-                raise ValueError(f"method {self.method!r} supports {name} {supported}, not {value!r} (it needs {needs}).")
-        for name, valid in (("imagination_input", IMAGINATION_INPUTS), ("evaluation_noise", EVALUATION_NOISES),
-                            ("value_head", VALUE_HEADS), ("imagination_noise", IMAGINATION_NOISES),
-                            ("attention_value_init", ATTENTION_VALUE_INITS),
-                            ("attention_key_gradient", ATTENTION_KEY_GRADIENTS)):  # fmt: skip
+                raise ValueError(
+                    f"method {self.method!r} supports {name} {supported}, not {value!r} (it needs {needs})."
+                )
+        for name, valid in (
+            ("imagination_input", IMAGINATION_INPUTS),
+            ("evaluation_noise", EVALUATION_NOISES),
+            ("value_head", VALUE_HEADS),
+            ("imagination_noise", IMAGINATION_NOISES),
+            ("attention_value_init", ATTENTION_VALUE_INITS),
+            ("attention_key_gradient", ATTENTION_KEY_GRADIENTS),
+        ):
             if getattr(self, name) not in valid:
                 raise ValueError(f"{name} must be one of {valid}, got {getattr(self, name)!r}.")
         if pieces.imagination_variant.reads_goal_view and self.imagination_noise != "output":
-            raise ValueError(f"method {self.method!r} takes i_tau from the goal view, not from f_w: its noise is "
-                             "Eq. 6's, on i_tau; drop imagination_noise (or set it to 'output').")  # fmt: skip
+            raise ValueError(
+                f"method {self.method!r} takes i_tau from the goal view, not from f_w: its noise is "
+                "Eq. 6's, on i_tau; drop imagination_noise (or set it to 'output')."
+            )
         if pieces.imagination_variant.reads_cue and (self.sigma2_max != 0 or self.imagination_noise != "output"):
-            raise ValueError(f"method {self.method!r} gives the policy an exact privileged cue, without Eq. 7's noise: "
-                             "set sigma2_max=0 (and leave imagination_noise at 'output').")  # fmt: skip
+            raise ValueError(
+                f"method {self.method!r} gives the policy an exact privileged cue, without Eq. 7's noise: "
+                "set sigma2_max=0 (and leave imagination_noise at 'output')."
+            )
         if self.imagination_optimizer not in IMAGINATION_OPTIMIZERS:
             raise ValueError(
-                f"imagination_optimizer must be one of {IMAGINATION_OPTIMIZERS}, "
-                f"got {self.imagination_optimizer!r}."
+                f"imagination_optimizer must be one of {IMAGINATION_OPTIMIZERS}, got {self.imagination_optimizer!r}."
             )
         for name in (
-            "num_lanes", "num_updates", "num_steps", "num_actions", "hidden_size",
-            "attention_size", "value_hidden", "buffer_size", "imagination_epochs", "imagination_batch",
-            "success_window", "int_interval", "maml_segment",
+            "num_lanes",
+            "num_updates",
+            "num_steps",
+            "num_actions",
+            "hidden_size",
+            "attention_size",
+            "value_hidden",
+            "buffer_size",
+            "imagination_epochs",
+            "imagination_batch",
+            "success_window",
+            "int_interval",
+            "maml_segment",
         ):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int):
@@ -241,9 +266,15 @@ class Config:
             if value < 1:
                 raise ValueError(f"{name} must be >= 1, got {value}.")
         if self.buffer_size % self.imagination_batch:
-            raise ValueError(f"imagination_batch ({self.imagination_batch}) must divide buffer_size ({self.buffer_size}): "
-                             "a full buffer is split into steps of that many items")  # fmt: skip
-        if isinstance(self.maml_inner_updates, bool) or not isinstance(self.maml_inner_updates, int) or self.maml_inner_updates < 0:
+            raise ValueError(
+                f"imagination_batch ({self.imagination_batch}) must divide buffer_size ({self.buffer_size}): "
+                "a full buffer is split into steps of that many items"
+            )
+        if (
+            isinstance(self.maml_inner_updates, bool)
+            or not isinstance(self.maml_inner_updates, int)
+            or self.maml_inner_updates < 0
+        ):
             raise ValueError(f"maml_inner_updates must be an int >= 0, got {self.maml_inner_updates!r}.")
         for f in dataclasses.fields(self):  # inf or NaN breaks a run and cannot be saved in strict JSON
             value = getattr(self, f.name)

@@ -110,8 +110,17 @@ def _fit_adam(loss_fn, params, key, n: int, batch_size: int, epochs: int, learni
     return params, step_losses
 
 
-def fit_cvae(model: CVAE, key, state, s_0, goal, epochs: int = 50, batch_size: int = 64, learning_rate: float = 1e-3,
-             beta: float = 1.0):  # fmt: skip
+def fit_cvae(
+    model: CVAE,
+    key,
+    state,
+    s_0,
+    goal,
+    epochs: int = 50,
+    batch_size: int = 64,
+    learning_rate: float = 1e-3,
+    beta: float = 1.0,
+):
     """Train the C-VAE on items `[N, ...]` with Adam; (params, per-step losses `[steps]`)."""
     state, s_0, goal = (jnp.asarray(x) for x in (state, s_0, goal))
     k_init, k_fit = jax.random.split(key)
@@ -120,8 +129,16 @@ def fit_cvae(model: CVAE, key, state, s_0, goal, epochs: int = 50, batch_size: i
     return _fit_adam(loss, params, k_fit, state.shape[0], batch_size, epochs, learning_rate)
 
 
-def fit_imagination(key, s_0, goal, target, layer_sizes: Sequence[int], epochs: int = 50, batch_size: int = 64,
-                    learning_rate: float = 1e-3):  # fmt: skip
+def fit_imagination(
+    key,
+    s_0,
+    goal,
+    target,
+    layer_sizes: Sequence[int],
+    epochs: int = 50,
+    batch_size: int = 64,
+    learning_rate: float = 1e-3,
+):
     """Train an f_w (ImaginationNet of `layer_sizes`) to map [s_0 : g] to `target` with
     Eq. 5's smooth-L1 and Adam; (apply function, params, per-step losses `[steps]`)."""
     s_0, goal, target = (jnp.asarray(x) for x in (s_0, goal, target))
@@ -133,8 +150,16 @@ def fit_imagination(key, s_0, goal, target, layer_sizes: Sequence[int], epochs: 
     return net.apply, params, step_losses
 
 
-def compare_imagination_targets(key, train_items, test_items, layer_sizes: Sequence[int], latent_size: int = 64,
-                                epochs: int = 50, batch_size: int = 64, learning_rate: float = 1e-3) -> dict:  # fmt: skip
+def compare_imagination_targets(
+    key,
+    train_items,
+    test_items,
+    layer_sizes: Sequence[int],
+    latent_size: int = 64,
+    epochs: int = 50,
+    batch_size: int = 64,
+    learning_rate: float = 1e-3,
+) -> dict:
     """The paper's comparison on (s_0, g, ŝ) items `[N, ...]` (a train and a held-out set):
     f_w trained on ŝ directly vs on the C-VAE's latent mean of ŝ; each one's average
     smooth-L1 loss on the held-out items, with the variance of what it predicts."""
@@ -147,15 +172,21 @@ def compare_imagination_targets(key, train_items, test_items, layer_sizes: Seque
     _, (reconstruction, kl) = cvae_loss(model, cvae_params, test_items[2], test_items[0], test_items[1], k_held_out)
     # A KL near 0 means the latent carries little of ŝ (posterior collapse: the condition
     # alone explains it), and the latent target is then nearly constant.
-    out = {"cvae_final_loss": float(cvae_losses[-1]), "cvae_reconstruction": float(reconstruction),
-           "cvae_kl": float(kl)}  # fmt: skip
+    out = {
+        "cvae_final_loss": float(cvae_losses[-1]),
+        "cvae_reconstruction": float(reconstruction),
+        "cvae_kl": float(kl),
+    }
     sizes = {"direct": tuple(layer_sizes), "cvae_latent": (*tuple(layer_sizes)[:-1], latent_size)}
     targets = {"direct": (subgoal, test_items[2]), "cvae_latent": (latent(train_items), latent(test_items))}
     for (name, (train_target, test_target)), k in zip(targets.items(), (k_direct, k_latent)):
         apply, params, _ = fit_imagination(k, s_0, goal, train_target, sizes[name], epochs, batch_size, learning_rate)
         loss = imagination.imagination_loss(apply, params, test_items[0], test_items[1], test_target)
         variance = jnp.mean(jnp.var(test_target, axis=0))
-        out[name] = {"loss": float(loss), "target_variance": float(variance),
-                     "loss_over_variance": float(loss / jnp.maximum(variance, 1e-12)),
-                     "outside_tanh": float(jnp.mean(jnp.abs(test_target) >= 1.0))}  # fmt: skip
+        out[name] = {
+            "loss": float(loss),
+            "target_variance": float(variance),
+            "loss_over_variance": float(loss / jnp.maximum(variance, 1e-12)),
+            "outside_tanh": float(jnp.mean(jnp.abs(test_target) >= 1.0)),
+        }
     return out

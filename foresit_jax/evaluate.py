@@ -100,8 +100,10 @@ def make_act(config: Config, state, seed: int | None = None) -> Acting:
     """
     stacked = np.ndim(state.update) > 0
     if stacked != (seed is not None):
-        raise ValueError("make_act: give seed=i for the states of several seeds (jax.vmap(train)), and no seed for "
-                         f"one seed's state (its update counter has shape {np.shape(state.update)})")  # fmt: skip
+        raise ValueError(
+            "make_act: give seed=i for the states of several seeds (jax.vmap(train)), and no seed for "
+            f"one seed's state (its update counter has shape {np.shape(state.update)})"
+        )
     if stacked:
         if not 0 <= seed < np.shape(state.update)[0]:
             raise ValueError(f"make_act: seed {seed} is not one of the {np.shape(state.update)[0]} seeds trained")
@@ -169,8 +171,9 @@ class Evaluator:
     the same episode length. Attributes: `env`, `params` ({(split, room): EnvParams}) and
     `compiled` ({key: jitted rollout}, keyed by (policy, config, num_steps, greedy))."""
 
-    def __init__(self, setup: str = "savn", layout: str = "room", priors: bool = False,
-                 perception_range: float | None = None):  # fmt: skip
+    def __init__(
+        self, setup: str = "savn", layout: str = "room", priors: bool = False, perception_range: float | None = None
+    ):
         self.setup, self.layout, self.priors = setup, layout, bool(priors)
         self.env = envs.GridNav(setup=setup, layout=layout, priors=self.priors, perception_range=perception_range)
         self.perception_range = self.env.perception_range
@@ -213,8 +216,16 @@ class Evaluator:
             options = ActOptions(greedy=greedy, whole_episodes=True, record_inputs=False)
 
             def run_group(params, w_params, env_params, key, sigma2, reset_keys=None):
-                traj = rollout.rollout(nets, AgentParams(params, w_params, sigma2), BoundEnv(env, env_params), key,
-                                       num_steps, options, reset_keys=reset_keys, act=base.act)  # fmt: skip
+                traj = rollout.rollout(
+                    nets,
+                    AgentParams(params, w_params, sigma2),
+                    BoundEnv(env, env_params),
+                    key,
+                    num_steps,
+                    options,
+                    reset_keys=reset_keys,
+                    act=base.act,
+                )
                 return episode_stats(traj)
 
             def run(params, w_params, env_params, key, sigma2):
@@ -230,8 +241,10 @@ class Evaluator:
                 reset = jax.random.split(k_start, episodes)
                 reset = jnp.concatenate([reset, reset[:pad]]).reshape(groups, group, *reset.shape[1:])
                 sigma2 = jnp.concatenate([sigma2, sigma2[:pad]]).reshape(groups, group)
-                out = jax.lax.map(lambda xs: run_group(params, w_params, env_params, *xs),
-                                  (jax.random.split(k_act, groups), sigma2, reset))  # fmt: skip
+                out = jax.lax.map(
+                    lambda xs: run_group(params, w_params, env_params, *xs),
+                    (jax.random.split(k_act, groups), sigma2, reset),
+                )
                 return jax.tree.map(lambda x: x.reshape(groups * group, *x.shape[2:])[:episodes], out)
 
             self.compiled[key] = jax.jit(run)
@@ -242,7 +255,9 @@ class Evaluator:
         key = ("random", num_steps, episodes)
         if key not in self.compiled:
             env = self.env
-            self.compiled[key] = jax.jit(lambda env_params, k: random_policy_rollout(env, env_params, k, episodes, num_steps))
+            self.compiled[key] = jax.jit(
+                lambda env_params, k: random_policy_rollout(env, env_params, k, episodes, num_steps)
+            )
         return self.compiled[key]
 
     def _per_room(self, rooms, split, key, run_room, by_length: bool = False) -> dict[str, dict[str, float]]:
@@ -272,20 +287,33 @@ class Evaluator:
         if config.setup != self.setup:
             raise ValueError(f"this Evaluator is for setup {self.setup!r}, the config's is {config.setup!r}")
         if config.layout != self.layout:
-            raise ValueError(f"this Evaluator is for layout {self.layout!r}, the config's is {config.layout!r}; "
-                             f"make one with Evaluator(setup, layout={config.layout!r})")  # fmt: skip
+            raise ValueError(
+                f"this Evaluator is for layout {self.layout!r}, the config's is {config.layout!r}; "
+                f"make one with Evaluator(setup, layout={config.layout!r})"
+            )
         if config.priors != self.priors:
-            raise ValueError(f"this Evaluator is for priors={self.priors}, the config's is {config.priors}; "
-                             "make one with Evaluator.for_config(config)")  # fmt: skip
+            raise ValueError(
+                f"this Evaluator is for priors={self.priors}, the config's is {config.priors}; "
+                "make one with Evaluator.for_config(config)"
+            )
         if config.perception_range != self.perception_range:
-            raise ValueError(f"this Evaluator is for perception_range={self.perception_range}, the config's is "
-                             f"{config.perception_range}; make one with Evaluator.for_config(config)")  # fmt: skip
+            raise ValueError(
+                f"this Evaluator is for perception_range={self.perception_range}, the config's is "
+                f"{config.perception_range}; make one with Evaluator.for_config(config)"
+            )
 
     def evaluate(
-        self, agent_params: AgentParams, config: Config, split: str = "test", key: chex.PRNGKey | None = None,
-        episodes_per_room: int = 250, greedy: bool | None = None, room_types: tuple[str, ...] | None = None,
-        by_length: bool = False, agent: Networks | None = None,
-    ) -> dict[str, dict[str, float]]:  # fmt: skip
+        self,
+        agent_params: AgentParams,
+        config: Config,
+        split: str = "test",
+        key: chex.PRNGKey | None = None,
+        episodes_per_room: int = 250,
+        greedy: bool | None = None,
+        room_types: tuple[str, ...] | None = None,
+        by_length: bool = False,
+        agent: Networks | None = None,
+    ) -> dict[str, dict[str, float]]:
         """Run `episodes_per_room` episodes in each room type of `split` ("val" or "test").
 
         Returns {"overall": metrics, "kitchen": metrics, ...} with metrics from `summarize`,
@@ -321,26 +349,35 @@ class Evaluator:
 
 
 def evaluate(
-    agent_params: AgentParams, config: Config, split: str = "test", key: chex.PRNGKey | None = None,
-    episodes_per_room: int = 250, greedy: bool | None = None, room_types: tuple[str, ...] | None = None,
+    agent_params: AgentParams,
+    config: Config,
+    split: str = "test",
+    key: chex.PRNGKey | None = None,
+    episodes_per_room: int = 250,
+    greedy: bool | None = None,
+    room_types: tuple[str, ...] | None = None,
     evaluator: Evaluator | None = None,
-) -> dict[str, dict[str, float]]:  # fmt: skip
+) -> dict[str, dict[str, float]]:
     """`Evaluator.evaluate` (with a new Evaluator unless one is given)."""
     evaluator = Evaluator.for_config(config) if evaluator is None else evaluator
     return evaluator.evaluate(agent_params, config, split, key, episodes_per_room, greedy, room_types)
 
 
 def evaluate_random_policy(
-    config: Config, split: str = "test", key: chex.PRNGKey | None = None, episodes_per_room: int = 250,
+    config: Config,
+    split: str = "test",
+    key: chex.PRNGKey | None = None,
+    episodes_per_room: int = 250,
     evaluator: Evaluator | None = None,
-) -> dict[str, dict[str, float]]:  # fmt: skip
+) -> dict[str, dict[str, float]]:
     """`Evaluator.evaluate_random_policy` (with a new Evaluator unless one is given)."""
     evaluator = Evaluator.for_config(config) if evaluator is None else evaluator
     return evaluator.evaluate_random_policy(config, split, key, episodes_per_room)
 
 
-def policy_episodes(policy_fn: Callable, params, carry, env: BoundEnv, key: chex.PRNGKey, num_steps: int,
-                    num_lanes: int) -> EpisodeStats:  # fmt: skip
+def policy_episodes(
+    policy_fn: Callable, params, carry, env: BoundEnv, key: chex.PRNGKey, num_steps: int, num_lanes: int
+) -> EpisodeStats:
     """One whole episode per lane of any batched policy function
     `(params, carry, obs, first, key) -> (action [B], carry)`, padded to `num_steps`, as
     `rollout.rollout` plays them: the lanes reset with `split(split(key)[0], B)`, and the
@@ -373,9 +410,15 @@ def policy_episodes(policy_fn: Callable, params, carry, env: BoundEnv, key: chex
 
 
 def evaluate_policy(
-    policy_fn: Callable, params, initial_carry: Callable[[int], Any], config: Config, split: str = "test",
-    key: chex.PRNGKey | None = None, episodes_per_room: int = 250, room_types: tuple[str, ...] | None = None,
-) -> dict[str, dict[str, float]]:  # fmt: skip
+    policy_fn: Callable,
+    params,
+    initial_carry: Callable[[int], Any],
+    config: Config,
+    split: str = "test",
+    key: chex.PRNGKey | None = None,
+    episodes_per_room: int = 250,
+    room_types: tuple[str, ...] | None = None,
+) -> dict[str, dict[str, float]]:
     """SR, SPL and SR by path length of any policy, the user's own included, on the episodes
     `Evaluator.evaluate` plays for `config`'s scenes (setup, layout, priors; its room types
     unless `room_types`) with `key` (PRNGKey(0) by default; the reports' test episodes of
@@ -395,8 +438,9 @@ def evaluate_policy(
 
     def run_room(env_params, num_steps, k):
         if num_steps not in compiled:  # one program per time limit (room types share one in rooms)
-            compiled[num_steps] = jax.jit(lambda p, c, e, k: policy_episodes(policy_fn, p, c, BoundEnv(env, e), k,
-                                                                             num_steps, episodes_per_room))  # fmt: skip
+            compiled[num_steps] = jax.jit(
+                lambda p, c, e, k: policy_episodes(policy_fn, p, c, BoundEnv(env, e), k, num_steps, episodes_per_room)
+            )
         return compiled[num_steps](params, initial_carry(episodes_per_room), env_params, k)
 
     return evaluator._per_room(rooms, split, key, run_room, by_length=True)

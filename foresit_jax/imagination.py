@@ -147,9 +147,7 @@ def train_on_buffer(
     Returns (trained params, per-step losses `[epochs, M / batch]`, each the loss before
     its step, the optimiser state after the last step).
     """
-    grad_fn = jax.value_and_grad(
-        lambda p, s0, g, sg: imagination_loss(apply_fn, p, s0, g, sg)
-    )
+    grad_fn = jax.value_and_grad(lambda p, s0, g, sg: imagination_loss(apply_fn, p, s0, g, sg))
     items = (buffer.s_0, buffer.goal, buffer.subgoal)  # each [M, ...]
     if batch > 1:  # [M / batch, batch, ...]: the loss is the batch's mean (batch 1 keeps Algorithm 1's program)
         items = jax.tree.map(lambda x: x.reshape((x.shape[0] // batch, batch) + x.shape[1:]), items)
@@ -286,16 +284,12 @@ def tracker_init(window: int = 100) -> SuccessTracker:
     )
 
 
-def tracker_update(
-    tracker: SuccessTracker, success: chex.Array, finished: chex.Array = True
-) -> SuccessTracker:
+def tracker_update(tracker: SuccessTracker, success: chex.Array, finished: chex.Array = True) -> SuccessTracker:
     """Record one episode outcome `success` `[]` if `finished` `[]` (else unchanged)."""
     window = tracker.outcomes.shape[-1]
     finished = jnp.asarray(finished, bool)
     slot = tracker.outcomes[tracker.next_index]
-    outcomes = tracker.outcomes.at[tracker.next_index].set(
-        jnp.where(finished, jnp.asarray(success, jnp.float32), slot)
-    )
+    outcomes = tracker.outcomes.at[tracker.next_index].set(jnp.where(finished, jnp.asarray(success, jnp.float32), slot))
     step = finished.astype(jnp.int32)
     return SuccessTracker(
         outcomes=outcomes,
@@ -316,9 +310,7 @@ def noise_variance(success_rate: chex.Array, sigma2_max: float = 0.9) -> chex.Ar
     return jnp.maximum(sigma2_max - success_rate, 0.0)
 
 
-def add_imagination_noise(
-    key: chex.PRNGKey, imagined: chex.Array, variance: chex.Array
-) -> chex.Array:
+def add_imagination_noise(key: chex.PRNGKey, imagined: chex.Array, variance: chex.Array) -> chex.Array:
     """Eq. 6: i_tau = f_w([s_0 : g_tau]) + eta, eta ~ N(0, sigma^2 I).
 
     imagined `[..., H]`, variance `[...]` (per lane) -> `[..., H]`.
@@ -342,8 +334,6 @@ def add_input_noise(
     return s_0 + eta[..., :h], goal + eta[..., h:]
 
 
-def random_imagination(
-    key: chex.PRNGKey, shape: tuple[int, ...], variance: float = 0.5
-) -> chex.Array:
+def random_imagination(key: chex.PRNGKey, shape: tuple[int, ...], variance: float = 0.5) -> chex.Array:
     """The `rnd` ablation: i_tau = tanh(z), z ~ N(0, variance I) (variance 0.5)."""
     return jnp.tanh(jnp.sqrt(variance) * jax.random.normal(key, shape, jnp.float32))

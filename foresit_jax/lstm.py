@@ -140,7 +140,9 @@ def lstm_params(kernels: LSTMKernels) -> dict[str, Any]:
     hidden = kernels.recurrent_kernel.shape[-2]
     split = lambda x: jnp.split(x, [hidden, 2 * hidden, 3 * hidden], axis=-1)  # noqa: E731
     out = {}
-    for g, ik, hk, b in zip(LSTM_GATES, split(kernels.input_kernel), split(kernels.recurrent_kernel), split(kernels.bias)):
+    for g, ik, hk, b in zip(
+        LSTM_GATES, split(kernels.input_kernel), split(kernels.recurrent_kernel), split(kernels.bias)
+    ):
         out["i" + g] = {"kernel": ik}
         out["h" + g] = {"kernel": hk, "bias": b}
     return out
@@ -242,8 +244,9 @@ class EncoderLSTM(nn.OptimizedLSTMCell):
     def step(self, kernels: LSTMKernels, carry: LSTMCarry, gates: chex.Array) -> tuple[LSTMCarry, chex.Array]:
         return lstm_step(kernels, carry, gates)
 
-    def unroll(self, kernels: LSTMKernels, carry: LSTMCarry, gates: chex.Array,
-               first: chex.Array) -> tuple[LSTMCarry, chex.Array]:  # fmt: skip
+    def unroll(
+        self, kernels: LSTMKernels, carry: LSTMCarry, gates: chex.Array, first: chex.Array
+    ) -> tuple[LSTMCarry, chex.Array]:
         """(the carry after a window, its states `[T, ..., H]`) from the window's input gates
         `[T, ..., 4H]`, the carry zeroed before each step that begins an episode (`first`
         `[T, ...]`), the recurrent kernel transposed once (`with_transposed_recurrent_kernel`:

@@ -99,6 +99,7 @@ from foresit_jax.rollout import (
     agent_step,
 )
 
+
 def interaction_inputs(states: chex.Array, logits: chex.Array) -> chex.Array:
     """[h_t : pi_t] per step, `[..., H + A]` (what L_phi reads)."""
     return jnp.concatenate([states, distributions.probs(logits)], axis=-1)
@@ -114,9 +115,7 @@ def inner_step(params, grads, lr: float, apply: chex.Array = True):
     False the parameters are returned unchanged."""
     flat_p = traverse_util.flatten_dict(params)
     flat_g = traverse_util.flatten_dict(grads)
-    out = {
-        path: jnp.where(apply, p - lr * flat_g[path], p) if adapts(path) else p for path, p in flat_p.items()
-    }
+    out = {path: jnp.where(apply, p - lr * flat_g[path], p) if adapts(path) else p for path, p in flat_p.items()}
     return traverse_util.unflatten_dict(out)
 
 
@@ -171,8 +170,15 @@ class InnerLoop:
         return cls(config.maml_segment, config.maml_inner_updates, config.maml_inner_lr, config.maml_first_order)
 
 
-def act(nets: Networks, acting: AgentParams, env: BoundEnv, actor: ActorState, key: chex.PRNGKey, num_steps: int,
-        options: ActOptions = ActOptions()) -> tuple[ActorState, Trajectory, WindowEnd]:  # fmt: skip
+def act(
+    nets: Networks,
+    acting: AgentParams,
+    env: BoundEnv,
+    actor: ActorState,
+    key: chex.PRNGKey,
+    num_steps: int,
+    options: ActOptions = ActOptions(),
+) -> tuple[ActorState, Trajectory, WindowEnd]:
     """The maml base's window, with `rollout.act_window`'s arguments and returns: one whole
     episode per lane under SAVN's inner loop (`adaptive_act`), in training and evaluation.
     The noise variance, unless given, is Eq. 7's from each lane's success tracker (it
@@ -186,8 +192,15 @@ def act(nets: Networks, acting: AgentParams, env: BoundEnv, actor: ActorState, k
     return actor, traj, end
 
 
-def adaptive_act(nets: Networks, acting: AgentParams, env: BoundEnv, actor: ActorState, key: chex.PRNGKey,
-                 num_steps: int, options: ActOptions) -> tuple[ActorState, Trajectory, WindowEnd, list[AdaptedParams]]:  # fmt: skip
+def adaptive_act(
+    nets: Networks,
+    acting: AgentParams,
+    env: BoundEnv,
+    actor: ActorState,
+    key: chex.PRNGKey,
+    num_steps: int,
+    options: ActOptions,
+) -> tuple[ActorState, Trajectory, WindowEnd, list[AdaptedParams]]:
     """One whole episode per lane (from `actor`, every lane at an episode start) with
     SAVN's inner loop (`InnerLoop.of(nets.config)`), acting as `acting` (`AgentParams`:
     theta_0, w, the noise variance, `[]` or `[B]`, never None: `act` sets Eq. 7's) in `env`
@@ -208,17 +221,21 @@ def adaptive_act(nets: Networks, acting: AgentParams, env: BoundEnv, actor: Acto
     def window(lanes, update, lane_actor, key, variance, alive, steps, record, gate_offsets=None):  # one lane
         lane_acting = acting._replace(params=join_partial_trees(shared, lanes), noise_variance=variance)
         lane_options = options._replace(whole_episodes=True, record_inputs=record)
-        return rollout.act_window(nets, lane_acting, env, lane_actor, key, steps, lane_options,
-                          Adaptation(alive, update, gate_offsets))  # fmt: skip
+        return rollout.act_window(
+            nets, lane_acting, env, lane_actor, key, steps, lane_options, Adaptation(alive, update, gate_offsets)
+        )
 
     def segment(lanes, update, lane_actor, key, variance, alive):  # one lane
         def run(lanes, gate_offsets):
-            next_actor, traj, end = window(lanes, update, lane_actor, key, variance, alive, loop.segment, True,
-                                          gate_offsets)  # fmt: skip
+            next_actor, traj, end = window(
+                lanes, update, lane_actor, key, variance, alive, loop.segment, True, gate_offsets
+            )
             return traj, (next_actor, end)
 
         grads, rows, traj, (next_actor, end) = segment_update(nets, loop, shared, lanes, lane_actor.lstm[1], run)
-        still_alive = traj.valid[-1] & ~(traj.terminated[-1] | traj.truncated[-1])  # [1] the episode runs on (alive next)
+        still_alive = traj.valid[-1] & ~(
+            traj.terminated[-1] | traj.truncated[-1]
+        )  # [1] the episode runs on (alive next)
         rows = rows._replace(deltas=jnp.where(still_alive[0], rows.deltas, 0.0))
         update = rows if update is None else update.concat(rows)
         if not options.record_inputs:
@@ -239,8 +256,9 @@ def adaptive_act(nets: Networks, acting: AgentParams, env: BoundEnv, actor: Acto
     if num_steps > done_steps:
         steps = num_steps - done_steps
         rest = lambda *a: window(*a, steps, options.record_inputs)  # noqa: E731
-        lane_actor, traj, end = jax.vmap(rest)(lanes, update, lane_actor, jax.random.split(keys[-1], num_lanes), variance,
-                                               alive)  # fmt: skip
+        lane_actor, traj, end = jax.vmap(rest)(
+            lanes, update, lane_actor, jax.random.split(keys[-1], num_lanes), variance, alive
+        )
         segments.append((traj, end))
     traj, end = _joined(segments)  # (before the actor: the order of the lowered program's ops)
     return _unlane(lane_actor), traj, end, thetas
@@ -282,8 +300,9 @@ def _kernel_update(nets: Networks, loop: InnerLoop, params, h_before, traj, gate
     (`gate_grads`: d L_phi / d gates)."""
     seen = traj.inputs
     return LowRankUpdate(
-        inputs=nets.model.apply(params, seen.obs, seen.prev_action_probs, seen.encoder_imagined,
-                                method="encoder_features")[:, 0],
+        inputs=nets.model.apply(
+            params, seen.obs, seen.prev_action_probs, seen.encoder_imagined, method="encoder_features"
+        )[:, 0],
         hiddens=jnp.concatenate([h_before, traj.states[:-1, 0]]),
         deltas=-loop.lr * gate_grads[:, 0],
     )
@@ -314,8 +333,7 @@ class AdaptiveCarry(NamedTuple):
     seen_keys: chex.Array  # [B, segment, 2] its steps' keys
 
 
-def adaptive_keys(loop: InnerLoop, key: chex.PRNGKey, num_steps: int,
-                  num_lanes: int) -> tuple[chex.Array, chex.Array]:  # fmt: skip
+def adaptive_keys(loop: InnerLoop, key: chex.PRNGKey, num_steps: int, num_lanes: int) -> tuple[chex.Array, chex.Array]:
     """The keys `adaptive_act` gives a whole-episode rollout, for a step-by-step replay:
     one key per segment (the update slots' and the rest's, `split(key, slots + 1)`), split
     per lane, then per step: (the policy's `[T, B, 2]`, one per lane; the environment's
@@ -323,8 +341,10 @@ def adaptive_keys(loop: InnerLoop, key: chex.PRNGKey, num_steps: int,
     slots = update_steps(num_steps, loop.segment, loop.updates)
     lengths = [loop.segment] * len(slots) + [num_steps - loop.segment * len(slots)]
     keys = jax.random.split(key, len(slots) + 1)
-    per_segment = [jnp.swapaxes(jax.vmap(lambda k, n=n: jax.random.split(k, n))(jax.random.split(k, num_lanes)), 0, 1)
-                   for k, n in zip(keys, lengths)]  # fmt: skip
+    per_segment = [
+        jnp.swapaxes(jax.vmap(lambda k, n=n: jax.random.split(k, n))(jax.random.split(k, num_lanes)), 0, 1)
+        for k, n in zip(keys, lengths)
+    ]
     policy_keys = jnp.concatenate(per_segment)  # [T, B, 2]
     env_key = lambda k: jax.random.split(jax.random.split(k, 3)[2], 1)[0]  # noqa: E731
     return policy_keys, jax.vmap(jax.vmap(env_key))(policy_keys)
@@ -335,16 +355,21 @@ def policy_carry(nets: Networks, num_lanes: int, acting: Optional[AgentParams] =
     theta_0 and an empty segment. It needs `acting` (its theta_0) and `obs`, one unbatched
     observation of the environment or its shapes (`jax.eval_shape`), to shape the segment."""
     if acting is None or obs is None:
-        raise ValueError(f"method {nets.method.name!r}: the maml base's carry holds each lane's adapted parameters and "
-                         "its running segment; give maml.policy_carry(nets, num_lanes, acting=AgentParams(...), "
-                         "obs=one observation) (experiments.load's initial_carry does)")  # fmt: skip
+        raise ValueError(
+            f"method {nets.method.name!r}: the maml base's carry holds each lane's adapted parameters and "
+            "its running segment; give maml.policy_carry(nets, num_lanes, acting=AgentParams(...), "
+            "obs=one observation) (experiments.load's initial_carry does)"
+        )
     loop, hidden = InnerLoop.of(nets.config), nets.config.hidden_size
     carry = zero_carry(nets, num_lanes)
     _, lanes = split_encoder_lstm_kernels(acting.params)
     kernels = lstm_kernels(encoder_lstm_params(acting.params))
     rows, dtype = loop.segment * loop.updates, kernels.input_kernel.dtype
-    update = LowRankUpdate(jnp.zeros((num_lanes, rows, kernels.input_kernel.shape[0]), dtype),
-                           jnp.zeros((num_lanes, rows, hidden), dtype), jnp.zeros((num_lanes, rows, 4 * hidden), dtype))
+    update = LowRankUpdate(
+        jnp.zeros((num_lanes, rows, kernels.input_kernel.shape[0]), dtype),
+        jnp.zeros((num_lanes, rows, hidden), dtype),
+        jnp.zeros((num_lanes, rows, 4 * hidden), dtype),
+    )
     return AdaptiveCarry(
         policy=carry,
         lanes=lane_copies(lanes, num_lanes),
@@ -363,8 +388,9 @@ class _Replayed(NamedTuple):
     inputs: StepInputs  # [segment, 1, ...]
 
 
-def _replayed_segment(nets: Networks, acting: AgentParams, kernels, start: PolicyCarry, seen_obs, seen_keys,
-                      gate_offsets) -> _Replayed:  # fmt: skip
+def _replayed_segment(
+    nets: Networks, acting: AgentParams, kernels, start: PolicyCarry, seen_obs, seen_keys, gate_offsets
+) -> _Replayed:
     """`act_window`'s agent half over one lane's recorded segment (`[1, ...]` leaves; obs
     `[segment, 1, ...]`, keys `[segment, 2]`), the episode running throughout: the same
     states and logits, as functions of `acting.params`, without the environment."""
@@ -379,8 +405,9 @@ def _replayed_segment(nets: Networks, acting: AgentParams, kernels, start: Polic
         probs = distributions.probs(logits)
         if not carries_gradient:
             probs = jax.lax.stop_gradient(probs)
-        actor = actor._replace(lstm=lstm, prev_probs=probs, imagined=imagined, s_0=s_0,
-                               episode_step=actor.episode_step + 1)  # fmt: skip
+        actor = actor._replace(
+            lstm=lstm, prev_probs=probs, imagined=imagined, s_0=s_0, episode_step=actor.episode_step + 1
+        )
         return actor, _Replayed(s_t, logits, seen)
 
     first_obs = jax.tree.map(lambda x: x[0], seen_obs)
@@ -423,8 +450,9 @@ def policy(nets: Networks, greedy: bool = False) -> StepPolicy:
             def run(lanes, gate_offsets):
                 params, kernels = lane_params(lanes, update)
                 lane_acting = acting._replace(params=params, noise_variance=variance[None])
-                segment = _replayed_segment(nets, lane_acting, kernels, lane(start), lane(seen_obs, 1), seen_keys,
-                                            gate_offsets)  # fmt: skip
+                segment = _replayed_segment(
+                    nets, lane_acting, kernels, lane(start), lane(seen_obs, 1), seen_keys, gate_offsets
+                )
                 return segment, None
 
             grads, rows, _, _ = segment_update(nets, loop, shared, lanes, lane(start.lstm[1]), run)
@@ -433,8 +461,9 @@ def policy(nets: Networks, greedy: bool = False) -> StepPolicy:
             return inner_step(lanes, grads, loop.lr), update
 
         def adapted():
-            new = jax.vmap(lane_update)(lanes, update, carry.segment_start, carry.seen_obs, carry.seen_keys,
-                                        acting.noise_variance, slot)  # fmt: skip
+            new = jax.vmap(lane_update)(
+                lanes, update, carry.segment_start, carry.seen_obs, carry.seen_keys, acting.noise_variance, slot
+            )
             return _where_lanes(adapting, new, (lanes, update))
 
         lanes, update = jax.lax.cond(jnp.any(adapting), adapted, lambda: (lanes, update))

@@ -183,8 +183,9 @@ class Method:
 
     def __post_init__(self):
         if self.base not in BASE_PIECES or self.encoder not in ENCODER_PIECES:
-            raise ValueError(f"base must be one of {BASES} and encoder one of {ENCODERS}, got {self.base!r}, "
-                             f"{self.encoder!r}")  # fmt: skip
+            raise ValueError(
+                f"base must be one of {BASES} and encoder one of {ENCODERS}, got {self.base!r}, {self.encoder!r}"
+            )
         if self.critic is None:
             object.__setattr__(self, "critic", self.imagination_variant.critic)
         if self.critic not in CRITICS:
@@ -251,20 +252,40 @@ class Method:
 
 # The paper's names for its rows, for reference (Table 1 and Table 3).
 PAPER_METHODS: tuple[str, ...] = (
-    "a3c", "a3c+foresit", "a3c+maml", "a3c+maml+foresit", "a3c+org", "a3c+org+foresit",
-    "a3c+org+rnd", "a3c+org+att", "a3c+org+int",
-)  # fmt: skip
+    "a3c",
+    "a3c+foresit",
+    "a3c+maml",
+    "a3c+maml+foresit",
+    "a3c+org",
+    "a3c+org+foresit",
+    "a3c+org+rnd",
+    "a3c+org+att",
+    "a3c+org+int",
+)
 # Methods that run today: the paper's rows and ablations, and the attention critic alone
 # (any other combination of the pieces, e.g. 'a3c+maml+org', 'a3c+maml+rnd' or
 # 'a3c+foresit+plaincritic', runs too).
 IMPLEMENTED_METHODS: tuple[str, ...] = (
-    "a3c", "a3c+foresit", "a3c+rnd", "a3c+att", "a3c+int",
-    "a3c+maml", "a3c+maml+foresit",
-    "a3c+org", "a3c+org+foresit", "a3c+org+rnd", "a3c+org+att", "a3c+org+int",
-    "a3c+critic", "a3c+org+critic",
-    "a3c+oracle", "a3c+org+oracle",  # privileged diagnostics, not methods (docs/ceiling.md)
-    "a3c+optaction", "a3c+compass", "a3c+startcompass",  # privileged controls (docs/ceiling.md)
-)  # fmt: skip
+    "a3c",
+    "a3c+foresit",
+    "a3c+rnd",
+    "a3c+att",
+    "a3c+int",
+    "a3c+maml",
+    "a3c+maml+foresit",
+    "a3c+org",
+    "a3c+org+foresit",
+    "a3c+org+rnd",
+    "a3c+org+att",
+    "a3c+org+int",
+    "a3c+critic",
+    "a3c+org+critic",
+    "a3c+oracle",
+    "a3c+org+oracle",  # privileged diagnostics, not methods (docs/ceiling.md)
+    "a3c+optaction",
+    "a3c+compass",
+    "a3c+startcompass",  # privileged controls (docs/ceiling.md)
+)
 
 
 def parse_method(name: str) -> Method:
@@ -305,8 +326,10 @@ def parse_method(name: str) -> Method:
             imagination = value
     try:
         return Method(
-            base or "a3c", encoder or "plain", IMAGINATION_VARIANTS[imagination or "none"],
+            base or "a3c",
+            encoder or "plain",
+            IMAGINATION_VARIANTS[imagination or "none"],
             CRITIC_PIECES[critic] if critic else None,
-        )  # fmt: skip
+        )
     except ValueError as e:
         raise ValueError(f"method {name!r}: {e}") from None

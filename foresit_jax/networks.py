@@ -37,11 +37,17 @@ import jax.numpy as jnp
 from foresit_jax.config import Config
 from foresit_jax.layers import Dense, GridDense, orthogonal
 from foresit_jax.lstm import (  # noqa: F401 (initial_carry, reset_carry: re-exported)
-    EncoderLSTM, LowRankUpdate, LSTMCarry, LSTMKernels, initial_carry, reset_carry,
+    EncoderLSTM,
+    LowRankUpdate,
+    LSTMCarry,
+    LSTMKernels,
+    initial_carry,
+    reset_carry,
 )
 from foresit_jax.learned_loss import LearnedLoss
 from foresit_jax.methods import Method, ImaginationVariant
 from foresit_jax.org import ObjectGraph
+
 
 class Encoder(nn.Module):
     """SAVN encoder: observation, target and previous action probabilities -> s_t.
@@ -80,7 +86,7 @@ class Encoder(nn.Module):
 
     def features(
         self, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array, imagined: Optional[chex.Array] = None
-    ) -> chex.Array:  # fmt: skip
+    ) -> chex.Array:
         """The LSTM's input `[..., 3 * W * conv_features (+ F)]`: everything before the cell.
 
         It depends on no carry, so a whole window's features can be computed at once
@@ -113,9 +119,12 @@ class Encoder(nn.Module):
         return x
 
     def __call__(
-        self, carry: LSTMCarry, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array,
+        self,
+        carry: LSTMCarry,
+        obs: Mapping[str, chex.Array],
+        prev_action_probs: chex.Array,
         imagined: Optional[chex.Array] = None,
-    ) -> tuple[LSTMCarry, chex.Array]:  # fmt: skip
+    ) -> tuple[LSTMCarry, chex.Array]:
         carry, s_t = self.lstm(carry, self.features(obs, prev_action_probs, imagined))
         return carry, s_t  # s_t: [..., hidden_size]
 
@@ -143,9 +152,7 @@ class PolicyHead(nn.Module):
             x = s_t  # [..., H]
         if self.hidden:
             x = nn.relu(Dense(self.hidden, name="hidden")(x))  # [..., hidden]
-        return Dense(
-            self.num_actions, kernel_init=orthogonal(0.01), name="actor"
-        )(x)  # [..., A]
+        return Dense(self.num_actions, kernel_init=orthogonal(0.01), name="actor")(x)  # [..., A]
 
 
 class ValueHead(nn.Module):
@@ -235,9 +242,13 @@ class Critic(nn.Module):
 
     @nn.compact
     def __call__(
-        self, states: chex.Array, valid: chex.Array, keys: Optional[chex.Array] = None,
-        key_mask: Optional[chex.Array] = None, positions: Optional[chex.Array] = None,
-    ) -> CriticOutput:  # fmt: skip
+        self,
+        states: chex.Array,
+        valid: chex.Array,
+        keys: Optional[chex.Array] = None,
+        key_mask: Optional[chex.Array] = None,
+        positions: Optional[chex.Array] = None,
+    ) -> CriticOutput:
         chex.assert_equal_shape_prefix([states, valid], valid.ndim)
         chex.assert_rank(states, valid.ndim + 1)
         value_head = ValueHead(self.value_hidden, name="value_head")
@@ -334,15 +345,26 @@ class ActorCritic(nn.Module):
     def setup(self):
         # i_tau is embedded as wide as the target it sits beside.
         features = Encoder.target_features if self.imagination_in_encoder else 0
-        self.encoder = Encoder(hidden_size=self.hidden_size, imagination_features=features, object_graph=self.object_graph)
+        self.encoder = Encoder(
+            hidden_size=self.hidden_size, imagination_features=features, object_graph=self.object_graph
+        )
         policy_hidden = self.value_hidden if self.imagination_input == "mlp" else 0
-        self.policy = PolicyHead(self.num_actions, self.use_imagination and not self.imagination_in_encoder, policy_hidden)
+        self.policy = PolicyHead(
+            self.num_actions, self.use_imagination and not self.imagination_in_encoder, policy_hidden
+        )
         value_hidden = 0 if self.linear_value_head else self.value_hidden
-        self.value_critic = Critic(self.attention_critic, self.attention_size, value_hidden, self.zero_value_init,
-                                   self.key_gradient)  # fmt: skip
+        self.value_critic = Critic(
+            self.attention_critic, self.attention_size, value_hidden, self.zero_value_init, self.key_gradient
+        )
 
-    def encode(self, carry: LSTMCarry, inputs: EncoderInputs, first: chex.Array, kernels: Optional[LSTMKernels] = None,
-               gate_offsets: Optional[chex.Array] = None) -> tuple[LSTMCarry, chex.Array]:  # fmt: skip
+    def encode(
+        self,
+        carry: LSTMCarry,
+        inputs: EncoderInputs,
+        first: chex.Array,
+        kernels: Optional[LSTMKernels] = None,
+        gate_offsets: Optional[chex.Array] = None,
+    ) -> tuple[LSTMCarry, chex.Array]:
         """The encoder over T steps, time-major -> (the carry after them, states
         `[T, ..., H]`). The encoder up to the LSTM's input gates needs no carry, so it runs
         over all the steps at once (a few large matmuls instead of T small ones); then the
@@ -356,7 +378,7 @@ class ActorCritic(nn.Module):
         size = first.size
 
         def flat(x):  # [T, ..., ...] -> [T * ..., ...]
-            return x.reshape((size,) + x.shape[first.ndim:])
+            return x.reshape((size,) + x.shape[first.ndim :])
 
         imagined = None if inputs.imagined is None else flat(inputs.imagined)
         features = self.encoder.features(jax.tree.map(flat, inputs.obs), flat(inputs.prev_action_probs), imagined)
@@ -377,7 +399,7 @@ class ActorCritic(nn.Module):
 
     def encoder_features(
         self, obs: Mapping[str, chex.Array], prev_action_probs: chex.Array, imagined: Optional[chex.Array] = None
-    ) -> chex.Array:  # fmt: skip
+    ) -> chex.Array:
         """The encoder up to the LSTM's input `[..., F]` (see `Encoder.features`)."""
         return self.encoder.features(obs, prev_action_probs, imagined)
 

@@ -75,8 +75,10 @@ def zero_carry(nets: Networks, num_lanes: int) -> PolicyCarry:
 
 def _check_base(nets: Networks, name: str) -> None:
     if nets.method.base_piece.adapts_in_episode:
-        raise ValueError(f"method {nets.method.name!r} adapts its parameters inside each episode (the maml base): "
-                         f"use foresit_jax.maml.{name}, whose carry holds each lane's adapted parameters")
+        raise ValueError(
+            f"method {nets.method.name!r} adapts its parameters inside each episode (the maml base): "
+            f"use foresit_jax.maml.{name}, whose carry holds each lane's adapted parameters"
+        )
 
 
 def with_noise(acting: AgentParams, lanes: int) -> AgentParams:
@@ -90,14 +92,24 @@ def with_noise(acting: AgentParams, lanes: int) -> AgentParams:
 def reset(carry: PolicyCarry, first: chex.Array) -> PolicyCarry:
     """The carry as a step sees it: zeroed where `first` begins an episode."""
     probs = jnp.where(first[:, None], 0.0, carry.prev_probs)
-    return carry._replace(lstm=reset_carry(first, carry.lstm), prev_probs=probs,
-                          episode_step=jnp.where(first, 0, carry.episode_step))  # fmt: skip
+    return carry._replace(
+        lstm=reset_carry(first, carry.lstm), prev_probs=probs, episode_step=jnp.where(first, 0, carry.episode_step)
+    )
 
 
 def as_actor(carry: PolicyCarry, obs) -> ActorState:
     """The carry and the step's observations as the `ActorState` `rollout.agent_step` reads."""
-    return ActorState(env_state=None, obs=obs, lstm=carry.lstm, prev_probs=carry.prev_probs, imagined=carry.imagined,
-                      s_0=carry.s_0, episode_step=carry.episode_step, memory=None, tracker=None)  # fmt: skip
+    return ActorState(
+        env_state=None,
+        obs=obs,
+        lstm=carry.lstm,
+        prev_probs=carry.prev_probs,
+        imagined=carry.imagined,
+        s_0=carry.s_0,
+        episode_step=carry.episode_step,
+        memory=None,
+        tracker=None,
+    )
 
 
 def policy_step(nets: Networks, acting: AgentParams, kernels, carry: PolicyCarry, obs, key, greedy: bool):

@@ -88,8 +88,13 @@ def ridge_fit(x: np.ndarray, y: np.ndarray, alphas=RIDGE_ALPHAS) -> tuple[np.nda
     return w, my - mx @ w, float(alpha)
 
 
-def imagination_fit(predicted: np.ndarray, target: np.ndarray, goal: np.ndarray, s_0: np.ndarray | None = None,
-                    offline: np.ndarray | None = None) -> dict[str, float]:  # fmt: skip
+def imagination_fit(
+    predicted: np.ndarray,
+    target: np.ndarray,
+    goal: np.ndarray,
+    s_0: np.ndarray | None = None,
+    offline: np.ndarray | None = None,
+) -> dict[str, float]:
     """How well f_w's predictions `[N, H]` match the sub-goals `[N, H]` of items whose
     targets are `goal [N, D]`, against baselines fit on the even items and scored, as f_w
     is, on the odd ones (`halves`): the targets' mean, and each target category's mean (a
@@ -135,8 +140,9 @@ def imagination_fit(predicted: np.ndarray, target: np.ndarray, goal: np.ndarray,
     return out
 
 
-def fit_imagination_offline(imagine, w_init, s_0, goal, target, steps: int = 3000, learning_rate: float = 1e-3,
-                            check_every: int = 50):  # fmt: skip
+def fit_imagination_offline(
+    imagine, w_init, s_0, goal, target, steps: int = 3000, learning_rate: float = 1e-3, check_every: int = 50
+):
     """f_w's architecture (`imagine(w, s_0, goal)`, from `w_init`) trained offline on the
     even items of (s_0, goal, target) (`halves`) with f_w's own loss (smooth-L1), full
     batch, Adam at `learning_rate`, up to `steps` steps: as well fitted as these items
@@ -175,8 +181,20 @@ def fit_imagination_offline(imagine, w_init, s_0, goal, target, steps: int = 300
     return best[1], best[2]
 
 
-def replay_online_fit(imagine, w_start, s_0, goal, subgoal, add, optimizer, epochs: int, buffer_size: int,
-                      passes: int = 1, batch: int = 1, keep_optimizer_state: bool = False):  # fmt: skip
+def replay_online_fit(
+    imagine,
+    w_start,
+    s_0,
+    goal,
+    subgoal,
+    add,
+    optimizer,
+    epochs: int,
+    buffer_size: int,
+    passes: int = 1,
+    batch: int = 1,
+    keep_optimizer_state: bool = False,
+):
     """f_w trained from `w_start` as training trains it (`imagination.buffer_add` and
     `train_on_full_buffers`, step by step in time order, one buffer of `buffer_size` per
     lane, `epochs` passes of one `optimizer` step per item, a fresh optimiser state per
@@ -187,8 +205,10 @@ def replay_online_fit(imagine, w_start, s_0, goal, subgoal, add, optimizer, epoc
     items. Jitted per call; returns the parameters."""
 
     lanes = add.shape[1]
-    buffers = jax.tree.map(lambda x: jnp.broadcast_to(x, (lanes,) + x.shape),
-                           imagination.buffer_init(buffer_size, s_0.shape[-1], goal.shape[-1]))  # fmt: skip
+    buffers = jax.tree.map(
+        lambda x: jnp.broadcast_to(x, (lanes,) + x.shape),
+        imagination.buffer_init(buffer_size, s_0.shape[-1], goal.shape[-1]),
+    )
     stream = tuple(jnp.asarray(np.concatenate([np.asarray(x)] * passes)) for x in (s_0, goal, subgoal, add))
 
     @jax.jit
@@ -196,7 +216,9 @@ def replay_online_fit(imagine, w_start, s_0, goal, subgoal, add, optimizer, epoc
         def step(carry, item):
             w, buffers, state = carry
             buffers = jax.vmap(imagination.buffer_add)(buffers, *item)
-            w, buffers, _, state = imagination.train_on_full_buffers(w, buffers, imagine, optimizer, epochs, batch, state)
+            w, buffers, _, state = imagination.train_on_full_buffers(
+                w, buffers, imagine, optimizer, epochs, batch, state
+            )
             return (w, buffers, state), None
 
         state = optimizer.init(w) if keep_optimizer_state else None
@@ -231,11 +253,20 @@ def subgoal_position_histogram(subgoal_step: np.ndarray, done_step: np.ndarray, 
         raise ValueError("a sub-goal lies outside its episode (t* > T or t* < 0)")
     n = len(t)
     if n == 0:
-        return {"episodes": 0, "edges": np.linspace(0, 1, bins + 1).tolist(), "shares": [float("nan")] * bins,
-                "at_done": float("nan")}  # fmt: skip
+        return {
+            "episodes": 0,
+            "edges": np.linspace(0, 1, bins + 1).tolist(),
+            "shares": [float("nan")] * bins,
+            "at_done": float("nan"),
+        }
     ratio = np.where(total > 0, t / np.maximum(total, 1), 1.0)
     counts, edges = np.histogram(ratio, bins=bins, range=(0.0, 1.0))
-    return {"episodes": n, "edges": edges.tolist(), "shares": (counts / n).tolist(), "at_done": float(np.mean(t == total))}
+    return {
+        "episodes": n,
+        "edges": edges.tolist(),
+        "shares": (counts / n).tolist(),
+        "at_done": float(np.mean(t == total)),
+    }
 
 
 def replay_oracle(env, env_params, reset_keys: chex.Array, actions: chex.Array) -> tuple[chex.Array, chex.Array]:
@@ -285,8 +316,13 @@ def episode_endings(valid, success, actions, p_done, d, in_room, done_action: in
 
     def shares(mask):
         n = int(mask.sum())
-        return {"episodes": n, **{k: float(np.mean(kind[mask] == k)) if n else float("nan")
-                                  for k in ("success", "failed Done", "time-out")}}  # fmt: skip
+        return {
+            "episodes": n,
+            **{
+                k: float(np.mean(kind[mask] == k)) if n else float("nan")
+                for k in ("success", "failed Done", "time-out")
+            },
+        }
 
     def mean(x):
         return float(np.mean(x)) if len(x) else float("nan")

@@ -194,8 +194,9 @@ def ended_episodes(traj: Trajectory) -> tuple[chex.Array, EpisodeStats]:
 # ---------------------------------------------------------------------- acting
 
 
-def start(nets: Networks, key, env: BoundEnv, num_lanes: int, memory_size: int = 0, tracker=None,
-          reset_keys=None) -> ActorState:  # fmt: skip
+def start(
+    nets: Networks, key, env: BoundEnv, num_lanes: int, memory_size: int = 0, tracker=None, reset_keys=None
+) -> ActorState:
     """Every lane at the start of a fresh episode. memory_size: states of an episode the
     attention critic can remember across windows (the training time limit; 0 when nothing
     is carried across windows: `memory` is then None). tracker: per-lane success trackers
@@ -306,8 +307,14 @@ def renews(variant: ImaginationVariant, episode_step: chex.Array, interval: int)
     return episode_step == 0
 
 
-def imagined_at_step(nets: Networks, acting: AgentParams, actor: ActorState, s_t: chex.Array, key: chex.PRNGKey,
-                     goal_latent_fn: Optional[Callable[[], chex.Array]] = None) -> chex.Array:  # fmt: skip
+def imagined_at_step(
+    nets: Networks,
+    acting: AgentParams,
+    actor: ActorState,
+    s_t: chex.Array,
+    key: chex.PRNGKey,
+    goal_latent_fn: Optional[Callable[[], chex.Array]] = None,
+) -> chex.Array:
     """i_tau for a step `[B, H]` (Eq. 6-7): renewed where the ImaginationVariant piece says
     (an episode's first step; every K steps for `int`) from s_t (= s_0 at the first step)
     by f_w (`acting.imagination_params`), with noise of each lane's variance
@@ -342,8 +349,15 @@ def agent_step(nets: Networks, acting: AgentParams, kernels, actor: ActorState, 
     first = actor.episode_step == 0  # [B]
     seen_imagined = encoder_imagined(nets, actor)  # [B, H] or None
     offsets = None if gate_offset is None else gate_offset[None]
-    lstm, states = nets.model.apply(acting.params, actor.lstm, one_step(actor.obs, actor.prev_probs, seen_imagined),
-                                    first[None], kernels, offsets, method="encode")  # fmt: skip
+    lstm, states = nets.model.apply(
+        acting.params,
+        actor.lstm,
+        one_step(actor.obs, actor.prev_probs, seen_imagined),
+        first[None],
+        kernels,
+        offsets,
+        method="encode",
+    )
     s_t = states[0]
     s_0 = jnp.where(first[:, None], s_t, actor.s_0)
     goal_latent_fn = None  # the oracle's: computed only where i_tau is renewed
@@ -354,9 +368,16 @@ def agent_step(nets: Networks, acting: AgentParams, kernels, actor: ActorState, 
     return lstm, s_t, logits, imagined, s_0, seen_imagined
 
 
-def act_window(nets: Networks, acting: AgentParams, env: BoundEnv, actor: ActorState, key: chex.PRNGKey,
-               num_steps: int, options: ActOptions = ActOptions(),
-               adapt: Adaptation = Adaptation()) -> tuple[ActorState, Trajectory, WindowEnd]:  # fmt: skip
+def act_window(
+    nets: Networks,
+    acting: AgentParams,
+    env: BoundEnv,
+    actor: ActorState,
+    key: chex.PRNGKey,
+    num_steps: int,
+    options: ActOptions = ActOptions(),
+    adapt: Adaptation = Adaptation(),
+) -> tuple[ActorState, Trajectory, WindowEnd]:
     """Run every lane `num_steps` steps from `actor` under one parameter set (see the module
     docstring; the a3c base's window, and each segment of the maml base's): returns (the
     actor state after the window, the window's Trajectory, what follows it). Each step
@@ -364,9 +385,11 @@ def act_window(nets: Networks, acting: AgentParams, env: BoundEnv, actor: ActorS
     then the environment's. `adapt`: what the maml base's inner loop gives a window
     (`Adaptation`; the default: nothing)."""
     if adapt.alive is None and nets.method.base_piece.adapts_in_episode:
-        raise ValueError(f"act_window plays one parameter set, and method {nets.method.name!r} adapts its parameters "
-                         "inside each episode (the maml base): use foresit_jax.maml.act (Trainer.act_window, "
-                         "foresit_jax.evaluate.base_acting(config).act)")
+        raise ValueError(
+            f"act_window plays one parameter set, and method {nets.method.name!r} adapts its parameters "
+            "inside each episode (the maml base): use foresit_jax.maml.act (Trainer.act_window, "
+            "foresit_jax.evaluate.base_acting(config).act)"
+        )
     params, lanes = acting.params, jnp.arange(actor.episode_step.shape[0])
     env = acting_env(nets, env)
     kernels = nets.model.apply(params, adapt.lstm_update, method="lstm_kernels")  # once, outside the loop
@@ -387,20 +410,36 @@ def act_window(nets: Networks, acting: AgentParams, env: BoundEnv, actor: ActorS
         tracker = jax.vmap(imagination.tracker_update)(actor.tracker, info["success"], done & alive)
         seen = StepInputs(actor.obs, actor.prev_probs, policy_input, seen_imagined) if options.record_inputs else None
         out = Trajectory(
-            states=s_t, logits=logits, actions=action, rewards=reward, terminated=term, truncated=trunc,
-            valid=alive, success=info["success"] & alive, episode_step=actor.episode_step, s_0=s_0,
-            optimal_length=info["optimal_length"], room_type=info["room_type"], inputs=seen,
-        )  # fmt: skip
+            states=s_t,
+            logits=logits,
+            actions=action,
+            rewards=reward,
+            terminated=term,
+            truncated=trunc,
+            valid=alive,
+            success=info["success"] & alive,
+            episode_step=actor.episode_step,
+            s_0=s_0,
+            optimal_length=info["optimal_length"],
+            room_type=info["room_type"],
+            inputs=seen,
+        )
         # The lanes after the step: an episode that ended starts afresh (its LSTM carry,
         # previous action probabilities and step count zeroed).
         probs = distributions.probs(logits)
         if not carries_gradient:
             probs = jax.lax.stop_gradient(probs)
         next_actor = ActorState(
-            env_state=env_state, obs=obs, lstm=reset_carry(done, lstm), prev_probs=jnp.where(done[:, None], 0.0, probs),
-            imagined=imagined, s_0=s_0, episode_step=jnp.where(done, 0, actor.episode_step + 1), memory=memory,
+            env_state=env_state,
+            obs=obs,
+            lstm=reset_carry(done, lstm),
+            prev_probs=jnp.where(done[:, None], 0.0, probs),
+            imagined=imagined,
+            s_0=s_0,
+            episode_step=jnp.where(done, 0, actor.episode_step + 1),
+            memory=memory,
             tracker=tracker,
-        )  # fmt: skip
+        )
         return (next_actor, alive & ~done if options.whole_episodes else alive), out
 
     step_keys = jax.random.split(key, num_steps) if options.step_keys is None else options.step_keys
@@ -410,8 +449,9 @@ def act_window(nets: Networks, acting: AgentParams, env: BoundEnv, actor: ActorS
         next_state = jnp.zeros_like(actor.s_0)
     else:  # s_T, for V(s*_T) at the cut (Eq. 8); the next window computes it again
         inputs = one_step(actor.obs, actor.prev_probs, encoder_imagined(nets, actor))
-        next_state = nets.model.apply(params, actor.lstm, inputs, (actor.episode_step == 0)[None], kernels,
-                                      method="encode")[1][0]  # fmt: skip
+        next_state = nets.model.apply(
+            params, actor.lstm, inputs, (actor.episode_step == 0)[None], kernels, method="encode"
+        )[1][0]
     return actor, out, WindowEnd(jax.lax.stop_gradient(next_state), actor.episode_step)
 
 
@@ -425,9 +465,16 @@ def remember(actor: ActorState, s_t: chex.Array, lanes: chex.Array) -> Optional[
     return actor.memory.at[lanes, jnp.minimum(actor.episode_step, last)].set(jax.lax.stop_gradient(s_t))
 
 
-def rollout(nets: Networks, acting: AgentParams, env: BoundEnv, key, num_steps: int,
-            options: ActOptions = ActOptions(whole_episodes=True, record_inputs=False),
-            reset_keys: Optional[chex.Array] = None, act: Optional[Callable] = None) -> Trajectory:  # fmt: skip
+def rollout(
+    nets: Networks,
+    acting: AgentParams,
+    env: BoundEnv,
+    key,
+    num_steps: int,
+    options: ActOptions = ActOptions(whole_episodes=True, record_inputs=False),
+    reset_keys: Optional[chex.Array] = None,
+    act: Optional[Callable] = None,
+) -> Trajectory:
     """One whole episode per lane from a fresh start, padded to `num_steps` (evaluation),
     with `acting.noise_variance` `[B]` (a scalar with `reset_keys`); `options`: greedy or
     sampled, inputs recorded or not (whole episodes always). The B lanes reset with
@@ -437,8 +484,10 @@ def rollout(nets: Networks, acting: AgentParams, env: BoundEnv, key, num_steps: 
     if acting.noise_variance is None:
         raise ValueError("rollout: give AgentParams.noise_variance, the evaluation's fixed variance")
     if act is None and nets.method.base_piece.adapts_in_episode:
-        raise ValueError(f"rollout: method {nets.method.name!r} adapts its parameters inside each episode (the maml "
-                         "base): pass act=foresit_jax.maml.act (foresit_jax.evaluate.base_acting(config).act)")
+        raise ValueError(
+            f"rollout: method {nets.method.name!r} adapts its parameters inside each episode (the maml "
+            "base): pass act=foresit_jax.maml.act (foresit_jax.evaluate.base_acting(config).act)"
+        )
     noise_variance = jnp.asarray(acting.noise_variance, jnp.float32)
     if reset_keys is not None:
         num_lanes = reset_keys.shape[0]

@@ -116,9 +116,7 @@ def episode_discounts(
     return gamma * keep.astype(jnp.float32)
 
 
-def discounted_returns(
-    r_t: chex.Array, discount_t: chex.Array, bootstrap_value: chex.Array
-) -> chex.Array:
+def discounted_returns(r_t: chex.Array, discount_t: chex.Array, bootstrap_value: chex.Array) -> chex.Array:
     """Discounted returns R_t = r_t + discount_t * R_{t+1}, R_T = bootstrap_value.
 
     Shapes: `r_t`, `discount_t` `[T, ...]`; `bootstrap_value` `[...]`. Returns `[T, ...]`.
@@ -160,9 +158,7 @@ def generalized_advantage_estimation(
         acc = delta + discount * lambda_ * acc
         return acc, acc
 
-    _, advantages = jax.lax.scan(
-        step, jnp.zeros_like(bootstrap_value), (delta_t, discount_t), reverse=True
-    )
+    _, advantages = jax.lax.scan(step, jnp.zeros_like(bootstrap_value), (delta_t, discount_t), reverse=True)
     return advantages
 
 
@@ -187,9 +183,7 @@ def advantages_and_returns(
     discount_t = episode_discounts(terminated_t, truncated_t, valid_t, gamma)
     r_t = r_t * valid  # padding rewards never enter a recursion
     v_t = v_t * valid
-    advantage_t = generalized_advantage_estimation(
-        r_t, v_t, discount_t, bootstrap_value, lambda_
-    )
+    advantage_t = generalized_advantage_estimation(r_t, v_t, discount_t, bootstrap_value, lambda_)
     return_t = discounted_returns(r_t, discount_t, bootstrap_value)
     return advantage_t * valid, return_t * valid
 
@@ -274,9 +268,16 @@ def a3c_loss(
 def make_env(config: Config, split: str = "train", room_types=None, training: bool | None = None):
     """The environment of a config (foresit_jax sees envs only through its public API)."""
     rooms = room_types if room_types is not None else (config.room_types or None)
-    env, params = envs.make("GridNav-v0", setup=config.setup, split=split, room_types=rooms, training=training,
-                            layout=config.layout, priors=config.priors,
-                            perception_range=config.perception_range)  # fmt: skip
+    env, params = envs.make(
+        "GridNav-v0",
+        setup=config.setup,
+        split=split,
+        room_types=rooms,
+        training=training,
+        layout=config.layout,
+        priors=config.priors,
+        perception_range=config.perception_range,
+    )
     return env, params.replace(progress_reward=config.progress_reward)
 
 
@@ -315,8 +316,9 @@ def replayed(nets: Networks, params, traj: Trajectory, initial_carry: LSTMCarry)
     return traj._replace(states=states, logits=logits)
 
 
-def window_critic(nets: Networks, params, traj: Trajectory, end: WindowEnd,
-                  memory: chex.Array | None) -> tuple[CriticOutput, chex.Array]:  # fmt: skip
+def window_critic(
+    nets: Networks, params, traj: Trajectory, end: WindowEnd, memory: chex.Array | None
+) -> tuple[CriticOutput, chex.Array]:
     """The critic over a window, the state after it (`end`) included: (CriticOutput with
     value `[T + 1, B]` (row T: V(s*_T), the bootstrap), alpha `[B, T + 1, M + T + 1]` or
     None; keys `[B, M + T + 1, H]`, what alpha weighs).
@@ -388,9 +390,7 @@ class Trainer:
         # The attention critic remembers a running episode's states across windows: at most
         # the time limit's worth. Whole-episode updates carry nothing across updates.
         self.memory_size = limit if self.packed and config.pieces.attention_critic else 0
-        self.optimizer = optax.chain(
-            optax.clip_by_global_norm(config.max_grad_norm), optax.adam(config.learning_rate)
-        )
+        self.optimizer = optax.chain(optax.clip_by_global_norm(config.max_grad_norm), optax.adam(config.learning_rate))
         self.imagination_optimizer = imagination.make_imagination_optimizer(
             config.imagination_optimizer, config.imagination_lr
         )
@@ -410,9 +410,7 @@ class Trainer:
         lanes = lambda x: jnp.broadcast_to(x, (cfg.num_lanes,) + x.shape)  # noqa: E731
         buffers = jax.tree.map(lanes, imagination.buffer_init(cfg.buffer_size, cfg.hidden_size, goal_size))
         actor = rollout.start(self.networks, k_actor, self.bind(self.env_params), cfg.num_lanes, self.memory_size)
-        return RunnerState(
-            params, self.optimizer.init(params), w_params, buffers, actor, key, jnp.zeros((), jnp.int32)
-        )
+        return RunnerState(params, self.optimizer.init(params), w_params, buffers, actor, key, jnp.zeros((), jnp.int32))
 
     # ------------------------------------------------------------------ the loss
     def window_loss(self, params, traj: Trajectory, end: WindowEnd, memory: chex.Array):
@@ -426,15 +424,30 @@ class Trainer:
         if not self.packed:
             bootstrap = jnp.zeros_like(bootstrap)  # whole episodes: nothing to bootstrap
         advantage, returns = advantages_and_returns(
-            traj.rewards, value, traj.terminated, traj.truncated, traj.valid, bootstrap, cfg.gamma, cfg.gae_lambda,
-        )  # fmt: skip
+            traj.rewards,
+            value,
+            traj.terminated,
+            traj.truncated,
+            traj.valid,
+            bootstrap,
+            cfg.gamma,
+            cfg.gae_lambda,
+        )
         loss, metrics = a3c_loss(
-            traj.logits, traj.actions, value, advantage, returns, traj.valid, cfg.entropy_coef, cfg.value_coef,
-        )  # fmt: skip
+            traj.logits,
+            traj.actions,
+            value,
+            advantage,
+            returns,
+            traj.valid,
+            cfg.entropy_coef,
+            cfg.value_coef,
+        )
         return loss, (critic.alpha, key_states, metrics)
 
-    def act(self, acting: AgentParams, env: BoundEnv, actor: ActorState,
-            key) -> tuple[ActorState, Trajectory, WindowEnd]:  # fmt: skip
+    def act(
+        self, acting: AgentParams, env: BoundEnv, actor: ActorState, key
+    ) -> tuple[ActorState, Trajectory, WindowEnd]:
         """One window of every lane (inputs recorded, for the replay and the buffers)."""
         options = ActOptions(whole_episodes=not self.packed, record_inputs=True)
         return self.act_window(self.networks, acting, env, actor, key, self.config.num_steps, options)
@@ -520,7 +533,11 @@ class Trainer:
             w_params, buffers, losses = carry
             buffers = jax.vmap(imagination.buffer_add)(buffers, *item)
             w_params, buffers, trained, _ = imagination.train_on_full_buffers(
-                w_params, buffers, self.networks.imagine, self.imagination_optimizer, cfg.imagination_epochs,
+                w_params,
+                buffers,
+                self.networks.imagine,
+                self.imagination_optimizer,
+                cfg.imagination_epochs,
                 cfg.imagination_batch,
             )
             return (w_params, buffers, losses.plus(trained)), None
@@ -529,8 +546,9 @@ class Trainer:
         (w_params, buffers, losses), _ = jax.lax.scan(step, carry, items)
         return w_params, buffers, losses.metrics()
 
-    def run(self, state: RunnerState, env_params, num_updates: int, on_update: Callable | None = None
-            ) -> tuple[RunnerState, dict]:  # fmt: skip
+    def run(
+        self, state: RunnerState, env_params, num_updates: int, on_update: Callable | None = None
+    ) -> tuple[RunnerState, dict]:
         """`num_updates` updates in a `lax.scan`; metrics stacked `[num_updates]`.
 
         `on_update`, if given, is a host function called after every `PROGRESS_EVERY`-th
@@ -542,8 +560,9 @@ class Trainer:
         def body(s, _):
             s, metrics = self.update(s, env_params)
             if on_update is not None:  # every 10th update: a callback per update cost ~5% at quick
-                jax.lax.cond(s.update % PROGRESS_EVERY == 0, lambda: jax.debug.callback(on_update, s.update),
-                             lambda: None)  # fmt: skip
+                jax.lax.cond(
+                    s.update % PROGRESS_EVERY == 0, lambda: jax.debug.callback(on_update, s.update), lambda: None
+                )
             return s, metrics
 
         return jax.lax.scan(body, state, None, length=num_updates)
@@ -563,8 +582,9 @@ class Trainer:
 
 def seeds_runner(trainer: Trainer, on_update: Callable | None):
     """`trainer.run_seeds` with `on_update` (see `Trainer.run`): jitted, vmapped over the seeds."""
-    return jax.jit(jax.vmap(functools.partial(trainer.run, on_update=on_update), in_axes=(0, None, None)),
-                   static_argnums=2)  # fmt: skip
+    return jax.jit(
+        jax.vmap(functools.partial(trainer.run, on_update=on_update), in_axes=(0, None, None)), static_argnums=2
+    )
 
 
 def collect_subgoal_items(trainer: Trainer, state: RunnerState, env_params, num_windows: int):

@@ -48,10 +48,16 @@ def pytest_configure(config):
     lives in the user's cache folder (`xla_cache_dir`), where a second run of the suite
     finds it; with FORESIT_NO_CACHE=1, a fresh folder per session, deleted at its end.  A
     user's own `JAX_COMPILATION_CACHE_DIR` is left as it is."""
-    config.addinivalue_line("markers", f"{SLOW}: trains, runs a CLI end to end or compiles many programs "
-                                       "(the slow tier: python -m pytest -m slow; docs/testing.md)")
-    config.addinivalue_line("markers", "readme_snippet: the README's library snippet at its own sizes (.ci/run runs "
-                                       "it again on the unconstrained resolution of Python 3.11)")
+    config.addinivalue_line(
+        "markers",
+        f"{SLOW}: trains, runs a CLI end to end or compiles many programs "
+        "(the slow tier: python -m pytest -m slow; docs/testing.md)",
+    )
+    config.addinivalue_line(
+        "markers",
+        "readme_snippet: the README's library snippet at its own sizes (.ci/run runs "
+        "it again on the unconstrained resolution of Python 3.11)",
+    )
     if not hasattr(config, "workerinput") and _CACHE not in os.environ:
         folder = xla_cache_dir()
         if folder is None:
@@ -115,7 +121,8 @@ def pytest_collection_modifyitems(config, items):
     if unmarked:
         raise pytest.UsageError(
             "tests that use a training fixture must be marked @pytest.mark.slow (docs/testing.md): "
-            + ", ".join(unmarked))
+            + ", ".join(unmarked)
+        )
     if config.option.markexpr or _names_tests(config):
         return  # the user chose (-m slow, -m "slow or not slow", a node id)
     slow = [item for item in items if item.get_closest_marker(SLOW) is not None]
@@ -134,8 +141,11 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
                 seconds[report.nodeid] = seconds.get(report.nodeid, 0.0) + report.duration
     over = sorted(((s, n) for n, s in seconds.items() if s > DEFAULT_TIER_BUDGET_S), reverse=True)
     if over:
-        terminalreporter.write_sep("-", f"default-tier tests over the {DEFAULT_TIER_BUDGET_S:g} s budget "
-                                        "(make them cheaper or mark them slow: docs/testing.md)")
+        terminalreporter.write_sep(
+            "-",
+            f"default-tier tests over the {DEFAULT_TIER_BUDGET_S:g} s budget "
+            "(make them cheaper or mark them slow: docs/testing.md)",
+        )
         for s, nodeid in over:
             terminalreporter.write_line(f"{s:6.1f}s {nodeid}")
     if not config.option.markexpr and not _names_tests(config):  # the default tier ran, not the slow one

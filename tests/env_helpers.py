@@ -43,8 +43,7 @@ def cast_views(cell_type, obj_cat, obj_band, pos, heading, horizon, view_width: 
     chunk = CAST_CHUNK if n > BATCH else BATCH
     padded = pad_to_batch(args, chunk)
     outs = [
-        _cast_views(*(a[i : i + chunk] for a in padded), view_width=view_width)
-        for i in range(0, len(padded[0]), chunk)
+        _cast_views(*(a[i : i + chunk] for a in padded), view_width=view_width) for i in range(0, len(padded[0]), chunk)
     ]
     sem = np.concatenate([np.asarray(o[0]) for o in outs])[:n]
     depth = np.concatenate([np.asarray(o[1]) for o in outs])[:n]
@@ -61,9 +60,14 @@ def target_visible(bank_np, scene, pos, heading, horizon, target, radius_m, view
     from a fresh ray cast of the bank's layout (not from the bank's tables)."""
     scene = np.asarray(scene)
     sem, depth = cast_views(
-        bank_np["cell_type"][scene], bank_np["obj_cat"][scene], bank_np["obj_band"][scene],
-        pos, heading, horizon, view_width=view_width,
-    )  # fmt: skip
+        bank_np["cell_type"][scene],
+        bank_np["obj_cat"][scene],
+        bank_np["obj_band"][scene],
+        pos,
+        heading,
+        horizon,
+        view_width=view_width,
+    )
     target = np.asarray(target)[:, None, None]
     return ((sem == C.NUM_STRUCTURAL + target) & (depth <= radius_m / C.CELL_SIZE_M)).any((1, 2))
 
@@ -103,12 +107,16 @@ def make_states(bank_np, scene, slot, pos, heading, horizon, time=None):
     pose = ((pos[:, 0] * grid_size + pos[:, 1]) * 8 + heading) * 2 + horizon
     i32 = lambda x: jnp.asarray(x, jnp.int32)
     return EnvState(
-        agent_pos=i32(pos), heading=i32(heading), horizon=i32(horizon), scene=i32(scene),
+        agent_pos=i32(pos),
+        heading=i32(heading),
+        horizon=i32(horizon),
+        scene=i32(scene),
         room_type=i32(bank_np["room_types"][scene, bank_np["target_room"][scene, slot]]),
         target=i32(bank_np["targets"][scene, slot]),
-        target_slot=i32(slot), time=i32(time),
+        target_slot=i32(slot),
+        time=i32(time),
         optimal_length=i32(bank_np["distance"][scene, slot, pose]),
-    )  # fmt: skip
+    )
 
 
 def index_tree(tree, i):

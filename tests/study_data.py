@@ -43,8 +43,10 @@ def pair_row(out: dict, results: dict, a: str, b: str) -> str:
     pair = out["pairs"][f"{b} - {a}"]
     r = pair["robust"]["SR"]
     poi, sr = r["probability_of_improvement"], stats.summary(report.values(results[b], "SR"))
-    return (f"| {b} - {a} | {sr['mean']:.1f} ± {sr['std']:.1f} | {interval(pair['SR'])} | {interval(pair['SPL'])} | "
-            f"{poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | {r['p_holm']:.3f} | {r['mde']:.1f} |")
+    return (
+        f"| {b} - {a} | {sr['mean']:.1f} ± {sr['std']:.1f} | {interval(pair['SR'])} | {interval(pair['SPL'])} | "
+        f"{poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | {r['p_holm']:.3f} | {r['mde']:.1f} |"
+    )
 
 
 def tune_report(archive: str, folder: Path) -> dict:
@@ -58,8 +60,11 @@ def tune_report(archive: str, folder: Path) -> dict:
     root = folder / "tune"
     args = rundir.args_from_saved(tune.Args, rundir.read_json(root / "tune.json"), out=root)
     table = tune.arms(args, tune.parse_grid(args.grid))
-    results = {a: rundir.read_json(root / "sweep" / "methods" / a / "results.json")["results"]
-               for by_point in table.values() for a in by_point.values()}  # fmt: skip
+    results = {
+        a: rundir.read_json(root / "sweep" / "methods" / a / "results.json")["results"]
+        for by_point in table.values()
+        for a in by_point.values()
+    }
     chosen = {m: tuning.choose({p: results[a] for p, a in by_point.items()}) for m, by_point in table.items()}
     _, grid_rows = tuning.grid_table(table, results, chosen)
     best = {m: results[table[m][chosen[m]]] for m in args.methods}  # as tuning.tune_report pairs them
@@ -72,9 +77,11 @@ def grid_line(row: dict) -> str:
     from experiments.reporting import stats
 
     val, sr, spl = (stats.summary(row[k]) for k in ("val_SR", "SR", "SPL"))
-    return (f"| {row['method']} | {row['point'].split('=')[1]} | {val['mean']:.1f} ± {val['std']:.1f} | "
-            f"{sr['mean']:.1f} ± {sr['std']:.1f} | {spl['mean']:.1f} ± {spl['std']:.1f} | "
-            + ("**chosen** |" if row["chosen"] else "|"))
+    return (
+        f"| {row['method']} | {row['point'].split('=')[1]} | {val['mean']:.1f} ± {val['std']:.1f} | "
+        f"{sr['mean']:.1f} ± {sr['std']:.1f} | {spl['mean']:.1f} ± {spl['std']:.1f} | "
+        + ("**chosen** |" if row["chosen"] else "|")
+    )
 
 
 def best_vs_best_line(name: str, pair: dict) -> str:
@@ -82,8 +89,10 @@ def best_vs_best_line(name: str, pair: dict) -> str:
     Holm's p of SR / SPL, the MDE of SR."""
     r, spl_r = pair["robust"]["SR"], pair["robust"]["SPL"]
     poi, iqm = r["probability_of_improvement"], r["iqm_b"]
-    return (f"| {name} | {interval(pair['SR'])} | {interval(pair['SPL'])} | {iqm[0]:.1f} [{iqm[1]:.1f}, {iqm[2]:.1f}] | "
-            f"{poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | {r['p_holm']:.3f} / {spl_r['p_holm']:.3f} | {r['mde']:.1f} |")
+    return (
+        f"| {name} | {interval(pair['SR'])} | {interval(pair['SPL'])} | {iqm[0]:.1f} [{iqm[1]:.1f}, {iqm[2]:.1f}] | "
+        f"{poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | {r['p_holm']:.3f} / {spl_r['p_holm']:.3f} | {r['mde']:.1f} |"
+    )
 
 
 def probe_fit_row(r: dict) -> str:
@@ -91,8 +100,16 @@ def probe_fit_row(r: dict) -> str:
     first fifth of the episode, then R^2 of the online f_w, the category mean, s_0, ridge on
     [s_0 : g] and the offline f_w."""
     f, sub = r["items"]["fit"], r["items"]["subgoal"]
-    cells = [f"{100 * sub['shares'][0]:.0f}%"] + [f"{f[k]:.2f}" for k in (
-        "r2_over_mean", "category_r2_over_mean", "identity_r2_over_mean", "ridge_r2_over_mean", "offline_r2_over_mean")]
+    cells = [f"{100 * sub['shares'][0]:.0f}%"] + [
+        f"{f[k]:.2f}"
+        for k in (
+            "r2_over_mean",
+            "category_r2_over_mean",
+            "identity_r2_over_mean",
+            "ridge_r2_over_mean",
+            "offline_r2_over_mean",
+        )
+    ]
     return f"| {r['seed']} | " + " | ".join(cells) + " |"
 
 

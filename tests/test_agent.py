@@ -15,8 +15,15 @@ from foresit_jax.config import Config
 from foresit_jax.lstm import initial_carry
 from foresit_jax.networks import build
 from foresit_jax.rollout import (
-    ActOptions, AgentParams, BoundEnv, EpisodeStats, Trajectory, WindowEnd, ended_episodes, episode_stats,
-)  # fmt: skip
+    ActOptions,
+    AgentParams,
+    BoundEnv,
+    EpisodeStats,
+    Trajectory,
+    WindowEnd,
+    ended_episodes,
+    episode_stats,
+)
 from foresit_jax.rollout import rollout as rollout_of
 from foresit_jax.train import replayed as replay_of
 from foresit_jax.train import window_critic
@@ -55,7 +62,9 @@ def test_parameter_tree_of_each_method(method):
     # f_w maps [s_0 : g_tau] to an imagined state.
     layers = w_params["params"]
     assert len(layers) == len(config.imagination_layer_sizes)
-    chex.assert_shape(layers["layer_0"]["kernel"], (hidden + obs["target"].shape[-1], config.imagination_layer_sizes[0]))
+    chex.assert_shape(
+        layers["layer_0"]["kernel"], (hidden + obs["target"].shape[-1], config.imagination_layer_sizes[0])
+    )
     chex.assert_shape(layers[f"layer_{len(layers) - 1}"]["kernel"], (config.imagination_layer_sizes[-2], hidden))
 
 
@@ -78,13 +87,19 @@ def test_episode_stats_hand_computed():
     valid[:, 4] = True
     success[4, 1] = terminated[4, 1] = True  # padding of lane 1: ignored
     traj = Trajectory(
-        states=np.zeros((T, B, 2), np.float32), logits=np.zeros((T, B, 6), np.float32),
-        actions=np.zeros((T, B), np.int32), rewards=np.zeros((T, B), np.float32),
-        terminated=terminated, truncated=truncated, valid=valid, success=success,
-        episode_step=np.broadcast_to(np.arange(T)[:, None], (T, B)).astype(np.int32), s_0=np.zeros((T, B, 2), np.float32),
+        states=np.zeros((T, B, 2), np.float32),
+        logits=np.zeros((T, B, 6), np.float32),
+        actions=np.zeros((T, B), np.int32),
+        rewards=np.zeros((T, B), np.float32),
+        terminated=terminated,
+        truncated=truncated,
+        valid=valid,
+        success=success,
+        episode_step=np.broadcast_to(np.arange(T)[:, None], (T, B)).astype(np.int32),
+        s_0=np.zeros((T, B, 2), np.float32),
         optimal_length=np.broadcast_to(np.array([2, 3, 4, 3, 6], np.int32), (T, B)),
         room_type=np.full((T, B), 3, np.int32),
-    )  # fmt: skip
+    )
     stats = jax.tree.map(np.asarray, episode_stats(traj))
     assert isinstance(stats, EpisodeStats)
     np.testing.assert_array_equal(stats.success, [True, False, False, True, False])
@@ -106,12 +121,20 @@ def _rollout(greedy: bool):
     nets, (env, _) = build(FORESIT), H.bathroom_env()
 
     def run(params, w_params, env_params, key, sigma2):
-        traj = rollout_of(nets, AgentParams(params, w_params, sigma2), BoundEnv(env, env_params), key, FORESIT.num_steps,
-                          ActOptions(greedy=greedy, record_inputs=not greedy))  # fmt: skip
+        traj = rollout_of(
+            nets,
+            AgentParams(params, w_params, sigma2),
+            BoundEnv(env, env_params),
+            key,
+            FORESIT.num_steps,
+            ActOptions(greedy=greedy, record_inputs=not greedy),
+        )
         again = None if greedy else replay_of(nets, params, traj, initial_carry((LANES,), FORESIT.hidden_size))
         replayed = None if greedy else (again.states, again.logits)
         memory = jnp.zeros((LANES, 0, FORESIT.hidden_size))
-        end = WindowEnd(jnp.zeros((LANES, FORESIT.hidden_size)), jnp.zeros((LANES,), jnp.int32))  # whole episodes: nothing bootstrapped
+        end = WindowEnd(
+            jnp.zeros((LANES, FORESIT.hidden_size)), jnp.zeros((LANES,), jnp.int32)
+        )  # whole episodes: nothing bootstrapped
         return traj, replayed, window_critic(nets, params, traj, end, memory)[0]
 
     return jax.jit(run, compiler_options=H.FAST_COMPILE)
@@ -121,7 +144,9 @@ def _rollout(greedy: bool):
 def rollout():
     """A sampled rollout of 8 lanes with freshly initialised parameters."""
     env, env_params = H.bathroom_env()
-    params, w_params = jax.jit(build(FORESIT).init, compiler_options=H.FAST_COMPILE)(jax.random.PRNGKey(0), observation())
+    params, w_params = jax.jit(build(FORESIT).init, compiler_options=H.FAST_COMPILE)(
+        jax.random.PRNGKey(0), observation()
+    )
     sigma2 = jnp.full((LANES,), 0.5)
     out = _rollout(False)(params, w_params, env_params, jax.random.PRNGKey(1), sigma2)
     return (params, w_params, env_params, sigma2), jax.tree.map(np.asarray, out)

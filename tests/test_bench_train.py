@@ -13,9 +13,15 @@ from benchmarks import bench_train as B
 def test_bench_train_runs_every_combination_and_counts_useful_frames(monkeypatch, capsys):
     H.patch_for_experiments(monkeypatch)
     bench = B.BenchConfig(
-        methods=("a3c",), preset="tiny", lanes=(2,), rollouts=("packed", "episodes"), gradients=("replay",),
-        num_steps=8, updates=2, repeats=1,
-    )  # fmt: skip
+        methods=("a3c",),
+        preset="tiny",
+        lanes=(2,),
+        rollouts=("packed", "episodes"),
+        gradients=("replay",),
+        num_steps=8,
+        updates=2,
+        repeats=1,
+    )
     results = B.main(bench)
     out = capsys.readouterr().out
     assert [m.label for m in results] == ["a3c packed replay", "a3c episodes replay"]
@@ -38,8 +44,9 @@ def test_bench_grid_times_the_arms_and_the_grid_over_the_same_frames(monkeypatch
     from benchmarks import bench_grid
 
     H.patch_for_experiments(monkeypatch)
-    out = bench_grid.main(bench_grid.BenchGrid(rates=(1e-3, 3e-3), seeds=2, method="a3c", preset="tiny", updates=2,
-                                               repeats=1))  # fmt: skip
+    out = bench_grid.main(
+        bench_grid.BenchGrid(rates=(1e-3, 3e-3), seeds=2, method="a3c", preset="tiny", updates=2, repeats=1)
+    )
     printed = capsys.readouterr().out
     assert out["rates"] == pytest.approx([1e-3, 1e-3, 3e-3, 3e-3])
     assert out["useful_frames"] > 0 and out["speedup"] > 0

@@ -11,32 +11,46 @@ from experiments.running import rundir
 from experiments.reporting import report, stats
 
 REPO = Path(__file__).resolve().parents[1]
+
+
 def arm_row(results: dict, arm: str, label: str) -> str:
     """The docs' row of one arm: SR per seed, SR and SPL as mean ± std."""
     sr, spl = (report.values(results[arm], c) for c in ("SR", "SPL"))
-    return (f"| {label} | {' / '.join(f'{x:.1f}' for x in sr)} | {sr.mean():.1f} ± {sr.std(ddof=1):.1f} | "
-            f"{spl.mean():.1f} ± {spl.std(ddof=1):.1f} |")
+    return (
+        f"| {label} | {' / '.join(f'{x:.1f}' for x in sr)} | {sr.mean():.1f} ± {sr.std(ddof=1):.1f} | "
+        f"{spl.mean():.1f} ± {spl.std(ddof=1):.1f} |"
+    )
 
 
-CRITIC, FORESIT, ORACLE = ("a3c+critic@learning_rate=3e-4", "a3c+foresit@learning_rate=3e-4",
-                           "a3c+oracle@learning_rate=3e-4")  # fmt: skip
+CRITIC, FORESIT, ORACLE = (
+    "a3c+critic@learning_rate=3e-4",
+    "a3c+foresit@learning_rate=3e-4",
+    "a3c+oracle@learning_rate=3e-4",
+)
 
 
 @pytest.mark.parametrize("archive", ["ceiling_savn.tar.xz", "ceiling_priors.tar.xz"])
 def test_ceiling_md_quotes_the_ceiling(tmp_path, capsys, archive):
     root = study_data.unpack(archive, tmp_path, (CRITIC, FORESIT, ORACLE))
-    out = compare.main(compare.Args(run=root, pairs=(f"{CRITIC}:{ORACLE}", f"{CRITIC}:{FORESIT}"),
-                                    ceiling=(f"{CRITIC}:{FORESIT}:{ORACLE}",)))  # fmt: skip
+    out = compare.main(
+        compare.Args(
+            run=root, pairs=(f"{CRITIC}:{ORACLE}", f"{CRITIC}:{FORESIT}"), ceiling=(f"{CRITIC}:{FORESIT}:{ORACLE}",)
+        )
+    )
     capsys.readouterr()
     doc = (REPO / "docs" / "ceiling.md").read_text()
     results = report.load(root)
     for arm, label in ((CRITIC, "a3c+critic"), (FORESIT, "a3c+foresit"), (ORACLE, "a3c+oracle (privileged)")):
         assert arm_row(results, arm, label) in doc, arm_row(results, arm, label)
-    for (a, b), label in (((CRITIC, ORACLE), "the ceiling: a3c+oracle (privileged) - a3c+critic"),
-                          ((CRITIC, FORESIT), "a3c+foresit - a3c+critic")):  # fmt: skip
+    for (a, b), label in (
+        ((CRITIC, ORACLE), "the ceiling: a3c+oracle (privileged) - a3c+critic"),
+        ((CRITIC, FORESIT), "a3c+foresit - a3c+critic"),
+    ):
         pair = out["pairs"][f"{b} - {a}"]
-        row = (f"| {label} | {study_data.interval(pair['SR'])} | {study_data.interval(pair['SPL'])} | "
-               f"{pair['robust']['SR']['mde']:.1f} |")
+        row = (
+            f"| {label} | {study_data.interval(pair['SR'])} | {study_data.interval(pair['SPL'])} | "
+            f"{pair['robust']['SR']['mde']:.1f} |"
+        )
         assert row in doc, row
     ceiling = out["ceiling"][f"{ORACLE} - {CRITIC}"]
     sr = stats.paired(report.values(results[CRITIC], "SR"), report.values(results[ORACLE], "SR"))
@@ -60,8 +74,11 @@ def test_ceiling_md_quotes_the_probe_of_the_oracle():
     trained = [r["sr"]["trained"] for r in seeds]
     assert set(seeds[0]["sr"]) == {"trained", "noise off", "shuffled", "shuffled, noise off"}  # no f_w conditions
     doc = (REPO / "docs" / "ceiling.md").read_text()
-    for condition, label in (("noise off", "noise off"), ("shuffled", "shuffled (another episode's goal view)"),
-                             ("shuffled, noise off", "shuffled, noise off")):  # fmt: skip
+    for condition, label in (
+        ("noise off", "noise off"),
+        ("shuffled", "shuffled (another episode's goal view)"),
+        ("shuffled, noise off", "shuffled, noise off"),
+    ):
         values = [r["sr"][condition] for r in seeds]
         s = stats.summary(values)
         row = f"| {label} | {s['mean']:.1f} ± {s['std']:.1f} | {study_data.interval(stats.paired(trained, values))} |"
@@ -76,25 +93,36 @@ def test_ceiling_md_quotes_the_noise_off_oracle(tmp_path, capsys):
     why part 3 was not run."""
     noiseoff = "a3c+oracle@learning_rate=3e-4,sigma2_max=0"
     root = study_data.unpack("ceiling_savn_noiseoff.tar.xz", tmp_path, (CRITIC, FORESIT, ORACLE, noiseoff))
-    out = compare.main(compare.Args(run=root, pairs=(f"{CRITIC}:{noiseoff}", f"{ORACLE}:{noiseoff}"),
-                                    ceiling=(f"{CRITIC}:{FORESIT}:{noiseoff}",)))  # fmt: skip
+    out = compare.main(
+        compare.Args(
+            run=root,
+            pairs=(f"{CRITIC}:{noiseoff}", f"{ORACLE}:{noiseoff}"),
+            ceiling=(f"{CRITIC}:{FORESIT}:{noiseoff}",),
+        )
+    )
     capsys.readouterr()
     doc = (REPO / "docs" / "ceiling.md").read_text()
     results = report.load(root)
     row = arm_row(results, noiseoff, "a3c+oracle@sigma2_max=0 (privileged)")
     assert row in doc, row
-    for (a, label) in ((CRITIC, "the noise-off ceiling: a3c+oracle@sigma2_max=0 - a3c+critic"),
-                       (ORACLE, "a3c+oracle@sigma2_max=0 - a3c+oracle (both privileged)")):  # fmt: skip
+    for a, label in (
+        (CRITIC, "the noise-off ceiling: a3c+oracle@sigma2_max=0 - a3c+critic"),
+        (ORACLE, "a3c+oracle@sigma2_max=0 - a3c+oracle (both privileged)"),
+    ):
         pair = out["pairs"][f"{noiseoff} - {a}"]
-        row = (f"| {label} | {study_data.interval(pair['SR'])} | {study_data.interval(pair['SPL'])} | "
-               f"{pair['robust']['SR']['mde']:.1f} |")
+        row = (
+            f"| {label} | {study_data.interval(pair['SR'])} | {study_data.interval(pair['SPL'])} | "
+            f"{pair['robust']['SR']['mde']:.1f} |"
+        )
         assert row in doc, row
     ceiling = out["ceiling"][f"{noiseoff} - {CRITIC}"]["SR"]
     assert not ceiling["resolved"]
     pair = out["pairs"][f"{noiseoff} - {CRITIC}"]
     results_md = (REPO / "docs" / "results.md").read_text()
-    assert (f"| today's rooms, the oracle without noise (`sigma2_max=0`) | {study_data.interval(pair['SR'])} | "
-            f"{pair['robust']['SR']['mde']:.1f} |") in results_md
+    assert (
+        f"| today's rooms, the oracle without noise (`sigma2_max=0`) | {study_data.interval(pair['SR'])} | "
+        f"{pair['robust']['SR']['mde']:.1f} |"
+    ) in results_md
     assert "| today's rooms, the oracle with Eq. 7's noise | +1.4 [-2.0, +4.7] | 4.5 |" in results_md
     assert "| rooms with priors, the oracle with Eq. 7's noise | +4.1 [+0.2, +8.0] | 5.3 |" in results_md
 
@@ -102,19 +130,52 @@ def test_ceiling_md_quotes_the_noise_off_oracle(tmp_path, capsys):
 NOISEOFF = "a3c+oracle@learning_rate=3e-4,sigma2_max=0"
 
 
-@pytest.mark.parametrize("archive, methods, label, rows", [
-    ("ceiling_savn_epyc.tar.xz", (CRITIC, ORACLE, NOISEOFF), "a3c+critic, on the EPYC", (
-        (ORACLE, "the ceiling: a3c+oracle (privileged) - a3c+critic",
-         "today's rooms, machine-matched (the critic retrained on the EPYC), with the noise"),
-        (NOISEOFF, "the noise-off ceiling: a3c+oracle@sigma2_max=0 - a3c+critic",
-         "today's rooms, machine-matched, without noise"))),
-    ("ceiling_priors_epyc.tar.xz", (CRITIC, ORACLE), "a3c+critic, on the EPYC, rooms with priors", (
-        (ORACLE, "the ceiling in rooms with priors: a3c+oracle (privileged) - a3c+critic",
-         "rooms with priors, machine-matched (the critic retrained on the EPYC), with the noise"),)),
-    ("ceiling_priors_noiseoff.tar.xz", (CRITIC, ORACLE, NOISEOFF), "a3c+critic, on the EPYC, rooms with priors", (
-        (NOISEOFF, "the noise-off ceiling in rooms with priors: a3c+oracle@sigma2_max=0 - a3c+critic",
-         "rooms with priors, machine-matched, without noise"),)),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "archive, methods, label, rows",
+    [
+        (
+            "ceiling_savn_epyc.tar.xz",
+            (CRITIC, ORACLE, NOISEOFF),
+            "a3c+critic, on the EPYC",
+            (
+                (
+                    ORACLE,
+                    "the ceiling: a3c+oracle (privileged) - a3c+critic",
+                    "today's rooms, machine-matched (the critic retrained on the EPYC), with the noise",
+                ),
+                (
+                    NOISEOFF,
+                    "the noise-off ceiling: a3c+oracle@sigma2_max=0 - a3c+critic",
+                    "today's rooms, machine-matched, without noise",
+                ),
+            ),
+        ),
+        (
+            "ceiling_priors_epyc.tar.xz",
+            (CRITIC, ORACLE),
+            "a3c+critic, on the EPYC, rooms with priors",
+            (
+                (
+                    ORACLE,
+                    "the ceiling in rooms with priors: a3c+oracle (privileged) - a3c+critic",
+                    "rooms with priors, machine-matched (the critic retrained on the EPYC), with the noise",
+                ),
+            ),
+        ),
+        (
+            "ceiling_priors_noiseoff.tar.xz",
+            (CRITIC, ORACLE, NOISEOFF),
+            "a3c+critic, on the EPYC, rooms with priors",
+            (
+                (
+                    NOISEOFF,
+                    "the noise-off ceiling in rooms with priors: a3c+oracle@sigma2_max=0 - a3c+critic",
+                    "rooms with priors, machine-matched, without noise",
+                ),
+            ),
+        ),
+    ],
+)
 def test_ceiling_md_quotes_the_machine_matched_ceilings(tmp_path, capsys, archive, methods, label, rows):
     """The critic retrained on the oracles' machine (docs/data/`archive`): its row, each
     ceiling (none resolved), results.md's rows and the README's sentence."""
@@ -151,8 +212,10 @@ def test_ceiling_md_quotes_the_ceiling_at_range_4(tmp_path, capsys):
     out = compare.main(compare.Args(run=root, pairs=(f"{CRITIC}:{ORACLE}",)))
     capsys.readouterr()
     doc = (REPO / "docs" / "ceiling.md").read_text()
-    for arm, label in ((CRITIC, "a3c+critic, on the EPYC, rooms with priors, range 4"),
-                       (ORACLE, "a3c+oracle (privileged), on the EPYC, rooms with priors, range 4")):
+    for arm, label in (
+        (CRITIC, "a3c+critic, on the EPYC, rooms with priors, range 4"),
+        (ORACLE, "a3c+oracle (privileged), on the EPYC, rooms with priors, range 4"),
+    ):
         assert arm_row(results, arm, label) in doc, arm_row(results, arm, label)
     pair = out["pairs"][f"{ORACLE} - {CRITIC}"]
     assert pair["SR"]["ci_high"] < 0  # resolved, below 0: "the oracle costs"
@@ -161,8 +224,10 @@ def test_ceiling_md_quotes_the_ceiling_at_range_4(tmp_path, capsys):
     row = f"| the ceiling at range 4: a3c+oracle (privileged) - a3c+critic | {sr} | {study_data.interval(pair['SPL'])} | {mde} |"
     assert row in doc, row
     assert f"**Here the oracle costs**: {sr} SR" in doc
-    assert f"| rooms with priors, range 4, machine-matched, with the noise | {sr} | {mde} |" in (
-        REPO / "docs" / "results.md").read_text()
+    assert (
+        f"| rooms with priors, range 4, machine-matched, with the noise | {sr} | {mde} |"
+        in (REPO / "docs" / "results.md").read_text()
+    )
     assert study_data.readme_links("ceilings")  # "in one family it costs": the README links to that row
 
 
@@ -184,8 +249,10 @@ def test_ceiling_md_quotes_the_noise_off_ceiling_at_range_4(tmp_path, capsys):
     doc = (REPO / "docs" / "ceiling.md").read_text()
     label = "a3c+oracle@sigma2_max=0 (privileged), on the EPYC, rooms with priors, range 4"
     assert arm_row(results, NOISEOFF, label) in doc, arm_row(results, NOISEOFF, label)
-    for a, pair_label in ((CRITIC, "the noise-off ceiling at range 4: a3c+oracle@sigma2_max=0 - a3c+critic"),
-                          (ORACLE, "a3c+oracle@sigma2_max=0 - a3c+oracle at range 4 (both privileged)")):  # fmt: skip
+    for a, pair_label in (
+        (CRITIC, "the noise-off ceiling at range 4: a3c+oracle@sigma2_max=0 - a3c+critic"),
+        (ORACLE, "a3c+oracle@sigma2_max=0 - a3c+oracle at range 4 (both privileged)"),
+    ):
         pair = out["pairs"][f"{NOISEOFF} - {a}"]
         assert pair["SR"]["ci_low"] < 0 < pair["SR"]["ci_high"]  # not resolved
         mde = f"{pair['robust']['SR']['mde']:.1f}"
@@ -193,8 +260,10 @@ def test_ceiling_md_quotes_the_noise_off_ceiling_at_range_4(tmp_path, capsys):
         assert row in doc, row
     pair = out["pairs"][f"{NOISEOFF} - {CRITIC}"]
     sr, mde = study_data.interval(pair["SR"]), f"{pair['robust']['SR']['mde']:.1f}"
-    assert f"| rooms with priors, range 4, machine-matched, without noise | {sr} | {mde} |" in (
-        REPO / "docs" / "results.md").read_text()
+    assert (
+        f"| rooms with priors, range 4, machine-matched, without noise | {sr} | {mde} |"
+        in (REPO / "docs" / "results.md").read_text()
+    )
     assert "**Without the noise we cannot tell the ceiling from 0**, and its point estimate is the" in doc
     assert f"noisy arm's: {sr} SR over the critic alone (MDE {mde})" in " ".join(doc.split())
     assert study_data.readme_links("ceilings")
@@ -207,10 +276,15 @@ def test_ceiling_md_quotes_the_probe_at_range_4():
 
     methods = json.loads((study_data.DATA / "ceiling_probe_range4.json").read_text())["methods"]
     doc = (REPO / "docs" / "ceiling.md").read_text()
-    labels = {"noise off": "noise off", "shuffled": "shuffled (another episode's goal view)",
-              "shuffled, noise off": "shuffled, noise off"}  # fmt: skip
-    for arm, name, conditions in ((ORACLE, "a3c+oracle (Eq. 7's noise)", ("noise off", "shuffled", "shuffled, noise off")),
-                                  (NOISEOFF, "a3c+oracle@sigma2_max=0", ("shuffled",))):  # fmt: skip
+    labels = {
+        "noise off": "noise off",
+        "shuffled": "shuffled (another episode's goal view)",
+        "shuffled, noise off": "shuffled, noise off",
+    }
+    for arm, name, conditions in (
+        (ORACLE, "a3c+oracle (Eq. 7's noise)", ("noise off", "shuffled", "shuffled, noise off")),
+        (NOISEOFF, "a3c+oracle@sigma2_max=0", ("shuffled",)),
+    ):
         seeds = methods[arm]
         assert [r["seed"] for r in seeds] == [0, 1, 2, 3, 4]
         trained = [r["sr"]["trained"] for r in seeds]
@@ -247,8 +321,11 @@ def test_ceiling_md_quotes_the_range_4_arms_along_training(tmp_path):
     for i, update in enumerate(range(500, 3001, 500)):
         critic = curves[CRITIC][:, i]
         pairs = [stats.paired(critic, curves[arm][:, i]) for arm in (ORACLE, NOISEOFF)]
-        row = (f"| {update} | {critic.mean():.1f} ± {critic.std(ddof=1):.1f} | "
-               + " | ".join(study_data.interval(p) for p in pairs) + " |")  # fmt: skip
+        row = (
+            f"| {update} | {critic.mean():.1f} ± {critic.std(ddof=1):.1f} | "
+            + " | ".join(study_data.interval(p) for p in pairs)
+            + " |"
+        )
         assert row in doc, row
         assert all(p["ci_high"] > 0 for p in pairs)  # "no oracle arm is behind the critic at any checkpoint"
         if update == 3000:

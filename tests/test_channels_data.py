@@ -18,9 +18,11 @@ REPO = Path(__file__).resolve().parents[1]
 CRITIC = "a3c+critic@learning_rate=3e-4"
 COMPASS = "a3c+compass@learning_rate=3e-4,imagination_input=encoder,sigma2_max=0"
 START = "a3c+startcompass@learning_rate=3e-4,imagination_input=encoder,sigma2_max=0"
-LABELS = {CRITIC: "a3c+critic, rooms with priors, range 4 (channels study)",
-          COMPASS: "a3c+compass through `encoder` (privileged), per step",
-          START: "a3c+startcompass through `encoder` (privileged), held from the start"}  # fmt: skip
+LABELS = {
+    CRITIC: "a3c+critic, rooms with priors, range 4 (channels study)",
+    COMPASS: "a3c+compass through `encoder` (privileged), per step",
+    START: "a3c+startcompass through `encoder` (privileged), held from the start",
+}
 
 
 def passes(pair: dict) -> bool:
@@ -49,15 +51,21 @@ def test_stage_1_is_quoted_with_its_verdicts(tmp_path, capsys):
     for arm, name in ((COMPASS, "the compass per step"), (START, "the compass at step 0")):
         pair = out["pairs"][f"{arm} - {CRITIC}"]
         mde = f"{pair['robust']['SR']['mde']:.1f}"
-        row = (f"| {name} - a3c+critic | {study_data.interval(pair['SR'])} | {study_data.interval(pair['SPL'])} | "
-               f"{mde} | {'passes' if passes(pair) else 'does not pass'} |")
+        row = (
+            f"| {name} - a3c+critic | {study_data.interval(pair['SR'])} | {study_data.interval(pair['SPL'])} | "
+            f"{mde} | {'passes' if passes(pair) else 'does not pass'} |"
+        )
         assert row in doc, row
     start = out["pairs"][f"{START} - {CRITIC}"]
     assert start["SPL"]["ci_low"] > 0 and start["SR"]["ci_low"] < 0 < start["SR"]["ci_high"]  # the docs' words
-    assert "+4.4 [+1.9, +6.8] SPL, a gain that excludes 0" in flat and study_data.interval(start["SPL"]) == "+4.4 [+1.9, +6.8]"
+    assert (
+        "+4.4 [+1.9, +6.8] SPL, a gain that excludes 0" in flat
+        and study_data.interval(start["SPL"]) == "+4.4 [+1.9, +6.8]"
+    )
     # "The critic reproduces bit for bit": the range-4 study's critic (79dce9c), seed for seed
-    earlier = report.load(study_data.unpack("ceiling_range4.tar.xz", tmp_path / "range4", (CRITIC,
-                                            "a3c+oracle@learning_rate=3e-4")))  # fmt: skip
+    earlier = report.load(
+        study_data.unpack("ceiling_range4.tar.xz", tmp_path / "range4", (CRITIC, "a3c+oracle@learning_rate=3e-4"))
+    )
     for column in ("SR", "SPL"):
         assert list(report.values(results[CRITIC], column)) == list(report.values(earlier[CRITIC], column))
     assert all(r["selected_update"] == 3000 for arm in results for r in results[arm])  # "its last model"
@@ -74,13 +82,19 @@ ENC = "a3c+oracle@learning_rate=3e-4,imagination_input=encoder,sigma2_max=0"
 MLP_CRITIC = "a3c+critic@learning_rate=3e-4,imagination_input=mlp"
 MLP = "a3c+oracle@learning_rate=3e-4,imagination_input=mlp,sigma2_max=0"
 HEAD = "a3c+oracle@learning_rate=3e-4,sigma2_max=0"
-STAGE2 = {CRITIC: "a3c+critic (the base of `head` and `encoder`; stage 1's, copied)",
-          MLP_CRITIC: "a3c+critic through `mlp` (the base of `mlp`)",
-          ENC: "a3c+oracle through `encoder` (privileged), no noise",
-          MLP: "a3c+oracle through `mlp` (privileged), no noise",
-          HEAD: "a3c+oracle through `head` (privileged), no noise"}  # fmt: skip
+STAGE2 = {
+    CRITIC: "a3c+critic (the base of `head` and `encoder`; stage 1's, copied)",
+    MLP_CRITIC: "a3c+critic through `mlp` (the base of `mlp`)",
+    ENC: "a3c+oracle through `encoder` (privileged), no noise",
+    MLP: "a3c+oracle through `mlp` (privileged), no noise",
+    HEAD: "a3c+oracle through `head` (privileged), no noise",
+}
 CEILINGS = ((CRITIC, ENC, "`encoder`"), (MLP_CRITIC, MLP, "`mlp`"), (CRITIC, HEAD, "`head`"))
-CHANNELS = ((HEAD, ENC, "`encoder` - `head`"), (HEAD, MLP, "`mlp` - `head`"), (CRITIC, MLP_CRITIC, "the critic: `mlp` - `head`"))
+CHANNELS = (
+    (HEAD, ENC, "`encoder` - `head`"),
+    (HEAD, MLP, "`mlp` - `head`"),
+    (CRITIC, MLP_CRITIC, "the critic: `mlp` - `head`"),
+)
 
 
 def resolved(pair: dict) -> bool:
@@ -90,13 +104,17 @@ def resolved(pair: dict) -> bool:
 
 def mean_selected_validation(results: list[dict]) -> float:
     """The plan's rule 3: the mean over seeds of the selected model's validation SR."""
-    return sum(next(v["SR"] for v in r["validation"] if v["update"] == r["selected_update"]) for r in results) / len(results)
+    return sum(next(v["SR"] for v in r["validation"] if v["update"] == r["selected_update"]) for r in results) / len(
+        results
+    )
 
 
 def test_stage_2_is_quoted_with_its_verdicts(tmp_path, capsys):
     if not (study_data.DATA / "channels_stage2.tar.xz").exists():
         pytest.skip("channels_stage2.tar.xz: not run yet")
-    root = study_data.unpack("channels_stage2.tar.xz", tmp_path, (CRITIC, ENC, MLP_CRITIC, MLP, HEAD))  # the sweep's order
+    root = study_data.unpack(
+        "channels_stage2.tar.xz", tmp_path, (CRITIC, ENC, MLP_CRITIC, MLP, HEAD)
+    )  # the sweep's order
     for arm in STAGE2:
         config = rundir.read_json(root / "methods" / arm / "run.json")["config"]
         assert config["priors"] is True and config["perception_range"] == 4.0 and config["learning_rate"] == 3e-4
@@ -104,7 +122,9 @@ def test_stage_2_is_quoted_with_its_verdicts(tmp_path, capsys):
         if "oracle" in arm:
             assert config["sigma2_max"] == 0
     assert rundir.read_json(root / "methods" / ENC / "run.json")["config"]["imagination_input"] == "encoder"
-    assert {rundir.read_json(root / "methods" / a / "run.json")["config"]["imagination_input"] for a in (MLP, MLP_CRITIC)} == {"mlp"}
+    assert {
+        rundir.read_json(root / "methods" / a / "run.json")["config"]["imagination_input"] for a in (MLP, MLP_CRITIC)
+    } == {"mlp"}
     results = report.load(root)
     assert all([r["seed"] for r in results[arm]] == [0, 1, 2, 3, 4] for arm in results)
     doc = (REPO / "docs" / "ceiling.md").read_text()
@@ -116,16 +136,20 @@ def test_stage_2_is_quoted_with_its_verdicts(tmp_path, capsys):
     for a, b, name in CEILINGS:
         pair = out["pairs"][f"{b} - {a}"]
         r = pair["robust"]["SR"]
-        row = (f"| the goal view through {name} - its base | {study_data.interval(pair['SR'])} | "
-               f"{study_data.interval(pair['SPL'])} | {r['mde']:.1f} | {r['p_holm']:.3f} | "
-               f"{'resolved' if resolved(pair) else 'not resolved'} |")
+        row = (
+            f"| the goal view through {name} - its base | {study_data.interval(pair['SR'])} | "
+            f"{study_data.interval(pair['SPL'])} | {r['mde']:.1f} | {r['p_holm']:.3f} | "
+            f"{'resolved' if resolved(pair) else 'not resolved'} |"
+        )
         assert row in doc, row
     differences = compare.main(compare.Args(run=root, pairs=tuple(f"{a}:{b}" for a, b, _ in CHANNELS)))
     capsys.readouterr()
     for a, b, name in CHANNELS:
         pair = differences["pairs"][f"{b} - {a}"]
-        row = (f"| {name} | {study_data.interval(pair['SR'])} | {study_data.interval(pair['SPL'])} | "
-               f"{pair['robust']['SR']['mde']:.1f} |")
+        row = (
+            f"| {name} | {study_data.interval(pair['SR'])} | {study_data.interval(pair['SPL'])} | "
+            f"{pair['robust']['SR']['mde']:.1f} |"
+        )
         assert row in doc, row
     best = max((ENC, MLP, HEAD), key=lambda arm: mean_selected_validation(results[arm]))
     assert f"The best channel by the plan's rule 3 is {STAGE2[best].split(' (')[0].split('through ')[1]}" in flat
@@ -133,7 +157,10 @@ def test_stage_2_is_quoted_with_its_verdicts(tmp_path, capsys):
     first = report.load(study_data.unpack("channels_stage1.tar.xz", tmp_path / "stage1", (CRITIC, COMPASS, START)))
     assert list(report.values(first[CRITIC], "SR")) == list(report.values(results[CRITIC], "SR"))
     # "The head arm reproduces bit for bit": the range-4 study's noise-off oracle (79dce9c)
-    earlier = report.load(study_data.unpack("ceiling_range4_noiseoff.tar.xz", tmp_path / "noiseoff",
-                                            (CRITIC, "a3c+oracle@learning_rate=3e-4", HEAD)))  # fmt: skip
+    earlier = report.load(
+        study_data.unpack(
+            "ceiling_range4_noiseoff.tar.xz", tmp_path / "noiseoff", (CRITIC, "a3c+oracle@learning_rate=3e-4", HEAD)
+        )
+    )
     for column in ("SR", "SPL"):
         assert list(report.values(results[HEAD], column)) == list(report.values(earlier[HEAD], column))

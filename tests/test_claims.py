@@ -22,25 +22,42 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-CLAIM_FILES = ("README.md", "docs/results.md", "docs/mechanism.md", "docs/priors.md", "docs/houses.md",
-               "docs/deviations.md", "docs/foresight.md", "docs/ceiling.md", "docs/usage.md", "docs/reproducibility.md",
-               "docs/learner.md", "docs/design.md", "CHANGELOG.md",
-               *sorted(str(p.relative_to(REPO)) for p in (REPO / "docs" / "plans").glob("*.md")))  # fmt: skip
+CLAIM_FILES = (
+    "README.md",
+    "docs/results.md",
+    "docs/mechanism.md",
+    "docs/priors.md",
+    "docs/houses.md",
+    "docs/deviations.md",
+    "docs/foresight.md",
+    "docs/ceiling.md",
+    "docs/usage.md",
+    "docs/reproducibility.md",
+    "docs/learner.md",
+    "docs/design.md",
+    "CHANGELOG.md",
+    *sorted(str(p.relative_to(REPO)) for p in (REPO / "docs" / "plans").glob("*.md")),
+)
 
 MARGIN = 3.8  # SR points: the paper's effect, the margin declared for "level" unless a sentence names another
 # Equivalence: the interval inside [-margin, +margin]. Only verdict uses: "end level", "level
 # with", not "an optimisation level".
-EQUIVALENCE = re.compile(r"\b(?:(?:are|is|end|ends|ended|stay|stays|arms?) level|level with|equivalent|on par|"
-                         r"indistinguishable|no difference|costs? nothing|gains? nothing)\b", re.I)  # fmt: skip
+EQUIVALENCE = re.compile(
+    r"\b(?:(?:are|is|end|ends|ended|stay|stays|arms?) level|level with|equivalent|on par|"
+    r"indistinguishable|no difference|costs? nothing|gains? nothing)\b",
+    re.I,
+)
 # A direction: the interval clear of 0.
 DIRECTION = re.compile(r"\b(?:helps|hurts|costs|gains|lowers|raises)\b(?! nothing)", re.I)
 INTERVAL = re.compile(r"([+-]?\d+(?:\.\d+)?)\s*\[([+-]?\d+(?:\.\d+)?),\s*([+-]?\d+(?:\.\d+)?)\]")
 NAMED_MARGIN = re.compile(r"margin (?:of )?±?\s*(\d+(?:\.\d+)?)")
 
 # Issue 68's lexicon: words that give a verdict on a difference.
-LEXICON = re.compile(r"\b(?:level|equal|matches|helps|costs|gains|lowers|raises|hurts|lower|higher|better|worse|beats|"
-                     r"vanishes|is gone|disappears|at most|bounds?|bounded|ignores?)\b|\b(?:above|below)\s+(?:than|0)(?!\.?\d)",
-                     re.I)  # fmt: skip
+LEXICON = re.compile(
+    r"\b(?:level|equal|matches|helps|costs|gains|lowers|raises|hurts|lower|higher|better|worse|beats|"
+    r"vanishes|is gone|disappears|at most|bounds?|bounded|ignores?)\b|\b(?:above|below)\s+(?:than|0)(?!\.?\d)",
+    re.I,
+)
 # What makes a sentence a verdict: it names an arm, a pair, a ceiling or a metric.
 SUBJECT = re.compile(r"\b(?:a3c[\w+@=.,-]*|foresit|oracle|critic|ceiling|pairs?|SR|SPL|compass\w*|optaction)\b", re.I)
 SECTION_LINK = re.compile(r"\]\([^)\s]*#[^)\s]+\)")
@@ -51,7 +68,8 @@ EXEMPT = re.compile(
     r"\b(?:lower|upper) (?:bound|end)s?\b|\btested equal\b|\bequal to (?:the|it|its)\b|\bat (?:about )?equal\b|"
     r"\babout equal\b|\bequally\b|\bthe higher mean validation SR\b|\bmatches arms\b|\bat most \d+ (?:lines|words)\b|"
     r"\bwhat (?:it|they|the \w+) costs?\b",
-    re.I)  # fmt: skip
+    re.I,
+)
 CHANGE = re.compile(r"\b(?:vanishes|is gone|disappears)\b", re.I)
 EQUAL = re.compile(r"\bequal\b", re.I)
 
@@ -110,13 +128,21 @@ def unsupported_verdicts(sentence: str) -> list[str]:
     intervals = [(float(m.group(2)), float(m.group(3))) for m in INTERVAL.finditer(plain)]
     out = []
     for word in CHANGE.finditer(plain):  # a change of a difference is a verdict, whatever it names
-        if not (any(high < 0 or low > 0 for low, high in intervals) and any(low <= 0 <= high for low, high in intervals)):
-            out.append(f"{word.group(0)!r} needs what was there (an interval clear of 0) and what is left (one holding 0)")
+        if not (
+            any(high < 0 or low > 0 for low, high in intervals) and any(low <= 0 <= high for low, high in intervals)
+        ):
+            out.append(
+                f"{word.group(0)!r} needs what was there (an interval clear of 0) and what is left (one holding 0)"
+            )
     if not SUBJECT.search(sentence) or SECTION_LINK.search(sentence):
         return out
     out += [f"{w.group(0)!r} claims no difference at all: say level, within a margin" for w in EQUAL.finditer(plain)]
     if not intervals:  # `sentences` cuts at ";": the clause holds its interval, or nothing does
-        out += [f"{w.group(0)!r} with no interval in its clause" for w in LEXICON.finditer(plain) if not EQUAL.match(w.group(0))]
+        out += [
+            f"{w.group(0)!r} with no interval in its clause"
+            for w in LEXICON.finditer(plain)
+            if not EQUAL.match(w.group(0))
+        ]
     return out
 
 
@@ -189,7 +215,10 @@ def test_the_rule_reads_verdicts_and_leaves_other_uses_alone():
     assert violations("Shuffled i_tau costs nothing (+0.4 [-2.4, +3.1]).") == []
     assert violations("The critic costs nothing: -0.7 [-5.5, +4.2].")
     assert list(sentences("One. Two is level: +1 [-1, +2]; three costs\n-5 [-7, -3].\n\n| a | level [-9, 9] |")) == [
-        "One", "Two is level: +1 [-1, +2]", "three costs -5 [-7, -3]."]
+        "One",
+        "Two is level: +1 [-1, +2]",
+        "three costs -5 [-7, -3].",
+    ]
 
 
 @pytest.mark.parametrize("name", CLAIM_FILES)
@@ -220,7 +249,10 @@ def anchors(path: Path) -> set[str]:
 
 def test_slugs_are_githubs():
     assert slug("## Study 6: the critic's keys, savn, seeds 0-4") == "study-6-the-critics-keys-savn-seeds-0-4"
-    assert slug("### Stage 1: can a compass be carried? (quick, 2026-11-29)") == "stage-1-can-a-compass-be-carried-quick-2026-11-29"
+    assert (
+        slug("### Stage 1: can a compass be carried? (quick, 2026-11-29)")
+        == "stage-1-can-a-compass-be-carried-quick-2026-11-29"
+    )
 
 
 @pytest.mark.parametrize("name", CLAIM_FILES)

@@ -22,13 +22,16 @@ def write_sweep(root, rng, methods=("a", "b", "c", "d"), seeds=SEEDS):
         per_seed = []
         for seed in seeds:
             overall = {"SR": rng.uniform(30, 80), "SPL": rng.uniform(10, 40), "SR>=5": rng.uniform(20, 60)}
-            per_seed.append({
-                "seed": seed, "selected": {"overall": overall},
-                "training_success_rate": rng.uniform(0, 1, 300).tolist(),
-                "diagnostics": {"losses/entropy": rng.uniform(0.2, 1, 6).tolist()},
-                "counts": {"frames/useful": 1.5e6 + seed, "charts/episodes": 1000 + seed},
-                "validation": [{"update": u, "SR": rng.uniform(0, 90)} for u in (1000, 500, 1500, 2500)],
-            })  # fmt: skip
+            per_seed.append(
+                {
+                    "seed": seed,
+                    "selected": {"overall": overall},
+                    "training_success_rate": rng.uniform(0, 1, 300).tolist(),
+                    "diagnostics": {"losses/entropy": rng.uniform(0.2, 1, 6).tolist()},
+                    "counts": {"frames/useful": 1.5e6 + seed, "charts/episodes": 1000 + seed},
+                    "validation": [{"update": u, "SR": rng.uniform(0, 90)} for u in (1000, 500, 1500, 2500)],
+                }
+            )
         truth[method] = per_seed
         folder = root / "methods" / method
         folder.mkdir(parents=True)
@@ -59,14 +62,18 @@ def test_pairs_and_difference_of_differences_match_a_hand_computation(tmp_path, 
 
     for name in ("SR", "SPL", "SR>=5", "training SR", "validation SR area", "losses/entropy"):
         got = out["pairs"]["b - a"][name]
-        np.testing.assert_allclose([got["diff"], got["ci_low"], got["ci_high"], got["p"]],
-                                   hand_paired(col("a", name), col("b", name)), rtol=1e-9)  # fmt: skip
+        np.testing.assert_allclose(
+            [got["diff"], got["ci_low"], got["ci_high"], got["p"]],
+            hand_paired(col("a", name), col("b", name)),
+            rtol=1e-9,
+        )
     for name in ("SR", "SPL", "SR>=5"):
         got = out["did"]["(d - c) - (b - a)"][name]
         first = np.subtract(col("b", name), col("a", name))
         second = np.subtract(col("d", name), col("c", name))
-        np.testing.assert_allclose([got["diff"], got["ci_low"], got["ci_high"], got["p"]],
-                                   hand_paired(first, second), rtol=1e-9)  # fmt: skip
+        np.testing.assert_allclose(
+            [got["diff"], got["ci_low"], got["ci_high"], got["p"]], hand_paired(first, second), rtol=1e-9
+        )
     sr_a = col("a", "SR")
     assert " / ".join(f"{x:.1f}" for x in sr_a) in printed
     assert f"{out['pairs']['b - a']['SR']['diff']:+.2f}" in printed
@@ -89,8 +96,11 @@ def test_bad_input_says_what_is_wrong(tmp_path):
         compare.main(compare.Args(run=tmp_path))
     write_sweep(tmp_path / "one", np.random.default_rng(1), methods=("a", "b"))
     write_sweep(tmp_path / "one", np.random.default_rng(2), methods=("c",), seeds=(0, 1, 2, 3))
-    for pairs, says in ((("a:x",), "'x' is not a finished method of this sweep; it has a, b, c"),
-                        (("a-b",), "give 2 method names"), (("a:c",), "different seeds")):  # fmt: skip
+    for pairs, says in (
+        (("a:x",), "'x' is not a finished method of this sweep; it has a, b, c"),
+        (("a-b",), "give 2 method names"),
+        (("a:c",), "different seeds"),
+    ):
         with pytest.raises(errors.UserError, match=says):
             compare.main(compare.Args(run=tmp_path / "one", pairs=pairs))
 
@@ -107,14 +117,15 @@ def test_the_robust_table_of_the_pairs_matches_a_hand_computation(tmp_path, caps
     for m, p_holm in adjusted.items():
         robust = out["pairs"][f"{m} - a"]["robust"]["SR"]
         middle = lambda x: np.sort(x)[1:3].mean()  # noqa: E731  4 seeds: the IQM is the middle two's mean
-        assert robust["iqm_a"][0] == pytest.approx(middle(sr["a"])) and robust["iqm_b"][0] == pytest.approx(middle(sr[m]))
+        assert robust["iqm_a"][0] == pytest.approx(middle(sr["a"])) and robust["iqm_b"][0] == pytest.approx(
+            middle(sr[m])
+        )
         wins = np.mean([(y > x) + 0.5 * (y == x) for y in sr[m] for x in sr["a"]])
         assert robust["probability_of_improvement"][0] == pytest.approx(wins)
         assert robust["p_holm"] == pytest.approx(p_holm)
         d = sr[m] - sr["a"]
         assert robust["mde"] == pytest.approx(stats.minimum_detectable_effect(d.std(ddof=1), len(d)))
     assert "What these seeds can tell" in printed and "P(B > A)" in printed
-
 
 
 def test_the_ceiling_and_the_share_closed_are_reported_only_where_the_ceiling_is_resolved(tmp_path, capsys):
@@ -124,14 +135,23 @@ def test_the_ceiling_and_the_share_closed_are_reported_only_where_the_ceiling_is
 
     from experiments import compare
 
-    srs = {"crit": [50.0, 52.0, 48.0, 51.0, 49.0], "fore": [52.0, 55.0, 49.0, 53.0, 51.0],
-           "orac": [60.0, 64.0, 56.0, 62.0, 58.0]}  # fmt: skip
+    srs = {
+        "crit": [50.0, 52.0, 48.0, 51.0, 49.0],
+        "fore": [52.0, 55.0, 49.0, 53.0, 51.0],
+        "orac": [60.0, 64.0, 56.0, 62.0, 58.0],
+    }
     spls = {"crit": [20.0] * 5, "fore": [21.0] * 5, "orac": [20.5, 19.0, 21.0, 19.5, 20.0]}
     for arm in srs:
         folder = tmp_path / "methods" / arm
         folder.mkdir(parents=True)
-        per_seed = [{"seed": s, "selected": {"overall": {"SR": srs[arm][s], "SPL": spls[arm][s], "SR>=5": 0.0}},
-                     "training_success_rate": [0.5] * 10} for s in range(5)]  # fmt: skip
+        per_seed = [
+            {
+                "seed": s,
+                "selected": {"overall": {"SR": srs[arm][s], "SPL": spls[arm][s], "SR>=5": 0.0}},
+                "training_success_rate": [0.5] * 10,
+            }
+            for s in range(5)
+        ]
         (folder / "results.json").write_text(json.dumps({"updates": 10, "results": per_seed}))
     out = compare.main(compare.Args(run=tmp_path, ceiling=("crit:fore:orac",)))
     sr, spl = out["ceiling"]["orac - crit"]["SR"], out["ceiling"]["orac - crit"]["SPL"]

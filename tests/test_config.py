@@ -75,7 +75,9 @@ def test_unknown_methods_and_impossible_combinations():
 
 
 def changed_fields(a: ImaginationVariant, b: ImaginationVariant):
-    fields = [f for f in dataclasses.fields(ImaginationVariant) if f.init]  # the choices, not the flags derived from them
+    fields = [
+        f for f in dataclasses.fields(ImaginationVariant) if f.init
+    ]  # the choices, not the flags derived from them
     return {f.name for f in fields if getattr(a, f.name) != getattr(b, f.name)} - {"name"}
 
 

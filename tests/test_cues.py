@@ -44,8 +44,13 @@ def run_cue(kit, cue: str, actions=None, seed: int = 0):
                 action = jnp.argmax(obs["cue"], -1).astype(jnp.int32)
             out = jax.vmap(wrapped.step, in_axes=(0, 0, 0, None))(keys, state, action, kit.params)
             next_obs, next_state, _, term, trunc, info = out
-            return (next_obs, next_state), (obs["cue"], state.env_state, term | trunc, info["success"],
-                                            info["optimal_length"])  # fmt: skip
+            return (next_obs, next_state), (
+                obs["cue"],
+                state.env_state,
+                term | trunc,
+                info["success"],
+                info["optimal_length"],
+            )
 
         return jax.lax.scan(step, (obs, state), (env_keys, random_actions))[1]
 
@@ -142,9 +147,17 @@ def test_the_agent_sees_the_steps_own_cue_from_the_first_step(imagination_input)
     nets = build(config)
     cue = jax.random.normal(jax.random.PRNGKey(0), (3, CUES["compass"]))
     hidden = config.hidden_size
-    actor = rollout.ActorState(env_state=None, obs={"cue": cue}, lstm=None, prev_probs=None,
-                               imagined=jnp.ones((3, hidden)), s_0=None, episode_step=jnp.array([0, 1, 7]),
-                               memory=None, tracker=None)  # fmt: skip
+    actor = rollout.ActorState(
+        env_state=None,
+        obs={"cue": cue},
+        lstm=None,
+        prev_probs=None,
+        imagined=jnp.ones((3, hidden)),
+        s_0=None,
+        episode_step=jnp.array([0, 1, 7]),
+        memory=None,
+        tracker=None,
+    )
     expected = np.concatenate([np.asarray(cue), np.zeros((3, hidden - cue.shape[1]))], 1)
     imagined = rollout.imagined_at_step(nets, AgentParams(None, None, jnp.zeros(3)), actor, None, None)
     np.testing.assert_array_equal(imagined, expected)
@@ -166,20 +179,30 @@ def test_acting_records_the_cue_of_every_step(savn_kit, imagination_input):
     actor = rollout.start(nets, jax.random.PRNGKey(2), env, config.num_lanes)
     assert "cue" in actor.obs  # start wrapped the env itself
     params, w_params = jax.jit(nets.init, compiler_options=H.FAST_COMPILE)(
-        jax.random.PRNGKey(1), jax.tree.map(lambda x: x[0], actor.obs))
+        jax.random.PRNGKey(1), jax.tree.map(lambda x: x[0], actor.obs)
+    )
     acting = AgentParams(params, w_params, jnp.zeros((config.num_lanes,)))
-    act = jax.jit(lambda a, k: rollout.act_window(nets, acting, env, a, k, 20, ActOptions(record_inputs=True)),
-                  compiler_options=H.FAST_COMPILE)  # fmt: skip
+    act = jax.jit(
+        lambda a, k: rollout.act_window(nets, acting, env, a, k, 20, ActOptions(record_inputs=True)),
+        compiler_options=H.FAST_COMPILE,
+    )
     inputs = act(actor, jax.random.PRNGKey(3))[1].inputs
     cue = np.asarray(inputs.obs["cue"])
     seen = inputs.imagined if imagination_input == "head" else inputs.encoder_imagined
-    np.testing.assert_array_equal(np.asarray(seen)[..., :cue.shape[-1]], cue)
-    assert not np.asarray(seen)[..., cue.shape[-1]:].any()
+    np.testing.assert_array_equal(np.asarray(seen)[..., : cue.shape[-1]], cue)
+    assert not np.asarray(seen)[..., cue.shape[-1] :].any()
     assert len({tuple(np.argmax(c, -1)) for c in cue}) > 1  # the cue changes along the window
 
 
-PLUMBING = dict(preset="tiny", seed=0, num_updates=300, chunk_updates=300, val_episodes_per_room=10,
-                test_episodes_per_room=50, progress=False)  # fmt: skip
+PLUMBING = dict(
+    preset="tiny",
+    seed=0,
+    num_updates=300,
+    chunk_updates=300,
+    val_episodes_per_room=10,
+    test_episodes_per_room=50,
+    progress=False,
+)
 
 
 @pytest.mark.slow  # about 90 s: three tiny runs of 300 updates (docs/plans/ceiling_channels.md)

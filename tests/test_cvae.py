@@ -53,7 +53,9 @@ def test_the_loss_reaches_the_encoder_through_the_sample_and_the_condition_shape
 def test_the_cvae_learns_a_conditional_structure():
     s_0, goal, subgoal = synthetic_items(jax.random.PRNGKey(0), 1024)
     model = cvae.CVAE(state_size=12, latent_size=4, hidden_size=64)
-    params, step_losses = jax.jit(lambda k: cvae.fit_cvae(model, k, subgoal, s_0, goal, epochs=40))(jax.random.PRNGKey(1))
+    params, step_losses = jax.jit(lambda k: cvae.fit_cvae(model, k, subgoal, s_0, goal, epochs=40))(
+        jax.random.PRNGKey(1)
+    )
     assert np.all(np.isfinite(step_losses))
     _, (reconstruction, kl) = cvae.cvae_loss(model, params, subgoal, s_0, goal, jax.random.PRNGKey(2))
     total_variance = float(jnp.sum(jnp.var(subgoal, axis=0)))  # what predicting the mean would cost
@@ -66,13 +68,16 @@ def test_the_comparison_trains_both_imaginations_and_beats_predicting_the_mean()
     items = synthetic_items(jax.random.PRNGKey(0), 768)
     train = jax.tree.map(lambda x: x[:512], items)
     test = jax.tree.map(lambda x: x[512:], items)
-    out = cvae.compare_imagination_targets(jax.random.PRNGKey(1), train, test, layer_sizes=(32, 8, 32, 12),
-                                           latent_size=4, epochs=40)  # fmt: skip
+    out = cvae.compare_imagination_targets(
+        jax.random.PRNGKey(1), train, test, layer_sizes=(32, 8, 32, 12), latent_size=4, epochs=40
+    )
     assert set(out) == {"cvae_final_loss", "cvae_reconstruction", "cvae_kl", "direct", "cvae_latent"}
     assert out["cvae_kl"] >= 0 and out["direct"]["loss_over_variance"] == pytest.approx(
-        out["direct"]["loss"] / out["direct"]["target_variance"], rel=1e-5)
-    mean_guess = imagination.imagination_loss(lambda p, s, g: jnp.broadcast_to(p, (s.shape[0], 12)),
-                                              jnp.mean(train[2], axis=0), test[0], test[1], test[2])  # fmt: skip
+        out["direct"]["loss"] / out["direct"]["target_variance"], rel=1e-5
+    )
+    mean_guess = imagination.imagination_loss(
+        lambda p, s, g: jnp.broadcast_to(p, (s.shape[0], 12)), jnp.mean(train[2], axis=0), test[0], test[1], test[2]
+    )
     assert 0 < out["direct"]["loss"] < 0.5 * float(mean_guess)
     assert np.isfinite(out["cvae_latent"]["loss"]) and out["cvae_latent"]["target_variance"] > 0
     assert out["direct"]["target_variance"] == pytest.approx(float(jnp.mean(jnp.var(test[2], axis=0))))

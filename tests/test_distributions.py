@@ -25,9 +25,7 @@ class CategoricalTest(chex.TestCase):
     def test_log_prob_matches_numpy(self):
         out = self.variant(distributions.log_prob)(self.logits, self.actions)
         chex.assert_shape(out, (4, 5))
-        expected = np.take_along_axis(
-            np_log_softmax(self.logits), self.actions[..., None], -1
-        )[..., 0]
+        expected = np.take_along_axis(np_log_softmax(self.logits), self.actions[..., None], -1)[..., 0]
         np.testing.assert_allclose(out, expected, rtol=1e-5, atol=1e-5)
 
     @chex.variants(with_jit=True, without_jit=True)

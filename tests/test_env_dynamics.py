@@ -22,9 +22,12 @@ from env_reference import SPEC_DELTAS, reference_transition
 ROLLOUT_STEPS = 24
 UNREACHABLE = np.iinfo(np.int16).max
 HYPOTHESIS = settings(
-    max_examples=25, deadline=None, derandomize=True, print_blob=True,
+    max_examples=25,
+    deadline=None,
+    derandomize=True,
+    print_blob=True,
     suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
-)  # fmt: skip
+)
 
 
 def make_rollout(env):
@@ -44,9 +47,17 @@ def make_rollout(env):
             obs_env, state_env, *_ = env.step_env(k, state, action, params)
             obs, next_state, reward, terminated, truncated, info = env.step(k, state, action, params)
             record = dict(
-                state=state, action=action, obs_env=obs_env, state_env=state_env, obs=obs,
-                next_state=next_state, reward=reward, terminated=terminated, truncated=truncated, info=info,
-            )  # fmt: skip
+                state=state,
+                action=action,
+                obs_env=obs_env,
+                state_env=state_env,
+                obs=obs,
+                next_state=next_state,
+                reward=reward,
+                terminated=terminated,
+                truncated=truncated,
+                info=info,
+            )
             return (next_state, key), record
 
         _, records = jax.lax.scan(body, (state, key), (actions, use_oracle))

@@ -25,6 +25,8 @@ GYMNAX = gymnax_compat.installed_gymnax_version()
 needs_gymnax = pytest.mark.skipif(GYMNAX is None, reason="gymnax is not installed (pip install -e '.[gymnax]')")
 needs_gymnax_1 = pytest.mark.skipif(GYMNAX is None or GYMNAX < (1,), reason="needs gymnax >= 1.0 (its registry)")
 ROOMS = ("bathroom",)
+
+
 @contextlib.contextmanager
 def no_warning():
     """Expects no warning of the project's at all: a new user's make_gymnax is silent
@@ -69,7 +71,8 @@ def test_both_conventions_step_as_gridnav_does(pair):
     ends = 0
     for t, action in enumerate(actions, start=1):
         obs_g, state, reward_g, term, trunc, info_g = five.gridnav.step(
-            jax.random.key(1000 + t - 1), state, jnp.int32(action), params)
+            jax.random.key(1000 + t - 1), state, jnp.int32(action), params
+        )
         obs5, reward5, done5, info5 = a[t]
         obs6, reward6, term6, trunc6, info6 = b[t]
         np.testing.assert_array_equal(obs5, np.asarray(flat.flatten(obs_g)))
@@ -226,8 +229,11 @@ def test_the_default_is_five_values_and_silent_whatever_gymnax_is_installed(monk
     with no_warning():
         env, _ = envs.make_gymnax(room_types=ROOMS)
     assert env.step_api == "done"
-    for step_api, expected in (("done", "done"), ("terminated_truncated", "terminated_truncated"),
-                               ("auto", "terminated_truncated" if version and version >= (1,) else "done")):
+    for step_api, expected in (
+        ("done", "done"),
+        ("terminated_truncated", "terminated_truncated"),
+        ("auto", "terminated_truncated" if version and version >= (1,) else "done"),
+    ):
         with no_warning():
             env, _ = envs.make_gymnax(room_types=ROOMS, step_api=step_api)
         assert env.step_api == expected and env.final_observation == (expected == "terminated_truncated")
@@ -312,8 +318,10 @@ def test_gymnax_make_builds_it_with_keywords_once_registered():
 @needs_gymnax_1
 def test_importing_envs_after_gymnax_registers_it():
     """gymnax.make without step_api: the five-value env, and nothing on stderr."""
-    code = ("import gymnax, envs; env, p = gymnax.make('GridNav-v0', room_types=('bathroom',)); "
-            "print(type(env).__name__, env.step_api)")
+    code = (
+        "import gymnax, envs; env, p = gymnax.make('GridNav-v0', room_types=('bathroom',)); "
+        "print(type(env).__name__, env.step_api)"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ["GymnaxGridNav", "done"]
@@ -346,8 +354,10 @@ def test_env_and_params_survive_deepcopy_and_pickle_and_step_the_same():
     key, action = jax.random.key(3), jnp.int32(0)
     obs, state = env.reset(key, params)
     expected = env.step(key, state, action, params)
-    for copied_env, copied_params in [(copy.deepcopy(env), copy.deepcopy(params)),
-                                      (pickle.loads(pickle.dumps(env)), pickle.loads(pickle.dumps(params)))]:
+    for copied_env, copied_params in [
+        (copy.deepcopy(env), copy.deepcopy(params)),
+        (pickle.loads(pickle.dumps(env)), pickle.loads(pickle.dumps(params))),
+    ]:
         assert isinstance(copied_env, gymnax_compat.GymnaxGridNav) and copied_env.step_api == "done"
         obs2, state2 = copied_env.reset(key, copied_params)
         np.testing.assert_array_equal(np.asarray(obs2), np.asarray(obs))

@@ -99,10 +99,22 @@ def test_ppo_loop_shapes_and_finiteness(ppo_run):
     # gymnax 1.x's FlattenObservationWrapper reads final_observation at every step; the
     # five-value stacks do not ask for it, and it is not there.
     assert ("final_observation" in metrics) == (stack == "gymnax")
-    keys = ["returned_episode", "returned_episode_returns", "returned_episode_lengths", "success",
-            "optimal_length", "room_type", "episode_length", "terminated", "truncated"]
-    keys += {"envs": ["timestep", "returned_episode_success", "returned_episode_spl"],
-             "purejaxrl": ["timestep"], "gymnax": ["returned_episode_valid"]}[stack]
+    keys = [
+        "returned_episode",
+        "returned_episode_returns",
+        "returned_episode_lengths",
+        "success",
+        "optimal_length",
+        "room_type",
+        "episode_length",
+        "terminated",
+        "truncated",
+    ]
+    keys += {
+        "envs": ["timestep", "returned_episode_success", "returned_episode_spl"],
+        "purejaxrl": ["timestep"],
+        "gymnax": ["returned_episode_valid"],
+    }[stack]
     for key in keys:
         chex.assert_shape(metrics[key], (u, t, b))
     chex.assert_tree_all_finite(metrics)

@@ -35,11 +35,16 @@ def test_summarize_hand_computed():
     # SPL_i = s_i * L^g_i / max(L_i, L^g_i)
     spl = [s * g / max(n, g) for s, g, n in zip(success, optimal, lengths)]  # .5, 0, 1, 1, 0
     got = summarize(success, spl, optimal)
-    assert got == pytest.approx({
-        "SR": 60.0, "SPL": 50.0,  # (.5 + 0 + 1 + 1 + 0) / 5
-        "SR>=5": 100 / 3, "SPL>=5": 100 / 3,  # episodes 1, 2, 4 have L^g >= 5
-        "episodes": 5, "episodes>=5": 3,
-    })  # fmt: skip
+    assert got == pytest.approx(
+        {
+            "SR": 60.0,
+            "SPL": 50.0,  # (.5 + 0 + 1 + 1 + 0) / 5
+            "SR>=5": 100 / 3,
+            "SPL>=5": 100 / 3,  # episodes 1, 2, 4 have L^g >= 5
+            "episodes": 5,
+            "episodes>=5": 3,
+        }
+    )
     # L^g = 5 is in the bucket, 4 is not.
     assert summarize([1, 1], [1.0, 1.0], [4, 5])["episodes>=5"] == 1
 
@@ -108,9 +113,12 @@ def test_evaluate_rejects_bad_arguments(tiny_agent):
 
 def test_summarize_is_the_one_in_envs_metrics():
     assert summarize is metrics.summarize
-    outcomes = EpisodeStats(np.array([1, 0, 1, 1, 0], bool), np.array([4, 30, 5, 3, 12]), np.array([2, 6, 5, 3, 9]),
-                               np.ones(5, bool))  # fmt: skip
-    assert outcome_metrics(outcomes) == pytest.approx(summarize(outcomes.success, [0.5, 0, 1, 1, 0], outcomes.optimal_length))
+    outcomes = EpisodeStats(
+        np.array([1, 0, 1, 1, 0], bool), np.array([4, 30, 5, 3, 12]), np.array([2, 6, 5, 3, 9]), np.ones(5, bool)
+    )
+    assert outcome_metrics(outcomes) == pytest.approx(
+        summarize(outcomes.success, [0.5, 0, 1, 1, 0], outcomes.optimal_length)
+    )
 
 
 # ---------------------------------------------------------------------- the random policy
@@ -137,8 +145,9 @@ def recorded_random_episodes(env, env_params, key, episodes, num_steps):
 def test_random_policy_rollout_matches_a_per_episode_record(num_steps):
     env, env_params = H.bathroom_env("val", training=False)
     key, episodes = jax.random.PRNGKey(7), 128
-    got = jax.tree.map(np.asarray, jax.jit(random_policy_rollout, static_argnums=(0, 3, 4))(
-        env, env_params, key, episodes, num_steps))  # fmt: skip
+    got = jax.tree.map(
+        np.asarray, jax.jit(random_policy_rollout, static_argnums=(0, 3, 4))(env, env_params, key, episodes, num_steps)
+    )
     chex.assert_shape(list(got), (episodes,))
     record, ended = recorded_random_episodes(env, env_params, key, episodes, num_steps)
     np.testing.assert_array_equal(got.ended, ended)

@@ -36,17 +36,39 @@ def pair():
     ex = load_example()
     # Small nets and buffers of 2, so that f_w trains within a few dozen updates.
     cfg, _ = presets.preset(
-        "quick", "a3c+foresit", num_lanes=4, room_types=("bathroom",), buffer_size=2, imagination_epochs=2,
-        hidden_size=32, attention_size=32, value_hidden=32, imagination_layer_sizes=(32, 16, 8, 16, 32, 32),
-    )  # fmt: skip
+        "quick",
+        "a3c+foresit",
+        num_lanes=4,
+        room_types=("bathroom",),
+        buffer_size=2,
+        imagination_epochs=2,
+        hidden_size=32,
+        attention_size=32,
+        value_hidden=32,
+        imagination_layer_sizes=(32, 16, 8, 16, 32, 32),
+    )
     config = dict(
-        ex.CONFIG, NUM_LANES=cfg.num_lanes, NUM_STEPS=cfg.num_steps, LR=cfg.learning_rate, HIDDEN=cfg.hidden_size,
-        ATTENTION=cfg.attention_size, VALUE_HIDDEN=cfg.value_hidden, IMAGINATION_LAYERS=cfg.imagination_layer_sizes,
-        BUFFER_SIZE=cfg.buffer_size, IMAGINATION_EPOCHS=cfg.imagination_epochs, ROOM_TYPES=cfg.room_types,
-    )  # fmt: skip
-    for name, value in [("GAMMA", cfg.gamma), ("ENT_COEF", cfg.entropy_coef), ("VF_COEF", cfg.value_coef),
-                        ("MAX_GRAD_NORM", cfg.max_grad_norm), ("IMAGINATION_LR", cfg.imagination_lr),
-                        ("SIGMA2_MAX", cfg.sigma2_max), ("SUCCESS_WINDOW", cfg.success_window)]:  # fmt: skip
+        ex.CONFIG,
+        NUM_LANES=cfg.num_lanes,
+        NUM_STEPS=cfg.num_steps,
+        LR=cfg.learning_rate,
+        HIDDEN=cfg.hidden_size,
+        ATTENTION=cfg.attention_size,
+        VALUE_HIDDEN=cfg.value_hidden,
+        IMAGINATION_LAYERS=cfg.imagination_layer_sizes,
+        BUFFER_SIZE=cfg.buffer_size,
+        IMAGINATION_EPOCHS=cfg.imagination_epochs,
+        ROOM_TYPES=cfg.room_types,
+    )
+    for name, value in [
+        ("GAMMA", cfg.gamma),
+        ("ENT_COEF", cfg.entropy_coef),
+        ("VF_COEF", cfg.value_coef),
+        ("MAX_GRAD_NORM", cfg.max_grad_norm),
+        ("IMAGINATION_LR", cfg.imagination_lr),
+        ("SIGMA2_MAX", cfg.sigma2_max),
+        ("SUCCESS_WINDOW", cfg.success_window),
+    ]:
         assert ex.CONFIG[name] == value, f"the example's {name} differs from the quick preset's"
     assert (cfg.imagination_optimizer, cfg.gae_lambda, cfg.rollout, cfg.gradient) == ("adam", 1.0, "packed", "replay")
     trainer = make_trainer(cfg)
@@ -58,8 +80,9 @@ def pair():
 def as_example_state(ex, state):
     """The Trainer's RunnerState as the example's (the same fields, the example's types)."""
     lanes = ex.Lanes(*state.actor[:-1], ex.Tracker(*state.actor.tracker))
-    return ex.RunnerState(state.params, state.opt_state, state.imagination_params, ex.Buffers(*state.buffers),
-                          lanes, state.key)  # fmt: skip
+    return ex.RunnerState(
+        state.params, state.opt_state, state.imagination_params, ex.Buffers(*state.buffers), lanes, state.key
+    )
 
 
 def assert_trees_close(a, b, rtol=1e-4, scale=1e-5):
@@ -77,8 +100,9 @@ def test_the_example_initialises_the_trainers_parameters(pair):
     _, init, _, _ = ex.make_train(config)
     ours, theirs = init(jax.random.key(0)), trainer.init(jax.random.key(0))
     assert jax.tree.structure(ours.params) == jax.tree.structure(theirs.params)
-    for a, b in zip(jax.tree.leaves((ours.params, ours.w_params)), jax.tree.leaves((theirs.params,
-                                                                                   theirs.imagination_params))):
+    for a, b in zip(
+        jax.tree.leaves((ours.params, ours.w_params)), jax.tree.leaves((theirs.params, theirs.imagination_params))
+    ):
         np.testing.assert_array_equal(a, b)
     np.testing.assert_array_equal(ours.lanes.obs["view"], theirs.actor.obs["view"])
 
@@ -88,7 +112,9 @@ def test_the_examples_window_loss_and_gradient_are_the_trainers(pair):
     _, _, _, loss_and_grad = ex.make_train(config)
     env = trainer.bind(trainer.env_params)
     actor, _, k_act = trainer.begin_window(state.actor, state.key, env)
-    (loss, (_, traj, *_)), grads = jax.jit(trainer.loss_and_grad)(state.params, state.imagination_params, env, actor, k_act)
+    (loss, (_, traj, *_)), grads = jax.jit(trainer.loss_and_grad)(
+        state.params, state.imagination_params, env, actor, k_act
+    )
     mine = as_example_state(ex, state)
     (my_loss, (_, my_traj, _, _)), my_grads = jax.jit(loss_and_grad)(mine.params, mine.w_params, mine.lanes, k_act)
     np.testing.assert_array_equal(my_traj.action, traj.actions)

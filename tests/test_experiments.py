@@ -98,7 +98,12 @@ def cli_error(cli, argv, capsys) -> str:
 @pytest.mark.slow
 def test_finished_run_folder(finished_run):
     info = rundir.read_run_info(finished_run)
-    assert (info["method"], info["preset"], info["seeds"], info["format"]) == ("a3c+foresit", "tiny", [SEED], RUN_FORMAT)
+    assert (info["method"], info["preset"], info["seeds"], info["format"]) == (
+        "a3c+foresit",
+        "tiny",
+        [SEED],
+        RUN_FORMAT,
+    )
     progress = rundir.read_json(finished_run / "progress.json")
     assert progress["numerics"] == [{"from_update": 0, "platform": numerics.fingerprint()}]
     rows = rundir.read_rows(finished_run / "metrics")
@@ -157,8 +162,10 @@ def test_a_run_resumed_on_another_platform_says_so_and_records_where_each_stretc
     train_cli.main(train_cli.Args(out=out, resume=True, progress=False))
     err = capsys.readouterr().err
     assert "warning: a3c+foresit: continuing on another platform than updates 0-2 were trained on" in err
-    assert rundir.read_json(out / "progress.json")["numerics"] == [{"from_update": 0, "platform": elsewhere},
-                                                     {"from_update": 2, "platform": numerics.fingerprint()}]  # fmt: skip
+    assert rundir.read_json(out / "progress.json")["numerics"] == [
+        {"from_update": 0, "platform": elsewhere},
+        {"from_update": 2, "platform": numerics.fingerprint()},
+    ]
     # (Here it is this machine all along: the numbers are still the uninterrupted run's.)
     assert (out / "results_test.json").read_text() == (finished_run / "results_test.json").read_text()
 
@@ -180,7 +187,9 @@ def test_existing_folders_are_never_overwritten_without_a_flag(finished_run, tmp
     line = cli_error(train_cli.cli, ["--preset", "tiny", "--out", finished_run], capsys)
     assert "already exists" in line and "--resume" in line and "--overwrite" in line
     # A bad value with --overwrite fails before anything is deleted.
-    line = cli_error(train_cli.cli, ["--preset", "tiny", "--out", finished_run, "--overwrite", "--num-lanes", "0"], capsys)
+    line = cli_error(
+        train_cli.cli, ["--preset", "tiny", "--out", finished_run, "--overwrite", "--num-lanes", "0"], capsys
+    )
     assert "num_lanes must be >= 1" in line
     assert snapshot(finished_run) == before
 
@@ -257,13 +266,19 @@ def test_json_writes_nan_as_null(tmp_path):
         out: Path
         sizes: tuple
 
-    results = {"overall": {"SR": 12.5, "SR>=5": float("nan"), "SPL>=5": np.float32("nan"), "episodes": np.int64(8)},
-               "bad": [float("inf"), -float("inf")], "args": Where(Path("runs/x"), (1, 2))}  # fmt: skip
+    results = {
+        "overall": {"SR": 12.5, "SR>=5": float("nan"), "SPL>=5": np.float32("nan"), "episodes": np.int64(8)},
+        "bad": [float("inf"), -float("inf")],
+        "args": Where(Path("runs/x"), (1, 2)),
+    }
     rundir.write_json(tmp_path / "r.json", results)
     text = (tmp_path / "r.json").read_text()
     assert "NaN" not in text and "Infinity" not in text
-    assert strict_json(text) == {"overall": {"SR": 12.5, "SR>=5": None, "SPL>=5": None, "episodes": 8},
-                                 "bad": [None, None], "args": {"out": "runs/x", "sizes": [1, 2]}}  # fmt: skip
+    assert strict_json(text) == {
+        "overall": {"SR": 12.5, "SR>=5": None, "SPL>=5": None, "episodes": 8},
+        "bad": [None, None],
+        "args": {"out": "runs/x", "sizes": [1, 2]},
+    }
     # Rows: JSONL strict, CSV as before (nan), and a row read back (null -> None) is
     # written to CSV the same way (a resume rewrites the CSV from the JSONL).
     row = {"update": 1, "SR": 50.0, "SR>=5": float("nan")}
@@ -271,7 +286,11 @@ def test_json_writes_nan_as_null(tmp_path):
     (back,) = rundir.read_rows(tmp_path / "validation")
     assert back == {"update": 1, "SR": 50.0, "SR>=5": None}
     rundir.append_rows(tmp_path / "again", [back])
-    assert (tmp_path / "again.csv").read_text() == (tmp_path / "validation.csv").read_text() == "update,SR,SR>=5\n1,50.0,nan\n"
+    assert (
+        (tmp_path / "again.csv").read_text()
+        == (tmp_path / "validation.csv").read_text()
+        == "update,SR,SR>=5\n1,50.0,nan\n"
+    )
     with pytest.raises(TypeError, match="not JSON serialisable"):
         rundir.to_json({"x": object()})
 
@@ -279,17 +298,14 @@ def test_json_writes_nan_as_null(tmp_path):
 def test_markdown_table_of_a_hand_written_table():
     rows = [["a3c", "12.50", 250], ["a3c+foresit", "n/a", 7]]
     assert tables.markdown_table(rows, ["method", "SR", "episodes"]) == (
-        "| method | SR | episodes |\n"
-        "|---|---|---|\n"
-        "| a3c | 12.50 | 250 |\n"
-        "| a3c+foresit | n/a | 7 |"
-    )  # fmt: skip
+        "| method | SR | episodes |\n|---|---|---|\n| a3c | 12.50 | 250 |\n| a3c+foresit | n/a | 7 |"
+    )
     assert tables.markdown_table(rows, ["method", "SR", "episodes"], align="<>>") == (
         "| method      |    SR | episodes |\n"
         "|-------------|-------|----------|\n"
         "| a3c         | 12.50 |      250 |\n"
         "| a3c+foresit |   n/a |        7 |"
-    )  # fmt: skip
+    )
     assert tables.markdown_table([], ["x"]) == "| x |\n|---|"
     with pytest.raises(ValueError, match="2 cells for 3 columns"):
         tables.markdown_table([["a", "b"]], ["x", "y", "z"])
@@ -302,25 +318,34 @@ def test_reports_use_the_one_table_writer():
     assert tables.results_markdown(results, "T", level=2) == (
         "## T\n\n| rooms | SPL | SR | SPL>=5 | SR>=5 | episodes |\n|---|---|---|---|---|---|\n"
         "| overall | 10.00 | 20.00 | n/a | n/a | 4 |\n"
-    )  # fmt: skip
-    rows = report.table({"a3c": [{"overall": {"SPL": 1.0, "SR": 2.0, "SPL>=5": 3.0, "SR>=5": 4.0}}] * 2,
-                        "b": [{"overall": {"SPL": 1.0, "SR": 10.0, "SPL>=5": None, "SR>=5": 4.0}}]})  # fmt: skip
+    )
+    rows = report.table(
+        {
+            "a3c": [{"overall": {"SPL": 1.0, "SR": 2.0, "SPL>=5": 3.0, "SR>=5": 4.0}}] * 2,
+            "b": [{"overall": {"SPL": 1.0, "SR": 10.0, "SPL>=5": None, "SR>=5": 4.0}}],
+        }
+    )
     assert report.table_markdown(rows, "T1") == (
         "# T1\n\n| Method | SPL | SR | SPL>=5 | SR>=5 |\n|---|---|---|---|---|\n"
         "| a3c | 1.00 ± 0.00 [1.0, 1.0] | 2.00 ± 0.00 [2.0, 2.0] | 3.00 ± 0.00 [3.0, 3.0] | 4.00 ± 0.00 [4.0, 4.0] |\n"
         "| b | 1.00 | 10.00 | n/a | 4.00 |\n"
         "(mean ± sample std [95% confidence interval, Student t] over seeds)\n"
-    )  # fmt: skip
+    )
 
 
 def test_sweep_pairs_every_method_with_the_first_seed_by_seed():
     result = lambda sr, spl: {"overall": {"SR": sr, "SPL": spl}}  # noqa: E731
-    md = report.paired_markdown({"a3c": [result(1.0, 0.0), result(2.0, 0.0), result(3.0, 0.0)],
-                                "b": [result(2.0, 1.0), result(4.0, 1.0), result(5.0, 1.0)]})  # fmt: skip
+    md = report.paired_markdown(
+        {
+            "a3c": [result(1.0, 0.0), result(2.0, 0.0), result(3.0, 0.0)],
+            "b": [result(2.0, 1.0), result(4.0, 1.0), result(5.0, 1.0)],
+        }
+    )
     # SR differences 1, 2, 2: mean 5/3, t = 5 with 2 dof, p = 1 - 5 / sqrt(27) = 0.038,
     # interval 5/3 -+ 4.303 / 3; SPL differences all 1: no spread, no p.
-    assert ("| b - a3c | +1.67 [+0.2, +3.1] | 0.038 | holds | +1.00 [+1.0, +1.0] | n/a | cannot tell at this budget |"
-            in md)  # fmt: skip
+    assert (
+        "| b - a3c | +1.67 [+0.2, +3.1] | 0.038 | holds | +1.00 [+1.0, +1.0] | n/a | cannot tell at this budget |" in md
+    )
 
 
 def test_write_csv(tmp_path):
@@ -364,8 +389,9 @@ def test_learning_curve_png_leaves_matplotlib_global_state_alone(tmp_path, monke
     monkeypatch.setattr(matplotlib, "use", no_global_backend)
     had_pyplot = "matplotlib.pyplot" in sys.modules
     x = np.arange(1, 6)
-    figures.learning_curve_png(tmp_path / "c.png", {"a": (x, x / 10.0), "b": (x, np.stack([x, x + 1]) / 10.0)},
-                               val_points=[(2, 0.1), (4, 0.3)])  # fmt: skip
+    figures.learning_curve_png(
+        tmp_path / "c.png", {"a": (x, x / 10.0), "b": (x, np.stack([x, x + 1]) / 10.0)}, val_points=[(2, 0.1), (4, 0.3)]
+    )
     assert (tmp_path / "c.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert ("matplotlib.pyplot" in sys.modules) == had_pyplot
 
@@ -453,7 +479,9 @@ def test_evaluate_rejects_bad_input_in_one_line(finished_run, tmp_path, capsys):
     nothing = tmp_path / "nothing"
     nothing.mkdir()
     assert "not a run folder" in cli_error(evaluate_cli.cli, ["--run", nothing], capsys)
-    assert "--split must be val or test" in cli_error(evaluate_cli.cli, ["--run", finished_run, "--split", "train"], capsys)
+    assert "--split must be val or test" in cli_error(
+        evaluate_cli.cli, ["--run", finished_run, "--split", "train"], capsys
+    )
     for n in ("0", "-3"):
         line = cli_error(evaluate_cli.cli, ["--run", finished_run, "--episodes-per-room", n], capsys)
         assert "--episodes-per-room must lie in 1..100,000, got" in line
@@ -562,8 +590,9 @@ def test_sampled_results_of_a_sweep_replay_its_sampled_test_evaluation(tiny_swee
 
 
 def sweep_args(out: Path) -> sweep.Args:
-    return sweep.Args(methods=("a3c", "a3c+foresit"), seeds=2, preset="tiny", seed=SEED, out=out, progress=False,
-                      **SWEEP_EPISODES)  # fmt: skip
+    return sweep.Args(
+        methods=("a3c", "a3c+foresit"), seeds=2, preset="tiny", seed=SEED, out=out, progress=False, **SWEEP_EPISODES
+    )
 
 
 @pytest.fixture(scope="module")
@@ -586,8 +615,9 @@ def test_sweep_seed_i_is_the_run_train_makes_with_seed_i(tiny_sweep, tmp_path):
     assert [r["seed"] for r in per_seed] == [SEED, SEED + 1]
     trained = [tmp_path / f"train{i}" for i in range(2)]
     for i, run in enumerate(trained):
-        train_cli.main(train_cli.Args(method="a3c+foresit", preset="tiny", seed=SEED + i, out=run, progress=False,
-                                      **episodes))  # fmt: skip
+        train_cli.main(
+            train_cli.Args(method="a3c+foresit", preset="tiny", seed=SEED + i, out=run, progress=False, **episodes)
+        )
     for r, run in zip(per_seed, trained):
         mine = json.loads((run / "results_test.json").read_text())
         assert r["selected_update"] == mine["selected_update"]
@@ -620,19 +650,27 @@ def test_a_sweeps_table_pairs_each_path_length_bucket_over_seeds():
     sr = {"a3c": [[60.0, 20.0], [50.0, 30.0], [70.0, 10.0]], "a3c+critic": [[55.0, 30.0], [51.0, 33.0], [60.0, 18.0]]}
 
     def seed(rates):
-        by_length = {"1-4": {"SR": rates[0], "SPL": rates[0] / 2, "episodes": 40},
-                     ">=5": {"SR": rates[1], "SPL": rates[1] / 4, "episodes": 60},
-                     ">=20": {"SR": None, "SPL": None, "episodes": 0}}  # fmt: skip
+        by_length = {
+            "1-4": {"SR": rates[0], "SPL": rates[0] / 2, "episodes": 40},
+            ">=5": {"SR": rates[1], "SPL": rates[1] / 4, "episodes": 60},
+            ">=20": {"SR": None, "SPL": None, "episodes": 0},
+        }
         return {"selected": {"by_length": by_length}}
 
     results = {m: [seed(r) for r in per_seed] for m, per_seed in sr.items()}
     md = report.by_length_markdown(results)
-    row = {line.split("|")[1].strip(): [c.strip() for c in line.split("|")[2:-1]]
-           for line in md.split("### a3c+critic - a3c")[1].splitlines() if line.startswith("| ")}  # fmt: skip
+    row = {
+        line.split("|")[1].strip(): [c.strip() for c in line.split("|")[2:-1]]
+        for line in md.split("### a3c+critic - a3c")[1].splitlines()
+        if line.startswith("| ")
+    }
     for i, bucket in enumerate(("1-4", ">=5")):
         d = np.array(sr["a3c+critic"])[:, i] - np.array(sr["a3c"])[:, i]
         half = scipy_stats.t.ppf(0.975, 2) * d.std(ddof=1) / np.sqrt(3)
-        assert row[bucket][:2] == ["120" if i == 0 else "180", f"{d.mean():+.1f} [{d.mean() - half:+.1f}, {d.mean() + half:+.1f}]"]
+        assert row[bucket][:2] == [
+            "120" if i == 0 else "180",
+            f"{d.mean():+.1f} [{d.mean() - half:+.1f}, {d.mean() + half:+.1f}]",
+        ]
         x = np.array(sr["a3c"])[:, i]
         assert f"| {bucket} | {x.mean():.1f} ± {x.std(ddof=1):.1f} / {x.mean() / (2 if i == 0 else 4):.1f}" in md
     assert row[">=20"][:2] == ["0", "n/a"] and "| >=20 | n/a / n/a | n/a / n/a |" in md
@@ -663,8 +701,11 @@ def test_bad_method_from_the_shell_is_one_line_without_traceback(tmp_path):
     out = tmp_path / "x"
     proc = subprocess.run(
         [sys.executable, "-m", "experiments.train", "--method", "bogus", "--out", str(out)],
-        cwd=REPO, capture_output=True, text=True, timeout=120,
-    )  # fmt: skip
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert proc.returncode == 2, proc.stderr
     lines = [line for line in proc.stderr.splitlines() if line.strip()]
     assert lines == [lines[0]] and lines[0].startswith("error: unknown method 'bogus'"), proc.stderr
@@ -682,7 +723,9 @@ def test_a_sweep_spread_over_two_host_devices_equals_the_one_device_sweep(tiny_s
     read back onto one device, there and in this process (before, it came back spread over
     both there, and failed with orbax's "Topology mismatch" in a 1-device process)."""
     out = tmp_path / "two_devices"
-    on_one_device = "assert {d for x in jax.tree.leaves(read[2:]) for d in x.sharding.device_set} == {jax.local_devices()[0]}"
+    on_one_device = (
+        "assert {d for x in jax.tree.leaves(read[2:]) for d in x.sharding.device_set} == {jax.local_devices()[0]}"
+    )
     code = (
         "import sys, pytest, jax; sys.path.insert(0, 'tests'); import train_helpers as H\n"
         "assert jax.device_count() == 2, jax.devices()\n"
@@ -776,7 +819,10 @@ def test_a_sweep_copies_the_methods_another_sweep_finished_instead_of_training_t
     md = (tmp_path / "mixed" / "table1.md").read_text()
     assert f"- {numerics.describe(elsewhere[0]['platform'])}: a3c+foresit\n" in md
     assert "different platforms (or a run on several): a3c and a3c+foresit." in md
-    assert f"Every method was trained on {numerics.describe(numerics.fingerprint())}." in (tiny_sweep / "table1.md").read_text()
+    assert (
+        f"Every method was trained on {numerics.describe(numerics.fingerprint())}."
+        in (tiny_sweep / "table1.md").read_text()
+    )
 
 
 @pytest.mark.slow
@@ -798,12 +844,16 @@ def test_a_sweep_assembles_a_method_from_the_seeds_other_sweeps_finished(tiny_sw
     assert per_seed == sources[0] + sources[1]
     done = json.loads((three.out / "methods" / "a3c" / "results.json").read_text())
     assert done["curves"] == [r["training_success_rate"] for r in per_seed]
-    assert done["assembled_from"] == {str(SEED): str(tiny_sweep / "methods" / "a3c"),
-                                      str(SEED + 1): str(tiny_sweep / "methods" / "a3c"),
-                                      str(SEED + 2): str(extra / "methods" / "a3c")}  # fmt: skip
+    assert done["assembled_from"] == {
+        str(SEED): str(tiny_sweep / "methods" / "a3c"),
+        str(SEED + 1): str(tiny_sweep / "methods" / "a3c"),
+        str(SEED + 2): str(extra / "methods" / "a3c"),
+    }
     md = (three.out / "table1.md").read_text()
-    assert (f"- a3c: seeds {SEED}-{SEED + 1} from {tiny_sweep / 'methods' / 'a3c'}; "
-            f"seeds {SEED + 2} from {extra / 'methods' / 'a3c'}\n") in md  # fmt: skip
+    assert (
+        f"- a3c: seeds {SEED}-{SEED + 1} from {tiny_sweep / 'methods' / 'a3c'}; "
+        f"seeds {SEED + 2} from {extra / 'methods' / 'a3c'}\n"
+    ) in md
     assert "combined" not in (tiny_sweep / "table1.md").read_text()
     table = next(csv_rows(three.out / "table1.csv"))
     assert table["seeds"] == "3"
@@ -813,8 +863,9 @@ def test_a_sweep_assembles_a_method_from_the_seeds_other_sweeps_finished(tiny_sw
     for got, first, second in zip(*(jax.tree.leaves(x) for x in loaded), strict=True):
         np.testing.assert_array_equal(got, np.concatenate([first, second]))
     # A subset of a source's seeds: seed S+1 alone is taken from tiny_sweep (not copied whole).
-    one = dataclasses.replace(sweep_args(tmp_path / "one"), methods=("a3c",), seed=SEED + 1, seeds=1,
-                              reuse=(tiny_sweep,), stop_after_chunks=0)  # fmt: skip
+    one = dataclasses.replace(
+        sweep_args(tmp_path / "one"), methods=("a3c",), seed=SEED + 1, seeds=1, reuse=(tiny_sweep,), stop_after_chunks=0
+    )
     assert sweep.main(one) is not None
     assert json.loads((one.out / "results_per_seed.json").read_text())["a3c"] == sources[0][1:]
     # Seed S+3 is in no source: all four seeds would train (a budget of 0 stops it), and it says why.
@@ -833,7 +884,9 @@ def test_the_sweep_command_asks_for_two_host_devices_unless_the_user_chose(monke
     monkeypatch.setenv("XLA_FLAGS", "--xla_cpu_use_thunk_runtime=true")
     devices.split_host_into_devices()
     expected = min(2, os.cpu_count() or 1)
-    assert os.environ["XLA_FLAGS"] == f"--xla_cpu_use_thunk_runtime=true --xla_force_host_platform_device_count={expected}"
+    assert (
+        os.environ["XLA_FLAGS"] == f"--xla_cpu_use_thunk_runtime=true --xla_force_host_platform_device_count={expected}"
+    )
     monkeypatch.setenv("XLA_FLAGS", "--xla_force_host_platform_device_count=1")
     devices.split_host_into_devices()
     assert os.environ["XLA_FLAGS"] == "--xla_force_host_platform_device_count=1"
@@ -848,7 +901,11 @@ def test_seeds_go_to_the_most_devices_that_divide_them():
 
     fake = ["d0", "d1", "d2", "d3"]
     assert [devices.seed_mesh(n, fake).devices.tolist() for n in (5, 6, 8, 3)] == [
-        ["d0"], ["d0", "d1", "d2"], ["d0", "d1", "d2", "d3"], ["d0", "d1", "d2"]]  # fmt: skip
+        ["d0"],
+        ["d0", "d1", "d2"],
+        ["d0", "d1", "d2", "d3"],
+        ["d0", "d1", "d2"],
+    ]
 
 
 @pytest.mark.slow
@@ -933,7 +990,8 @@ def test_a_train_folder_of_the_format_before_still_reads_and_is_refused_a_resume
     (tmp_path / "sweep" / "sweep.json").write_text("{}")
     assert "a sweep's arm (1 seed(s))" in cli_error(train_cli.cli, ["--out", arm, "--resume"], capsys)
     assert {k: v for k, v in snapshot(out).items() if k != rundir.LOCK_FILE} == {
-        k: v for k, v in before.items() if k != rundir.LOCK_FILE}
+        k: v for k, v in before.items() if k != rundir.LOCK_FILE
+    }
 
 
 # ---------------------------------------------------------------------- the README
@@ -941,9 +999,13 @@ README = (REPO / "README.md").read_text()
 USAGE = (REPO / "docs" / "usage.md").read_text()  # the README's command line, environment and methods
 BLOCKS = re.findall(r"```(\w+)\n(.*?)```", README, flags=re.S)
 USAGE_BLOCKS = re.findall(r"```(\w+)\n(.*?)```", USAGE, flags=re.S)
-CLI_MODULES = {"experiments.train": train_cli, "experiments.evaluate": evaluate_cli, "experiments.sweep": sweep,
-               "experiments.probe": importlib.import_module("experiments.probe"),
-               "experiments.failures": importlib.import_module("experiments.failures")}  # fmt: skip
+CLI_MODULES = {
+    "experiments.train": train_cli,
+    "experiments.evaluate": evaluate_cli,
+    "experiments.sweep": sweep,
+    "experiments.probe": importlib.import_module("experiments.probe"),
+    "experiments.failures": importlib.import_module("experiments.failures"),
+}
 # Benchmarks the README documents: their flags must parse (they run in their own tests or
 # take minutes by design).
 BENCH_ARGS = {  # commands whose flags are parsed here and which run in their own tests
@@ -956,7 +1018,9 @@ BENCH_ARGS = {  # commands whose flags are parsed here and which run in their ow
     "experiments.compare": lambda: importlib.import_module("experiments.compare").Args,  # tests/test_compare.py
     "experiments.tune": lambda: importlib.import_module("experiments.tune").Args,  # tests/test_tune.py runs it
     "experiments.foresight": lambda: importlib.import_module("experiments.foresight").Args,  # tests/test_foresight.py
-    "benchmarks.reference_ppo": lambda: importlib.import_module("benchmarks.reference_ppo").Args,  # tests/test_reference_ppo.py
+    "benchmarks.reference_ppo": lambda: (
+        importlib.import_module("benchmarks.reference_ppo").Args
+    ),  # tests/test_reference_ppo.py
 }
 
 
@@ -1076,8 +1140,10 @@ def test_readme_python_blocks_run_at_a_tiny_size():
     assert len(python_blocks) >= 2
     assert any("make_train" in body for lang, body in BLOCKS if lang == "python")  # the README's library snippet
     assert any("envs.make" in body for lang, body in USAGE_BLOCKS if lang == "python")  # usage.md's environment
-    small = ('num_lanes=2, num_updates=1, room_types=("bathroom",), hidden_size=16, attention_size=16, '
-             "value_hidden=16, imagination_layer_sizes=(16, 8, 4, 8, 16, 16)")  # fmt: skip
+    small = (
+        'num_lanes=2, num_updates=1, room_types=("bathroom",), hidden_size=16, attention_size=16, '
+        "value_hidden=16, imagination_layer_sizes=(16, 8, 4, 8, 16, 16)"
+    )
     for body in python_blocks:
         code = body.replace('split="train")', 'split="train", room_types=("bathroom",))')
         code = re.sub(r"num_lanes=\d+, num_updates=\d+", small, code)
@@ -1127,8 +1193,16 @@ def test_console_scripts_are_the_module_programs(monkeypatch, capsys):
     import tomllib
 
     scripts = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())["project"]["scripts"]
-    assert set(scripts) == {"foresit-train", "foresit-evaluate", "foresit-sweep", "foresit-tune", "foresit-paper",
-                            "foresit-probe", "foresit-failures", "foresit-compare"}
+    assert set(scripts) == {
+        "foresit-train",
+        "foresit-evaluate",
+        "foresit-sweep",
+        "foresit-tune",
+        "foresit-paper",
+        "foresit-probe",
+        "foresit-failures",
+        "foresit-compare",
+    }
     for name, target in scripts.items():
         module, function = target.split(":")
         assert module == f"experiments.{name.removeprefix('foresit-')}"
@@ -1150,8 +1224,21 @@ def test_every_config_field_is_a_flag_of_train_and_sweep():
         own = {f.name for f in dataclasses.fields(cli.Args)}
         nested = {f.name for f in dataclasses.fields(cli.Args().config)}
         assert wanted <= own | nested and not own & nested, cli.__name__
-    args = tyro.cli(train_cli.Args, args=["--gamma", "0.9", "--room-types", "bathroom", "kitchen",
-                                          "--imagination-layer-sizes", "8", "128", "--maml-first-order", "True"])  # fmt: skip
+    args = tyro.cli(
+        train_cli.Args,
+        args=[
+            "--gamma",
+            "0.9",
+            "--room-types",
+            "bathroom",
+            "kitchen",
+            "--imagination-layer-sizes",
+            "8",
+            "128",
+            "--maml-first-order",
+            "True",
+        ],
+    )
     config, _ = train_cli.build(args)
     assert (config.gamma, config.room_types, config.maml_first_order) == (0.9, ("bathroom", "kitchen"), True)
     assert config.entropy_coef == presets.preset("quick", "a3c+foresit")[0].entropy_coef  # the rest: the preset's
@@ -1181,8 +1268,11 @@ def test_each_config_field_flag_is_helped_by_its_docstring_on_one_line(capsys):
 @pytest.mark.slow
 def test_config_flags_reach_the_run_and_resume_refuses_other_values(tmp_path, capsys):
     out = tmp_path / "gamma"
-    train_cli.main(dataclasses.replace(tiny_args(out, stop_after_chunks=1),
-                                       config=presets.TrainConfigFields(gamma=0.9, entropy_coef=0.02)))  # fmt: skip
+    train_cli.main(
+        dataclasses.replace(
+            tiny_args(out, stop_after_chunks=1), config=presets.TrainConfigFields(gamma=0.9, entropy_coef=0.02)
+        )
+    )
     assert (run_config(out).gamma, run_config(out).entropy_coef) == (0.9, 0.02)
     line = cli_error(train_cli.cli, ["--out", out, "--resume", "--gamma", "0.5"], capsys)
     assert "--gamma 0.5 (the run has 0.9)" in line
@@ -1202,8 +1292,24 @@ def test_sweep_config_flags_are_saved_resumed_and_part_of_the_protocol(tmp_path,
     assert config.learning_rate == 3e-4
     # Reuse takes only the sweeps of the same Config fields.
     other = dataclasses.replace(base, out=tmp_path / "other", reuse=(first.out,))
-    line = cli_error(sweep.cli, ["--methods", "a3c", "--seeds", "1", "--preset", "tiny", "--seed", SEED,
-                                 "--out", other.out, "--reuse", first.out], capsys)  # fmt: skip
+    line = cli_error(
+        sweep.cli,
+        [
+            "--methods",
+            "a3c",
+            "--seeds",
+            "1",
+            "--preset",
+            "tiny",
+            "--seed",
+            SEED,
+            "--out",
+            other.out,
+            "--reuse",
+            first.out,
+        ],
+        capsys,
+    )
     assert "run with another protocol" in line and "--config" in line
     # A sweep saved before it had Config fields reads back with none set.
     saved = rundir.read_json(first.out / "sweep.json")
@@ -1225,8 +1331,11 @@ def test_episodes_per_room_is_the_folders_own_or_the_users(tmp_path):
     assert sweeps.episodes_per_room(run, "val", given=3) == 3
     sweep = tmp_path / "sweep"
     sweep.mkdir()
-    rundir.write_started_args(sweep / "sweep.json", sweeps.Sweep(methods=("a3c",), preset="tiny", seeds=2, out=sweep,
-                                                                 test_episodes_per_room=7), ())  # fmt: skip
+    rundir.write_started_args(
+        sweep / "sweep.json",
+        sweeps.Sweep(methods=("a3c",), preset="tiny", seeds=2, out=sweep, test_episodes_per_room=7),
+        (),
+    )
     assert sweeps.episodes_per_room(sweep, "test", "a3c") == 7
     assert sweeps.episodes_per_room(sweep, "val", "a3c") == tiny.val_episodes_per_room
     for bad in (0, presets.MAX_EPISODES + 1):

@@ -17,8 +17,11 @@ from experiments import compare
 from experiments.reporting import report, stats
 
 REPO = Path(__file__).resolve().parents[1]
-ARMS = {"a3c": "a3c@learning_rate=3e-4", "a3c+foresit": "a3c+foresit@learning_rate=3e-4",
-        "a3c+critic": "a3c+critic@learning_rate=3e-4"}  # fmt: skip  (the sweep's order)
+ARMS = {
+    "a3c": "a3c@learning_rate=3e-4",
+    "a3c+foresit": "a3c+foresit@learning_rate=3e-4",
+    "a3c+critic": "a3c+critic@learning_rate=3e-4",
+}  # (the sweep's order)
 PAIRS = (("a3c", "a3c+foresit"), ("a3c", "a3c+critic"), ("a3c+critic", "a3c+foresit"))
 
 
@@ -46,15 +49,19 @@ def test_results_md_quotes_the_sweep(study):
         assert [r["seed"] for r in per_seed] == [0, 1, 2, 3, 4]
         sr, spl = report.values(per_seed, "SR"), report.values(per_seed, "SPL")
         s, iqm = stats.summary(sr), stats.stratified_bootstrap_ci(stats.iqm, sr)
-        row = (f"| {arm} | " + " / ".join(f"{x:.1f}" for x in sr) + f" | {s['mean']:.1f} ± {s['std']:.1f} | "
-               f"{spl.mean():.1f} ± {spl.std(ddof=1):.1f} | {iqm[0]:.1f} [{iqm[1]:.1f}, {iqm[2]:.1f}] |")
+        row = (
+            f"| {arm} | " + " / ".join(f"{x:.1f}" for x in sr) + f" | {s['mean']:.1f} ± {s['std']:.1f} | "
+            f"{spl.mean():.1f} ± {spl.std(ddof=1):.1f} | {iqm[0]:.1f} [{iqm[1]:.1f}, {iqm[2]:.1f}] |"
+        )
         assert row in results, row
     for a, b in PAIRS:
         pair = pairs[f"{ARMS[b]} - {ARMS[a]}"]
         robust = pair["robust"]["SR"]
         poi = robust["probability_of_improvement"]
-        row = (f"| {b} - {a} | {interval(pair['SR'])} | {interval(pair['SPL'])} | "
-               f"{poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | {robust['p_holm']:.3f} | {robust['mde']:.1f} |")
+        row = (
+            f"| {b} - {a} | {interval(pair['SR'])} | {interval(pair['SPL'])} | "
+            f"{poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | {robust['p_holm']:.3f} | {robust['mde']:.1f} |"
+        )
         assert row in results, row
 
 
@@ -92,8 +99,10 @@ def test_results_md_quotes_the_kept_optimizer_state_against_a_fresh_one():
     report = json.loads((REPO / "docs" / "data" / "fair_probe_lr3e-4.json").read_text())
     options = [r["items"]["fit_options"] for r in report["methods"]["a3c+foresit@learning_rate=3e-4"]]
     results = " ".join((REPO / "docs" / "results.md").read_text().split())
-    for kept, fresh, text in (("state kept", "as trained", "{:+.3f} R^2 against a fresh state at each flush (per seed {:+.3f} to {:+.3f})"),
-                              ("state kept, lr 3e-4", "lr 3e-4", "{:+.3f} with lr 3e-4 ({:+.3f} to {:+.3f})")):  # fmt: skip
+    for kept, fresh, text in (
+        ("state kept", "as trained", "{:+.3f} R^2 against a fresh state at each flush (per seed {:+.3f} to {:+.3f})"),
+        ("state kept, lr 3e-4", "lr 3e-4", "{:+.3f} with lr 3e-4 ({:+.3f} to {:+.3f})"),
+    ):
         d = np.array([o[kept] - o[fresh] for o in options])
         quoted = text.format(d.mean(), d.min(), d.max())
         assert quoted in results, quoted
@@ -108,10 +117,18 @@ def test_the_gpu_script_runs_dry_on_a_cpu(tmp_path):
     import subprocess
     import tarfile
 
-    env = {**os.environ, "PRESET": "tiny", "SEEDS": "2", "UPDATES": "4", "LOW_LR_SECONDS": "120",
-           "OUT": str(tmp_path / "out"), "RUNS": str(tmp_path / "runs")}  # fmt: skip
-    proc = subprocess.run(["bash", str(REPO / "scripts" / "fair_study_gpu.sh")], env=env, capture_output=True,
-                          text=True, cwd=tmp_path)  # fmt: skip
+    env = {
+        **os.environ,
+        "PRESET": "tiny",
+        "SEEDS": "2",
+        "UPDATES": "4",
+        "LOW_LR_SECONDS": "120",
+        "OUT": str(tmp_path / "out"),
+        "RUNS": str(tmp_path / "runs"),
+    }
+    proc = subprocess.run(
+        ["bash", str(REPO / "scripts" / "fair_study_gpu.sh")], env=env, capture_output=True, text=True, cwd=tmp_path
+    )
     assert proc.returncode == 0, proc.stderr[-2000:]
     runs_ = tmp_path / "runs"
     assert (runs_ / "lr3e-4_3x" / "table1.md").is_file()
@@ -125,8 +142,11 @@ def test_results_md_quotes_the_tuned_comparison(tmp_path):
     """The tuned study's grid and best-vs-best rows in results.md are what `experiments.tune`'s
     report computes from its files (docs/data/fair_tune.tar.xz: the tune folder, no checkpoints)."""
     tuned = study_data.tune_report("fair_tune.tar.xz", tmp_path)
-    assert tuned["chosen"] == {"a3c": "learning_rate=1e-3", "a3c+critic": "learning_rate=3e-4",
-                               "a3c+foresit": "learning_rate=3e-4"}  # fmt: skip
+    assert tuned["chosen"] == {
+        "a3c": "learning_rate=1e-3",
+        "a3c+critic": "learning_rate=3e-4",
+        "a3c+foresit": "learning_rate=3e-4",
+    }
     doc = (REPO / "docs" / "results.md").read_text()
     for row in tuned["grid_rows"]:
         assert study_data.grid_line(row) in doc, study_data.grid_line(row)
@@ -136,9 +156,11 @@ def test_results_md_quotes_the_tuned_comparison(tmp_path):
     headline = best_vs_best["a3c+foresit - a3c"]
     summary = " ".join(doc.split())  # results.md's "In brief" (once the README's Results)
     iqm = headline["robust"]["SR"]
-    for quoted in (f"{interval(headline['SR'])} SR and {interval(headline['SPL'])} SPL",
-                   f"IQM of SR is {iqm['iqm_b'][0]:.1f} against {iqm['iqm_a'][0]:.1f}",
-                   f"a3c+foresit - a3c+critic is {interval(best_vs_best['a3c+foresit - a3c+critic']['SR'])} SR"):
+    for quoted in (
+        f"{interval(headline['SR'])} SR and {interval(headline['SPL'])} SPL",
+        f"IQM of SR is {iqm['iqm_b'][0]:.1f} against {iqm['iqm_a'][0]:.1f}",
+        f"a3c+foresit - a3c+critic is {interval(best_vs_best['a3c+foresit - a3c+critic']['SR'])} SR",
+    ):
         assert quoted in summary, quoted
     assert study_data.readme_links("tuned")  # "ForeSIT does not beat its base at the quick budget"
     assert headline["SR"]["ci_low"] < 0 < headline["SR"]["ci_high"] and headline["SPL"]["ci_high"] < 0  # the words
@@ -211,14 +233,21 @@ def test_results_md_quotes_the_noise_placement_arm_and_its_probe(tmp_path, capsy
     def shifts(data: str, method: str) -> dict:
         seeds = json.loads((study_data.DATA / data).read_text())["methods"][method]
         trained = [r["sr"]["trained"] for r in seeds]
-        return {c: study_data.interval(stats.paired(trained, [r["sr"][c] for r in seeds]))
-                for c in ("shuffled, noise off", "untrained f_w")}  # fmt: skip
+        return {
+            c: study_data.interval(stats.paired(trained, [r["sr"][c] for r in seeds]))
+            for c in ("shuffled, noise off", "untrained f_w")
+        }
 
     mine, eq6 = shifts("fair_probe_noise.json", arm), shifts("fair_probe_lr3e-4.json", bases[0])
-    assert (f"noise off costs {mine['shuffled, noise off']} SR (Eq. 6's placement: {eq6['shuffled, noise off']}), "
-            f"an untrained f_w {mine['untrained f_w']} (Eq. 6's: {eq6['untrained f_w']})") in flat
+    assert (
+        f"noise off costs {mine['shuffled, noise off']} SR (Eq. 6's placement: {eq6['shuffled, noise off']}), "
+        f"an untrained f_w {mine['untrained f_w']} (Eq. 6's: {eq6['untrained f_w']})"
+    ) in flat
     # results.md's "In brief" (once the README's Results)
-    assert f"noise inside f_w's input ({study_data.interval(out['pairs'][f'{arm} - {bases[0]}']['SR'])} SR over Eq. 6's)" in flat
+    assert (
+        f"noise inside f_w's input ({study_data.interval(out['pairs'][f'{arm} - {bases[0]}']['SR'])} SR over Eq. 6's)"
+        in flat
+    )
 
 
 def _three_x_rows(tmp_path) -> tuple[list[str], dict]:
@@ -231,10 +260,16 @@ def _three_x_rows(tmp_path) -> tuple[list[str], dict]:
     root = study_data.unpack("fair_3x.tar.xz", tmp_path, ARMS.values())
     out = compare.main(compare.Args(run=root, pairs=tuple(f"{ARMS[a]}:{ARMS[b]}" for a, b in PAIRS)))
     results_9000 = report.load(root)
-    at = {3000: {short: json.loads((root / "methods" / arm / "results_3000_updates.json").read_text())["results"]
-                 for short, arm in ARMS.items()},
-          9000: {short: results_9000[arm] for short, arm in ARMS.items()}}  # fmt: skip
-    values = {n: {a: {m: report.values(r, m) for m in ("SR", "SPL")} for a, r in arms.items()} for n, arms in at.items()}
+    at = {
+        3000: {
+            short: json.loads((root / "methods" / arm / "results_3000_updates.json").read_text())["results"]
+            for short, arm in ARMS.items()
+        },
+        9000: {short: results_9000[arm] for short, arm in ARMS.items()},
+    }
+    values = {
+        n: {a: {m: report.values(r, m) for m in ("SR", "SPL")} for a, r in arms.items()} for n, arms in at.items()
+    }
 
     def mean_std(v) -> str:
         return f"{v.mean():.1f} ± {v.std(ddof=1):.1f}"

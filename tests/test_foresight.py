@@ -27,8 +27,8 @@ def synthetic(rng, n, planted: bool, groups: int = 12):
     sem[rows, 1, np.where(side == 0, WIDTH - 2, 1)] = other
     depth = rng.uniform(0, 4, size=(n, 3, WIDTH))
     data = bound.features(sem, depth, target, CLASSES, TARGETS, STRUCTURAL)
-    walls = (sem == 1)
-    more_right = walls[..., WIDTH // 2:].sum((1, 2)) > walls[..., :WIDTH // 2].sum((1, 2))
+    walls = sem == 1
+    more_right = walls[..., WIDTH // 2 :].sum((1, 2)) > walls[..., : WIDTH // 2].sum((1, 2))
     label = side if planted else more_right.astype(int)
     data.update(turn=label, group=rng.integers(0, groups, size=n))
     return data
@@ -59,11 +59,22 @@ def test_rows_labelled_minus_one_are_left_out():
     assert r["test_shares"] == pytest.approx([np.mean(kept == 0), np.mean(kept == 1)])
 
 
-@pytest.mark.parametrize("offset, heading, sector", [
-    ((-3, 0), 0, "ahead"), ((0, 3), 0, "right"), ((3, 0), 0, "behind"), ((0, -3), 0, "left"),
-    ((0, 3), 2, "ahead"), ((-3, 0), 2, "left"), ((-2, 2), 1, "ahead"), ((2, 2), 1, "right"),
-    ((-3, 1), 0, "ahead"), ((-1, 3), 0, "right"), ((3, -1), 6, "left"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "offset, heading, sector",
+    [
+        ((-3, 0), 0, "ahead"),
+        ((0, 3), 0, "right"),
+        ((3, 0), 0, "behind"),
+        ((0, -3), 0, "left"),
+        ((0, 3), 2, "ahead"),
+        ((-3, 0), 2, "left"),
+        ((-2, 2), 1, "ahead"),
+        ((2, 2), 1, "right"),
+        ((-3, 1), 0, "ahead"),
+        ((-1, 3), 0, "right"),
+        ((3, -1), 6, "left"),
+    ],
+)
 def test_bearing_sectors_by_hand(offset, heading, sector):
     assert bound.BEARINGS[bound.bearing_sector(np.array(offset), heading)] == sector
 
@@ -94,15 +105,31 @@ def _gain(r):
     return f"{100 * r['gain']:+.1f} [{100 * lo:+.1f}, {100 * hi:+.1f}]"
 
 
-@pytest.mark.parametrize("data_file, labels", [
-    ("foresight_today.json", (("room-savn", "rooms"), ("house-savn", "houses"))),
-    ("foresight_priors.json", (("room-savn", "rooms with priors"), ("room-org", "rooms with priors, org"),
-                               ("house-savn", "houses with priors"))),
-    ("foresight_levers.json", (("room-priors-range6", "rooms with priors, range 6"),
-                               ("house-priors-range6", "houses with priors, range 6"), ("room-range6", "rooms, range 6"),
-                               ("room-priors-range4", "rooms with priors, range 4"),
-                               ("room-priors-range3", "rooms with priors, range 3"), ("room-range4", "rooms, range 4"))),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "data_file, labels",
+    [
+        ("foresight_today.json", (("room-savn", "rooms"), ("house-savn", "houses"))),
+        (
+            "foresight_priors.json",
+            (
+                ("room-savn", "rooms with priors"),
+                ("room-org", "rooms with priors, org"),
+                ("house-savn", "houses with priors"),
+            ),
+        ),
+        (
+            "foresight_levers.json",
+            (
+                ("room-priors-range6", "rooms with priors, range 6"),
+                ("house-priors-range6", "houses with priors, range 6"),
+                ("room-range6", "rooms, range 6"),
+                ("room-priors-range4", "rooms with priors, range 4"),
+                ("room-priors-range3", "rooms with priors, range 3"),
+                ("room-range4", "rooms, range 4"),
+            ),
+        ),
+    ],
+)
 def test_docs_quote_the_measured_bound(data_file, labels):
     """docs/foresight.md's tables are docs/data/`data_file` (what the commands wrote), the
     split by whether the target's anchor is in view included."""
@@ -118,13 +145,18 @@ def test_docs_quote_the_measured_bound(data_file, labels):
         assert args.get("perception_range") == (float(label.split("range ")[1]) if "range" in label else None)
         for what in ("turn", "bearing"):
             r = data[name]["results"][what]
-            row = (f"| {label} | {what} | {r['test_samples']} ({r['test_groups']} layouts) | "
-                   + " | ".join(f"{100 * r[k]:.1f}" for k in ("majority", *bound.FEATURE_SETS))
-                   + f" | {_gain(r)} |")
+            row = (
+                f"| {label} | {what} | {r['test_samples']} ({r['test_groups']} layouts) | "
+                + " | ".join(f"{100 * r[k]:.1f}" for k in ("majority", *bound.FEATURE_SETS))
+                + f" | {_gain(r)} |"
+            )
             assert row in doc, row
             for subset, part in r.get("subsets", {}).items():
-                row = (f"| {label} | {what}, {subset} | {part['samples']} ({100 * part['share']:.0f}%) | | "
-                       + " | ".join(f"{100 * part[k]:.1f}" for k in bound.FEATURE_SETS) + f" | {_gain(part)} |")
+                row = (
+                    f"| {label} | {what}, {subset} | {part['samples']} ({100 * part['share']:.0f}%) | | "
+                    + " | ".join(f"{100 * part[k]:.1f}" for k in bound.FEATURE_SETS)
+                    + f" | {_gain(part)} |"
+                )
                 assert row in doc, row
 
 
@@ -175,7 +207,7 @@ def test_a_perception_range_leaves_near_objects_and_all_furniture_resolved():
     f = bound.features(seen, depth, np.array([0]), classes, 2, 4, unresolved=7)
     onehots = f["geometry"][0, : 4 * 5].reshape(4, 5)  # per pixel: nothing, wall, floor, furniture, object
     np.testing.assert_array_equal(onehots.argmax(1), [4, 4, 3, 1])
-    sides = f["view"][0, f["geometry"].shape[1]:].reshape(2, classes)
+    sides = f["view"][0, f["geometry"].shape[1] :].reshape(2, classes)
     assert sides[0, 4] and sides[0, 7] and not sides[0, 5]  # left half: the near object, the unresolved one
     assert sides[1, 6] and sides[1, 1]
 
@@ -203,8 +235,9 @@ def test_the_levers_verdict_follows_the_measured_gains():
     line = re.search(r"family kwargs: priors=(True|False) perception_range=(\d+)", doc)
     assert (best >= 0.05) == bool(line)
     if line:  # the lever with the largest gain, its kwargs, and its gain quoted
-        name, what = max(((n, w) for n in data for w in ("turn", "bearing")),
-                         key=lambda nw: data[nw[0]]["results"][nw[1]]["gain"])  # fmt: skip
+        name, what = max(
+            ((n, w) for n in data for w in ("turn", "bearing")), key=lambda nw: data[nw[0]]["results"][nw[1]]["gain"]
+        )
         args = data[name]["args"]
         assert (str(args["priors"]), args["perception_range"]) == (line[1], float(line[2])) and args["layout"] == "room"
         assert f"the {what}'s gain is {_gain(data[name]['results'][what])} points" in doc

@@ -143,12 +143,16 @@ FLAGS = [
 # The files a damaged folder can hold, and the program (argv) that reads each.
 DAMAGE = {"empty": b"", "truncated": b'{"format": 3, "arm": "a3', "binary": bytes(range(256)), "a list": b"[1, 2]"}
 READERS = {
-    "run.json": [["train", "--resume", "--out", "{run}"], ["evaluate", "--run", "{run}"], ["probe", "--run", "{run}"],
-                 ["cvae_compare", "--run", "{run}"]],
+    "run.json": [
+        ["train", "--resume", "--out", "{run}"],
+        ["evaluate", "--run", "{run}"],
+        ["probe", "--run", "{run}"],
+        ["cvae_compare", "--run", "{run}"],
+    ],
     "progress.json": [["train", "--resume", "--out", "{run}"]],
     "results.json": [["train", "--resume", "--out", "{run}"]],
     "sweep.json": [["sweep", "--resume", "--out", "{sweep}"], ["compare", "--run", "{sweep}"]],
-}  # fmt: skip
+}
 DAMAGED = [(name, damage, argv) for name, argvs in READERS.items() for argv in argvs for damage in DAMAGE]
 
 
@@ -164,8 +168,9 @@ def started_run(folder: Path, exist_ok: bool = False) -> Path:
 def started_sweep(folder: Path) -> Path:
     """A sweep folder as sweep leaves it before its first chunk: sweep.json only."""
     folder.mkdir(parents=True)
-    rundir.write_started_args(folder / "sweep.json", sweeps.Sweep(methods=("a3c", "a3c+foresit"), preset="tiny",
-                                                                   seeds=2, out=folder), ())  # fmt: skip
+    rundir.write_started_args(
+        folder / "sweep.json", sweeps.Sweep(methods=("a3c", "a3c+foresit"), preset="tiny", seeds=2, out=folder), ()
+    )
     return folder
 
 
@@ -176,9 +181,16 @@ def places(root: Path) -> dict[str, Path]:
     (root / "plain file").write_text("not a folder\n")
     (root / "run" / "foresight.md").parent.mkdir()
     (root / "run" / "foresight.md").write_text("a report the user keeps\n")
-    places = {"out": root / "out", "file": root / "plain file", "ro": ro / "out", "uni": root / "ein Lauf é ü 跑",
-              "under_file": root / "plain file" / "out",
-              "run": started_run(root / "run", exist_ok=True), "sweep": started_sweep(root / "sweep"), "missing": root / "no such"}  # fmt: skip
+    places = {
+        "out": root / "out",
+        "file": root / "plain file",
+        "ro": ro / "out",
+        "uni": root / "ein Lauf é ü 跑",
+        "under_file": root / "plain file" / "out",
+        "run": started_run(root / "run", exist_ok=True),
+        "sweep": started_sweep(root / "sweep"),
+        "missing": root / "no such",
+    }
     ro.chmod(0o555)
     return places
 
@@ -267,8 +279,10 @@ def bad_int(flag):
 
 
 @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(case=st.sampled_from(FIELDS).flatmap(lambda f: st.tuples(st.just(f), bad_int(f))),
-       program=st.sampled_from(("train", "sweep")))  # fmt: skip
+@given(
+    case=st.sampled_from(FIELDS).flatmap(lambda f: st.tuples(st.just(f), bad_int(f))),
+    program=st.sampled_from(("train", "sweep")),
+)
 @example(case=("--seed", -1), program="train")
 @example(case=("--seed", -1), program="sweep")
 @example(case=("--num-lanes", 0), program="train")
@@ -282,10 +296,13 @@ def test_any_out_of_range_count_is_refused(case, program, root, capsys, tmp_path
 
 
 @settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(name=st.sampled_from(["run.json", "progress.json", "results.json"]),
-       data=st.one_of(st.binary(max_size=64), st.sampled_from(list(DAMAGE.values())),
-                      st.text(max_size=32).map(str.encode)),
-       cut=st.integers(min_value=0, max_value=40))  # fmt: skip
+@given(
+    name=st.sampled_from(["run.json", "progress.json", "results.json"]),
+    data=st.one_of(
+        st.binary(max_size=64), st.sampled_from(list(DAMAGE.values())), st.text(max_size=32).map(str.encode)
+    ),
+    cut=st.integers(min_value=0, max_value=40),
+)
 def test_any_damage_to_a_run_file_is_named(name, data, cut, root, capsys, tmp_path_factory):
     sub = tmp_path_factory.mktemp("case")
     folder = started_run(sub / "run")

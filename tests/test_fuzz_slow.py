@@ -56,12 +56,27 @@ def truncated(name: str):
 CASES = [
     ("checkpoints deleted", no_checkpoints, ["evaluate", "--run", "{run}", "--split", "val"], "checkpoint"),
     ("checkpoints deleted", no_checkpoints, ["failures", "--run", "{run}"], "checkpoint"),
-    ("every checkpoint flipped", every_checkpoint("flipped"), ["evaluate", "--run", "{run}", "--split", "val"], "corrupt"),
-    ("every checkpoint truncated", every_checkpoint("truncated"), ["evaluate", "--run", "{run}", "--split", "val"], "corrupt"),
-    ("progress.json truncated", truncated("progress.json"), ["evaluate", "--run", "{run}", "--split", "val"], "progress.json"),
+    (
+        "every checkpoint flipped",
+        every_checkpoint("flipped"),
+        ["evaluate", "--run", "{run}", "--split", "val"],
+        "corrupt",
+    ),
+    (
+        "every checkpoint truncated",
+        every_checkpoint("truncated"),
+        ["evaluate", "--run", "{run}", "--split", "val"],
+        "corrupt",
+    ),
+    (
+        "progress.json truncated",
+        truncated("progress.json"),
+        ["evaluate", "--run", "{run}", "--split", "val"],
+        "progress.json",
+    ),
     ("results.json truncated", truncated("results.json"), ["train", "--resume", "--out", "{run}"], "results.json"),
     ("run.json truncated", truncated("run.json"), ["evaluate", "--run", "{run}", "--split", "val"], "run.json"),
-]  # fmt: skip
+]
 
 
 @pytest.mark.parametrize("label,damage,argv,words", CASES, ids=[f"{c[0]} {c[2][0]}" for c in CASES])
@@ -75,8 +90,16 @@ def test_damage_to_a_trained_run_is_named_in_one_line(label, damage, argv, words
 
 
 # A few of the table's cases, each through its own interpreter, as a user runs them.
-PICKED = (["--seed", "-1"], ["--num-lanes", str(10**9)], ["--room-types", "attic"], ["--seeds", str(10**6)],
-          ["--run", "{missing}"], ["--learning-rate", "abc"], ["--out", "{file}"], ["--out", "{missing}", "--resume"])
+PICKED = (
+    ["--seed", "-1"],
+    ["--num-lanes", str(10**9)],
+    ["--room-types", "attic"],
+    ["--seeds", str(10**6)],
+    ["--run", "{missing}"],
+    ["--learning-rate", "abc"],
+    ["--out", "{file}"],
+    ["--out", "{missing}", "--resume"],
+)
 SUBPROCESS = [next(c for c in FLAGS if c[1] == argv) for argv in PICKED]  # the first program each is given to
 
 
@@ -88,8 +111,14 @@ def test_a_refusal_through_a_subprocess_is_one_line(program, argv, status, tmp_p
         preset = ["--preset", "tiny"] if program in ("train", "sweep", "tune", "paper") else []
         before = listing(tmp_path)
         env = {**os.environ, "COLUMNS": "80"}
-        done = subprocess.run([sys.executable, "-m", f"experiments.{program}", *fill([*argv, *preset], where, given_out)],
-                              capture_output=True, text=True, cwd=REPO, env=env, timeout=120)  # fmt: skip
+        done = subprocess.run(
+            [sys.executable, "-m", f"experiments.{program}", *fill([*argv, *preset], where, given_out)],
+            capture_output=True,
+            text=True,
+            cwd=REPO,
+            env=env,
+            timeout=120,
+        )
         shown = f"{program} {argv}: {done.returncode}\n{done.stderr}"
         assert done.returncode == status, shown
         assert "Traceback" not in done.stderr, shown

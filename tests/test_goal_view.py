@@ -33,7 +33,9 @@ def reference_goal_pose(kit, scene: int, slot: int, pose: tuple) -> tuple:
     dist = cached_oracle(kit, scene)[slot][0]
     cell_type = kit.bank["cell_type"][scene]
     while dist[pose] > 1:
-        pose = next(q for q in (reference_transition(cell_type, pose, a) for a in range(5)) if dist[q] == dist[pose] - 1)
+        pose = next(
+            q for q in (reference_transition(cell_type, pose, a) for a in range(5)) if dist[q] == dist[pose] - 1
+        )
     return pose
 
 
@@ -56,8 +58,9 @@ def test_goal_view_is_the_view_at_the_end_of_a_reference_shortest_path(request, 
     if "detections" in expected:
         np.testing.assert_array_equal(obs["goal_detections"], expected["detections"])
         assert (expected["detections"][..., 0] * expected["detections"][..., -1]).sum(-1).all()  # the target seen
-    np.testing.assert_array_equal(obs["view"], jax.vmap(kit.env.get_obs, in_axes=(0, None))(state.env_state,
-                                                                                           kit.params)["view"])
+    np.testing.assert_array_equal(
+        obs["view"], jax.vmap(kit.env.get_obs, in_axes=(0, None))(state.env_state, kit.params)["view"]
+    )
     # Most starts are not already at their goal: the walk is tested, not skipped.
     assert (np.abs(obs["goal_view"] - obs["view"]).sum((1, 2, 3)) > 0).mean() > 0.5
 
@@ -81,8 +84,9 @@ def test_each_episode_holds_its_own_goal_view_after_auto_resets_lane_by_lane(sav
 
         def step(state, xs):
             keys, action = xs
-            obs, state, _, term, trunc, _ = jax.vmap(wrapped.step, in_axes=(0, 0, 0, None))(keys, state, action,
-                                                                                            kit.params)  # fmt: skip
+            obs, state, _, term, trunc, _ = jax.vmap(wrapped.step, in_axes=(0, 0, 0, None))(
+                keys, state, action, kit.params
+            )
             return state, (obs["goal_view"], state.env_state, term | trunc)
 
         _, (goals, inner, done) = jax.lax.scan(step, state, (env_keys, actions))
@@ -104,13 +108,22 @@ def test_each_episode_holds_its_own_goal_view_after_auto_resets_lane_by_lane(sav
             previous = goals[t, lane]
     assert checked >= lanes
     lane = 4
-    alone = jax.tree.map(np.asarray, run(keys[lane:lane + 1], env_keys[:, lane:lane + 1], actions[:, lane:lane + 1]))
+    alone = jax.tree.map(
+        np.asarray, run(keys[lane : lane + 1], env_keys[:, lane : lane + 1], actions[:, lane : lane + 1])
+    )
     np.testing.assert_array_equal(alone[1][:, 0], goals[:, lane])
 
 
 def small_config(**kw) -> Config:
-    base = dict(method="a3c+oracle", num_lanes=6, num_steps=8, num_updates=2, hidden_size=16,
-                imagination_layer_sizes=(16,), attention_size=8)  # fmt: skip
+    base = dict(
+        method="a3c+oracle",
+        num_lanes=6,
+        num_steps=8,
+        num_updates=2,
+        hidden_size=16,
+        imagination_layer_sizes=(16,),
+        attention_size=8,
+    )
     return Config(**{**base, **kw})
 
 
@@ -125,8 +138,10 @@ def test_oracle_i_tau_with_the_noise_off_is_one_network_step_on_the_goal_view(sa
     actor = rollout.start(nets, jax.random.PRNGKey(2), env, config.num_lanes)
     assert set(actor.obs) >= {"goal_view", "view", "target"}  # start wrapped the env itself
     acting = AgentParams(params, w_params, jnp.zeros((config.num_lanes,)))
-    act = jax.jit(lambda a, k: rollout.act_window(nets, acting, env, a, k, 20, ActOptions(record_inputs=True)),
-                  compiler_options=H.FAST_COMPILE)  # compile-bound: its checks compare values made here
+    act = jax.jit(
+        lambda a, k: rollout.act_window(nets, acting, env, a, k, 20, ActOptions(record_inputs=True)),
+        compiler_options=H.FAST_COMPILE,
+    )  # compile-bound: its checks compare values made here
     _, traj = act(actor, jax.random.PRNGKey(3))[:2]
     inputs = traj.inputs
     i_tau = inputs.imagined if imagination_input == "head" else None
@@ -137,16 +152,24 @@ def test_oracle_i_tau_with_the_noise_off_is_one_network_step_on_the_goal_view(sa
     hidden, actions = config.hidden_size, config.num_actions
     shape = obs["target"].shape[:-1]
     enc = jnp.zeros(shape + (hidden,)) if imagination_input == "encoder" else None
-    _, expected = nets.model.apply(params, initial_carry(shape, hidden), goal_obs, jnp.zeros(shape + (actions,)), enc,
-                                   method=lambda m, *a: m.encoder(*a))  # the flax cell's route, not acting's
+    _, expected = nets.model.apply(
+        params,
+        initial_carry(shape, hidden),
+        goal_obs,
+        jnp.zeros(shape + (actions,)),
+        enc,
+        method=lambda m, *a: m.encoder(*a),
+    )  # the flax cell's route, not acting's
     step = np.asarray(traj.episode_step)
     used = step > 0 if imagination_input == "encoder" else np.ones_like(step, bool)
     np.testing.assert_allclose(np.asarray(i_tau)[used], np.asarray(expected)[used], atol=1e-6)
     assert (step == 0).sum() > config.num_lanes  # several episodes began inside the window
     # With the noise on, i_tau is that latent plus noise, fixed for the episode.
     noisy = AgentParams(params, w_params, jnp.full((config.num_lanes,), 0.25))
-    traj = jax.jit(lambda a, k: rollout.act_window(nets, noisy, env, a, k, 20, ActOptions(record_inputs=True)),
-                   compiler_options=H.FAST_COMPILE)(actor, jax.random.PRNGKey(3))[1]
+    traj = jax.jit(
+        lambda a, k: rollout.act_window(nets, noisy, env, a, k, 20, ActOptions(record_inputs=True)),
+        compiler_options=H.FAST_COMPILE,
+    )(actor, jax.random.PRNGKey(3))[1]
     if imagination_input == "head":
         diff = np.asarray(traj.inputs.imagined) - np.asarray(expected)
         assert 0.3 < diff.std() < 0.7  # sigma = 0.5
@@ -166,8 +189,15 @@ def test_shuffled_probe_shuffles_the_oracles_i_tau_across_episodes(savn_kit):
     own = rollout.goal_latent(nets, params, kernels, actor.obs)
 
     def i_tau(n):  # with the noise off
-        return rollout._imagine(n, w_params, actor.s_0, actor.obs["target"], jax.random.PRNGKey(3),
-                                jnp.zeros((config.num_lanes,)), lambda: own)
+        return rollout._imagine(
+            n,
+            w_params,
+            actor.s_0,
+            actor.obs["target"],
+            jax.random.PRNGKey(3),
+            jnp.zeros((config.num_lanes,)),
+            lambda: own,
+        )
 
     np.testing.assert_array_equal(i_tau(nets), own)
     np.testing.assert_array_equal(i_tau(shuffled(nets)), jnp.roll(own, 1, axis=0))
@@ -214,6 +244,8 @@ def test_train_and_probe_an_oracle_run(tmp_path, method, setup, cheap_experiment
     episodes = rundir.read_run_info(out)["schedule"]["test_episodes_per_room"]
     (seed,) = probe.main(probe.Args(run=out, episodes_per_room=episodes, windows=10))[method]
     assert seed["sr"]["trained"] == pytest.approx(tested)
-    conditions = {"trained", "noise off", "shuffled", "shuffled, noise off"} | ({"sampled actions"} if setup == "org" else set())
+    conditions = {"trained", "noise off", "shuffled", "shuffled, noise off"} | (
+        {"sampled actions"} if setup == "org" else set()
+    )
     assert set(seed["sr"]) == conditions  # no "untrained f_w": the oracle's i_tau owes nothing to f_w
     assert "fit" not in seed["items"]

@@ -81,8 +81,10 @@ def test_houses_md_quotes_the_robust_statistics_of_the_archive(study, tmp_path, 
         r = out["pairs"][f"{b} - {a}"]["robust"]["SR"]
         cells = [f"{x[0]:.1f} [{x[1]:.1f}, {x[2]:.1f}]" for x in (r["iqm_a"], r["iqm_b"])]
         poi = r["probability_of_improvement"]
-        row = (f"| {b} - {a} | {cells[0]} | {cells[1]} | {poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | "
-               f"{r['p_holm']:.3f} | {r['mde']:.1f} |")
+        row = (
+            f"| {b} - {a} | {cells[0]} | {cells[1]} | {poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | "
+            f"{r['p_holm']:.3f} | {r['mde']:.1f} |"
+        )
         assert row in houses, row
     mde = out["pairs"]["a3c+foresit - a3c+critic"]["robust"]["SR"]["mde"]
     assert f"{mde:.1f}" in houses  # the MDE the "cannot tell" rests on

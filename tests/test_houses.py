@@ -131,8 +131,15 @@ def door_view_depth(house, door_open: bool):
             cell = house.cell_type.copy()
             if not door_open:
                 cell[tuple(doors.T)] = C.CELL_WALL
-            _, depth = cast_views(cell[None], house.obj_cat[None], house.obj_band[None], np.array([pos]),
-                                  np.array([heading]), np.array([0]), view_width=4)  # fmt: skip
+            _, depth = cast_views(
+                cell[None],
+                house.obj_cat[None],
+                house.obj_band[None],
+                np.array([pos]),
+                np.array([heading]),
+                np.array([0]),
+                view_width=4,
+            )
             return depth[0, 1, 1:3]
     return None
 
@@ -164,8 +171,15 @@ def test_precomputed_views_equal_the_ray_cast_ones_up_to_the_camera_range(house_
     heading, horizon = rng.integers(0, 8, 256), rng.integers(0, 2, 256)
     grid = kit.bank["cell_type"].shape[1]
     pose = ((pos[:, 0] * grid + pos[:, 1]) * 8 + heading) * 2 + horizon
-    sem, depth = cast_views(kit.bank["cell_type"][scene], kit.bank["obj_cat"][scene], kit.bank["obj_band"][scene],
-                            pos, heading, horizon, view_width=kit.env.view_width)  # fmt: skip
+    sem, depth = cast_views(
+        kit.bank["cell_type"][scene],
+        kit.bank["obj_cat"][scene],
+        kit.bank["obj_band"][scene],
+        pos,
+        heading,
+        horizon,
+        view_width=kit.env.view_width,
+    )
     np.testing.assert_array_equal(kit.bank["view_sem"][scene, pose], sem)
     np.testing.assert_array_equal(kit.bank["view_depth"][scene, pose], depth * 8)
     assert depth.max() > 20
@@ -180,8 +194,9 @@ def test_depth_is_clipped_at_the_camera_range():
     cell = np.full((44, 44), C.CELL_WALL, np.int8)
     cell[1:-1, 1:-1] = C.CELL_FLOOR
     none = np.full(cell.shape, -1, np.int8)
-    _, depth = cast_views(cell[None], none[None], none[None], np.array([[42, 3]]), np.array([0]), np.array([0]),
-                          view_width=4)  # fmt: skip
+    _, depth = cast_views(
+        cell[None], none[None], none[None], np.array([[42, 3]]), np.array([0]), np.array([0]), view_width=4
+    )
     assert MAX_DEPTH == 255 / 8 and depth[0, 1].max() == MAX_DEPTH and depth[0, 1].min() < MAX_DEPTH
 
 
@@ -248,7 +263,9 @@ def test_replay_oracle_follows_the_reference_bfs_and_rooms(house_kit):
     layout = H.generate_house(int(kit.bank["numbers"][0]), "savn")
     target_room = layout.target_room[int(state.target)]
     actions = rng.integers(0, 5, 40)
-    d, in_room = (np.asarray(x)[0] for x in replay_oracle(kit.env, kit.params, keys[i : i + 1], jnp.asarray(actions)[None]))
+    d, in_room = (
+        np.asarray(x)[0] for x in replay_oracle(kit.env, kit.params, keys[i : i + 1], jnp.asarray(actions)[None])
+    )
     pose = (*np.asarray(state.agent_pos).tolist(), int(state.heading), int(state.horizon))
     for t, action in enumerate(actions):
         assert d[t] == dist[pose] and in_room[t] == (layout.cell_room[pose[:2]] == target_room), t
@@ -268,8 +285,9 @@ def test_config_progress_reward_reaches_the_training_env():
 
 def test_oracle_policy_scores_sr_1_and_spl_1(house_kit):
     np.testing.assert_array_equal(house_kit.params.max_steps, [HOUSE_EVAL_TIME_LIMIT] * 4)
-    success, length, optimal, alive = house_kit.first_episodes(jax.random.split(jax.random.key(5), 1024),
-                                                               np.ones(1024, bool))  # fmt: skip
+    success, length, optimal, alive = house_kit.first_episodes(
+        jax.random.split(jax.random.key(5), 1024), np.ones(1024, bool)
+    )
     assert not alive.any() and success.all()
     np.testing.assert_array_equal(length, optimal)
     assert summarize(success, optimal / np.maximum(length, optimal), optimal)["SPL"] == 100.0
@@ -320,8 +338,9 @@ def test_room_types_select_targets_by_their_room():
         assert (bank["room_types"][s, bank["target_room"][s, :k]] == C.BATHROOM).all()
         names = {C.categories("savn")[c] for c in bank["targets"][s, :k]}
         assert names == set(C.SAVN_TARGETS[C.BATHROOM])
-    np.testing.assert_array_equal(envs.make(layout="house", view_width=2, split="val", training=True)[1].max_steps,
-                                  [HOUSE_TRAIN_TIME_LIMIT] * 4)  # fmt: skip
+    np.testing.assert_array_equal(
+        envs.make(layout="house", view_width=2, split="val", training=True)[1].max_steps, [HOUSE_TRAIN_TIME_LIMIT] * 4
+    )
 
 
 def test_house_metrics_add_the_long_buckets():
@@ -367,8 +386,9 @@ def test_agents_train_and_evaluate_in_houses():
     state, metrics = jax.jit(trainer.run, static_argnums=2)(trainer.init(jax.random.PRNGKey(0)), env_params, 2)
     TH.assert_tree_finite(state)
     evaluator = Evaluator("savn", "house")
-    results = evaluator.evaluate(agent_params(state, config.sigma2_max), config, "val", episodes_per_room=4,
-                                 by_length=True)  # fmt: skip
+    results = evaluator.evaluate(
+        agent_params(state, config.sigma2_max), config, "val", episodes_per_room=4, by_length=True
+    )
     assert set(results) == {"bathroom", "overall", "by_length"}
     assert {"SR>=10", "SPL>=20", "episodes>=20"} <= set(results["overall"]) and results["overall"]["episodes"] == 4
     assert list(results["by_length"]) == [bucket_label(b) for b in HOUSE_LENGTH_BUCKETS]
@@ -393,8 +413,19 @@ def test_the_house_preset_and_its_arms():
 def test_reports_add_the_house_columns():
     from experiments.reporting import report, tables
 
-    result = {"overall": {"SPL": 1.0, "SR": 2.0, "SPL>=5": 3.0, "SR>=5": 4.0, "SPL>=10": 5.0, "SR>=10": 6.0,
-                          "SPL>=20": None, "SR>=20": 8.0, "episodes": 4}}  # fmt: skip
+    result = {
+        "overall": {
+            "SPL": 1.0,
+            "SR": 2.0,
+            "SPL>=5": 3.0,
+            "SR>=5": 4.0,
+            "SPL>=10": 5.0,
+            "SR>=10": 6.0,
+            "SPL>=20": None,
+            "SR>=20": 8.0,
+            "episodes": 4,
+        }
+    }
     md = tables.results_markdown(result, "T").splitlines()
     assert md[2] == "| rooms | SPL | SR | SPL>=5 | SR>=5 | SPL>=10 | SR>=10 | SPL>=20 | SR>=20 | episodes |"
     assert md[4] == "| overall | 1.00 | 2.00 | 3.00 | 4.00 | 5.00 | 6.00 | n/a | 8.00 | 4 |"
@@ -407,8 +438,10 @@ def test_the_demo_checks_the_houses_own_calibration():
     from experiments import demo
 
     def checks(random_sr, long10, oracle_spl):
-        results = {"random": {"overall": {"SR": random_sr}},
-                   "oracle": {"overall": {"SR": 100.0, "SPL": oracle_spl, "L^g>=10 %": long10}}}  # fmt: skip
+        results = {
+            "random": {"overall": {"SR": random_sr}},
+            "oracle": {"overall": {"SR": 100.0, "SPL": oracle_spl, "L^g>=10 %": long10}},
+        }
         return [ok for _, ok in demo.calibration(results, "house")]
 
     assert checks(2.9, 70.0, 100.0) == [True, True, True]

@@ -111,8 +111,10 @@ def brute_force_batched(params, buffer, optimizer, epochs, batch):
     step_losses = np.zeros((epochs, buffer.capacity // batch))
     for e in range(epochs):
         for j in range(buffer.capacity // batch):
-            parts = [item_loss_and_grad(params, buffer.s_0[i], buffer.goal[i], buffer.subgoal[i])
-                     for i in range(j * batch, (j + 1) * batch)]  # fmt: skip
+            parts = [
+                item_loss_and_grad(params, buffer.s_0[i], buffer.goal[i], buffer.subgoal[i])
+                for i in range(j * batch, (j + 1) * batch)
+            ]
             step_losses[e, j] = np.mean([float(loss) for loss, _ in parts])
             grads = jax.tree.map(lambda *g: sum(g) / batch, *[g for _, g in parts])
             updates, opt_state = optimizer.update(grads, opt_state, params)
@@ -141,9 +143,9 @@ class TrainTest(chex.TestCase):
         buffer = filled_buffer(rng, M)
         optimizer = imagination.make_imagination_optimizer(name, lr)
         params = init_params()
-        trained, step_losses, _ = jax.jit(
-            lambda p, b: imagination.train_on_buffer(p, b, apply_fn, optimizer, 3)
-        )(params, buffer)
+        trained, step_losses, _ = jax.jit(lambda p, b: imagination.train_on_buffer(p, b, apply_fn, optimizer, 3))(
+            params, buffer
+        )
         chex.assert_shape(step_losses, (3, M))
         ref_params, ref_losses = brute_force_train(params, buffer, optimizer, 3)
         chex.assert_trees_all_close(trained, ref_params, rtol=1e-4, atol=1e-6)
@@ -159,9 +161,7 @@ class TrainTest(chex.TestCase):
         counts = [M, 2, M, 0]
         buffers = stack([filled_buffer(rng, n) for n in counts])
         shared = init_params()
-        fn = self.variant(
-            lambda p, b: imagination.train_full_buffers(p, b, apply_fn, optimizer, 2)
-        )
+        fn = self.variant(lambda p, b: imagination.train_full_buffers(p, b, apply_fn, optimizer, 2))
         new_shared, new_buffers, metrics = fn(shared, buffers)
         # Reference: lanes 0 then 2, each starting from the previous result.
         ref = shared
@@ -175,9 +175,7 @@ class TrainTest(chex.TestCase):
         np.testing.assert_array_equal(new_buffers.s_0[0], 0.0)
         np.testing.assert_array_equal(new_buffers.s_0[1], buffers.s_0[1])  # untouched
         self.assertEqual(int(metrics["imagination/num_trained_lanes"]), 2)
-        np.testing.assert_allclose(
-            metrics["imagination/loss"], np.mean([l.mean() for l in ref_losses]), rtol=1e-4
-        )
+        np.testing.assert_allclose(metrics["imagination/loss"], np.mean([l.mean() for l in ref_losses]), rtol=1e-4)
         np.testing.assert_allclose(
             metrics["imagination/first_epoch_loss"], np.mean([l[0].mean() for l in ref_losses]), rtol=1e-4
         )
@@ -201,9 +199,13 @@ class TrainTest(chex.TestCase):
         chex.assert_trees_all_close(new_shared, ref, rtol=1e-4, atol=1e-6)
         chex.assert_trees_all_close(state, ref_state, rtol=1e-4, atol=1e-6)
         np.testing.assert_array_equal(new_buffers.count, [0, 2, 0, 0])
-        fresh, _, _, none = jax.jit(lambda p, b: imagination.train_on_full_buffers(p, b, apply_fn, optimizer, 1))(shared, buffers)
+        fresh, _, _, none = jax.jit(lambda p, b: imagination.train_on_full_buffers(p, b, apply_fn, optimizer, 1))(
+            shared, buffers
+        )
         assert none is None
-        assert max(float(jnp.abs(a - b).max()) for a, b in zip(jax.tree.leaves(fresh), jax.tree.leaves(new_shared))) > 1e-4
+        assert (
+            max(float(jnp.abs(a - b).max()) for a, b in zip(jax.tree.leaves(fresh), jax.tree.leaves(new_shared))) > 1e-4
+        )
 
     def test_vmapped_over_seeds(self):
         """Seeds with different numbers of full lanes, in one vmapped call."""
@@ -271,9 +273,16 @@ class TrainTest(chex.TestCase):
         first = imagination.ImaginationLosses(*map(jnp.float32, (2.0, 0.2 + 0.4, 1.0, 0.5)))
         second = imagination.ImaginationLosses(*map(jnp.float32, (1.0, 0.6, 0.7, 0.4)))
         m = first.plus(second).metrics()
-        np.testing.assert_allclose([m["imagination/num_trained_lanes"], m["imagination/loss"],
-                                    m["imagination/first_epoch_loss"], m["imagination/last_epoch_loss"]],
-                                   [3.0, 0.4, 1.7 / 3, 0.3], rtol=1e-6)  # fmt: skip
+        np.testing.assert_allclose(
+            [
+                m["imagination/num_trained_lanes"],
+                m["imagination/loss"],
+                m["imagination/first_epoch_loss"],
+                m["imagination/last_epoch_loss"],
+            ],
+            [3.0, 0.4, 1.7 / 3, 0.3],
+            rtol=1e-6,
+        )
         none = imagination.ImaginationLosses.zeros().metrics()  # no lane trained: zeros, not NaN
         self.assertEqual([float(v) for v in none.values()], [0.0, 0.0, 0.0, 0.0])
 
@@ -305,9 +314,7 @@ class SuccessTrackerTest(chex.TestCase):
         update = jax.jit(imagination.tracker_update)
         for o, f in zip(outcomes, finished):
             tracker = update(tracker, o, f)
-        np.testing.assert_allclose(
-            imagination.success_rate(tracker), outcomes[finished][-100:].mean(), rtol=1e-6
-        )
+        np.testing.assert_allclose(imagination.success_rate(tracker), outcomes[finished][-100:].mean(), rtol=1e-6)
 
     def test_per_lane_vmap(self):
         trackers = jax.vmap(lambda _: imagination.tracker_init(100))(jnp.arange(2))
@@ -320,9 +327,7 @@ class SuccessTrackerTest(chex.TestCase):
 class NoiseTest(chex.TestCase):
     def test_variance_schedule_hand_values(self):
         rho = jnp.array([0.0, 0.3, 0.5, 0.9, 0.95, 1.0])
-        np.testing.assert_allclose(
-            imagination.noise_variance(rho, 0.9), [0.9, 0.6, 0.4, 0.0, 0.0, 0.0], atol=1e-7
-        )
+        np.testing.assert_allclose(imagination.noise_variance(rho, 0.9), [0.9, 0.6, 0.4, 0.0, 0.0, 0.0], atol=1e-7)
 
     @chex.variants(with_jit=True, without_jit=True)
     def test_empirical_variance(self):

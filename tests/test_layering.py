@@ -21,22 +21,43 @@ CHECKED = ("foresit_jax", "experiments", "benchmarks", "envs")
 
 # (file, function, module imported) -> why it is imported inside the function.
 ALLOWED = {
-    ("experiments/__init__.py", "__getattr__", "experiments.running"):
-        "defers jax and the library to `experiments.load`: every `python -m experiments.<program>` imports the package",
-    ("experiments/running/paper_figures.py", "trajectories_figure", "envs.render"):
-        "defers matplotlib (envs.render imports it at its top) to the figure that draws",
+    (
+        "experiments/__init__.py",
+        "__getattr__",
+        "experiments.running",
+    ): "defers jax and the library to `experiments.load`: every `python -m experiments.<program>` imports the package",
+    (
+        "experiments/running/paper_figures.py",
+        "trajectories_figure",
+        "envs.render",
+    ): "defers matplotlib (envs.render imports it at its top) to the figure that draws",
     ("envs/gymnax_compat.py", "make_gymnax", "envs"): "cycle: envs/__init__ imports gymnax_compat",
     ("envs/gymnax_compat.py", "register_gymnax", "envs"): "cycle: envs/__init__ imports gymnax_compat",
-    ("benchmarks/bench_devices.py", "measure", "experiments.running"):
-        "defers jax and the trainer: the parent process only starts the measuring ones",
-    ("benchmarks/bench_devices.py", "measure", "experiments.running.presets"):
-        "defers jax and the trainer: the parent process only starts the measuring ones",
-    ("benchmarks/bench_devices.py", "measure", "foresit_jax.train"):
-        "defers jax and the trainer: the parent process only starts the measuring ones",
-    ("benchmarks/bench_grid.py", "main", "experiments.running.presets"):
-        "defers jax and the trainer past the flags (--help, a refused flag)",
-    ("benchmarks/bench_grid.py", "main", "foresit_jax.train"):
-        "defers jax and the trainer past the flags (--help, a refused flag)",
+    (
+        "benchmarks/bench_devices.py",
+        "measure",
+        "experiments.running",
+    ): "defers jax and the trainer: the parent process only starts the measuring ones",
+    (
+        "benchmarks/bench_devices.py",
+        "measure",
+        "experiments.running.presets",
+    ): "defers jax and the trainer: the parent process only starts the measuring ones",
+    (
+        "benchmarks/bench_devices.py",
+        "measure",
+        "foresit_jax.train",
+    ): "defers jax and the trainer: the parent process only starts the measuring ones",
+    (
+        "benchmarks/bench_grid.py",
+        "main",
+        "experiments.running.presets",
+    ): "defers jax and the trainer past the flags (--help, a refused flag)",
+    (
+        "benchmarks/bench_grid.py",
+        "main",
+        "foresit_jax.train",
+    ): "defers jax and the trainer past the flags (--help, a refused flag)",
 }
 
 
@@ -75,8 +96,13 @@ def imports(path: Path, root: Path = ROOT) -> list[tuple[str, str, list[str]]]:
 def layer_imports(lower: str, upper: str, root: Path = ROOT) -> list[str]:
     """'file imports module' for each import of experiments/`upper` by experiments/`lower`."""
     prefix = f"experiments.{upper}"
-    return [f"{path.relative_to(root)} imports {name}" for path in modules(f"experiments/{lower}", root)
-            for _, _, names in imports(path, root) for name in names if name == prefix or name.startswith(prefix + ".")]
+    return [
+        f"{path.relative_to(root)} imports {name}"
+        for path in modules(f"experiments/{lower}", root)
+        for _, _, names in imports(path, root)
+        for name in names
+        if name == prefix or name.startswith(prefix + ".")
+    ]
 
 
 def test_reporting_is_below_running():
@@ -92,8 +118,13 @@ def test_errors_is_a_leaf():
 
 def function_level_imports(packages=CHECKED, root: Path = ROOT) -> set[tuple[str, str, str]]:
     """(file, function, module) of each import of a project module made inside a function."""
-    return {(str(path.relative_to(root)), where, module) for package in packages for path in modules(package, root)
-            for where, module, _ in imports(path, root) if where and module.split(".")[0] in PROJECT}
+    return {
+        (str(path.relative_to(root)), where, module)
+        for package in packages
+        for path in modules(package, root)
+        for where, module, _ in imports(path, root)
+        if where and module.split(".")[0] in PROJECT
+    }
 
 
 def test_function_level_imports_of_the_project_are_only_the_allowed_ones():
@@ -109,16 +140,22 @@ def test_the_checks_see_what_they_look_for(tmp_path):
     resolves a relative one, and counts a class body's as the module's."""
     package = tmp_path / "experiments" / "reporting"
     package.mkdir(parents=True)
-    (package / "x.py").write_text("import experiments.running.run\n"
-                                  "def f():\n    from ..running import sweeps\n"
-                                  "class C:\n    from envs import catalog\n"
-                                  "    def g(self):\n        def h():\n"
-                                  "            import foresit_jax.train\n")  # fmt: skip
+    (package / "x.py").write_text(
+        "import experiments.running.run\n"
+        "def f():\n    from ..running import sweeps\n"
+        "class C:\n    from envs import catalog\n"
+        "    def g(self):\n        def h():\n"
+        "            import foresit_jax.train\n"
+    )
     assert imports(package / "x.py", tmp_path) == [
         ("", "experiments.running.run", ["experiments.running.run"]),
         ("f", "experiments.running", ["experiments.running", "experiments.running.sweeps"]),
-        ("", "envs", ["envs", "envs.catalog"]), ("C.g.h", "foresit_jax.train", ["foresit_jax.train"])]  # fmt: skip
+        ("", "envs", ["envs", "envs.catalog"]),
+        ("C.g.h", "foresit_jax.train", ["foresit_jax.train"]),
+    ]
     assert len(layer_imports("reporting", "running", tmp_path)) == 3
     x = "experiments/reporting/x.py"
-    assert function_level_imports(("experiments",), tmp_path) == {(x, "f", "experiments.running"),
-                                                                  (x, "C.g.h", "foresit_jax.train")}
+    assert function_level_imports(("experiments",), tmp_path) == {
+        (x, "f", "experiments.running"),
+        (x, "C.g.h", "foresit_jax.train"),
+    }

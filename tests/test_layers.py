@@ -74,9 +74,7 @@ def test_grid_dense_equals_flax_dense_of_the_tiled_input(batch):
 def test_grid_dense_without_vectors_is_a_dense_over_the_grid():
     grid = jax.random.normal(jax.random.PRNGKey(0), (2, 3, 4, 6))
     params = GridDense(5).init(jax.random.PRNGKey(1), grid)
-    np.testing.assert_allclose(
-        GridDense(5).apply(params, grid), nn.Dense(5).apply(params, grid), rtol=1e-6, atol=1e-6
-    )
+    np.testing.assert_allclose(GridDense(5).apply(params, grid), nn.Dense(5).apply(params, grid), rtol=1e-6, atol=1e-6)
 
 
 def test_grid_dense_rejects_vectors_of_another_batch():

@@ -35,7 +35,9 @@ def imported_modules(path: Path) -> set[str]:
 
 def test_the_helper_sees_imports_inside_functions(tmp_path):
     source = tmp_path / "m.py"
-    source.write_text("import os\ndef f():\n    from experiments import sweep, tune\n    import experiments.paper as p\n")
+    source.write_text(
+        "import os\ndef f():\n    from experiments import sweep, tune\n    import experiments.paper as p\n"
+    )
     assert {"os", "experiments.sweep", "experiments.tune", "experiments.paper"} <= imported_modules(source)
 
 

@@ -25,8 +25,11 @@ def fake_run(nan_at=None, nan_params_after=None, seeds=None):
         w = state["w"].copy()
         if nan_params_after is not None and start + n > nan_params_after:
             w[..., 0] = np.inf
-        metrics = {"losses/total_loss": loss if seeds is None else np.stack([np.full(n, 1.0, np.float32), loss]),
-                   "losses/grad_norm": np.ones_like(loss), "losses/entropy": np.ones_like(loss)}  # fmt: skip
+        metrics = {
+            "losses/total_loss": loss if seeds is None else np.stack([np.full(n, 1.0, np.float32), loss]),
+            "losses/grad_norm": np.ones_like(loss),
+            "losses/entropy": np.ones_like(loss),
+        }
         return {"count": count, "w": w}, metrics
 
     return run, calls
@@ -37,15 +40,35 @@ class NoCheckpoints:
         return None
 
 
-def run_loop(run, state, *, done, total, chunk_updates, manager=None, checkpoints="c", seeds=None, budget=None,
-             label="", seen=None):  # fmt: skip
+def run_loop(
+    run,
+    state,
+    *,
+    done,
+    total,
+    chunk_updates,
+    manager=None,
+    checkpoints="c",
+    seeds=None,
+    budget=None,
+    label="",
+    seen=None,
+):
     """`Run.train`'s loop over a fake `run`: [(the state after each chunk, its `Chunk`)], as
     recorded (appended to `seen` as they are)."""
     seen = [] if seen is None else seen
     for n in loop.chunk_sizes(done, total, chunk_updates, budget):
         state, metrics = run(state, None, n)
-        warning = loop.check(metrics, state, done, n, manager=manager or NoCheckpoints(), checkpoints=checkpoints,
-                             seeds=seeds, label=label)  # fmt: skip
+        warning = loop.check(
+            metrics,
+            state,
+            done,
+            n,
+            manager=manager or NoCheckpoints(),
+            checkpoints=checkpoints,
+            seeds=seeds,
+            label=label,
+        )
         done += n
         seen.append((state, loop.Chunk(metrics, done, n, warning, 0.0)))
     return seen
@@ -59,8 +82,9 @@ def test_chunks_cover_the_updates_and_the_budget_stops_between_them():
     assert list(loop.chunk_sizes(0, 10, 4)) == [4, 4, 2] and list(loop.chunk_sizes(10, 10, 4)) == []
     budget = [2]
     run, calls = fake_run()
-    seen = run_loop(run, {"count": np.int32(3), "w": np.ones(3, np.float32)}, done=3, total=10, chunk_updates=2,
-                    budget=budget)  # fmt: skip
+    seen = run_loop(
+        run, {"count": np.int32(3), "w": np.ones(3, np.float32)}, done=3, total=10, chunk_updates=2, budget=budget
+    )
     assert (calls, seen[-1][1].done, budget) == ([2, 2], 7, [0])
     run, calls = fake_run()
     assert run_loop(run, {"count": np.int32(0), "w": np.ones(1)}, done=0, total=5, chunk_updates=5, budget=[0]) == []
@@ -75,10 +99,14 @@ def test_nonfinite_names_the_update_and_the_seed():
     finite = {"w": np.ones((2, 3), np.float32)}
     assert loop.nonfinite({"losses/total_loss": np.ones(4)}, {"w": np.ones(3)}, 8, 4) is None
     assert loop.nonfinite({"losses/total_loss": [1.0, 2.0, np.nan, np.inf]}, {"w": np.ones(3)}, 8, 4) == (
-        "non-finite loss at update 11")
+        "non-finite loss at update 11"
+    )
     loss = np.ones((2, 4))
     loss[1, 1] = np.nan
-    assert loop.nonfinite({"losses/total_loss": loss}, finite, 8, 4, seeds=[5, 6]) == "non-finite loss at update 10 of seed 6"
+    assert (
+        loop.nonfinite({"losses/total_loss": loss}, finite, 8, 4, seeds=[5, 6])
+        == "non-finite loss at update 10 of seed 6"
+    )
     bad = {"w": np.ones((2, 3), np.float32)}
     bad["w"][0, 2] = np.nan
     line = loop.nonfinite({"losses/total_loss": np.ones((2, 4))}, bad, 8, 4, seeds=[5, 6])
@@ -95,13 +123,24 @@ def test_a_non_finite_chunk_stops_before_it_is_recorded(capsys):
     run, _ = fake_run(nan_at=6, seeds=[3, 7])
     seen = []
     with pytest.raises(SystemExit) as stop:
-        run_loop(run, {"count": np.zeros(2, np.int32), "w": np.ones((2, 3), np.float32)}, done=0, total=9,
-                 chunk_updates=4, manager=Manager(), checkpoints="runs/x/checkpoints", seeds=[3, 7], label="a3c: ",
-                 seen=seen)  # fmt: skip
+        run_loop(
+            run,
+            {"count": np.zeros(2, np.int32), "w": np.ones((2, 3), np.float32)},
+            done=0,
+            total=9,
+            chunk_updates=4,
+            manager=Manager(),
+            checkpoints="runs/x/checkpoints",
+            seeds=[3, 7],
+            label="a3c: ",
+            seen=seen,
+        )
     assert stop.value.code == 1 and [c.done for _, c in seen] == [4]  # the second chunk is not recorded
     err = capsys.readouterr().err
-    assert ("a3c: non-finite loss at update 6 of seed 7; training stopped, its last checkpoint (update 4, finite) "
-            "is kept in runs/x/checkpoints") in err, err
+    assert (
+        "a3c: non-finite loss at update 6 of seed 7; training stopped, its last checkpoint (update 4, finite) "
+        "is kept in runs/x/checkpoints"
+    ) in err, err
     run, _ = fake_run(nan_params_after=0)
     with pytest.raises(SystemExit):
         run_loop(run, {"count": np.int32(0), "w": np.ones(3, np.float32)}, done=0, total=9, chunk_updates=4)
@@ -126,8 +165,14 @@ def checkpoints(tmp_path, steps):
 
 
 def truncate(manager, step):
-    data = max((p for p in checkpoint.step_dir(manager, step).rglob("*") if p.is_file() and p.name != checkpoint.CHECKSUM_FILE),
-               key=lambda p: p.stat().st_size)  # fmt: skip
+    data = max(
+        (
+            p
+            for p in checkpoint.step_dir(manager, step).rglob("*")
+            if p.is_file() and p.name != checkpoint.CHECKSUM_FILE
+        ),
+        key=lambda p: p.stat().st_size,
+    )
     data.write_bytes(data.read_bytes()[: data.stat().st_size // 2])
 
 

@@ -56,8 +56,12 @@ def make_batch(seed, T=7):
     terminated |= (~valid) & (rng.random((T, B)) < 0.5)
     bootstrap = rng.normal(size=(B,))
     return dict(
-        r_t=r.astype(np.float32), v_t=v.astype(np.float32), terminated_t=terminated,
-        truncated_t=truncated, valid_t=valid, bootstrap_value=bootstrap.astype(np.float32),
+        r_t=r.astype(np.float32),
+        v_t=v.astype(np.float32),
+        terminated_t=terminated,
+        truncated_t=truncated,
+        valid_t=valid,
+        bootstrap_value=bootstrap.astype(np.float32),
     )
 
 
@@ -66,14 +70,18 @@ class TargetsTest(chex.TestCase):
     @parameterized.parameters((0.99, 1.0), (0.9, 0.95), (0.5, 0.0))
     def test_matches_episode_loop(self, gamma, lam):
         batch = make_batch(0)
-        fn = self.variant(
-            lambda b: train.advantages_and_returns(**b, gamma=gamma, lambda_=lam)
-        )
+        fn = self.variant(lambda b: train.advantages_and_returns(**b, gamma=gamma, lambda_=lam))
         adv, ret = fn(batch)
         chex.assert_shape([adv, ret], (7, 4))
         exp_adv, exp_ret = savn_style_targets(
-            batch["r_t"], batch["v_t"], batch["terminated_t"], batch["truncated_t"],
-            batch["valid_t"], batch["bootstrap_value"], gamma, lam,
+            batch["r_t"],
+            batch["v_t"],
+            batch["terminated_t"],
+            batch["truncated_t"],
+            batch["valid_t"],
+            batch["bootstrap_value"],
+            gamma,
+            lam,
         )
         np.testing.assert_allclose(adv, exp_adv, rtol=1e-5, atol=1e-5)
         np.testing.assert_allclose(ret, exp_ret, rtol=1e-5, atol=1e-5)
@@ -97,12 +105,8 @@ class TargetsTest(chex.TestCase):
         valid = jnp.ones(3)
         kwargs = dict(gamma=0.99, lambda_=1.0)
         truncated = jnp.array([0, 0, 1])
-        _, ret_trunc = train.advantages_and_returns(
-            r, v, jnp.zeros(3), truncated, valid, jnp.array(100.0), **kwargs
-        )
-        _, ret_term = train.advantages_and_returns(
-            r, v, truncated, jnp.zeros(3), valid, jnp.array(100.0), **kwargs
-        )
+        _, ret_trunc = train.advantages_and_returns(r, v, jnp.zeros(3), truncated, valid, jnp.array(100.0), **kwargs)
+        _, ret_term = train.advantages_and_returns(r, v, truncated, jnp.zeros(3), valid, jnp.array(100.0), **kwargs)
         _, ret_running = train.advantages_and_returns(
             r, v, jnp.zeros(3), jnp.zeros(3), valid, jnp.array(100.0), **kwargs
         )
@@ -141,9 +145,7 @@ class TargetsTest(chex.TestCase):
         term = jnp.array([[0], [1], [0], [0]])
         trunc = jnp.zeros((4, 1))
         valid = jnp.array([[1], [1], [0], [0]])
-        np.testing.assert_allclose(
-            train.episode_discounts(term, trunc, valid, 0.9)[:, 0], [0.9, 0.0, 0.0, 0.0]
-        )
+        np.testing.assert_allclose(train.episode_discounts(term, trunc, valid, 0.9)[:, 0], [0.9, 0.0, 0.0, 0.0])
         # A valid step followed by padding without a done flag is not bootstrapped.
         valid = jnp.array([[1], [1], [1], [0]])
         np.testing.assert_allclose(
@@ -152,9 +154,7 @@ class TargetsTest(chex.TestCase):
         )
 
     def test_traced_once(self):
-        fn = jax.jit(chex.assert_max_traces(
-            lambda b: train.advantages_and_returns(**b, gamma=0.99, lambda_=1.0), n=1
-        ))
+        fn = jax.jit(chex.assert_max_traces(lambda b: train.advantages_and_returns(**b, gamma=0.99, lambda_=1.0), n=1))
         for seed in range(3):
             jax.block_until_ready(fn(make_batch(seed)))
 
@@ -254,9 +254,7 @@ class A3CLossTest(chex.TestCase):
         def f(logits, v, adv, ret):
             return train.a3c_loss(logits, self.a, v, adv, ret, self.valid, 0.01, 0.5)[0]
 
-        g_logits, g_v, g_adv, g_ret = jax.grad(f, argnums=(0, 1, 2, 3))(
-            self.logits, self.v, self.adv, self.ret
-        )
+        g_logits, g_v, g_adv, g_ret = jax.grad(f, argnums=(0, 1, 2, 3))(self.logits, self.v, self.adv, self.ret)
         # Targets are constants.
         np.testing.assert_array_equal(g_adv, 0.0)
         np.testing.assert_array_equal(g_ret, 0.0)

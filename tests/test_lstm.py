@@ -135,7 +135,9 @@ def test_low_rank_update_equals_the_dense_kernels_in_numpy():
     rank = 3
     ks = jax.random.split(jax.random.PRNGKey(9), 4)
     update = lstm.LowRankUpdate(
-        jax.random.normal(ks[0], (rank, F)), jax.random.normal(ks[1], (rank, H)), 0.2 * jax.random.normal(ks[2], (rank, 4 * H))
+        jax.random.normal(ks[0], (rank, F)),
+        jax.random.normal(ks[1], (rank, H)),
+        0.2 * jax.random.normal(ks[2], (rank, 4 * H)),
     )
     updated = kernels._replace(update=update)
     dense = updated.dense()
@@ -213,7 +215,9 @@ def test_splitting_the_agents_tree_at_the_encoder_lstm_and_replacing_its_kernels
     nets, params = small_agent
     kernels, rest = lstm.split_encoder_lstm_kernels(params)
     cell = lstm.encoder_lstm_params(kernels)
-    assert {name: set(leaves) for name, leaves in cell.items()} == {n + g: {"kernel"} for n in "ih" for g in lstm.LSTM_GATES}
+    assert {name: set(leaves) for name, leaves in cell.items()} == {
+        n + g: {"kernel"} for n in "ih" for g in lstm.LSTM_GATES
+    }
     assert all("kernel" not in leaves for leaves in lstm.encoder_lstm_params(rest).values())
     chex.assert_trees_all_equal(lstm.join_partial_trees(kernels, rest), params)
 
@@ -221,7 +225,9 @@ def test_splitting_the_agents_tree_at_the_encoder_lstm_and_replacing_its_kernels
     update = lstm.LowRankUpdate(*(jax.random.normal(k, s) for k, s in zip(keys, [(2, 3 * 2 * 64), (2, H), (2, 4 * H)])))
     changed = lstm.with_encoder_lstm_kernels(params, kernels_of(nets, params)._replace(update=update))
     dense = kernels_of(nets, params)._replace(update=update).dense()
-    chex.assert_trees_all_close(kernels_of(nets, changed), dense._replace(recurrent_kernel_t=None), rtol=1e-6, atol=1e-6)
+    chex.assert_trees_all_close(
+        kernels_of(nets, changed), dense._replace(recurrent_kernel_t=None), rtol=1e-6, atol=1e-6
+    )
     flat_old, flat_new = (jax.tree_util.tree_flatten_with_path(t)[0] for t in (params, changed))
     moved = [jax.tree_util.keystr(p) for (p, a), (_, b) in zip(flat_old, flat_new) if not np.array_equal(a, b)]
     assert len(moved) == 8 and all("'lstm'" in p and "'kernel'" in p for p in moved)

@@ -69,15 +69,22 @@ def test_causal_conv_is_flax_conv_with_causal_padding(dilation):
     init = learned_loss._torch_default_init(12)
     x = jax.random.normal(jax.random.PRNGKey(1), (20, 6))
     ours = learned_loss.CausalConv1d(10, 2, dilation, init)
-    flax_conv = nn.Conv(10, (2,), kernel_dilation=(dilation,), padding=((dilation, 0),), kernel_init=init, bias_init=init)
+    flax_conv = nn.Conv(
+        10, (2,), kernel_dilation=(dilation,), padding=((dilation, 0),), kernel_init=init, bias_init=init
+    )
     p_ours, p_flax = ours.init(jax.random.PRNGKey(0), x), flax_conv.init(jax.random.PRNGKey(0), x)
     jax.tree.map(np.testing.assert_array_equal, p_ours, p_flax)
     np.testing.assert_allclose(ours.apply(p_ours, x), flax_conv.apply(p_flax, x), rtol=1e-5, atol=1e-6)
 
 
 def test_inner_step_is_sgd_on_everything_but_phi():
-    params = {"params": {"encoder": {"w": jnp.ones((2, 3))}, "actor": {"b": jnp.arange(3.0)},
-                         "learned_loss": {"conv0": {"kernel": jnp.ones((2, 6, 10))}}}}  # fmt: skip
+    params = {
+        "params": {
+            "encoder": {"w": jnp.ones((2, 3))},
+            "actor": {"b": jnp.arange(3.0)},
+            "learned_loss": {"conv0": {"kernel": jnp.ones((2, 6, 10))}},
+        }
+    }
     grads = jax.tree.map(lambda x: jnp.full_like(x, 2.0), params)
     new = maml.inner_step(params, grads, 0.1)
     np.testing.assert_allclose(new["params"]["encoder"]["w"], np.ones((2, 3)) - 0.2)
@@ -111,8 +118,10 @@ def _setup(lr=0.05, lanes=16, training=True, never_done=False, **overrides):
 @pytest.fixture(scope="module")
 def adapted_rollout():
     config, nets, env, env_params, params, w_params, actor = _setup()
-    run = jax.jit(lambda p, a, k: _adaptive_act(nets, p, w_params, BoundEnv(env, env_params), a, k, 30),
-                  compiler_options=H.FAST_COMPILE)  # fmt: skip
+    run = jax.jit(
+        lambda p, a, k: _adaptive_act(nets, p, w_params, BoundEnv(env, env_params), a, k, 30),
+        compiler_options=H.FAST_COMPILE,
+    )
     _, traj, _, thetas = run(params, actor, jax.random.PRNGKey(5))
     return config, params, traj, thetas
 
@@ -128,9 +137,7 @@ def test_inner_updates_only_after_steps_6_12_18_24_of_running_episodes(adapted_r
     for i in range(1, 5):
         goes_on = running[6 * i - 1]  # alive after step 6 i
         for b in range(lanes):
-            changed = any(
-                not np.array_equal(flat[i][p][b], flat[i - 1][p][b]) for p in flat[0] if maml.adapts(p)
-            )  # fmt: skip
+            changed = any(not np.array_equal(flat[i][p][b], flat[i - 1][p][b]) for p in flat[0] if maml.adapts(p))
             assert changed == bool(goes_on[b]), (i, b)
             updated_any[b] |= changed
         for p in flat[0]:  # phi and the critic never change in an inner step
@@ -148,8 +155,10 @@ def test_evaluation_step_13_runs_under_theta_2_recomputed_independently():
     modules over the recorded observations, then step 13's logits under
     theta_2; they match the rollout's and differ from theta_0's."""
     config, nets, env, env_params, params, w_params, actor = _setup(lr=5.0, lanes=4, training=False, never_done=True)
-    run = jax.jit(lambda p, a, k: _adaptive_act(nets, p, w_params, BoundEnv(env, env_params), a, k, 14),
-                  compiler_options=H.FAST_COMPILE)  # fmt: skip
+    run = jax.jit(
+        lambda p, a, k: _adaptive_act(nets, p, w_params, BoundEnv(env, env_params), a, k, 14),
+        compiler_options=H.FAST_COMPILE,
+    )
     _, traj, _, thetas = run(params, actor, jax.random.PRNGKey(6))
     assert bool(np.all(np.asarray(traj.valid)[:14]))  # every lane still in its episode at step 13
     lane = 1
@@ -237,17 +246,31 @@ def _meta_objective(first_order: bool):
     params = jax.tree.map(lambda x: x.astype(jnp.float64) + 0.05 * rng.standard_normal(x.shape), params)
     actor = rollout.start(nets, jax.random.PRNGKey(3), BoundEnv(env, env_params), config.num_lanes)
     f64 = lambda x: x.astype(jnp.float64)  # noqa: E731  the agent's own carries, in float64
-    actor = actor._replace(lstm=jax.tree.map(f64, actor.lstm), prev_probs=f64(actor.prev_probs),
-                           imagined=f64(actor.imagined), s_0=f64(actor.s_0))  # fmt: skip
+    actor = actor._replace(
+        lstm=jax.tree.map(f64, actor.lstm),
+        prev_probs=f64(actor.prev_probs),
+        imagined=f64(actor.imagined),
+        s_0=f64(actor.s_0),
+    )
     steps = 13
     w_logits = jnp.asarray(rng.standard_normal((steps, 3, 6)))
     w_states = jnp.asarray(rng.standard_normal((steps, 3, config.hidden_size)))
 
     def objective(p):
-        _, traj, _, _ = _adaptive_act(nets, p, w_params, BoundEnv(env, env_params), actor, jax.random.PRNGKey(11), steps,
-                                      WHOLE._replace(record_inputs=False))  # fmt: skip
+        _, traj, _, _ = _adaptive_act(
+            nets,
+            p,
+            w_params,
+            BoundEnv(env, env_params),
+            actor,
+            jax.random.PRNGKey(11),
+            steps,
+            WHOLE._replace(record_inputs=False),
+        )
         valid = traj.valid[..., None]
-        return jnp.sum(jnp.where(valid, traj.logits * w_logits, 0.0)) + jnp.sum(jnp.where(valid, traj.states * w_states, 0.0))
+        return jnp.sum(jnp.where(valid, traj.logits * w_logits, 0.0)) + jnp.sum(
+            jnp.where(valid, traj.states * w_states, 0.0)
+        )
 
     return jax.jit(jax.value_and_grad(objective), compiler_options=H.FAST_COMPILE), params
 
@@ -266,8 +289,12 @@ def test_meta_gradient_matches_finite_differences_and_has_its_second_order_term(
         value, grads = value_and_grad(params)
         assert grads["params"]["encoder"]["lstm"]["hi"]["kernel"].dtype == jnp.float64
         rng = np.random.default_rng(0)
-        phi_only = lambda t: {"params": {k: (v if k == "learned_loss" else jax.tree.map(jnp.zeros_like, v))  # noqa: E731
-                                         for k, v in t["params"].items()}}  # fmt: skip
+        phi_only = lambda t: {
+            "params": {
+                k: (v if k == "learned_loss" else jax.tree.map(jnp.zeros_like, v))  # noqa: E731
+                for k, v in t["params"].items()
+            }
+        }
         for trial in range(3):
             direction = jax.tree.map(lambda x: jnp.asarray(rng.standard_normal(x.shape)), params)
             if trial == 2:  # phi alone: it gets its gradient only through the inner updates
@@ -319,8 +346,15 @@ def test_maml_foresit_trains_without_nan_and_phi_learns():
 def test_maml_training_on_an_easy_setting_raises_the_success_rate():
     """As the a3c easy-setting test (one bathroom, starts within 3 actions), with SAVN's
     inner loop in every training episode."""
-    config = H.tiny_config("a3c+maml", num_lanes=8, hidden_size=64, attention_size=64, value_hidden=64,
-                           imagination_layer_sizes=(64, 32, 16, 32, 64, 64), learning_rate=5e-3)  # fmt: skip
+    config = H.tiny_config(
+        "a3c+maml",
+        num_lanes=8,
+        hidden_size=64,
+        attention_size=64,
+        value_hidden=64,
+        imagination_layer_sizes=(64, 32, 16, 32, 64, 64),
+        learning_rate=5e-3,
+    )
     state, final, first, last = H.easy_setting_run(config, *H.bathroom_env())
     assert last > 0.5 and last > first + 0.25, (first, last)
     H.assert_tree_finite(final)
@@ -337,7 +371,9 @@ def test_maml_evaluation_runs_its_episodes_in_groups(monkeypatch):
     ev = importlib.import_module("foresit_jax.evaluate")  # the module (the package exports the function)
 
     assert ev.group_layout(250, 50) == (5, 50) and ev.group_layout(25, 50) == (1, 25)
-    assert ev.group_layout(7, 5) == (2, 4) and ev.group_layout(53, 50) == (2, 27) and ev.group_layout(12, None) == (1, 12)
+    assert (
+        ev.group_layout(7, 5) == (2, 4) and ev.group_layout(53, 50) == (2, 27) and ev.group_layout(12, None) == (1, 12)
+    )
     monkeypatch.setattr(ev, "MAX_ADAPTIVE_LANES", 2)
     config, nets, env, env_params, params, w_params, actor = _setup(lanes=5, training=False)
     evaluator = ev.Evaluator(config.setup)
@@ -354,10 +390,20 @@ def test_maml_evaluation_runs_its_episodes_in_groups(monkeypatch):
     # Group g: one rollout of its lanes' reset keys, acting with the g-th split of the key.
     k_start, k_act = jax.random.split(key)
     reset = jax.random.split(k_start, 5)
-    group = jax.jit(lambda k, r: ev.episode_stats(rollout.rollout(nets, AgentParams(params, w_params, 0.0),
-                                                                  BoundEnv(evaluator.env, room), k, 8,
-                                                                  reset_keys=r, act=maml.act)),
-                    compiler_options=H.FAST_COMPILE)  # fmt: skip
+    group = jax.jit(
+        lambda k, r: ev.episode_stats(
+            rollout.rollout(
+                nets,
+                AgentParams(params, w_params, 0.0),
+                BoundEnv(evaluator.env, room),
+                k,
+                8,
+                reset_keys=r,
+                act=maml.act,
+            )
+        ),
+        compiler_options=H.FAST_COMPILE,
+    )
     for g, k in enumerate(jax.random.split(k_act, 3)):
         lanes = slice(2 * g, min(2 * g + 2, 5))
         stats = group(k, jnp.concatenate([reset, reset[:1]])[2 * g : 2 * g + 2])

@@ -13,10 +13,17 @@ from foresit_jax.train import make_trainer
 @pytest.mark.timeout(240)
 def test_sixteen_seeds_vmapped_in_one_jit_finish_and_differ():
     config = Config(
-        method="a3c+foresit", num_lanes=2, num_updates=2, room_types=("bathroom",), hidden_size=16,
-        attention_size=16, value_hidden=16, imagination_layer_sizes=(16, 8, 4, 8, 16, 16), buffer_size=1,
+        method="a3c+foresit",
+        num_lanes=2,
+        num_updates=2,
+        room_types=("bathroom",),
+        hidden_size=16,
+        attention_size=16,
+        value_hidden=16,
+        imagination_layer_sizes=(16, 8, 4, 8, 16, 16),
+        buffer_size=1,
         imagination_epochs=1,
-    )  # fmt: skip
+    )
     trainer = make_trainer(config)
     keys = jax.random.split(jax.random.PRNGKey(0), 16)
     states, metrics = jax.jit(jax.vmap(trainer.train))(keys)
@@ -52,8 +59,10 @@ def test_the_readme_snippet_finishes_at_its_own_sizes():
     try:
         out = subprocess.run([sys.executable, "-c", SNIPPET], capture_output=True, text=True, timeout=280)
     except subprocess.TimeoutExpired:
-        pytest.fail("the README's snippet (2 seeds vmapped with init, 16 lanes) did not finish in 280 s: the jax "
-                    f"{jax.__version__} CPU hang of docs/design.md's known hazard is back")
+        pytest.fail(
+            "the README's snippet (2 seeds vmapped with init, 16 lanes) did not finish in 280 s: the jax "
+            f"{jax.__version__} CPU hang of docs/design.md's known hazard is back"
+        )
     assert out.returncode == 0, out.stderr[-2000:]
     assert "finished" in out.stdout and out.stdout.strip().endswith("(2, 2)"), out.stdout
 

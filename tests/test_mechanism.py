@@ -57,10 +57,18 @@ def test_the_encoder_reading_feeds_i_tau_beside_the_target():
     p = jax.tree.map(lambda x: np.asarray(x, np.float64), params["params"]["encoder"])
     view = np.asarray(obs["view"], np.float64)
     for b in range(4):
-        vectors = [relu(np_dense(p["target_embed"], obs["target"][b])), relu(np_dense(p["action_embed"], probs[b])),
-                   relu(np_dense(p["imagination_embed"], imagined[b]))]  # fmt: skip
-        cells = [relu(np_dense(p["pointwise_conv"], np.concatenate([relu(np_dense(p["view_conv"], view[b, r, c])), *vectors])))
-                 for r in range(view.shape[1]) for c in range(view.shape[2])]  # fmt: skip
+        vectors = [
+            relu(np_dense(p["target_embed"], obs["target"][b])),
+            relu(np_dense(p["action_embed"], probs[b])),
+            relu(np_dense(p["imagination_embed"], imagined[b])),
+        ]
+        cells = [
+            relu(
+                np_dense(p["pointwise_conv"], np.concatenate([relu(np_dense(p["view_conv"], view[b, r, c])), *vectors]))
+            )
+            for r in range(view.shape[1])
+            for c in range(view.shape[2])
+        ]
         np.testing.assert_allclose(got[b], np.concatenate(cells), rtol=2e-4, atol=2e-5)
     # i_tau changes the input; the policy head takes s_t alone.
     assert np.abs(got - np.asarray(lstm_inputs(params, obs, probs, 0 * imagined))).max() > 1e-3
@@ -136,7 +144,7 @@ def test_i_tau_while_acting_is_f_w_of_the_episode_state_it_was_renewed_at(method
     residual = given - np.asarray(nets.imagine(w_params, noisy.s_0, noisy.inputs.obs["target"]))
     if method == "a3c+foresit":  # constant over the episode: the same residual at every step
         for t in range(1, 30):
-            same = (noisy.episode_step[t] > (1 if reading == "encoder" else 0))
+            same = noisy.episode_step[t] > (1 if reading == "encoder" else 0)
             np.testing.assert_allclose(residual[t][same], residual[t - 1][same], atol=1e-6)
         firsts = residual[noisy.episode_step == (1 if reading == "encoder" else 0)]
         assert abs(firsts.std() - 0.5) < 0.05
@@ -246,7 +254,9 @@ def test_imagination_fit_against_hand_computed_values():
     sse = ((target[held] - goals[held] @ centres) ** 2).sum()
     assert fit["r2_over_mean"] == pytest.approx(1 - sse / ((target[held] - mean) ** 2).sum())
     # The mean itself explains nothing.
-    assert probes.imagination_fit(np.tile(mean, (60, 1)), target, goals)["r2_over_mean"] == pytest.approx(0.0, abs=1e-12)
+    assert probes.imagination_fit(np.tile(mean, (60, 1)), target, goals)["r2_over_mean"] == pytest.approx(
+        0.0, abs=1e-12
+    )
 
 
 def test_probe_baselines_recover_known_answers():
@@ -314,8 +324,9 @@ def test_offline_f_w_fits_what_a_teacher_f_w_computes():
     target = 3 * np.asarray(net.apply(teacher, s_0, goal))
     w, steps = probes.fit_imagination_offline(net.apply, w_init, s_0, goal, target)
     assert steps > 0
-    fit = probes.imagination_fit(np.asarray(net.apply(w_init, s_0, goal)), target, goal, s_0=s_0,
-                                 offline=np.asarray(net.apply(w, s_0, goal)))  # fmt: skip
+    fit = probes.imagination_fit(
+        np.asarray(net.apply(w_init, s_0, goal)), target, goal, s_0=s_0, offline=np.asarray(net.apply(w, s_0, goal))
+    )
     assert fit["offline_r2_over_mean"] > 0.6 > fit["r2_over_mean"] + 0.5  # measured: 0.74 against -0.11
 
 
@@ -333,8 +344,12 @@ def replay_stream(config, steps: int, seed: int, offered: float):
     each step offering its item with probability `offered`, f_w's initial w)."""
     trainer, rng = H.trainer(config), np.random.default_rng(seed)
     lanes, hidden = config.num_lanes, config.hidden_size
-    items = (rng.normal(size=(steps, lanes, hidden)).astype(np.float32), rng.normal(size=(steps, lanes, GOAL_SIZE)).astype(np.float32),
-             rng.normal(size=(steps, lanes, hidden)).astype(np.float32), rng.random((steps, lanes)) < offered)  # fmt: skip
+    items = (
+        rng.normal(size=(steps, lanes, hidden)).astype(np.float32),
+        rng.normal(size=(steps, lanes, GOAL_SIZE)).astype(np.float32),
+        rng.normal(size=(steps, lanes, hidden)).astype(np.float32),
+        rng.random((steps, lanes)) < offered,
+    )
     return trainer, items, trainer.networks.imagination_net.init(jax.random.PRNGKey(0), items[0][0, 0], items[1][0, 0])
 
 
@@ -346,12 +361,22 @@ def test_replayed_online_fit_is_the_training_procedure():
 
     config = H.tiny_config("a3c+foresit", buffer_size=4, imagination_epochs=2, imagination_batch=2)
     trainer, items, w0 = replay_stream(config, steps=6, seed=7, offered=0.5)
-    buffers = jax.tree.map(lambda x: jnp.broadcast_to(x, (config.num_lanes,) + x.shape),
-                           imagination.buffer_init(config.buffer_size, config.hidden_size, GOAL_SIZE))  # fmt: skip
+    buffers = jax.tree.map(
+        lambda x: jnp.broadcast_to(x, (config.num_lanes,) + x.shape),
+        imagination.buffer_init(config.buffer_size, config.hidden_size, GOAL_SIZE),
+    )
     doubled = tuple(jnp.asarray(np.concatenate([x, x])) for x in items)
     want, _, _ = jax.jit(trainer.store_and_train)(w0, buffers, doubled)
-    got = probes.replay_online_fit(trainer.networks.imagine, w0, *items, trainer.imagination_optimizer,
-                                   config.imagination_epochs, config.buffer_size, passes=2, batch=2)  # fmt: skip
+    got = probes.replay_online_fit(
+        trainer.networks.imagine,
+        w0,
+        *items,
+        trainer.imagination_optimizer,
+        config.imagination_epochs,
+        config.buffer_size,
+        passes=2,
+        batch=2,
+    )
     H.assert_trees_bitwise_equal(got, want)
     assert not H.trees_bitwise_equal(got, w0)
 
@@ -364,8 +389,12 @@ def test_the_replay_can_keep_one_optimizer_state_across_flushes():
 
     config = H.tiny_config("a3c+foresit", buffer_size=2)
     trainer, items, w0 = replay_stream(config, steps=4, seed=9, offered=0.7)
-    fresh, kept = (probes.replay_online_fit(trainer.networks.imagine, w0, *items, optax.adam(1e-2), 1, config.buffer_size,
-                                            keep_optimizer_state=keep) for keep in (False, True))  # fmt: skip
+    fresh, kept = (
+        probes.replay_online_fit(
+            trainer.networks.imagine, w0, *items, optax.adam(1e-2), 1, config.buffer_size, keep_optimizer_state=keep
+        )
+        for keep in (False, True)
+    )
     assert not H.trees_bitwise_equal(fresh, w0)
     assert not H.trees_bitwise_equal(kept, fresh)
 
@@ -420,16 +449,22 @@ def test_stopped_key_gradient_leaves_the_values_and_cuts_the_earlier_states_grad
     rng = np.random.default_rng(0)
     states = np.tanh(rng.normal(size=(5, 16))).astype(np.float32)
     valid = np.ones(5, bool)
-    full, stopped = (networks.Critic(attention=True, attention_size=8, value_hidden=12, key_gradient=g) for g in (True, False))
+    full, stopped = (
+        networks.Critic(attention=True, attention_size=8, value_hidden=12, key_gradient=g) for g in (True, False)
+    )
     params = full.init(jax.random.PRNGKey(1), states, valid)
     mask = networks.causal_episode_mask(valid)
-    value = {name: (lambda x, c=c: c.apply(params, x, valid).value) for name, c in (("full", full), ("stopped", stopped))}
+    value = {
+        name: (lambda x, c=c: c.apply(params, x, valid).value) for name, c in (("full", full), ("stopped", stopped))
+    }
     np.testing.assert_array_equal(value["full"](states), value["stopped"](states))
     jac = {name: np.asarray(jax.jacrev(f)(states)) for name, f in value.items()}  # [T, T, H]: d V_t / d s_j
     earlier = np.tril(np.ones((5, 5), bool), -1)
     assert np.all(jac["stopped"][earlier] == 0)
     assert np.all(np.abs(jac["full"][earlier]).max(-1) > 0)
-    reference = jax.jacrev(lambda x: full.apply(params, x, valid, keys=jnp.asarray(states), key_mask=mask).value)(states)
+    reference = jax.jacrev(lambda x: full.apply(params, x, valid, keys=jnp.asarray(states), key_mask=mask).value)(
+        states
+    )
     np.testing.assert_allclose(jac["stopped"], reference, atol=1e-6)
     config = H.tiny_config("a3c+critic", attention_key_gradient="stopped")
     assert build(config).model.key_gradient is False and build(H.tiny_config("a3c+critic")).model.key_gradient is True
@@ -452,8 +487,13 @@ def test_episode_endings_on_hand_made_episodes():
     p_done = np.array([[0.1, 0.2, 0.9, 0.5], [0.3, 0.5, 0.5, 0.5], [0.0, 0.1, 0.0, 0.2]])
     out = episode_endings(valid, success, actions, p_done, d, in_room, DONE)
     assert out["all"] == {"episodes": 3, "success": 1 / 3, "failed Done": 1 / 3, "time-out": 1 / 3}
-    assert out["failed Done"] == {"episodes": 1, "median actions": 1.0, "early share": 1.0, "median d at Done": 4.0,
-                                  "in target room share": 0.0}  # fmt: skip
+    assert out["failed Done"] == {
+        "episodes": 1,
+        "median actions": 1.0,
+        "early share": 1.0,
+        "median d at Done": 4.0,
+        "in target room share": 0.0,
+    }
     assert out["p_done"]["would succeed"] == pytest.approx(0.9)
     assert out["p_done"]["would fail"] == pytest.approx((0.1 + 0.2 + 0.3 + 0.0 + 0.1 + 0.0 + 0.2) / 7)
     assert out["start in target room"]["success"] == 1.0 and out["start away"]["episodes"] == 2
@@ -471,7 +511,9 @@ def test_explained_variance_and_advantage_spread_against_numpy():
     want = 1 - np.var(r - v) / np.var(r)
     got = train.explained_variance(jnp.asarray(values), jnp.asarray(returns), jnp.asarray(mask))
     assert float(got) == pytest.approx(want, rel=1e-5)
-    assert float(train.explained_variance(jnp.asarray(returns), jnp.asarray(returns), jnp.asarray(mask))) == pytest.approx(1.0)
+    assert float(
+        train.explained_variance(jnp.asarray(returns), jnp.asarray(returns), jnp.asarray(mask))
+    ) == pytest.approx(1.0)
     assert float(train.masked_variance(jnp.asarray(returns), jnp.asarray(mask))) == pytest.approx(np.var(r), rel=1e-5)
     assert float(train.explained_variance(jnp.ones((4,)), jnp.zeros((4,)), jnp.ones((4,), bool))) == 0.0  # no spread
 
@@ -500,8 +542,12 @@ def test_fit_options_replay_each_option_on_the_fit_items_and_score_the_held_out_
     trainer = H.trainer(config)
     rng = np.random.default_rng(8)
     shape = (3, 5, config.num_lanes)
-    items = (rng.normal(size=shape + (16,)).astype(np.float32), rng.normal(size=shape + (8,)).astype(np.float32),
-             rng.normal(size=shape + (16,)).astype(np.float32), rng.random(shape) < 0.6)  # fmt: skip
+    items = (
+        rng.normal(size=shape + (16,)).astype(np.float32),
+        rng.normal(size=shape + (8,)).astype(np.float32),
+        rng.normal(size=shape + (16,)).astype(np.float32),
+        rng.random(shape) < 0.6,
+    )
     w0 = trainer.networks.imagination_net.init(jax.random.PRNGKey(0), items[0][0, 0, 0], items[1][0, 0, 0])
     model = models.Model(config, trainer, 0, None, None)
     got = probe_runs.fit_options(model, w0, items, passes=2)
@@ -510,8 +556,16 @@ def test_fit_options_replay_each_option_on_the_fit_items_and_score_the_held_out_
     assert np.isnan(probe_runs.fit_options(small, w0, items, passes=1)["batch 8"])  # 8 does not divide 2
     flat = [x.reshape((-1,) + x.shape[2:]) for x in items]
     add = flat[3]
-    w = probes.replay_online_fit(trainer.networks.imagine, w0, *flat[:3], probes.only_fit_items(add),
-                                 trainer.imagination_optimizer, config.imagination_epochs, config.buffer_size, 2)  # fmt: skip
+    w = probes.replay_online_fit(
+        trainer.networks.imagine,
+        w0,
+        *flat[:3],
+        probes.only_fit_items(add),
+        trainer.imagination_optimizer,
+        config.imagination_epochs,
+        config.buffer_size,
+        2,
+    )
     target = flat[2][add]
     predicted = np.asarray(trainer.networks.imagine(w, flat[0][add][1::2], flat[1][add][1::2]))
     assert got["as trained"] == pytest.approx(probes.r_squared(predicted, target[1::2], target[::2].mean(0)))

@@ -38,13 +38,18 @@ def test_names_parse_into_pieces(name, base, encoder, imagination):
 @pytest.mark.parametrize(
     "name, critic, canonical",
     [
-        ("a3c", "plain", "a3c"), ("a3c+critic", "attention", "a3c+critic"),
-        ("a3c+foresit", "attention", "a3c+foresit"), ("critic+foresit", "attention", "a3c+foresit"),
-        ("a3c+foresit+plaincritic", "plain", "a3c+foresit+plaincritic"), ("a3c+plaincritic", "plain", "a3c"),
-        ("org+rnd", "attention", "a3c+org+rnd"), ("plaincritic+org+rnd", "plain", "a3c+org+rnd+plaincritic"),
-        ("a3c+maml+critic", "attention", "a3c+maml+critic"), ("a3c+org+int+plaincritic", "plain", "a3c+org+int+plaincritic"),
+        ("a3c", "plain", "a3c"),
+        ("a3c+critic", "attention", "a3c+critic"),
+        ("a3c+foresit", "attention", "a3c+foresit"),
+        ("critic+foresit", "attention", "a3c+foresit"),
+        ("a3c+foresit+plaincritic", "plain", "a3c+foresit+plaincritic"),
+        ("a3c+plaincritic", "plain", "a3c"),
+        ("org+rnd", "attention", "a3c+org+rnd"),
+        ("plaincritic+org+rnd", "plain", "a3c+org+rnd+plaincritic"),
+        ("a3c+maml+critic", "attention", "a3c+maml+critic"),
+        ("a3c+org+int+plaincritic", "plain", "a3c+org+int+plaincritic"),
     ],
-)  # fmt: skip
+)
 def test_the_critic_is_its_own_piece(name, critic, canonical):
     """Every imagination variant of the paper defaults to the attention critic (its rows
     keep their meaning), no imagination to the plain one; either can be named."""
@@ -68,9 +73,13 @@ def test_canonical_names_round_trip():
 
 @pytest.mark.parametrize(
     "name, match",
-    [("a3c+ppo", "unknown piece 'ppo'"), ("foresit+rnd", "two imagination"),
-     ("maml+maml", "two base"), ("", "non-empty")],
-)  # fmt: skip
+    [
+        ("a3c+ppo", "unknown piece 'ppo'"),
+        ("foresit+rnd", "two imagination"),
+        ("maml+maml", "two base"),
+        ("", "non-empty"),
+    ],
+)
 def test_bad_names(name, match):
     with pytest.raises(ValueError, match=match):
         parse_method(name)

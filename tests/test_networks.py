@@ -70,9 +70,7 @@ class EncoderTest(chex.TestCase):
         super().setUpClass()
         rng = np.random.default_rng(0)
         cls.encoder = networks.Encoder(hidden_size=H)
-        cls.params = random_params(
-            rng, cls.encoder, networks.initial_carry((), H), random_obs(rng), random_probs(rng)
-        )
+        cls.params = random_params(rng, cls.encoder, networks.initial_carry((), H), random_obs(rng), random_probs(rng))
 
     def setUp(self):
         super().setUp()
@@ -191,9 +189,7 @@ class CriticTest(chex.TestCase):
         cls.critic = networks.Critic(attention=True, attention_size=8, value_hidden=12)
         shapes = jax.eval_shape(cls.critic.init, jax.random.key(3), cls.states, cls.valid)
         # Standard-normal weights make the attention far from uniform.
-        cls.params = jax.tree.map(
-            lambda x: jnp.asarray(rng.normal(size=x.shape), jnp.float32), shapes
-        )
+        cls.params = jax.tree.map(lambda x: jnp.asarray(rng.normal(size=x.shape), jnp.float32), shapes)
 
     @chex.variants(with_jit=True, without_jit=True)
     def test_matches_numpy_equations(self):
@@ -296,9 +292,7 @@ class SubgoalTest(chex.TestCase):
     def setUp(self):
         super().setUp()
         # Hand-made episode of 4 states plus one padding step.
-        self.states = jnp.array(
-            [[3.0, 0, 0], [0, 3.0, 0], [0, 0, 1.0], [0, 2.0, 0], [9.0, 9.0, 9.0]]
-        )
+        self.states = jnp.array([[3.0, 0, 0], [0, 3.0, 0], [0, 0, 1.0], [0, 2.0, 0], [9.0, 9.0, 9.0]])
         self.valid = jnp.array([1, 1, 1, 1, 0], bool)
 
     def test_identity_attention_picks_most_correlated_state(self):
@@ -322,8 +316,9 @@ class SubgoalTest(chex.TestCase):
         argmax = self.variant(lambda s, a: networks.subgoals_of_rows(s, a, "argmax"))
         average = self.variant(lambda s, a: networks.subgoals_of_rows(s, a, "attention_average"))
         np.testing.assert_array_equal(argmax(self.states, alpha), [[0.0, 0.0, 1.0]])
-        np.testing.assert_allclose(average(self.states, alpha), [[0.1 * 3.0, 0.2 * 3.0 + 0.3 * 2.0, 0.4 * 1.0]],
-                                   rtol=1e-6)  # fmt: skip
+        np.testing.assert_allclose(
+            average(self.states, alpha), [[0.1 * 3.0, 0.2 * 3.0 + 0.3 * 2.0, 0.4 * 1.0]], rtol=1e-6
+        )
         # Ties go to the first index.
         tie = jnp.array([[0.0, 0.4, 0.2, 0.4, 0.0]])
         np.testing.assert_array_equal(argmax(self.states, tie), [[0.0, 3.0, 0.0]])
@@ -351,9 +346,7 @@ class ImaginationNetTest(chex.TestCase):
         layers = params["params"]
         self.assertEqual(len(layers), 6)
         sizes = [layers[f"layer_{i}"]["kernel"].shape for i in range(6)]
-        self.assertEqual(
-            sizes, [(812, 512), (512, 256), (256, 64), (64, 256), (256, 512), (512, 512)]
-        )
+        self.assertEqual(sizes, [(812, 512), (512, 256), (256, 64), (64, 256), (256, 512), (512, 512)])
         self.assertEqual(min(s[1] for s in sizes), 64)  # bottleneck
         out = net.apply(params, s0, goal)
         chex.assert_shape(out, (3, 512))
@@ -383,8 +376,12 @@ class ActorCriticTest(chex.TestCase):
             hidden_size=H, use_imagination=True, attention_critic=True, attention_size=8, value_hidden=12
         )
         cls.params = random_params(
-            rng, cls.model, networks.initial_carry((), H), random_obs(rng),
-            random_probs(rng), jnp.zeros(H),
+            rng,
+            cls.model,
+            networks.initial_carry((), H),
+            random_obs(rng),
+            random_probs(rng),
+            jnp.zeros(H),
         )
 
     def setUp(self):
@@ -401,9 +398,7 @@ class ActorCriticTest(chex.TestCase):
         probs = random_probs(self.rng, (T, B))
         imagined = np.tanh(self.rng.normal(size=(T, B, H))).astype(np.float32)
         carry0 = networks.initial_carry((B,), H)
-        unroll = jax.jit(chex.assert_max_traces(
-            lambda p, c, o, pr, i: unroll_steps(self.model, p, c, o, pr, i), n=1
-        ))
+        unroll = jax.jit(chex.assert_max_traces(lambda p, c, o, pr, i: unroll_steps(self.model, p, c, o, pr, i), n=1))
         carry, states, logits = unroll(self.params, carry0, obs, probs, imagined)
         unroll(self.params, carry0, obs, probs, imagined + 0.1)  # no retrace
         chex.assert_shape(states, (T, B, H))
@@ -417,15 +412,20 @@ class ActorCriticTest(chex.TestCase):
         np.testing.assert_allclose(carry[1], c[1], rtol=1e-5, atol=1e-6)
         # Critic over the unrolled states, lanes batched.
         out = self.model.apply(
-            self.params, jnp.swapaxes(states, 0, 1), jnp.ones((B, T), bool),
+            self.params,
+            jnp.swapaxes(states, 0, 1),
+            jnp.ones((B, T), bool),
             method=networks.ActorCritic.critic,
         )
         chex.assert_shape(out.value, (B, T))
 
     def test_init_is_finite_and_small_policy(self):
         params = jax.jit(self.model.init)(
-            jax.random.key(0), networks.initial_carry((), H), random_obs(self.rng),
-            random_probs(self.rng), jnp.zeros(H),
+            jax.random.key(0),
+            networks.initial_carry((), H),
+            random_obs(self.rng),
+            random_probs(self.rng),
+            jnp.zeros(H),
         )
         chex.assert_trees_all_equal_shapes(params, self.params)
         chex.assert_tree_all_finite(params)

@@ -18,8 +18,14 @@ processor	: 1
 vendor_id	: GenuineIntel
 model name	: something else
 """
-HERE = {"jax": "0.7.2", "jaxlib": "0.7.2", "backend": "cpu", "device": "cpu", "xla_flags": "",
-        "cpu": {"name": "AMD EPYC", "vendor": "AuthenticAMD", "family": "25", "model": "17", "isa": "avx512"}}  # fmt: skip
+HERE = {
+    "jax": "0.7.2",
+    "jaxlib": "0.7.2",
+    "backend": "cpu",
+    "device": "cpu",
+    "xla_flags": "",
+    "cpu": {"name": "AMD EPYC", "vendor": "AuthenticAMD", "family": "25", "model": "17", "isa": "avx512"},
+}
 THERE = {**HERE, "cpu": {**HERE["cpu"], "isa": "avx2"}}
 
 
@@ -86,7 +92,12 @@ def test_platforms_section_names_the_pairs_that_mix_platforms():
     here, there = numerics.extend(None, 0, HERE)[0], numerics.extend(None, 0, THERE)[0]
     one = numerics.markdown({"a": per_seed(here, here), "b": per_seed(here, here)}, [("a", "b")])
     assert f"Every method was trained on {numerics.describe(HERE)}." in one and "different platforms" not in one
-    results = {"a": per_seed(here, here), "b": per_seed(here, here), "c": per_seed(there, there), "d": per_seed(None, None)}
+    results = {
+        "a": per_seed(here, here),
+        "b": per_seed(here, here),
+        "c": per_seed(there, there),
+        "d": per_seed(None, None),
+    }
     text = numerics.markdown(results, [("a", "b"), ("a", "c"), ("b", "d"), ("a", "missing")])
     assert f"- {numerics.describe(HERE)}: a, b\n" in text and f"- {numerics.describe(THERE)}: c\n" in text
     assert "- not recorded: d\n" in text

@@ -55,7 +55,9 @@ def bank_pose_index(poses, grid):
     return ((poses[:, 0] * grid + poses[:, 1]) * 8 + poses[:, 2]) * 2 + poses[:, 3]
 
 
-@pytest.mark.parametrize("kit_name, scenes", [("savn_kit", [0, 7, 12, 19]), ("org_kit", [3, 16]), ("priors_kit", [2, 11])])
+@pytest.mark.parametrize(
+    "kit_name, scenes", [("savn_kit", [0, 7, 12, 19]), ("org_kit", [3, 16]), ("priors_kit", [2, 11])]
+)
 def test_bank_distance_equals_reference_bfs(request, kit_name, scenes):
     """Every free-cell pose of scenes of each room type, every target of the scene."""
     kit = request.getfixturevalue(kit_name)

@@ -61,8 +61,15 @@ def _act(num_steps):
     trainer = H.trainer(PACKED)
 
     def act(params, w_params, env_params, actor, step_keys):
-        return rollout.act_window(trainer.networks, AgentParams(params, w_params), trainer.bind(env_params), actor, step_keys[0],
-                           num_steps, ActOptions(step_keys=step_keys))  # fmt: skip
+        return rollout.act_window(
+            trainer.networks,
+            AgentParams(params, w_params),
+            trainer.bind(env_params),
+            actor,
+            step_keys[0],
+            num_steps,
+            ActOptions(step_keys=step_keys),
+        )
 
     return jax.jit(act, compiler_options=H.FAST_COMPILE)
 
@@ -89,9 +96,13 @@ def windows():
 def test_a_cut_window_gives_the_forward_values_of_the_uncut_one(windows):
     state, (long_actor, long, long_end), (cut_actor, first, first_end), (end_actor, second, second_end) = windows
     for name in ("actions", "episode_step", "terminated", "truncated", "success"):
-        np.testing.assert_array_equal(np.concatenate([getattr(first, name), getattr(second, name)]), getattr(long, name))
+        np.testing.assert_array_equal(
+            np.concatenate([getattr(first, name), getattr(second, name)]), getattr(long, name)
+        )
     for name in ("states", "logits"):
-        np.testing.assert_allclose(np.concatenate([getattr(first, name), getattr(second, name)]), getattr(long, name), rtol=1e-6, atol=1e-6)
+        np.testing.assert_allclose(
+            np.concatenate([getattr(first, name), getattr(second, name)]), getattr(long, name), rtol=1e-6, atol=1e-6
+        )
     cut_episodes = np.asarray(first.episode_step[-1] > 0) & ~np.asarray(first.terminated[-1] | first.truncated[-1])
     assert cut_episodes.any(), "precondition: some lane's episode runs across the cut"
     # The state after the first window is the second window's first state.
@@ -107,7 +118,9 @@ def test_a_cut_window_gives_the_forward_values_of_the_uncut_one(windows):
     first_out, _ = critic(state.params, first, first_end, state.actor.memory)
     second_out, _ = critic(state.params, second, second_end, cut_actor.memory)
     np.testing.assert_allclose(second_out.value[:25], long_out.value[15:40], rtol=1e-5, atol=1e-6)
-    np.testing.assert_allclose(second_out.attended_state[:, :25], long_out.attended_state[:, 15:40], rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(
+        second_out.attended_state[:, :25], long_out.attended_state[:, 15:40], rtol=1e-5, atol=1e-6
+    )
     np.testing.assert_allclose(first_out.value[:15], long_out.value[:15], rtol=1e-5, atol=1e-6)
     # Eq. 8: the cut is bootstrapped with V(s*_T), the value of the next window's first step.
     np.testing.assert_allclose(first_out.value[15], long_out.value[15], rtol=1e-5, atol=1e-6)
@@ -144,12 +157,20 @@ def whole_episode_layout(traj, limit: int):
     valid = lay(complete)
     E = len(spans)
     whole = traj._replace(
-        states=lay(traj.states), logits=lay(traj.logits), actions=lay(traj.actions), rewards=lay(traj.rewards),
-        terminated=lay(traj.terminated), truncated=lay(traj.truncated), valid=valid, success=lay(traj.success),
-        episode_step=np.broadcast_to(np.arange(limit)[:, None], (limit, E)).astype(np.int32), s_0=lay(traj.s_0),
-        optimal_length=lay(traj.optimal_length), room_type=lay(traj.room_type),
+        states=lay(traj.states),
+        logits=lay(traj.logits),
+        actions=lay(traj.actions),
+        rewards=lay(traj.rewards),
+        terminated=lay(traj.terminated),
+        truncated=lay(traj.truncated),
+        valid=valid,
+        success=lay(traj.success),
+        episode_step=np.broadcast_to(np.arange(limit)[:, None], (limit, E)).astype(np.int32),
+        s_0=lay(traj.s_0),
+        optimal_length=lay(traj.optimal_length),
+        room_type=lay(traj.room_type),
         inputs=jax.tree.map(lay, traj.inputs),
-    )  # fmt: skip
+    )
     end = WindowEnd(np.zeros((E,) + traj.states.shape[2:], np.float32), np.zeros((E,), np.int32))
     return whole, end, complete
 
@@ -168,13 +189,17 @@ def test_packing_changes_nothing_but_speed(windows):
 
     def packed_loss(p):
         traj = long._replace(valid=jnp.asarray(complete))
-        return packed.window_loss(p, replayed(packed.networks, p, traj, state.actor.lstm), long_end, state.actor.memory)[0]
+        return packed.window_loss(
+            p, replayed(packed.networks, p, traj, state.actor.lstm), long_end, state.actor.memory
+        )[0]
 
     def whole_loss(p):
         zeros = (jnp.zeros((E, hidden)), jnp.zeros((E, hidden)))
         traj = jax.tree.map(jnp.asarray, whole)
         end = jax.tree.map(jnp.asarray, whole_end)
-        return whole_trainer.window_loss(p, replayed(whole_trainer.networks, p, traj, zeros), end, jnp.zeros((E, 0, hidden)))[0]
+        return whole_trainer.window_loss(
+            p, replayed(whole_trainer.networks, p, traj, zeros), end, jnp.zeros((E, 0, hidden))
+        )[0]
 
     grad = functools.partial(jax.jit, compiler_options=H.FAST_COMPILE)
     loss_p, grads_p = grad(jax.value_and_grad(packed_loss))(state.params)
@@ -198,7 +223,9 @@ def test_bootstrapped_return_at_a_cut_by_hand():
     v = jnp.asarray([0.5, 1.0, 0.2, 0.3])[:, None]
     term = jnp.asarray([0, 1, 0, 0], bool)[:, None]
     valid = jnp.ones((4, 1), bool)
-    advantage, returns = train.advantages_and_returns(r, v, term, jnp.zeros_like(term), valid, jnp.asarray([2.0]), 0.99, 1.0)
+    advantage, returns = train.advantages_and_returns(
+        r, v, term, jnp.zeros_like(term), valid, jnp.asarray([2.0]), 0.99, 1.0
+    )
     np.testing.assert_allclose(returns[:, 0], [4.94, 5.0, 1.9403, 1.97], rtol=1e-6)
     np.testing.assert_allclose(advantage[:, 0], [4.44, 4.0, 1.7403, 1.67], rtol=1e-5)
     trunc = jnp.asarray([0, 0, 0, 1], bool)[:, None]
@@ -232,7 +259,9 @@ def test_foresit_bookkeeping_fires_once_per_ended_episode_never_for_a_cut_one():
     np.testing.assert_array_equal(new.actor.tracker.outcomes.sum(-1), successes_per_lane)
     np.testing.assert_array_equal(new.buffers.count, successes_per_lane)
     assert float(metrics["charts/episodes"]) == ended_per_lane.sum()
-    np.testing.assert_allclose(float(metrics["charts/success_rate"]), successes_per_lane.sum() / ended_per_lane.sum(), rtol=1e-6)
+    np.testing.assert_allclose(
+        float(metrics["charts/success_rate"]), successes_per_lane.sum() / ended_per_lane.sum(), rtol=1e-6
+    )
     step, states, goals = np.asarray(traj.episode_step), np.asarray(traj.states), np.asarray(traj.inputs.obs["target"])
     for b in range(config.num_lanes):
         items = 0
@@ -251,4 +280,6 @@ def test_foresit_bookkeeping_fires_once_per_ended_episode_never_for_a_cut_one():
         AgentParams(new.params, new.imagination_params), trainer.bind(trainer.env_params), new.actor, k_act
     )
     ended_2 = np.asarray(traj2.terminated | traj2.truncated).sum(0)
-    np.testing.assert_array_equal(newer.actor.tracker.count, np.minimum(ended_per_lane + ended_2, config.success_window))
+    np.testing.assert_array_equal(
+        newer.actor.tracker.count, np.minimum(ended_per_lane + ended_2, config.success_window)
+    )

@@ -20,9 +20,23 @@ from test_experiments import cli_error
 # The tiny report trains two methods (compile time dominates): the other rows read "not run".
 RUN = ("a3c", "a3c+foresit")
 EXCLUDE = tuple(m for m in paper_tables.SETUP_OF if m not in RUN)
-SECTIONS = ("## Platforms", "## Table 1", "### savn setup", "### org setup", "## Table 2", "## Table 3", "## Model selection",
-            "## SR and SPL by optimal path length", "## The paper's claims", "## ORG's rows with sampled actions",
-            "## Imagination probes", "## The C-VAE comparison", "## Figure 4", "## Figure 3", "## Learning curves")  # fmt: skip
+SECTIONS = (
+    "## Platforms",
+    "## Table 1",
+    "### savn setup",
+    "### org setup",
+    "## Table 2",
+    "## Table 3",
+    "## Model selection",
+    "## SR and SPL by optimal path length",
+    "## The paper's claims",
+    "## ORG's rows with sampled actions",
+    "## Imagination probes",
+    "## The C-VAE comparison",
+    "## Figure 4",
+    "## Figure 3",
+    "## Learning curves",
+)
 
 
 # Cheap in-process CLI calls for every test of this module (tests/conftest.py).
@@ -34,8 +48,17 @@ def test_tiny_report_has_every_table_figure_and_claim_after_a_kill_resume_and_re
     # a3c alone first, killed and resumed; then the report run trains a3c+foresit and
     # copies a3c from the first run (--reuse), as MAML rows run elsewhere would be combined.
     part, out = tmp_path / "a3c_only", tmp_path / "paper"
-    extra = ["--cvae-windows", "20", "--cvae-epochs", "2", "--trajectory-candidates", "8", "--probe-episodes-per-room", "2",
-             "--no-progress"]  # fmt: skip
+    extra = [
+        "--cvae-windows",
+        "20",
+        "--cvae-epochs",
+        "2",
+        "--trajectory-candidates",
+        "8",
+        "--probe-episodes-per-room",
+        "2",
+        "--no-progress",
+    ]
     only_a3c = ["--exclude", *EXCLUDE, "a3c+foresit"]
     argv = ["--preset", "tiny", "--seeds", "2", *extra]
     assert paper.cli([*argv, "--out", str(part), *only_a3c, "--stop-after-chunks", "1"]) is None  # killed in a3c
@@ -51,8 +74,19 @@ def test_tiny_report_has_every_table_figure_and_claim_after_a_kill_resume_and_re
     reused = (part / "savn" / "methods" / "a3c" / "results.json").read_text()
     capsys.readouterr()
     # a3c+foresit as an arm (--arms): trained in its arm's folder, reported under its method's name.
-    claims = paper.cli([*argv, "--out", str(out), "--exclude", *EXCLUDE, "--reuse", str(part),
-                        "--arms", "a3c+foresit@learning_rate=3e-4"])  # fmt: skip
+    claims = paper.cli(
+        [
+            *argv,
+            "--out",
+            str(out),
+            "--exclude",
+            *EXCLUDE,
+            "--reuse",
+            str(part),
+            "--arms",
+            "a3c+foresit@learning_rate=3e-4",
+        ]
+    )
     assert "a3c: finished in" in capsys.readouterr().out  # copied, not trained again
     assert (out / "savn" / "methods" / "a3c+foresit@learning_rate=3e-4" / "results.json").is_file()
     assert json.loads((out / "probe.json").read_text()).keys() == {"a3c+foresit"}
@@ -69,9 +103,18 @@ def test_tiny_report_has_every_table_figure_and_claim_after_a_kill_resume_and_re
     assert "most XLA optimisations off." in report.split("Every method was trained on cpu (")[1].splitlines()[0]
     assert not numerics.fast_compile_on()
     assert (out / "table3.csv").read_text() == ""  # none of Table 3's methods ran
-    for name in ("table1.csv", "table2.csv", "by_length.csv", "claims.csv", "cvae_comparison.json", "probe.json",
-                 "fig4_tsne.png", "fig3_a3c_vs_a3c_foresit.png", "by_length_a3c_vs_a3c_foresit.png",
-                 "savn/learning_curves.png"):  # fmt: skip
+    for name in (
+        "table1.csv",
+        "table2.csv",
+        "by_length.csv",
+        "claims.csv",
+        "cvae_comparison.json",
+        "probe.json",
+        "fig4_tsne.png",
+        "fig3_a3c_vs_a3c_foresit.png",
+        "by_length_a3c_vs_a3c_foresit.png",
+        "savn/learning_curves.png",
+    ):
         assert (out / name).stat().st_size > 0, name
     assert not (out / "org").exists()  # every org method excluded: no sweep
     # One line per claim; those with a method left out read "not run".
@@ -109,9 +152,13 @@ def test_sampled_section_pairs_greedy_with_sampled_and_each_method_with_the_base
     each method against the base with sampled actions, as mean paired differences."""
     greedy = {"a3c+org": (60.0, 70.0, 65.0), "a3c+org+critic": (50.0, 52.0, 57.0)}
     sampled = {"a3c+org": (64.0, 73.0, 70.0), "a3c+org+critic": (62.0, 66.0, 70.0)}
-    results = {m: [{"seed": s, "selected": {"overall": {"SR": v, "SPL": v / 2}}} for s, v in enumerate(vs)]
-               for m, vs in greedy.items()}  # fmt: skip
-    runs_ = {m: [{"seed": s, "overall": {"SR": v, "SPL": v / 2}} for s, v in enumerate(vs)] for m, vs in sampled.items()}
+    results = {
+        m: [{"seed": s, "selected": {"overall": {"SR": v, "SPL": v / 2}}} for s, v in enumerate(vs)]
+        for m, vs in greedy.items()
+    }
+    runs_ = {
+        m: [{"seed": s, "overall": {"SR": v, "SPL": v / 2}} for s, v in enumerate(vs)] for m, vs in sampled.items()
+    }
     md, rows = paper_tables.sampled_markdown(results, runs_)
     by = {(r["method"], r["metric"]): r for r in rows}
     assert by[("a3c+org", "SR")]["sampled - greedy"] == pytest.approx(4.0)  # (4 + 3 + 5) / 3
@@ -127,8 +174,12 @@ def test_claims_hold_fail_or_cannot_tell_by_the_paired_interval():
     better = [result(60.0 + d, 58.0 + 2 * d) for d in (0.5, 2.0, -1.0, 1.5)]  # ~+10 SR, ~+18 on L>=5, small spread
     worse = [result(40.0 + d, 30.0 + d) for d in (1.0, 2.0, -2.5, 1.0)]
     noisy = [result(50.0 + d, 40.0 + d) for d in (20.0, -20.0, 15.0, -10.0)]
-    verdicts = {c: v for c, v, _ in paper_tables.claims({"a3c": base, "a3c+foresit": better, "a3c+org": base,
-                                                  "a3c+org+foresit": worse, "a3c+org+att": noisy})}  # fmt: skip
+    verdicts = {
+        c: v
+        for c, v, _ in paper_tables.claims(
+            {"a3c": base, "a3c+foresit": better, "a3c+org": base, "a3c+org+foresit": worse, "a3c+org+att": noisy}
+        )
+    }
     assert verdicts["Table 1: a3c+foresit has a higher SR than a3c"] == "holds"
     assert verdicts["Table 1: a3c+foresit has a higher SPL than a3c"] == "holds"
     assert verdicts["a3c+foresit's SR gain over a3c is larger on L^g>=5 than overall"] == "holds"
@@ -137,7 +188,8 @@ def test_claims_hold_fail_or_cannot_tell_by_the_paired_interval():
     assert verdicts["Table 1: a3c+maml has a higher SR than a3c"] == paper_tables.NOT_RUN
     # selected - last is +1 SR in every run: no spread, so no interval
     assert verdicts["Protocol: the model selected on validation has a higher test SR than the last one"] == (
-        "cannot tell at this budget")
+        "cannot tell at this budget"
+    )
     numbers = {c: n for c, _, n in paper_tables.claims({"a3c": base, "a3c+foresit": better})}
     diff = np.mean([b["selected"]["overall"]["SR"] - a["selected"]["overall"]["SR"] for a, b in zip(base, better)])
     assert numbers["Table 1: a3c+foresit has a higher SR than a3c"].startswith(f"SR difference {diff:+.1f} [")
@@ -177,6 +229,7 @@ def test_trajectory_replay_follows_the_environment_step_by_step():
 def test_reuse_lends_each_setup_its_own_sweeps(tmp_path):
     """--reuse takes paper runs (one sweep per setup inside) and sweep folders (one setup
     each): each setup's sweep is lent the folders of that setup only."""
+
     def folder(path, setup=None):
         path.mkdir(parents=True)
         (path / "sweep.json").write_text(json.dumps({"setup": setup}))
@@ -203,11 +256,14 @@ def test_arms_name_the_folders_and_the_rows_keep_the_method(tmp_path):
 def test_paper_rejects_bad_input_in_one_line(tmp_path, capsys):
     base = ["--preset", "tiny", "--out", tmp_path / "p"]
     assert "each arm's method must be a method of the paper's tables" in cli_error(
-        paper.cli, [*base, "--arms", "a3c+critic+foresit@learning_rate=1e-3"], capsys)
+        paper.cli, [*base, "--arms", "a3c+critic+foresit@learning_rate=1e-3"], capsys
+    )
     assert "each arm's method must be" in cli_error(
-        paper.cli, [*base, "--exclude", "a3c+maml", "--arms", "a3c+maml@learning_rate=1e-3"], capsys)
+        paper.cli, [*base, "--exclude", "a3c+maml", "--arms", "a3c+maml@learning_rate=1e-3"], capsys
+    )
     assert "at most one arm" in cli_error(
-        paper.cli, [*base, "--arms", "a3c@learning_rate=1e-3", "a3c@learning_rate=3e-4"], capsys)
+        paper.cli, [*base, "--arms", "a3c@learning_rate=1e-3", "a3c@learning_rate=3e-4"], capsys
+    )
     assert "is not a Config field" in cli_error(paper.cli, [*base, "--arms", "a3c@no_such=1"], capsys)
     assert "not a method of the paper's tables" in cli_error(paper.cli, [*base, "--exclude", "bogus"], capsys)
     assert "leaves no method" in cli_error(paper.cli, [*base, "--exclude", *paper_tables.SETUP_OF], capsys)

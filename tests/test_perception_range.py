@@ -24,8 +24,10 @@ def views(env, params, states):
     return jax.tree.map(np.asarray, jax.vmap(lambda s: env.view(s, params))(states))
 
 
-@pytest.mark.parametrize("setup,priors,precomputed", [
-    ("savn", True, True), pytest.param("savn", True, False, marks=pytest.mark.slow), ("org", False, True)])
+@pytest.mark.parametrize(
+    "setup,priors,precomputed",
+    [("savn", True, True), pytest.param("savn", True, False, marks=pytest.mark.slow), ("org", False, True)],
+)
 def test_the_view_is_the_tools_emulation_of_the_range(setup, priors, precomputed):
     # test_priors' small bank (one room type, 3 rays), so that the bank cache is shared
     kw = dict(setup=setup, priors=priors, precomputed_views=precomputed, view_width=3)
@@ -103,8 +105,9 @@ def test_the_range_changes_only_what_is_seen():
         def body(state, t):
             step_keys = jax.vmap(lambda k: jax.random.fold_in(k, t))(keys)
             action = jax.random.randint(jax.random.fold_in(keys[0], t), (64,), 0, C.NUM_ACTIONS)
-            obs, state, reward, terminated, truncated, info = jax.vmap(
-                lambda k, s, a: env.step(k, s, a, params))(step_keys, state, action)
+            obs, state, reward, terminated, truncated, info = jax.vmap(lambda k, s, a: env.step(k, s, a, params))(
+                step_keys, state, action
+            )
             info = {k: v for k, v in info.items() if k != "final_observation"}
             return state, (state, reward, terminated, truncated, info, obs["view"].argmax(-1))
 

@@ -37,7 +37,9 @@ def test_there_is_a_plan_and_each_names_its_archive():
 
 def archives(plan: Path) -> list[Path]:
     """Every archive a plan names, one `archive: docs/data/...` line each (one per stage)."""
-    return [REPO / line.split(": ", 1)[1].strip() for line in plan.read_text().splitlines() if line.startswith("archive: ")]
+    return [
+        REPO / line.split(": ", 1)[1].strip() for line in plan.read_text().splitlines() if line.startswith("archive: ")
+    ]
 
 
 STAGES = [(plan, archive) for plan in PLANS for archive in archives(plan)]
@@ -62,7 +64,8 @@ def test_a_plan_precedes_every_run_of_its_archive(plan, archive):
     for commit in commits:
         assert not commit.endswith("+dirty"), f"{archive.name}: a run from uncommitted code ({commit})"
         assert git("merge-base", "--is-ancestor", first, commit).returncode == 0, (
-            f"{archive.name}: run at {commit[:7]} does not descend from the plan's commit {first[:7]}")
+            f"{archive.name}: run at {commit[:7]} does not descend from the plan's commit {first[:7]}"
+        )
 
 
 def test_runs_record_the_commits_that_trained_them(monkeypatch):

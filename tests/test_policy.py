@@ -53,11 +53,14 @@ def test_the_policy_step_by_step_plays_rollouts_episodes_exactly(method):
     lanes, steps, key = 12, 30, jax.random.PRNGKey(5)
     bound = rollout.acting_env(nets, BoundEnv(env, env_params))
     acting = acting._replace(noise_variance=jnp.full(lanes, acting.noise_variance))
-    want = jax.jit(lambda a: episode_stats(rollout.rollout(nets, a, bound, key, steps)),
-                   compiler_options=H.FAST_COMPILE)(acting)  # fmt: skip
+    want = jax.jit(
+        lambda a: episode_stats(rollout.rollout(nets, a, bound, key, steps)), compiler_options=H.FAST_COMPILE
+    )(acting)
     act = policy.policy(nets)
-    got = jax.jit(lambda a: policy_episodes(act, a, policy.policy_carry(nets, lanes), bound, key, steps, lanes),
-                  compiler_options=H.FAST_COMPILE)(acting)  # fmt: skip
+    got = jax.jit(
+        lambda a: policy_episodes(act, a, policy.policy_carry(nets, lanes), bound, key, steps, lanes),
+        compiler_options=H.FAST_COMPILE,
+    )(acting)
     for name in ("success", "length", "optimal_length", "ended", "spl", "room_type"):
         np.testing.assert_array_equal(np.asarray(getattr(got, name)), np.asarray(getattr(want, name)), err_msg=name)
     lengths = np.asarray(want.length)
@@ -78,15 +81,18 @@ def test_the_maml_policy_adapts_in_its_carry_and_plays_rollouts_episodes_exactly
     obs, _ = env.reset(jax.random.PRNGKey(0), env_params)
 
     def played(nets):
-        return jax.jit(lambda a: episode_stats(rollout.rollout(nets, a, bound, key, steps, act=maml.act)),
-                       compiler_options=H.FAST_COMPILE)(acting)  # fmt: skip
+        return jax.jit(
+            lambda a: episode_stats(rollout.rollout(nets, a, bound, key, steps, act=maml.act)),
+            compiler_options=H.FAST_COMPILE,
+        )(acting)
 
     acting = acting._replace(noise_variance=jnp.full(lanes, acting.noise_variance))
     want = played(nets)
     act = maml.policy(nets)
     carry = maml.policy_carry(nets, lanes, acting, jax.eval_shape(lambda: obs))
-    got = jax.jit(lambda a, c: policy_episodes(act, a, c, bound, key, steps, lanes),
-                  compiler_options=H.FAST_COMPILE)(acting, carry)  # fmt: skip
+    got = jax.jit(lambda a, c: policy_episodes(act, a, c, bound, key, steps, lanes), compiler_options=H.FAST_COMPILE)(
+        acting, carry
+    )
     for name in ("success", "length", "optimal_length", "ended", "spl", "room_type"):
         np.testing.assert_array_equal(np.asarray(getattr(got, name)), np.asarray(getattr(want, name)), err_msg=name)
     lengths = np.asarray(want.length)
@@ -98,7 +104,12 @@ def test_the_maml_policy_adapts_in_its_carry_and_plays_rollouts_episodes_exactly
 def test_the_maml_keys_are_adaptive_acts():
     """`adaptive_keys` by hand: segment j's key is split(key, slots + 1)[j], split per lane,
     then per step; the environment's is split(split(step key, 3)[2], 1)[0]."""
-    loop, key, lanes, steps = maml.InnerLoop(segment=2, updates=2, lr=1.0, first_order=False), jax.random.PRNGKey(3), 3, 7
+    loop, key, lanes, steps = (
+        maml.InnerLoop(segment=2, updates=2, lr=1.0, first_order=False),
+        jax.random.PRNGKey(3),
+        3,
+        7,
+    )
     policy_keys, env_keys = maml.adaptive_keys(loop, key, steps, lanes)
     assert policy_keys.shape == (steps, lanes, 2) and env_keys.shape == (steps, lanes, 2)
     segments = jax.random.split(key, 3)  # slots after steps 2 and 4, then the rest (3 steps)
@@ -119,8 +130,9 @@ def test_the_maml_carry_needs_its_parameters_and_a_missing_noise_variance_is_ref
             wrong(maml_nets, 2)
     nets = build(H.tiny_config("a3c+foresit"))  # refused before the parameters or observations are read
     with pytest.raises(ValueError, match="noise_variance"):
-        policy.policy(nets)(AgentParams(None, None, None), policy.policy_carry(nets, 2), None, jnp.ones(2, bool),
-                            jax.random.PRNGKey(0))  # fmt: skip
+        policy.policy(nets)(
+            AgentParams(None, None, None), policy.policy_carry(nets, 2), None, jnp.ones(2, bool), jax.random.PRNGKey(0)
+        )
 
 
 @pytest.mark.slow
@@ -129,8 +141,9 @@ def test_evaluate_policy_gives_the_evaluators_numbers():
     nets, acting, _, _ = _acting(config)
     key = jax.random.PRNGKey(9)
     want = Evaluator.for_config(config).evaluate(acting, config, "test", key, 8, by_length=True)
-    got = evaluate_policy(policy.policy(nets), acting, functools.partial(policy.policy_carry, nets), config, "test",
-                          key, 8)  # fmt: skip
+    got = evaluate_policy(
+        policy.policy(nets), acting, functools.partial(policy.policy_carry, nets), config, "test", key, 8
+    )
     assert _same(got, want), (got, want)
     assert 0.0 < want["overall"]["SR"] + want["overall"]["episodes"]
 
@@ -170,8 +183,15 @@ def test_load_reproduces_the_runs_test_results(tmp_path, method):
     results = json.loads((out / "results.json").read_text())["results"][0]
     for which, reported in (("best", "selected"), ("last", "last")):
         loaded = experiments.load(out, seed=3, which=which)
-        got = evaluate_policy(loaded.act, loaded.params, loaded.initial_carry, loaded.config, "test", loaded.test_key,
-                              loaded.test_episodes_per_room)  # fmt: skip
+        got = evaluate_policy(
+            loaded.act,
+            loaded.params,
+            loaded.initial_carry,
+            loaded.config,
+            "test",
+            loaded.test_key,
+            loaded.test_episodes_per_room,
+        )
         for metric in ("SR", "SPL"):
             assert got["overall"][metric] == pytest.approx(results[reported]["overall"][metric], abs=1e-9), which
     with pytest.raises(UserError, match="seeds"):
@@ -195,8 +215,9 @@ def test_make_act_is_the_policy_make_train_trained():
     one = jax.tree.map(lambda x: x[1], states)
     H.assert_trees_bitwise_equal(act.params.params, one.params)
     key = jax.random.PRNGKey(9)
-    want = Evaluator.for_config(config).evaluate(agent_params(one, config.sigma2_max, config.evaluation_noise), config,
-                                                 "test", key, 8, by_length=True)  # fmt: skip
+    want = Evaluator.for_config(config).evaluate(
+        agent_params(one, config.sigma2_max, config.evaluation_noise), config, "test", key, 8, by_length=True
+    )
     got = evaluate_policy(act.act, act.params, act.initial_carry, config, "test", key, 8)
     assert _same(got, want), (got, want)
     assert make_act(config, one).params.noise_variance == act.params.noise_variance

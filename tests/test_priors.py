@@ -93,12 +93,19 @@ def relation_holds(layout, setup):
         four = inside([(r + 1, c), (r - 1, c), (r, c + 1), (r, c - 1)])
         eight = inside([(r + i, c + j) for i in (-1, 0, 1) for j in (-1, 0, 1) if i or j])
         if rel.zone == "corner":
-            ok = corner(r, c) if band == C.BAND_FLOOR else any(corner(a, b) for a, b in eight if 0 < a < g - 1 and 0 < b < g - 1)
+            ok = (
+                corner(r, c)
+                if band == C.BAND_FLOOR
+                else any(corner(a, b) for a, b in eight if 0 < a < g - 1 and 0 < b < g - 1)
+            )
         else:
             on = {C.FURNITURE_KINDS.index(k) for k in rel.on}
             within_two = kind[max(r - 2, 0) : r + 3, max(c - 2, 0) : c + 3]
-            ok = {C.BAND_MID: kind[r, c] in on, C.BAND_FLOOR: any(kind[a, b] in on for a, b in four),
-                  C.BAND_HIGH: np.isin(within_two, list(on)).any()}[int(band)]  # fmt: skip
+            ok = {
+                C.BAND_MID: kind[r, c] in on,
+                C.BAND_FLOOR: any(kind[a, b] in on for a, b in four),
+                C.BAND_HIGH: np.isin(within_two, list(on)).any(),
+            }[int(band)]
         out.append((name, bool(ok)))
     return out
 
@@ -136,8 +143,9 @@ def test_furniture_kinds_show_in_the_view_as_the_reference_marcher_sees_them(pri
             heading, horizon = int(rng.integers(8)), int(rng.integers(2))
             pose = ((pos[0] * grids[0].shape[0] + pos[1]) * 8 + heading) * 2 + horizon
             sem = kit.bank["view_sem"][scene, pose]
-            ref, _, margin = reference_view(*grids, pos, heading, horizon, kit.env.view_width,
-                                            furniture_sem=kit.bank["furniture_sem"][scene])  # fmt: skip
+            ref, _, margin = reference_view(
+                *grids, pos, heading, horizon, kit.env.view_width, furniture_sem=kit.bank["furniture_sem"][scene]
+            )
             clear = margin > 1e-3
             np.testing.assert_array_equal(sem[clear], ref[clear])
             seen_kinds |= {int(s) for s in sem.ravel() if s >= C.furniture_sem("savn", 0)}
@@ -159,9 +167,13 @@ def test_house_rooms_come_in_adjacent_pairs():
 
     rates = {}
     for priors in (True, False):
-        hits = [joined(layout, *pair) for n in HOUSE_NUMBERS
-                for layout in [generate_house(n, "savn", priors=priors)] for pair in P.ROOM_PAIRS
-                if set(pair) <= set(layout.room_types)]  # fmt: skip
+        hits = [
+            joined(layout, *pair)
+            for n in HOUSE_NUMBERS
+            for layout in [generate_house(n, "savn", priors=priors)]
+            for pair in P.ROOM_PAIRS
+            if set(pair) <= set(layout.room_types)
+        ]
         assert len(hits) >= 40
         rates[priors] = np.mean(hits)
     assert rates[True] >= 0.8 and rates[True] > rates[False] + 0.15, rates
@@ -207,7 +219,9 @@ def test_docs_relation_table_is_the_code():
     doc = (Path(__file__).resolve().parents[1] / "docs" / "priors.md").read_text()
     band = {C.BAND_FLOOR: "on the floor, beside", C.BAND_MID: "on", C.BAND_HIGH: "high on a wall, within 2 cells of"}
     for name, rel in P.RELATIONS.items():
-        rooms = sorted({C.ROOM_TYPES[r].replace("_", " ") for s in C.SETUPS for r in range(4) if name in C.SETUPS[s][1][r]})
+        rooms = sorted(
+            {C.ROOM_TYPES[r].replace("_", " ") for s in C.SETUPS for r in range(4) if name in C.SETUPS[s][1][r]}
+        )
         setups = ", ".join(s for s in C.SETUPS if name in C.categories(s))
         where = ", ".join(rel.on) if rel.on else f"a {rel.zone}"
         row = f"| {name} | {setups} | {', '.join(rooms)} | {band[C.category_band(name)]} | {where} | {', '.join(rel.near) or '-'} |"
@@ -234,10 +248,17 @@ def test_the_gpu_script_runs_dry_on_a_cpu(tmp_path):
     from pathlib import Path
 
     repo = Path(__file__).resolve().parents[1]
-    env = {**os.environ, "PRESET": "tiny", "SEEDS": "2", "UPDATES": "4", "OUT": str(tmp_path / "out"),
-           "RUNS": str(tmp_path / "runs")}  # fmt: skip
-    proc = subprocess.run(["bash", str(repo / "scripts" / "priors_study_gpu.sh")], env=env, capture_output=True,
-                          text=True, cwd=tmp_path)  # fmt: skip
+    env = {
+        **os.environ,
+        "PRESET": "tiny",
+        "SEEDS": "2",
+        "UPDATES": "4",
+        "OUT": str(tmp_path / "out"),
+        "RUNS": str(tmp_path / "runs"),
+    }
+    proc = subprocess.run(
+        ["bash", str(repo / "scripts" / "priors_study_gpu.sh")], env=env, capture_output=True, text=True, cwd=tmp_path
+    )
     assert proc.returncode == 0, proc.stderr[-2000:]
     runs_ = tmp_path / "runs"
     savn = (runs_ / "savn_all" / "compare.md").read_text()
@@ -267,10 +288,13 @@ def test_the_view_table_equals_the_ray_cast_at_every_step():
     assert obs_t["view"][..., C.furniture_sem("savn", 0) : -1].any()  # furniture kinds are in view
 
 
-@pytest.mark.parametrize("archive, arms", [
-    ("priors_savn.tar.xz", ("a3c", "a3c+critic@learning_rate=3e-4", "a3c+foresit@learning_rate=3e-4")),
-    ("priors_org.tar.xz", ("a3c+org", "a3c+org+critic", "a3c+org+foresit")),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "archive, arms",
+    [
+        ("priors_savn.tar.xz", ("a3c", "a3c+critic@learning_rate=3e-4", "a3c+foresit@learning_rate=3e-4")),
+        ("priors_org.tar.xz", ("a3c+org", "a3c+org+critic", "a3c+org+foresit")),
+    ],
+)
 def test_docs_quote_the_study_in_rooms_with_priors(tmp_path, capsys, archive, arms):
     """docs/priors.md's pairs are what experiments.compare computes from the study's files
     (docs/data/priors_<setup>.tar.xz: the sweep folder without checkpoints), the pairs on
@@ -305,14 +329,18 @@ def test_docs_quote_the_study_in_rooms_with_priors(tmp_path, capsys, archive, ar
     base, critic, foresit = (a.split("@")[0] for a in arms)
     vs_base, vs_critic = (out["pairs"][f"{arms[2]} - {a}"] for a in arms[:2])
     sr, spl = study_data.interval(vs_critic["SR"]), study_data.interval(vs_critic["SPL"])
-    quotes = [f"{foresit} - {base} {study_data.interval(vs_base['SR'])} SR",
-              f"{sr} over the critic" if archive == "priors_org.tar.xz" else f"{foresit} - {critic} {sr} SR, {spl} SPL"]
+    quotes = [
+        f"{foresit} - {base} {study_data.interval(vs_base['SR'])} SR",
+        f"{sr} over the critic" if archive == "priors_org.tar.xz" else f"{foresit} - {critic} {sr} SR, {spl} SPL",
+    ]
     for quoted in quotes:
         assert quoted in summary, quoted
 
 
-@pytest.mark.parametrize("data, method", [("priors_probe_savn.json", "a3c+foresit@learning_rate=3e-4"),
-                                          ("priors_probe_org.json", "a3c+org+foresit")])
+@pytest.mark.parametrize(
+    "data, method",
+    [("priors_probe_savn.json", "a3c+foresit@learning_rate=3e-4"), ("priors_probe_org.json", "a3c+org+foresit")],
+)
 def test_docs_quote_the_probes_in_rooms_with_priors(data, method):
     """docs/priors.md's probe tables and intervals are those of docs/data/priors_probe_<setup>.json
     (what `experiments.probe` wrote for the studies' ForeSIT seeds)."""
@@ -341,13 +369,19 @@ def test_docs_quote_the_probes_in_rooms_with_priors(data, method):
 
     if method.startswith("a3c+foresit"):
         assert f"by {min(gain):+.2f} to {max(gain):+.2f} R^2" in flat
-        texts = [f"noise off {quoted('shuffled, noise off')} SR", f"untrained f_w {quoted('untrained f_w')},",
-                 f"with the noise off {quoted('noise off')}."]  # fmt: skip
+        texts = [
+            f"noise off {quoted('shuffled, noise off')} SR",
+            f"untrained f_w {quoted('untrained f_w')},",
+            f"with the noise off {quoted('noise off')}.",
+        ]
     else:
         assert sum(g > 0 for g in gain) == 4 and f"(by up to {max(gain):+.2f})" in flat
         assert max(online) < 0 and f"every seed ({max(online):+.2f} to {min(online):+.2f})" in flat
-        texts = [f"noise off {quoted('shuffled, noise off')} SR", f"untrained f_w {quoted('untrained f_w')}.",
-                 f"scores {quoted('sampled actions')} SR higher"]  # fmt: skip
+        texts = [
+            f"noise off {quoted('shuffled, noise off')} SR",
+            f"untrained f_w {quoted('untrained f_w')}.",
+            f"scores {quoted('sampled actions')} SR higher",
+        ]
     for text in texts:
         assert text in flat, text
 
@@ -375,8 +409,16 @@ def test_docs_quote_the_org_control_in_both_layouts(tmp_path):
     gains = {}
     for layout, folder, priors in (("today", "org_control", None), ("priors", "org_control_priors", True)):
         spec = rundir.read_json(root / folder / "sweep.json")
-        assert (spec["setup"], spec["methods"], spec["seeds"], spec["config"].get("priors")) == ("org", ["a3c"], 5, priors)
-        base = {r["seed"]: r["selected"]["overall"] for r in rundir.read_json(root / folder / "methods" / "a3c" / "results.json")["results"]}
+        assert (spec["setup"], spec["methods"], spec["seeds"], spec["config"].get("priors")) == (
+            "org",
+            ["a3c"],
+            5,
+            priors,
+        )
+        base = {
+            r["seed"]: r["selected"]["overall"]
+            for r in rundir.read_json(root / folder / "methods" / "a3c" / "results.json")["results"]
+        }
         graph = {r["seed"]: r["overall"] for r in sampled[layout]}
         assert sorted(base) == sorted(graph) == [0, 1, 2, 3, 4]
         cells = []

@@ -43,8 +43,13 @@ def put(scene, rc, cell=None, cat=None, band=None):
 
 
 def view(scene, pos, heading, horizon, view_width=W):
-    sem, depth = cast(*(jnp.asarray(a) for a in scene), jnp.asarray(pos, jnp.int32), jnp.int32(heading),
-                      jnp.int32(horizon), view_width=view_width)  # fmt: skip
+    sem, depth = cast(
+        *(jnp.asarray(a) for a in scene),
+        jnp.asarray(pos, jnp.int32),
+        jnp.int32(heading),
+        jnp.int32(horizon),
+        view_width=view_width,
+    )
     return np.asarray(sem), np.asarray(depth)
 
 
@@ -193,8 +198,9 @@ pose_strategy = dict(
     horizon=st.integers(0, 1),
     view_width=st.sampled_from([16, 12]),
 )
-REFERENCE_SETTINGS = settings(max_examples=30, deadline=None, derandomize=True,
-                              suppress_health_check=[HealthCheck.too_slow])  # fmt: skip
+REFERENCE_SETTINGS = settings(
+    max_examples=30, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow]
+)
 
 
 def _pose(number, setup, cell):
@@ -232,8 +238,15 @@ def test_precomputed_and_ray_cast_views_give_identical_observations(request, kit
         np.testing.assert_array_equal(obs_table[name], np.asarray(obs_cast[name]), err_msg=name)
     # And the semantic channels are those of a fresh ray cast of the layout.
     s = to_numpy(states)
-    sem, _ = cast_views(kit.bank["cell_type"][s.scene], kit.bank["obj_cat"][s.scene], kit.bank["obj_band"][s.scene],
-                        s.agent_pos, s.heading, s.horizon, view_width=kit.env.view_width)  # fmt: skip
+    sem, _ = cast_views(
+        kit.bank["cell_type"][s.scene],
+        kit.bank["obj_cat"][s.scene],
+        kit.bank["obj_band"][s.scene],
+        s.agent_pos,
+        s.heading,
+        s.horizon,
+        view_width=kit.env.view_width,
+    )
     np.testing.assert_array_equal(obs_table["view"][..., :-1].argmax(-1), sem)
 
 

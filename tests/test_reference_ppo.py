@@ -67,13 +67,20 @@ def test_results_md_quotes_the_reference_row(tmp_path):
     assert gpu["seeds"] == [0, 1, 2, 3, 4] and gpu["ppo_config"]["TOTAL_TIMESTEPS"] == R.QUICK_FRAMES
     val = {float(lr): np.mean(v["val_sr"]) for lr, v in gpu["by_lr"].items()}
     assert max(val, key=val.get) == gpu["learning_rate"] == 2e-3
-    assert "| validation SR (chooses) | " + " | ".join(
-        f"**{v:.1f}**" if lr == 2e-3 else f"{v:.1f}" for lr, v in sorted(val.items())) + " |" in results
+    assert (
+        "| validation SR (chooses) | "
+        + " | ".join(f"**{v:.1f}**" if lr == 2e-3 else f"{v:.1f}" for lr, v in sorted(val.items()))
+        + " |"
+        in results
+    )
     cpu_val = {float(lr): np.mean(v["val_sr"]) for lr, v in cpu["by_lr"].items()}
     assert max(cpu_val, key=cpu_val.get) == max((lr for lr in val if lr in cpu_val), key=val.get)  # the same choice
     for name in ("sampled", "greedy"):
         sr, spl = stats.summary(gpu[name]["test_sr"]), stats.summary(gpu[name]["test_spl"])
-        assert f"| PPO, 2e-3, {name} actions | {sr['mean']:.1f} ± {sr['std']:.1f} | {spl['mean']:.1f} ± {spl['std']:.1f} |" in results
+        assert (
+            f"| PPO, 2e-3, {name} actions | {sr['mean']:.1f} ± {sr['std']:.1f} | {spl['mean']:.1f} ± {spl['std']:.1f} |"
+            in results
+        )
     study_data.extract("fair_tune.tar.xz", tmp_path)
     a3c = json.loads((tmp_path / "tune" / "sweep" / "results_per_seed.json").read_text())["a3c@learning_rate=1e-3"]
     assert [r["seed"] for r in a3c] == gpu["seeds"]

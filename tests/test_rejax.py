@@ -16,8 +16,9 @@ from envs import gymnax_compat
 
 pytestmark = [
     pytest.mark.slow,  # trains (about 20 s on a 2-core CPU)
-    pytest.mark.skipif(importlib.util.find_spec("rejax") is None,
-                       reason="rejax is not installed (pip install -e '.[rejax]')"),
+    pytest.mark.skipif(
+        importlib.util.find_spec("rejax") is None, reason="rejax is not installed (pip install -e '.[rejax]')"
+    ),
 ]
 
 
@@ -26,9 +27,19 @@ def test_rejax_ppo_trains_on_gridnav_and_its_success_rate_rises():
 
     # rejax 0.1.3 unpacks five values (gymnax before 1.0): make_gymnax's step_api="done".
     env, params = envs.make_gymnax("GridNav-v0", step_api="done", room_types=["bathroom"])
-    algo = PPO.create(env=env, env_params=params, total_timesteps=200_000, eval_freq=50_000, num_envs=32,
-                      num_steps=64, num_epochs=4, num_minibatches=4, learning_rate=1e-3, ent_coef=0.01,
-                      agent_kwargs={"hidden_layer_sizes": (128, 128)})
+    algo = PPO.create(
+        env=env,
+        env_params=params,
+        total_timesteps=200_000,
+        eval_freq=50_000,
+        num_envs=32,
+        num_steps=64,
+        num_epochs=4,
+        num_minibatches=4,
+        learning_rate=1e-3,
+        ent_coef=0.01,
+        agent_kwargs={"hidden_layer_sizes": (128, 128)},
+    )
     _, (lengths, returns) = jax.jit(algo.train)(jax.random.PRNGKey(0))
     returns, lengths = np.asarray(returns), np.asarray(lengths)
     assert returns.shape[0] == 5  # evaluations at 0, 50k, ..., 200k steps, 128 episodes each
@@ -52,9 +63,18 @@ def test_rejax_string_path_builds_the_five_value_env_and_trains():
         pytest.skip("rejax's string path needs gymnax >= 1.0's registry")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        algo = PPO.create(env="GridNav-v0", env_params={"room_types": ["bathroom"]}, total_timesteps=4096,
-                          eval_freq=2048, num_envs=16, num_steps=64, num_epochs=1, num_minibatches=4,
-                          learning_rate=1e-3, agent_kwargs={"hidden_layer_sizes": (64, 64)})
+        algo = PPO.create(
+            env="GridNav-v0",
+            env_params={"room_types": ["bathroom"]},
+            total_timesteps=4096,
+            eval_freq=2048,
+            num_envs=16,
+            num_steps=64,
+            num_epochs=1,
+            num_minibatches=4,
+            learning_rate=1e-3,
+            agent_kwargs={"hidden_layer_sizes": (64, 64)},
+        )
     assert not [w for w in caught if "step_api" in str(w.message)], [str(w.message) for w in caught]
     assert isinstance(algo.env, gymnax_compat.GymnaxGridNav) and algo.env.step_api == "done"
     assert algo.env.gridnav.setup == "savn" and algo.env_params.max_steps_in_episode == 30

@@ -90,8 +90,9 @@ except errors.UserError as e:
 
 def start_holder(out: Path, ready: Path, go: Path, hold: float) -> subprocess.Popen:
     code = textwrap.dedent(HOLDER.format(repo=str(REPO), ready=str(ready), go=str(go), out=str(out), hold=hold))
-    return subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True,
-                            env={**os.environ, "JAX_PLATFORMS": "cpu"})  # fmt: skip
+    return subprocess.Popen(
+        [sys.executable, "-c", code], stdout=subprocess.PIPE, text=True, env={**os.environ, "JAX_PLATFORMS": "cpu"}
+    )
 
 
 def test_two_processes_started_at_the_same_instant_on_one_folder_one_is_refused(tmp_path):
@@ -116,7 +117,11 @@ def test_a_run_held_by_another_process_is_refused_in_one_line_and_left_as_it_was
     shutil.copytree(run6, out)
     (out / rundir.LOCK_FILE).unlink()
     before = snapshot(out)
-    holder = subprocess.Popen([sys.executable, "-c", textwrap.dedent(f"""
+    holder = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            textwrap.dedent(f"""
         import sys, time
         sys.path.insert(0, {str(REPO)!r})
         from pathlib import Path
@@ -125,7 +130,11 @@ def test_a_run_held_by_another_process_is_refused_in_one_line_and_left_as_it_was
         rundir.claim(Path({str(out)!r}))
         print("holding", flush=True)
         time.sleep(30)
-        """)], stdout=subprocess.PIPE, text=True)  # fmt: skip
+        """),
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert holder.stdout.readline().strip() == "holding"
         for argv in (["--out", out, "--resume"], ["--preset", "tiny", "--out", out, "--overwrite"]):
@@ -157,8 +166,24 @@ def test_a_step_that_leaves_inf_weights_behind_a_finite_loss_is_not_reported(tmp
     """lr 1e39 is finite as a Python float but inf in float32: the first Adam step makes
     the weights inf while the loss (computed before the step) is finite."""
     out = tmp_path / "inf_step"
-    line = one_line_error(train_cli.cli, ["--method", "a3c", "--preset", "tiny", "--out", out, "--no-progress",
-                                          "--learning-rate", "1e39", "--num-updates", "1"], capsys, code=1)  # fmt: skip
+    line = one_line_error(
+        train_cli.cli,
+        [
+            "--method",
+            "a3c",
+            "--preset",
+            "tiny",
+            "--out",
+            out,
+            "--no-progress",
+            "--learning-rate",
+            "1e39",
+            "--num-updates",
+            "1",
+        ],
+        capsys,
+        code=1,
+    )
     assert "non-finite parameters after update 1" in line and "no checkpoint was written" in line, line
     assert not list((out / "checkpoints").glob("*")) and not (out / "results_test.json").exists()
 
@@ -167,8 +192,28 @@ def test_a_step_that_leaves_inf_weights_behind_a_finite_loss_is_not_reported(tmp
 def test_a_sweep_names_the_seed_whose_weights_went_non_finite(tmp_path, capsys):
     """The same fault in a sweep (the loop train and sweep share, experiments.running.loop)."""
     out = tmp_path / "inf_sweep"
-    line = one_line_error(sweep.cli, ["--methods", "a3c", "--seeds", "2", "--seed", "3", "--preset", "tiny", "--out", out,
-                                      "--no-progress", "--learning-rate", "1e39", "--num-updates", "1"], capsys, code=1)  # fmt: skip
+    line = one_line_error(
+        sweep.cli,
+        [
+            "--methods",
+            "a3c",
+            "--seeds",
+            "2",
+            "--seed",
+            "3",
+            "--preset",
+            "tiny",
+            "--out",
+            out,
+            "--no-progress",
+            "--learning-rate",
+            "1e39",
+            "--num-updates",
+            "1",
+        ],
+        capsys,
+        code=1,
+    )
     assert "a3c: non-finite parameters after update 1 in seed(s) [3, 4]" in line, line
     assert "no checkpoint was written" in line and not (out / "methods" / "a3c" / "progress.json").exists(), line
 
@@ -204,9 +249,11 @@ def test_finite_seeds_finds_the_seed_with_a_nan():
 def test_divergence_short_of_nan_is_warned_of():
     normal = {"losses/grad_norm": [0.5, 3.0], "losses/total_loss": [1.2, -0.4], "losses/entropy": [1.7, 0.3]}
     assert loop.divergence(normal) is None
-    for name, values, says in (("losses/total_loss", [1.0, 1e33], "total_loss reached 1e+33"),
-                               ("losses/grad_norm", [np.inf, 1.0], "grad_norm reached inf"),
-                               ("losses/entropy", [0.5, 0.0], "entropy fell to 0")):  # fmt: skip
+    for name, values, says in (
+        ("losses/total_loss", [1.0, 1e33], "total_loss reached 1e+33"),
+        ("losses/grad_norm", [np.inf, 1.0], "grad_norm reached inf"),
+        ("losses/entropy", [0.5, 0.0], "entropy fell to 0"),
+    ):
         warning = loop.divergence({**normal, name: values})
         assert warning is not None and says in warning, warning
 
@@ -244,10 +291,12 @@ def test_a_checkpoint_saved_before_checksums_still_restores(run6, tmp_path):
 def test_resume_refuses_flags_that_contradict_the_run_and_extends_with_num_updates(run6, tmp_path, capsys):
     out = tmp_path / "flags"
     train_cli.main(tiny(out, num_updates=4))
-    for flag, value, says in (("--method", "a3c+critic", "--method a3c+critic (the run has a3c)"),
-                              ("--seed", 3, "--seed 3 (the run has 1)"),
-                              ("--learning-rate", 0.5, "--learning-rate 0.5 (the run has"),
-                              ("--chunk-updates", 1, "--chunk-updates 1 (the run has 2)")):  # fmt: skip
+    for flag, value, says in (
+        ("--method", "a3c+critic", "--method a3c+critic (the run has a3c)"),
+        ("--seed", 3, "--seed 3 (the run has 1)"),
+        ("--learning-rate", 0.5, "--learning-rate 0.5 (the run has"),
+        ("--chunk-updates", 1, "--chunk-updates 1 (the run has 2)"),
+    ):
         line = one_line_error(train_cli.cli, ["--out", out, "--resume", flag, value], capsys)
         assert says in line, line
     line = one_line_error(train_cli.cli, ["--out", out, "--resume", "--num-updates", 2], capsys)
@@ -270,12 +319,15 @@ def test_resume_refuses_flags_that_contradict_the_run_and_extends_with_num_updat
     line = one_line_error(train_cli.cli, ["--out", out, "--resume", "--num-updates", 8], capsys)
     assert "already holds report_6_updates/results_test.json; move them first" in line, line
     assert {k: v for k, v in snapshot(out).items() if k != rundir.LOCK_FILE} == {
-        k: v for k, v in before.items() if k != rundir.LOCK_FILE}
+        k: v for k, v in before.items() if k != rundir.LOCK_FILE
+    }
     # The same bytes kept there (an extension killed after moving them, the report then
     # written again by a resume) are this report: the extension goes on.
     shutil.copy(out / "results_test.json", out / "report_6_updates" / "results_test.json")
     train_cli.main(train_cli.Args(out=out, resume=True, num_updates=8, progress=False))
-    assert rundir.read_json(out / "report_6_updates" / "results_test.json") == rundir.read_json(run6 / "results_test.json")
+    assert rundir.read_json(out / "report_6_updates" / "results_test.json") == rundir.read_json(
+        run6 / "results_test.json"
+    )
     assert rundir.read_json(out / "results.json")["updates"] == 8
 
 
@@ -320,7 +372,9 @@ def bathroom():
 def test_an_integer_action_out_of_range_is_the_documented_no_op_step(bathroom, action):
     env, params, state = bathroom
     _, after, reward, terminated, truncated, info = env.step(jax.random.PRNGKey(0), state, action, params)
-    assert float(reward) == float(np.float32(params.step_penalty)) and not bool(terminated) and not bool(info["success"])
+    assert (
+        float(reward) == float(np.float32(params.step_penalty)) and not bool(terminated) and not bool(info["success"])
+    )
     for name in ("agent_pos", "heading", "horizon"):
         np.testing.assert_array_equal(getattr(after, name), getattr(state, name))
     assert int(after.time) == int(state.time) + 1
@@ -342,8 +396,10 @@ def test_check_actions_raises_on_an_out_of_range_action_under_jit_and_vmap(bathr
         jax.block_until_ready(step(jax.random.PRNGKey(0), state, jnp.array([0, 7]), params))
 
 
-@pytest.mark.parametrize("room_types, says", [([], "at least one room type"), ([1.5], "got 1.5"),
-                                              ([True], "got True"), (["attic"], "unknown room type")])  # fmt: skip
+@pytest.mark.parametrize(
+    "room_types, says",
+    [([], "at least one room type"), ([1.5], "got 1.5"), ([True], "got True"), (["attic"], "unknown room type")],
+)
 def test_make_refuses_bad_room_types(room_types, says):
     with pytest.raises(ValueError, match=says):
         envs.make(room_types=room_types)
@@ -391,7 +447,10 @@ def test_a_full_disk_is_one_line_that_says_how_to_continue(tmp_path, capsys, mon
 
     monkeypatch.setattr(rundir, "write_json", full)
     line = one_line_error(train_cli.cli, ["--preset", "tiny", "--out", tmp_path / "full"], capsys, code=1)
-    assert line == f"error: {tmp_path / 'full' / 'run.json'}: No space left on device (free some space, then continue with --resume)"
+    assert (
+        line
+        == f"error: {tmp_path / 'full' / 'run.json'}: No space left on device (free some space, then continue with --resume)"
+    )
 
 
 @pytest.mark.slow
@@ -437,13 +496,19 @@ def test_search_learner_parses_every_variant_before_training(monkeypatch):
 
 
 def test_sweep_rewind_drops_the_chunks_after_a_step_and_reselects():
-    progress = {"done": 6, "curves": [[[0.1, 0.2], [0.3, 0.4]]] * 3,
-                "history": [[{"update": 2, "SR": 10.0}, {"update": 4, "SR": 30.0}, {"update": 6, "SR": 50.0}],
-                            [{"update": 2, "SR": 40.0}, {"update": 4, "SR": 40.0}, {"update": 6, "SR": 20.0}]],
-                "diagnostics": {"losses/entropy": [[1.0, 1.1], [0.9, 1.0], [0.8, 0.9]]},
-                "counts": {"charts/episodes": [[5.0, 6.0], [7.0, 8.0], [9.0, 10.0]]},
-                "best_sr": [50.0, 40.0], "best_update": [6, 4],
-                "numerics": [{"from_update": 0, "platform": "a"}, {"from_update": 6, "platform": "b"}]}  # fmt: skip
+    progress = {
+        "done": 6,
+        "curves": [[[0.1, 0.2], [0.3, 0.4]]] * 3,
+        "history": [
+            [{"update": 2, "SR": 10.0}, {"update": 4, "SR": 30.0}, {"update": 6, "SR": 50.0}],
+            [{"update": 2, "SR": 40.0}, {"update": 4, "SR": 40.0}, {"update": 6, "SR": 20.0}],
+        ],
+        "diagnostics": {"losses/entropy": [[1.0, 1.1], [0.9, 1.0], [0.8, 0.9]]},
+        "counts": {"charts/episodes": [[5.0, 6.0], [7.0, 8.0], [9.0, 10.0]]},
+        "best_sr": [50.0, 40.0],
+        "best_update": [6, 4],
+        "numerics": [{"from_update": 0, "platform": "a"}, {"from_update": 6, "platform": "b"}],
+    }
     back = rewind(progress, 2)
     assert back["done"] == 2 and len(back["curves"]) == 1 and back["diagnostics"]["losses/entropy"] == [[1.0, 1.1]]
     assert back["counts"] == {"charts/episodes": [[5.0, 6.0]]}

@@ -44,9 +44,14 @@ def mid_episode_state():
 
 @pytest.mark.parametrize(
     "method, reading",
-    [("a3c+foresit", "head"), *(pytest.param(*case, marks=pytest.mark.slow)
-                                for case in (("a3c", "head"), ("a3c+foresit", "encoder"), ("a3c+foresit", "mlp")))],
-)  # fmt: skip
+    [
+        ("a3c+foresit", "head"),
+        *(
+            pytest.param(*case, marks=pytest.mark.slow)
+            for case in (("a3c", "head"), ("a3c+foresit", "encoder"), ("a3c+foresit", "mlp"))
+        ),
+    ],
+)
 def test_replay_gradient_equals_differentiating_through_the_rollout(method, reading, mid_episode_state):
     replay_config = dataclasses.replace(REPLAY, method=method, imagination_input=reading)
     through_config = dataclasses.replace(THROUGH, method=method, imagination_input=reading)
@@ -70,8 +75,9 @@ def test_replay_recomputes_the_acting_values(mid_episode_state):
     state = mid_episode_state
     trainer = H.trainer(REPLAY)
     act = jax.jit(trainer.act, compiler_options=H.FAST_COMPILE)
-    _, traj, _ = act(AgentParams(state.params, state.imagination_params), trainer.bind(trainer.env_params), state.actor,
-                     state.key)  # fmt: skip
+    _, traj, _ = act(
+        AgentParams(state.params, state.imagination_params), trainer.bind(trainer.env_params), state.actor, state.key
+    )
     again = jax.jit(functools.partial(replayed, trainer.networks), compiler_options=H.FAST_COMPILE)(
         state.params, traj, state.actor.lstm
     )

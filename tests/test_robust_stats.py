@@ -9,8 +9,9 @@ import pytest
 
 from experiments.reporting import stats
 
-needs_rliable = pytest.mark.skipif(importlib.util.find_spec("rliable") is None,
-                                   reason="rliable is not installed (pip install rliable)")
+needs_rliable = pytest.mark.skipif(
+    importlib.util.find_spec("rliable") is None, reason="rliable is not installed (pip install rliable)"
+)
 RNG = np.random.default_rng(7)
 SCORES = RNG.uniform(0, 100, size=(5, 4))  # 5 seeds x 4 room types
 OTHER = RNG.uniform(10, 90, size=(7, 4))
@@ -70,7 +71,8 @@ def test_iqm_and_probability_of_improvement_equal_rliables():
 
     assert stats.iqm(SCORES) == pytest.approx(metrics.aggregate_iqm(SCORES), rel=1e-12)
     assert stats.probability_of_improvement(SCORES, OTHER) == pytest.approx(
-        metrics.probability_of_improvement(SCORES, OTHER), rel=1e-12)
+        metrics.probability_of_improvement(SCORES, OTHER), rel=1e-12
+    )
 
 
 # rliable 1.2.0's get_interval_estimates on SCORES and OTHER (20,000 stratified-bootstrap
@@ -110,7 +112,9 @@ def brute_force_interval(statistic, *arrays, level=0.95):
     import itertools
 
     draws = [list(itertools.product(range(len(a)), repeat=len(a))) for a in arrays]
-    values = np.sort([statistic(*(np.asarray(a)[list(d)] for a, d in zip(arrays, ds))) for ds in itertools.product(*draws)])
+    values = np.sort(
+        [statistic(*(np.asarray(a)[list(d)] for a, d in zip(arrays, ds))) for ds in itertools.product(*draws)]
+    )
     cdf = np.arange(1, len(values) + 1) / len(values)
     return tuple(float(values[np.searchsorted(cdf, q - 1e-12)]) for q in ((1 - level) / 2, (1 + level) / 2))
 
@@ -125,7 +129,8 @@ def test_exact_bootstrap_intervals_equal_a_brute_force_enumeration_and_ignore_th
     x5, y5 = np.array([66.0, 70.0, 61.0, 68.0, 64.0]), np.array([62.0, 71.0, 60.0, 66.0, 65.0])
     assert stats.stratified_bootstrap_ci(stats.iqm, x5) == stats.stratified_bootstrap_ci(lambda a: stats.iqm(a), x5)
     assert stats.stratified_bootstrap_ci(stats.probability_of_improvement, y5, x5) == stats.stratified_bootstrap_ci(
-        lambda a, b: stats.probability_of_improvement(a, b), y5, x5)
+        lambda a, b: stats.probability_of_improvement(a, b), y5, x5
+    )
 
 
 def test_monte_carlo_beyond_the_exact_limit_is_close_to_the_exact_interval(monkeypatch):

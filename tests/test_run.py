@@ -58,7 +58,12 @@ def whole(request, tmp_path_factory, cheap_experiments):
 
 def test_a_run_folder_reads_alone(whole):
     again = read(whole.folder)
-    assert (again.config, again.schedule, again.seeds, again.label) == (whole.config, whole.schedule, whole.seeds, "a3c")
+    assert (again.config, again.schedule, again.seeds, again.label) == (
+        whole.config,
+        whole.schedule,
+        whole.seeds,
+        "a3c",
+    )
     done = rundir.read_json(whole.folder / "results.json")
     assert done["updates"] == 6 and [r["seed"] for r in done["results"]] == list(whole.seeds)
     for r in done["results"]:
@@ -87,8 +92,9 @@ def test_one_seed_is_the_unvmapped_program_and_two_the_vmapped_one(whole):
     H.assert_trees_bitwise_equal(final(whole)[0], add_axis(state))
 
 
-@pytest.mark.parametrize("kill", ["after a chunk", "after a checkpoint, before progress.json", "flipped checkpoint",
-                                  "truncated checkpoint"])  # fmt: skip
+@pytest.mark.parametrize(
+    "kill", ["after a chunk", "after a checkpoint, before progress.json", "flipped checkpoint", "truncated checkpoint"]
+)
 def test_a_killed_run_resumes_to_the_numbers_of_the_whole_one(whole, tmp_path, capsys, kill):
     run = make_run(tmp_path / "killed", whole.seeds)
     corrupt = kill.endswith(" checkpoint")

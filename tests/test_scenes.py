@@ -106,6 +106,7 @@ def test_objects_stand_at_three_heights(layouts):
         names = C.categories(setup)
         cell, cat, band = layout.cell_type, layout.obj_cat, layout.obj_band
         np.testing.assert_array_equal(cat >= 0, band >= 0)
+
         def next_to(kinds):
             near = np.zeros_like(cell, bool)
             ok = np.isin(cell, kinds)
@@ -215,18 +216,21 @@ def test_org_target_one_hot_and_detections(org_kit):
     assert checked > 50
 
 
-@pytest.mark.parametrize("call, words", [
-    (lambda: envs.make("GridNav-v9"), ["GridNav-v0"]),
-    (lambda: envs.make(setup="habitat"), ["habitat", "savn", "org"]),
-    (lambda: envs.make(split="training", room_types=["bathroom"]), ["training", "train", "val", "test"]),
-    (lambda: envs.make(split="test", room_types=["garage"]), ["garage", "kitchen", "bathroom"]),
-    (lambda: envs.make(split="test", room_types=[7]), ["0..3"]),
-    (lambda: envs.GridNav(view_width=0), ["view_width"]),
-    (lambda: scenes.generate_layout(31, "savn"), ["31", "201-230"]),
-    (lambda: scenes.generate_layout(501, "savn"), ["501"]),
-    (lambda: scenes.generate_layout(1, "savn", grid_size=10), ["grid_size", "20"]),
-    (lambda: C.scene_numbers("dev"), ["dev", "train"]),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "call, words",
+    [
+        (lambda: envs.make("GridNav-v9"), ["GridNav-v0"]),
+        (lambda: envs.make(setup="habitat"), ["habitat", "savn", "org"]),
+        (lambda: envs.make(split="training", room_types=["bathroom"]), ["training", "train", "val", "test"]),
+        (lambda: envs.make(split="test", room_types=["garage"]), ["garage", "kitchen", "bathroom"]),
+        (lambda: envs.make(split="test", room_types=[7]), ["0..3"]),
+        (lambda: envs.GridNav(view_width=0), ["view_width"]),
+        (lambda: scenes.generate_layout(31, "savn"), ["31", "201-230"]),
+        (lambda: scenes.generate_layout(501, "savn"), ["501"]),
+        (lambda: scenes.generate_layout(1, "savn", grid_size=10), ["grid_size", "20"]),
+        (lambda: C.scene_numbers("dev"), ["dev", "train"]),
+    ],
+)
 def test_bad_names_raise_helpful_value_errors(call, words):
     with pytest.raises(ValueError) as info:
         call()

@@ -7,7 +7,10 @@ from experiments.running import selection
 
 def test_the_best_validation_sr_is_kept_and_the_later_model_on_ties():
     best = selection.Selection()
-    kept = [best.offer(sr, update, f"params@{update}") for update, sr in ((1, 10.0), (2, 30.0), (3, 20.0), (4, 30.0), (5, 29.9))]
+    kept = [
+        best.offer(sr, update, f"params@{update}")
+        for update, sr in ((1, 10.0), (2, 30.0), (3, 20.0), (4, 30.0), (5, 29.9))
+    ]
     assert kept == [True, True, False, True, False]
     assert (best.sr, best.update, best.params) == (30.0, 4, "params@4")
     # A first validation at SR 0 is kept (nothing before it), as train's resume replays it.
@@ -17,6 +20,9 @@ def test_the_best_validation_sr_is_kept_and_the_later_model_on_ties():
 
 def test_validation_test_and_training_keys_are_distinct():
     seeds = range(100)
-    keys = [np.asarray(k).tobytes() for s in seeds
-            for k in (selection.run_key(s), selection.validation_key(s), selection.test_key(s))]  # fmt: skip
+    keys = [
+        np.asarray(k).tobytes()
+        for s in seeds
+        for k in (selection.run_key(s), selection.validation_key(s), selection.test_key(s))
+    ]
     assert len(set(keys)) == len(keys)  # no run validates or tests on another's (or its own training) draws

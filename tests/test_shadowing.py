@@ -11,8 +11,9 @@ REPO = Path(__file__).resolve().parents[1]
 def test_a_shadowing_envs_fails_in_one_line_naming_it(tmp_path):
     (tmp_path / "envs").mkdir()
     (tmp_path / "envs" / "__init__.py").write_text("# somebody else's environments\n")
-    out = subprocess.run([sys.executable, "-c", "import foresit_jax"], cwd=tmp_path, capture_output=True, text=True,
-                         timeout=120)  # fmt: skip
+    out = subprocess.run(
+        [sys.executable, "-c", "import foresit_jax"], cwd=tmp_path, capture_output=True, text=True, timeout=120
+    )
     assert out.returncode != 0
     last = out.stderr.strip().splitlines()[-1]
     assert last.startswith("ImportError: foresit_jax needs GridNav's `envs` package"), last
@@ -20,6 +21,11 @@ def test_a_shadowing_envs_fails_in_one_line_naming_it(tmp_path):
 
 
 def test_gridnavs_own_envs_passes_the_check():
-    out = subprocess.run([sys.executable, "-c", "import foresit_jax, envs; print(envs.GridNav.__name__)"], cwd=REPO,
-                         capture_output=True, text=True, timeout=120)  # fmt: skip
+    out = subprocess.run(
+        [sys.executable, "-c", "import foresit_jax, envs; print(envs.GridNav.__name__)"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert out.returncode == 0 and out.stdout.strip() == "GridNav", out.stderr[-500:]

@@ -84,36 +84,45 @@ def test_methods_import_nothing_of_the_package_and_config_only_methods():
 
 
 def test_importing_config_loads_neither_jax_nor_the_algorithm():
-    code = ("import sys; import foresit_jax.config; "
-            "print(sorted(m for m in sys.modules if m.startswith('foresit_jax')), 'jax' in sys.modules)")  # fmt: skip
+    code = (
+        "import sys; import foresit_jax.config; "
+        "print(sorted(m for m in sys.modules if m.startswith('foresit_jax')), 'jax' in sys.modules)"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
     assert out == "['foresit_jax', 'foresit_jax.config', 'foresit_jax.methods'] False"
 
 
 def test_the_package_face_loads_names_on_first_use():
-    code = ("import foresit_jax, sys; "
-            "from foresit_jax import evaluate_policy, make_train, Config; "
-            "print(evaluate_policy.__module__, make_train.__module__, Config.__module__, "
-            "sorted(set(foresit_jax.__all__) - set(dir(foresit_jax))))")  # fmt: skip
+    code = (
+        "import foresit_jax, sys; "
+        "from foresit_jax import evaluate_policy, make_train, Config; "
+        "print(evaluate_policy.__module__, make_train.__module__, Config.__module__, "
+        "sorted(set(foresit_jax.__all__) - set(dir(foresit_jax))))"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
     assert out == "foresit_jax.evaluate foresit_jax.train foresit_jax.config []"
 
 
-@pytest.mark.parametrize("before", [
-    "",
-    "import foresit_jax",
-    "from foresit_jax import evaluate_policy, make_act",
-    "import foresit_jax.evaluate",
-    "from foresit_jax.evaluate import evaluate",
-    "from foresit_jax import *",
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "before",
+    [
+        "",
+        "import foresit_jax",
+        "from foresit_jax import evaluate_policy, make_act",
+        "import foresit_jax.evaluate",
+        "from foresit_jax.evaluate import evaluate",
+        "from foresit_jax import *",
+    ],
+)
 def test_foresit_jax_evaluate_is_the_module_whatever_was_imported_before(before):
     """`foresit_jax.evaluate` is the module, never its function `evaluate`: by either form
     of import, after any other import of the package."""
-    code = (f"{before}\nimport types\nimport foresit_jax.evaluate as E\nfrom foresit_jax import evaluate as F\n"
-            "import foresit_jax\n"
-            "print(all(isinstance(m, types.ModuleType) and m.__name__ == 'foresit_jax.evaluate' "
-            "for m in (E, F, foresit_jax.evaluate)), callable(E.evaluate))")  # fmt: skip
+    code = (
+        f"{before}\nimport types\nimport foresit_jax.evaluate as E\nfrom foresit_jax import evaluate as F\n"
+        "import foresit_jax\n"
+        "print(all(isinstance(m, types.ModuleType) and m.__name__ == 'foresit_jax.evaluate' "
+        "for m in (E, F, foresit_jax.evaluate)), callable(E.evaluate))"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
     assert out == "True True", (before, out)
 
@@ -184,8 +193,12 @@ def test_no_two_modules_share_a_stem_or_its_plural():
     guard, apart: their names are the commands), no two modules share a stem or its plural."""
     root = PACKAGE.parent
     cli = {p for p in (root / "experiments").glob("*.py") if '__name__ == "__main__"' in p.read_text()}
-    modules = [p for folder in ("foresit_jax", "experiments") for p in (root / folder).rglob("*.py")
-               if p.name != "__init__.py" and p not in cli]  # fmt: skip
+    modules = [
+        p
+        for folder in ("foresit_jax", "experiments")
+        for p in (root / folder).rglob("*.py")
+        if p.name != "__init__.py" and p not in cli
+    ]
     assert len(modules) > 30 and len(cli) >= 10
     by_stem = {}
     for path in modules:

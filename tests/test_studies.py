@@ -37,7 +37,9 @@ def studies(text: str) -> dict[str, dict[str, list[str]]]:
 
 def test_the_anchor_of_a_heading_is_githubs():
     assert anchor("The paper's question there (5 seeds, 2026-11-27)") == "the-papers-question-there-5-seeds-2026-11-27"
-    assert anchor("Channels (issue 68, docs/plans/ceiling_channels.md)") == "channels-issue-68-docsplansceiling_channelsmd"
+    assert (
+        anchor("Channels (issue 68, docs/plans/ceiling_channels.md)") == "channels-issue-68-docsplansceiling_channelsmd"
+    )
 
 
 def test_a_malformed_page_is_refused():
@@ -69,8 +71,9 @@ def test_every_study_has_one_home_and_every_path_it_names_exists():
         assert cells["doc section"], f"{name}: no doc section"
         for section in cells["doc section"]:
             doc, _, wanted = section.partition("#")
-            headings = [anchor(line.lstrip("#")) for line in (ROOT / doc).read_text().splitlines()
-                        if line.startswith("#")]  # fmt: skip
+            headings = [
+                anchor(line.lstrip("#")) for line in (ROOT / doc).read_text().splitlines() if line.startswith("#")
+            ]
             if wanted not in headings:
                 missing.append(f"{name}: no heading {wanted!r} in {doc}")
     assert not missing, missing

@@ -33,8 +33,9 @@ def finished_method(folder: Path, method: str, updates: int, progress: bool = Tr
     path = folder / "methods" / method
     (path / "checkpoints" / str(updates)).mkdir(parents=True)
     protocol = selection.PROTOCOL_VERSION if protocol is None else protocol
-    rundir.write_json(path / "results.json", {"updates": updates, "results": [], "curves": [],
-                                              "selection_protocol": protocol})  # fmt: skip
+    rundir.write_json(
+        path / "results.json", {"updates": updates, "results": [], "curves": [], "selection_protocol": protocol}
+    )
     if progress:
         rundir.write_json(path / "progress.json", {"done": updates})
     return path
@@ -42,8 +43,11 @@ def finished_method(folder: Path, method: str, updates: int, progress: bool = Tr
 
 def listing(folder: Path) -> dict:
     """Every file under `folder` (but the lock) with its bytes."""
-    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*"))
-            if p.is_file() and p.name != rundir.LOCK_FILE}  # fmt: skip
+    return {
+        str(p.relative_to(folder)): p.read_bytes()
+        for p in sorted(folder.rglob("*"))
+        if p.is_file() and p.name != rundir.LOCK_FILE
+    }
 
 
 def test_a_sweep_is_never_shortened(tmp_path):
@@ -53,11 +57,14 @@ def test_a_sweep_is_never_shortened(tmp_path):
     assert sweeps.extend(spec.out, 6) == spec  # the same count: nothing to do
 
 
-@pytest.mark.parametrize("why, make, says", [
-    ("assembled", dict(progress=False), "was assembled from other sweeps' seeds"),
-    ("another protocol", dict(protocol=1), "validated under selection protocol 1"),
-    ("no checkpoint", dict(), "keeps no checkpoint of its update 6"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "why, make, says",
+    [
+        ("assembled", dict(progress=False), "was assembled from other sweeps' seeds"),
+        ("another protocol", dict(protocol=1), "validated under selection protocol 1"),
+        ("no checkpoint", dict(), "keeps no checkpoint of its update 6"),
+    ],
+)
 def test_what_cannot_continue_is_refused_before_anything_moves(tmp_path, why, make, says):
     spec = started(tmp_path / "s", num_updates=6)
     method = finished_method(spec.out, "a3c", 6, **make)
@@ -88,7 +95,10 @@ def test_an_extension_killed_while_moving_the_report_is_repaired_by_the_same_cal
     (spec.out / "report_6_updates" / "table1.md").write_text("moved before the kill")
     (spec.out / "table1.csv").write_text("left behind")
     sweeps.extend(spec.out, 12)
-    assert listing(spec.out / "report_6_updates") == {"table1.md": b"moved before the kill", "table1.csv": b"left behind"}
+    assert listing(spec.out / "report_6_updates") == {
+        "table1.md": b"moved before the kill",
+        "table1.csv": b"left behind",
+    }
     assert sweeps.saved(spec.out).num_updates == 12
 
 
@@ -138,8 +148,15 @@ def test_set_aside_never_overwrites_kept_results(tmp_path):
 
 @pytest.mark.slow
 def test_an_extended_sweep_ends_as_the_sweep_of_that_many_updates_from_the_start(tmp_path, capsys):
-    args = sweep.Args(methods=("a3c", "a3c+critic"), seeds=2, preset="tiny", num_updates=4, progress=False,
-                      val_episodes_per_room=4, test_episodes_per_room=4)  # fmt: skip
+    args = sweep.Args(
+        methods=("a3c", "a3c+critic"),
+        seeds=2,
+        preset="tiny",
+        num_updates=4,
+        progress=False,
+        val_episodes_per_room=4,
+        test_episodes_per_room=4,
+    )
     short, whole = tmp_path / "short", tmp_path / "whole"
     sweep.main(dataclasses.replace(args, out=short))
     earlier = {m: (short / "methods" / m / "results.json").read_text() for m in args.methods}
@@ -158,4 +175,6 @@ def test_an_extended_sweep_ends_as_the_sweep_of_that_many_updates_from_the_start
     # Resumed again: finished at 8, nothing trains, nothing moves.
     sweep.cli(["--out", str(short), "--resume", "--no-progress"])
     assert sorted(p.name for p in (short / "methods" / "a3c").glob("results*.json")) == [
-        "results.json", "results_4_updates.json"]
+        "results.json",
+        "results_4_updates.json",
+    ]

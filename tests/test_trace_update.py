@@ -41,9 +41,18 @@ def test_the_path_from_the_cli_to_the_optimiser():
     path = trace_update.files_from_cli("a3c+foresit", "tiny")
     entered, reader, config = path.entered, path.reader, path.config
     assert len(entered) == len(set(entered)) and len(reader) == len(set(reader))
-    assert {"experiments/train.py", "experiments/running/run.py", "foresit_jax/config.py", "foresit_jax/train.py",
-            "foresit_jax/rollout.py", "foresit_jax/networks.py", "envs/gridnav.py"} <= set(entered)
-    assert "foresit_jax/maml.py" not in entered and "foresit_jax/policy.py" not in entered  # neither runs for a3c+foresit
+    assert {
+        "experiments/train.py",
+        "experiments/running/run.py",
+        "foresit_jax/config.py",
+        "foresit_jax/train.py",
+        "foresit_jax/rollout.py",
+        "foresit_jax/networks.py",
+        "envs/gridnav.py",
+    } <= set(entered)
+    assert (
+        "foresit_jax/maml.py" not in entered and "foresit_jax/policy.py" not in entered
+    )  # neither runs for a3c+foresit
     assert set(reader) <= set(entered)
     # the chain first (the command, its run, the Trainer), then the update's body
     assert reader[:3] == ["experiments/errors.py", "experiments/train.py", "experiments/running/run.py"]

@@ -33,8 +33,8 @@ def event_scalars(folder: Path) -> dict[str, dict[int, float]]:
     for path in sorted(folder.glob("events.out.tfevents.*")):
         data, at = path.read_bytes(), 0
         while at < len(data):
-            (length,) = struct.unpack("<Q", data[at:at + 8])
-            event = event_pb2.Event.FromString(data[at + 12:at + 12 + length])
+            (length,) = struct.unpack("<Q", data[at : at + 8])
+            event = event_pb2.Event.FromString(data[at + 12 : at + 12 + length])
             at += 12 + length + 4
             for value in event.summary.value:
                 scalars.setdefault(value.tag, {})[event.step] = value.simple_value
@@ -80,7 +80,8 @@ def test_wandb_gets_the_same_rows_under_one_run_id_across_a_resume(tmp_path, mon
     logged = {step: row for kind, *rest in calls if kind == "log" for step, row in [rest] if "losses/total_loss" in row}
     assert sorted(logged) == [r["update"] for r in rundir.read_rows(out / "metrics")]
     assert {r["update"]: r["losses/total_loss"] for r in rundir.read_rows(out / "metrics")} == pytest.approx(
-        {step: row["losses/total_loss"] for step, row in logged.items()})
+        {step: row["losses/total_loss"] for step, row in logged.items()}
+    )
 
 
 def test_an_unknown_or_missing_tracker_is_one_line_before_training(tmp_path, monkeypatch):

@@ -67,14 +67,18 @@ def _loss_term_grads(config):
     def terms(params, w_params, actor, key):
         _, traj, end = trainer.act(AgentParams(params, w_params), trainer.bind(trainer.env_params), actor, key)
         _, (_, _, metrics) = trainer.window_loss(params, traj, end, actor.memory)
-        return jnp.stack([metrics["losses/policy_gradient_loss"], metrics["losses/value_loss"], metrics["losses/entropy"]])
+        return jnp.stack(
+            [metrics["losses/policy_gradient_loss"], metrics["losses/value_loss"], metrics["losses/entropy"]]
+        )
 
     return jax.jit(jax.jacrev(terms, argnums=(0, 1)), compiler_options=H.FAST_COMPILE)
 
 
 def test_each_loss_term_moves_the_right_parameters():
     state = H.jitted_init(FORESIT)(jax.random.PRNGKey(0))
-    d_params, d_w = _loss_term_grads(FORESIT)(state.params, state.imagination_params, state.actor, jax.random.PRNGKey(1))
+    d_params, d_w = _loss_term_grads(FORESIT)(
+        state.params, state.imagination_params, state.actor, jax.random.PRNGKey(1)
+    )
     pg, value, entropy = (jax.tree.map(lambda g, i=i: g[i], d_params) for i in range(3))
 
     # The value loss of Eq. 9 reaches the attention critic (q, k, v of Eq. 3-4), the value
@@ -126,9 +130,11 @@ def test_full_buffer_trains_only_fw_and_is_emptied():
     subgoal = jnp.tanh(jnp.asarray(rng.normal(size=16), jnp.float32))
     b = state.buffers
     full = b._replace(
-        s_0=b.s_0.at[0, 0].set(s_0), goal=b.goal.at[0, 0].set(goal), subgoal=b.subgoal.at[0, 0].set(subgoal),
+        s_0=b.s_0.at[0, 0].set(s_0),
+        goal=b.goal.at[0, 0].set(goal),
+        subgoal=b.subgoal.at[0, 0].set(subgoal),
         count=b.count.at[0].set(b.capacity),
-    )  # fmt: skip
+    )
     plain, m_plain = update(state, trainer.env_params)
     forced, m_forced = update(state._replace(buffers=full), trainer.env_params)
 
@@ -142,7 +148,9 @@ def test_full_buffer_trains_only_fw_and_is_emptied():
     assert H.max_abs(jax.tree.map(lambda x: x[0], forced.buffers)) == 0
     loss = lambda w: imagination.imagination_loss(trainer.networks.imagine, w, s_0, goal, subgoal)  # noqa: E731
     assert float(loss(forced.imagination_params)) < float(loss(state.imagination_params))
-    np.testing.assert_allclose(float(m_forced["imagination/first_epoch_loss"]), float(loss(state.imagination_params)), rtol=1e-5)
+    np.testing.assert_allclose(
+        float(m_forced["imagination/first_epoch_loss"]), float(loss(state.imagination_params)), rtol=1e-5
+    )
 
 
 def test_buffer_of_one_trains_fw_on_every_success(foresit_run):
@@ -171,7 +179,9 @@ def test_buffer_of_one_trains_fw_on_every_success(foresit_run):
 
 # ---------------------------------------------------------------------- every method
 # The default tier keeps ForeSIT itself; the other methods are the slow tier's.
-@pytest.mark.parametrize("method", [m if m == "a3c+foresit" else pytest.param(m, marks=pytest.mark.slow) for m in H.METHODS])
+@pytest.mark.parametrize(
+    "method", [m if m == "a3c+foresit" else pytest.param(m, marks=pytest.mark.slow) for m in H.METHODS]
+)
 def test_every_method_trains_without_nan(method, foresit_run):
     config = H.tiny_config(method)
     if method == "a3c+foresit":
@@ -218,8 +228,9 @@ def test_the_encoder_really_uses_the_detections():
         from foresit_jax.networks import EncoderInputs
 
         inputs = EncoderInputs(*jax.tree.map(lambda x: x[None], (seen, probs)))
-        _, states = nets.model.apply(state.params, initial_carry((), config.hidden_size), inputs, jnp.ones((1,), bool),
-                                     method="encode")  # fmt: skip
+        _, states = nets.model.apply(
+            state.params, initial_carry((), config.hidden_size), inputs, jnp.ones((1,), bool), method="encode"
+        )
         return nets.model.apply(state.params, states[0], method="heads")
 
     detections = obs["detections"]
@@ -238,9 +249,15 @@ def test_the_encoder_really_uses_the_detections():
 def test_object_graph_training_on_an_easy_org_setting_raises_the_success_rate():
     """As the savn easy-setting test, on the org setup with ORG's encoder."""
     config = H.tiny_config(
-        "a3c+org", setup="org", num_lanes=16, hidden_size=64, attention_size=64, value_hidden=64,
-        imagination_layer_sizes=(64, 32, 16, 32, 64, 64), learning_rate=5e-3,
-    )  # fmt: skip
+        "a3c+org",
+        setup="org",
+        num_lanes=16,
+        hidden_size=64,
+        attention_size=64,
+        value_hidden=64,
+        imagination_layer_sizes=(64, 32, 16, 32, 64, 64),
+        learning_rate=5e-3,
+    )
     _, _, first, last = H.easy_setting_run(config, *H.org_bathroom_env())
     assert last > 0.5 and last > first + 0.25, (first, last)
 
@@ -321,13 +338,20 @@ def test_a_vmapped_grid_is_the_per_rate_sweeps_to_float_rounding():
         one_rate, _ = grid.run_seeds(init(*train_module.grid_inputs(seeds, [rate])), env_params, 3)
         H.assert_trees_bitwise_equal(one_rate.opt_state[1].inner_state, alone.opt_state[1])
         H.assert_trees_bitwise_equal(one_rate._replace(opt_state=()), alone._replace(opt_state=()))
-        part = jax.tree.map(lambda x: x[v * len(seeds):(v + 1) * len(seeds)], together)
-        H.assert_trees_bitwise_equal((part.actor.tracker, part.buffers.count, part.key, part.update),
-                                     (alone.actor.tracker, alone.buffers.count, alone.key, alone.update))  # fmt: skip
+        part = jax.tree.map(lambda x: x[v * len(seeds) : (v + 1) * len(seeds)], together)
+        H.assert_trees_bitwise_equal(
+            (part.actor.tracker, part.buffers.count, part.key, part.update),
+            (alone.actor.tracker, alone.buffers.count, alone.key, alone.update),
+        )
         jax.tree.map(lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-3, atol=2e-4), part.params, alone.params)
         for name, values_ in alone_metrics.items():
-            np.testing.assert_allclose(np.asarray(together_metrics[name][v * len(seeds):(v + 1) * len(seeds)]),
-                                       values_, rtol=1e-3, atol=2e-4, err_msg=name)  # fmt: skip
+            np.testing.assert_allclose(
+                np.asarray(together_metrics[name][v * len(seeds) : (v + 1) * len(seeds)]),
+                values_,
+                rtol=1e-3,
+                atol=2e-4,
+                err_msg=name,
+            )
     kernel = np.asarray(jax.tree.leaves(together.params)[0])
     assert not np.array_equal(kernel[0], kernel[2]), "seed 0 trained the same at both rates"
 
@@ -342,9 +366,16 @@ def test_training_on_an_easy_setting_raises_the_success_rate():
     units instead of 64, about half the seeds were still stuck at ~15% after 300 updates.)
     """
     config = H.tiny_config(
-        "a3c+foresit", num_lanes=16, hidden_size=64, attention_size=64, value_hidden=64,
-        imagination_layer_sizes=(64, 32, 16, 32, 64, 64), buffer_size=4, imagination_epochs=5, learning_rate=5e-3,
-    )  # fmt: skip
+        "a3c+foresit",
+        num_lanes=16,
+        hidden_size=64,
+        attention_size=64,
+        value_hidden=64,
+        imagination_layer_sizes=(64, 32, 16, 32, 64, 64),
+        buffer_size=4,
+        imagination_epochs=5,
+        learning_rate=5e-3,
+    )
     _, _, first, last = H.easy_setting_run(config, *H.bathroom_env())
     assert first < 0.3, first
     assert last > 0.5 and last > first + 0.25, (first, last)
@@ -365,14 +396,17 @@ def test_the_progress_callback_sees_every_update_and_changes_no_number():
     jit = functools.partial(jax.jit, static_argnums=2, compiler_options=H.FAST_COMPILE)
     plain = jit(trainer.run)(state, trainer.env_params, n)
     reported = jit(functools.partial(trainer.run, on_update=lambda u: seen.append(np.asarray(u).tolist())))(
-        state, trainer.env_params, n)  # fmt: skip
+        state, trainer.env_params, n
+    )
     jax.block_until_ready(reported)
     H.assert_trees_bitwise_equal(plain, reported)
     assert seen == [train_module.PROGRESS_EVERY, 2 * train_module.PROGRESS_EVERY]
     states = jax.vmap(trainer.init)(jax.random.split(jax.random.PRNGKey(4), 2))
     seen.clear()
     plain = trainer.run_seeds(states, trainer.env_params, 2)
-    reported = train_module.seeds_runner(trainer, lambda u: seen.append(np.asarray(u).tolist()))(states, trainer.env_params, 2)
+    reported = train_module.seeds_runner(trainer, lambda u: seen.append(np.asarray(u).tolist()))(
+        states, trainer.env_params, 2
+    )
     jax.block_until_ready(reported)
     H.assert_trees_bitwise_equal(plain, reported)
     assert sorted(seen) == [1, 1, 2, 2], seen  # vmapped: once per seed and update

@@ -19,36 +19,46 @@ SEEDS = (0, 1, 2, 3)
 def seed_result(seed, val_history, selected_update, test_sr, rng):
     """One seed's result as a sweep writes it (the fields tune reads)."""
     return {
-        "seed": seed, "selected_update": selected_update,
+        "seed": seed,
+        "selected_update": selected_update,
         "validation": [{"update": u, "SR": sr} for u, sr in val_history],
         "selected": {"overall": {"SR": test_sr, "SPL": test_sr / 3, "SR>=5": test_sr / 2}},
         "training_success_rate": rng.uniform(0, 1, 40).tolist(),
-    }  # fmt: skip
+    }
 
 
 def per_seed(val_at_selected, test_sr, rng):
     """Seeds whose selected model (update 20) validates at `val_at_selected[i]`; the other
     validations are higher or lower, so only the selected one gives the right mean."""
-    return [seed_result(s, [(10, v + 30.0), (20, v), (30, v - 30.0)], 20, t, rng)
-            for s, v, t in zip(SEEDS, val_at_selected, test_sr)]  # fmt: skip
+    return [
+        seed_result(s, [(10, v + 30.0), (20, v), (30, v - 30.0)], 20, t, rng)
+        for s, v, t in zip(SEEDS, val_at_selected, test_sr)
+    ]
 
 
 def test_grid_points_and_arms():
     grid = tune.parse_grid(["learning_rate=3e-4,1e-3", "entropy_coef=0.01,0.02"])
     assert grid == [("learning_rate", ["3e-4", "1e-3"]), ("entropy_coef", ["0.01", "0.02"])]
-    assert tune.points(grid) == ["learning_rate=3e-4,entropy_coef=0.01", "learning_rate=3e-4,entropy_coef=0.02",
-                                 "learning_rate=1e-3,entropy_coef=0.01", "learning_rate=1e-3,entropy_coef=0.02"]  # fmt: skip
+    assert tune.points(grid) == [
+        "learning_rate=3e-4,entropy_coef=0.01",
+        "learning_rate=3e-4,entropy_coef=0.02",
+        "learning_rate=1e-3,entropy_coef=0.01",
+        "learning_rate=1e-3,entropy_coef=0.02",
+    ]
     assert tune.arm("a3c", "learning_rate=3e-4") == "a3c@learning_rate=3e-4"
     assert tune.arm("a3c@imagination_input=mlp", "learning_rate=3e-4") == "a3c@imagination_input=mlp,learning_rate=3e-4"
 
 
-@pytest.mark.parametrize("spec, message", [
-    (("learning_rate",), "write FIELD=V1,V2"),
-    (("learning_rate=",), "write FIELD=V1,V2"),
-    (("learning_rate=1e-3,1e-3",), "given twice"),
-    (("learning_rate=1e-3", "learning_rate=3e-4"), "learning_rate is given twice"),
-    ((), "at least one"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "spec, message",
+    [
+        (("learning_rate",), "write FIELD=V1,V2"),
+        (("learning_rate=",), "write FIELD=V1,V2"),
+        (("learning_rate=1e-3,1e-3",), "given twice"),
+        (("learning_rate=1e-3", "learning_rate=3e-4"), "learning_rate is given twice"),
+        ((), "at least one"),
+    ],
+)
 def test_grid_errors_name_what_is_wrong(spec, message):
     with pytest.raises(errors.UserError, match=message):
         tune.parse_grid(spec)
@@ -64,9 +74,13 @@ def test_arms_are_checked_against_the_preset(tmp_path):
         tune.arms(tune.Args(methods=("a3c",), out=tmp_path), tune.parse_grid(["learning_rate=fast"]))
     with pytest.raises(errors.UserError, match="trains what it trains at learning_rate=1e-3"):
         tune.arms(tune.Args(methods=("a3c",), out=tmp_path), tune.parse_grid(["learning_rate=1e-3,0.001"]))
-    table = tune.arms(tune.Args(methods=("a3c", "a3c+critic"), out=tmp_path), tune.parse_grid(["learning_rate=3e-4,1e-3"]))
-    assert table["a3c+critic"] == {"learning_rate=3e-4": "a3c+critic@learning_rate=3e-4",
-                                   "learning_rate=1e-3": "a3c+critic@learning_rate=1e-3"}  # fmt: skip
+    table = tune.arms(
+        tune.Args(methods=("a3c", "a3c+critic"), out=tmp_path), tune.parse_grid(["learning_rate=3e-4,1e-3"])
+    )
+    assert table["a3c+critic"] == {
+        "learning_rate=3e-4": "a3c+critic@learning_rate=3e-4",
+        "learning_rate=1e-3": "a3c+critic@learning_rate=1e-3",
+    }
 
 
 def test_the_value_is_chosen_on_validation_and_the_test_split_is_ignored():
@@ -101,8 +115,12 @@ def test_report_pairs_each_method_at_its_own_value_and_at_each_common_value(tmp_
     rng = np.random.default_rng(1)
     grid = tune.parse_grid(["learning_rate=3e-4,1e-3"])
     table = {m: {p: tune.arm(m, p) for p in tune.points(grid)} for m in ("a3c", "a3c+foresit")}
-    val = {("a3c", "learning_rate=3e-4"): 40, ("a3c", "learning_rate=1e-3"): 60,
-           ("a3c+foresit", "learning_rate=3e-4"): 55, ("a3c+foresit", "learning_rate=1e-3"): 50}  # fmt: skip
+    val = {
+        ("a3c", "learning_rate=3e-4"): 40,
+        ("a3c", "learning_rate=1e-3"): 60,
+        ("a3c+foresit", "learning_rate=3e-4"): 55,
+        ("a3c+foresit", "learning_rate=1e-3"): 50,
+    }
     results = {}
     for (m, p), v in val.items():
         results[table[m][p]] = per_seed([v + rng.normal() for _ in SEEDS], rng.uniform(30, 80, len(SEEDS)), rng)
@@ -155,20 +173,30 @@ def test_tune_end_to_end_resumes_and_reuses_a_plain_sweep(tmp_path, capsys):
     sweep.main(sweep.Args(methods=("a3c",), seeds=2, preset="tiny", out=plain, progress=False, **episodes))
     out = tmp_path / "tune"
     # tiny's own learning rate is Config's 1e-4
-    args = tune.Args(methods=("a3c",), grid=("learning_rate=1e-4,1e-3",), seeds=2, preset="tiny", out=out,
-                     reuse=(plain,), progress=False, stop_after_chunks=1, **episodes)  # fmt: skip
+    args = tune.Args(
+        methods=("a3c",),
+        grid=("learning_rate=1e-4,1e-3",),
+        seeds=2,
+        preset="tiny",
+        out=out,
+        reuse=(plain,),
+        progress=False,
+        stop_after_chunks=1,
+        **episodes,
+    )
     assert tune.main(args) is None
     assert "a3c@learning_rate=1e-4: finished in" in capsys.readouterr().out
     done = tune.main(tune.Args(out=out, resume=True, progress=False))
     copied = json.loads((out / "sweep" / "methods" / "a3c@learning_rate=1e-4" / "results.json").read_text())
     assert copied == json.loads((plain / "methods" / "a3c" / "results.json").read_text())
-    results = {p: json.loads((out / "sweep" / "methods" / f"a3c@{p}" / "results.json").read_text())["results"]
-               for p in ("learning_rate=1e-4", "learning_rate=1e-3")}  # fmt: skip
+    results = {
+        p: json.loads((out / "sweep" / "methods" / f"a3c@{p}" / "results.json").read_text())["results"]
+        for p in ("learning_rate=1e-4", "learning_rate=1e-3")
+    }
     assert done["chosen"] == {"a3c": tuning.choose(results)}
     assert (out / "tune.md").is_file() and (out / "tune_curves.png").is_file()
     with pytest.raises(errors.UserError, match="already exists"):
         tune.main(tune.Args(methods=("a3c",), seeds=2, preset="tiny", out=out, progress=False))
-
 
 
 def test_reuse_takes_a_tune_folder_by_its_sweep(tmp_path):
@@ -176,5 +204,7 @@ def test_reuse_takes_a_tune_folder_by_its_sweep(tmp_path):
     (tmp_path / "tune").mkdir()
     (tmp_path / "tune" / "tune.json").write_text("{}")
     args = tune.Args(out=tmp_path / "new", reuse=(tmp_path / "tune", tmp_path / "a_sweep"))
-    assert tune.sweep_args(args, ("a3c",), tmp_path / "new" / "sweep").reuse == (tmp_path / "tune" / "sweep",
-                                                                                 tmp_path / "a_sweep")  # fmt: skip
+    assert tune.sweep_args(args, ("a3c",), tmp_path / "new" / "sweep").reuse == (
+        tmp_path / "tune" / "sweep",
+        tmp_path / "a_sweep",
+    )

@@ -83,7 +83,9 @@ def test_sizes_past_their_bounds_are_refused_naming_the_bound_unless_allowed():
     config = Config(num_lanes=8, num_steps=16)
     need = presets.window_bytes(config, seeds=2)
     presets.check_sizes(config, seeds=2, memory=need)  # exactly fits
-    with pytest.raises(ValueError, match=r"2 seed\(s\) x 8 lanes x 17 steps of 5616-byte observations .* --allow-large"):
+    with pytest.raises(
+        ValueError, match=r"2 seed\(s\) x 8 lanes x 17 steps of 5616-byte observations .* --allow-large"
+    ):
         presets.check_sizes(config, seeds=2, memory=need - 1)
     presets.check_sizes(config, seeds=2, memory=need - 1, allow_large=True)
     presets.check_sizes(Config(num_updates=10**7), memory=2**40)
@@ -109,8 +111,11 @@ def test_resume_names_in_one_line_the_flags_it_ignored(tmp_path, capsys):
 
     def resumed(argv):
         capsys.readouterr()
-        args = run_cli(sweep.Args, lambda a: rundir.resumed_args(a, "sweep.json", "sweep", keep=flags.INVOCATION),
-                       ["--out", str(tmp_path), "--resume", *argv])  # fmt: skip
+        args = run_cli(
+            sweep.Args,
+            lambda a: rundir.resumed_args(a, "sweep.json", "sweep", keep=flags.INVOCATION),
+            ["--out", str(tmp_path), "--resume", *argv],
+        )
         return args, capsys.readouterr().err
 
     args, err = resumed(["--preset", "quick", "--seeds", "5", "--setup", "savn"])  # all at their defaults
@@ -121,8 +126,17 @@ def test_resume_names_in_one_line_the_flags_it_ignored(tmp_path, capsys):
     with pytest.raises(SystemExit):  # another value is refused, as before
         resumed(["--preset", "house"])
 
-    info = {"arm": "a3c", "preset": "tiny", "seeds": [3], "config": {"setup": "savn"},
-            "schedule": {"chunk_updates": 2, "test_episodes_per_room": 2, "val_episodes_per_room": 2}}  # fmt: skip
-    ignored = run_cli(train.Args, lambda a: train.resume_ignored(a, info), ["--resume", "--seed", "0", "--preset", "quick"])
+    info = {
+        "arm": "a3c",
+        "preset": "tiny",
+        "seeds": [3],
+        "config": {"setup": "savn"},
+        "schedule": {"chunk_updates": 2, "test_episodes_per_room": 2, "val_episodes_per_room": 2},
+    }
+    ignored = run_cli(
+        train.Args, lambda a: train.resume_ignored(a, info), ["--resume", "--seed", "0", "--preset", "quick"]
+    )
     assert ignored == ["--preset quick (the run has tiny)", "--seed 0 (the run has 3)"]
-    assert train.resume_ignored(train.Args(seed=0, preset="quick"), info) == []  # outside run_cli nothing is known given
+    assert (
+        train.resume_ignored(train.Args(seed=0, preset="quick"), info) == []
+    )  # outside run_cli nothing is known given

@@ -9,14 +9,17 @@ from envs import versions
 REPO = Path(__file__).resolve().parents[1]
 
 
-@pytest.mark.parametrize("jax_version, flax_version, refused", [
-    ((0, 7, 2), (0, 12, 0), False),   # constraints.txt
-    ((0, 10, 2), (0, 12, 6), False),  # before jax 0.11 any flax 0.12 runs
-    ((0, 11, 0), (0, 12, 6), True),   # get_opaque_trace_state is gone
-    ((0, 12, 0), (0, 12, 0), True),
-    ((0, 11, 2), (0, 12, 7), False),  # the first flax that runs there
-    ((0, 12, 0), (0, 12, 12), False),  # constraints-latest.txt
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "jax_version, flax_version, refused",
+    [
+        ((0, 7, 2), (0, 12, 0), False),  # constraints.txt
+        ((0, 10, 2), (0, 12, 6), False),  # before jax 0.11 any flax 0.12 runs
+        ((0, 11, 0), (0, 12, 6), True),  # get_opaque_trace_state is gone
+        ((0, 12, 0), (0, 12, 0), True),
+        ((0, 11, 2), (0, 12, 7), False),  # the first flax that runs there
+        ((0, 12, 0), (0, 12, 12), False),  # constraints-latest.txt
+    ],
+)
 def test_incompatible_pair(jax_version, flax_version, refused):
     reason = versions.incompatible_pair(jax_version, flax_version)
     assert (reason is not None) == refused
@@ -42,7 +45,9 @@ def test_constraints_txt_pins_every_package_the_dev_install_brings():
 
     def pinned(name):
         lines = (REPO / name).read_text().splitlines()
-        return {canonicalize_name(l.split("==")[0]): l.split("==")[1].strip() for l in lines if l and not l.startswith("#")}
+        return {
+            canonicalize_name(l.split("==")[0]): l.split("==")[1].strip() for l in lines if l and not l.startswith("#")
+        }
 
     # Only where constraints.txt's stack is installed (Python 3.11; constraints-latest.txt, the
     # newest stack's, is a freeze of its own venv already).

@@ -231,8 +231,10 @@ def test_flatten_wrapper_gives_one_float32_vector_in_the_documented_order(reques
     info, ref_info = out[5], ref[5]
     np.testing.assert_array_equal(info["final_observation"], env.flatten(ref_info["final_observation"], params))
     np.testing.assert_array_equal(info["final_observation"], obs)  # Done: the last real observation
-    chex.assert_trees_all_equal({k: v for k, v in info.items() if k != "final_observation"},
-                                {k: v for k, v in ref_info.items() if k != "final_observation"})  # fmt: skip
+    chex.assert_trees_all_equal(
+        {k: v for k, v in info.items() if k != "final_observation"},
+        {k: v for k, v in ref_info.items() if k != "final_observation"},
+    )
 
 
 def test_flatten_wrapper_takes_a_five_value_step_and_box_observations():

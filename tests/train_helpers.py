@@ -30,10 +30,17 @@ FAST_COMPILE = {"xla_backend_optimization_level": 0}
 # The smallest sensible agent: bathrooms only (the smallest scene bank and the shortest
 # paths), 4 lanes, 16 hidden units.  num_steps stays 30 (the training time limit).
 TINY = dict(
-    room_types=("bathroom",), num_lanes=4, num_updates=2, hidden_size=16, attention_size=16,
-    value_hidden=16, imagination_layer_sizes=(16, 8, 4, 8, 16, 16), buffer_size=1,
-    imagination_epochs=1, learning_rate=1e-3,
-)  # fmt: skip
+    room_types=("bathroom",),
+    num_lanes=4,
+    num_updates=2,
+    hidden_size=16,
+    attention_size=16,
+    value_hidden=16,
+    imagination_layer_sizes=(16, 8, 4, 8, 16, 16),
+    buffer_size=1,
+    imagination_epochs=1,
+    learning_rate=1e-3,
+)
 
 METHODS = ("a3c", "a3c+foresit", "rnd", "att", "int", "a3c+critic", "a3c+foresit+plaincritic")
 ORG_METHODS = ("a3c+org", "a3c+org+foresit", "a3c+org+rnd", "a3c+org+att", "a3c+org+int")
@@ -110,16 +117,31 @@ def easy_env_params(env_params, max_optimal_length: int = 3):
     """An easy setting: one bathroom, one target, starts within `max_optimal_length`
     actions of success (Done included)."""
     b = env_params.bank
-    per_scene = ("numbers", "room_type", "cell_type", "obj_cat", "obj_band", "targets", "num_targets",
-                 "view_sem", "view_depth", "distance", "starts", "num_starts")  # fmt: skip
+    per_scene = (
+        "numbers",
+        "room_type",
+        "cell_type",
+        "obj_cat",
+        "obj_band",
+        "targets",
+        "num_targets",
+        "view_sem",
+        "view_depth",
+        "distance",
+        "starts",
+        "num_starts",
+    )
     b = b.replace(**{f: getattr(b, f)[:1] for f in per_scene})
     starts = np.asarray(b.starts[0, 0]).astype(np.int64)[: int(b.num_starts[0, 0])]
     near = starts[np.asarray(b.distance[0, 0])[starts * 2] <= max_optimal_length]  # pose index = start * 2 (level)
     assert len(near) > 10
     new_starts = np.zeros_like(np.asarray(b.starts))
     new_starts[0, 0, : len(near)] = near
-    b = b.replace(starts=jnp.asarray(new_starts), num_starts=b.num_starts.at[0, 0].set(len(near)),
-                  num_targets=jnp.ones_like(b.num_targets))  # fmt: skip
+    b = b.replace(
+        starts=jnp.asarray(new_starts),
+        num_starts=b.num_starts.at[0, 0].set(len(near)),
+        num_targets=jnp.ones_like(b.num_targets),
+    )
     return env_params.replace(bank=b)
 
 
@@ -146,13 +168,15 @@ def corrupt_checkpoint(folder, how: str = "flipped") -> None:
     copy (truncated to half) would."""
     from experiments.running import checkpoint
 
-    data = sorted((p for p in folder.rglob("*") if p.is_file() and p.name != checkpoint.CHECKSUM_FILE),
-                  key=lambda p: p.stat().st_size)[-1]  # fmt: skip
+    data = sorted(
+        (p for p in folder.rglob("*") if p.is_file() and p.name != checkpoint.CHECKSUM_FILE),
+        key=lambda p: p.stat().st_size,
+    )[-1]
     raw = bytearray(data.read_bytes())
     if how == "flipped":
         rng = np.random.default_rng(0)
         at = rng.integers(0, len(raw) - 16)
-        raw[at:at + 16] = rng.integers(0, 256, 16, dtype=np.uint8).tobytes()
+        raw[at : at + 16] = rng.integers(0, 256, 16, dtype=np.uint8).tobytes()
     else:
         raw = raw[: len(raw) // 2]
     data.write_bytes(bytes(raw))
@@ -184,8 +208,6 @@ def _make_trainer_cached(config, env=None, env_params=None, **kwargs):
 
 
 _REAL_EVALUATOR = importlib.import_module("foresit_jax.evaluate").Evaluator  # before any patching
-
-
 
 
 def _fast_jit(real_jit):
@@ -225,8 +247,9 @@ def patch_for_experiments(mp) -> None:
     class CachedEvaluator(_REAL_EVALUATOR):
         """Evaluator(...) and Evaluator.for_config(...) give the one Evaluator of their scenes."""
 
-        def __new__(cls, setup: str = "savn", layout: str = "room", priors: bool = False,
-                    perception_range: float | None = None):  # fmt: skip
+        def __new__(
+            cls, setup: str = "savn", layout: str = "room", priors: bool = False, perception_range: float | None = None
+        ):
             key = (setup, layout, bool(priors), perception_range)
             if key not in evaluators:  # a real Evaluator: its __init__ runs once, here
                 evaluators[key] = _REAL_EVALUATOR(*key)
@@ -234,8 +257,10 @@ def patch_for_experiments(mp) -> None:
 
     mp.setattr(evaluate, "Evaluator", CachedEvaluator)
     for module in programs:
-        for name, real, cached in (("make_trainer", real_make_trainer, _make_trainer_cached),
-                                   ("Evaluator", _REAL_EVALUATOR, CachedEvaluator)):  # fmt: skip
+        for name, real, cached in (
+            ("make_trainer", real_make_trainer, _make_trainer_cached),
+            ("Evaluator", _REAL_EVALUATOR, CachedEvaluator),
+        ):
             if getattr(module, name, None) is real:
                 mp.setattr(module, name, cached)
     mp.setattr(jax, "jit", _fast_jit(jax.jit))

@@ -39,8 +39,9 @@ def compare(config, items: tuple[np.ndarray, ...], epochs: int, seed: int) -> di
     train = tuple(x[order[:cut]] for x in items)
     test = tuple(x[order[cut:]] for x in items)
     sizes = config.imagination_layer_sizes
-    result = cvae.compare_imagination_targets(jax.random.PRNGKey(seed), train, test, layer_sizes=sizes,
-                                              latent_size=min(sizes), epochs=epochs)  # fmt: skip
+    result = cvae.compare_imagination_targets(
+        jax.random.PRNGKey(seed), train, test, layer_sizes=sizes, latent_size=min(sizes), epochs=epochs
+    )
     result.update(items=n, train_items=cut, test_items=n - cut, latent_size=min(sizes))
     return result
 
@@ -48,14 +49,21 @@ def compare(config, items: tuple[np.ndarray, ...], epochs: int, seed: int) -> di
 def markdown(result: dict, config, windows: int, level: int = 1) -> str:
     """The comparison's table and notes (the result of `compare`)."""
     sizes, n, cut = config.imagination_layer_sizes, result["items"], result["train_items"]
-    rows = [[label, f"{r['loss']:.4f}", f"{r['target_variance']:.4f}", f"{r['loss_over_variance']:.3f}", width]
-            for label, r, width in (("f_w on the agent's states (ForeSIT)", result["direct"], sizes[-1]),
-                                    ("f_w on the C-VAE's latent mean", result["cvae_latent"], min(sizes)))]  # fmt: skip
+    rows = [
+        [label, f"{r['loss']:.4f}", f"{r['target_variance']:.4f}", f"{r['loss_over_variance']:.3f}", width]
+        for label, r, width in (
+            ("f_w on the agent's states (ForeSIT)", result["direct"], sizes[-1]),
+            ("f_w on the C-VAE's latent mean", result["cvae_latent"], min(sizes)),
+        )
+    ]
     header = ["f_w target", "held-out smooth-L1 loss", "target variance", "loss / variance", "width"]
     at = f", update {result['update']}" if "update" in result else ""
-    return ("#" * level + f" Imagination loss: the agent's states vs a C-VAE's latent ({config.method}{at})\n\n"
-            + markdown_table(rows, header)
-            + f"\n\n{n} items from successful episodes in {windows} windows ({cut} to fit, {n - cut} held out, "
-            "split at random: the held-out items come from the same training scenes and targets); "
-            f"the C-VAE's held-out reconstruction {result['cvae_reconstruction']:.4f}, KL {result['cvae_kl']:.4f} "
-            "(a KL near 0 means the latent carries little of the state). Paper: 0.012 vs 0.018.\n")  # fmt: skip
+    return (
+        "#" * level
+        + f" Imagination loss: the agent's states vs a C-VAE's latent ({config.method}{at})\n\n"
+        + markdown_table(rows, header)
+        + f"\n\n{n} items from successful episodes in {windows} windows ({cut} to fit, {n - cut} held out, "
+        "split at random: the held-out items come from the same training scenes and targets); "
+        f"the C-VAE's held-out reconstruction {result['cvae_reconstruction']:.4f}, KL {result['cvae_kl']:.4f} "
+        "(a KL near 0 means the latent carries little of the state). Paper: 0.012 vs 0.018.\n"
+    )

@@ -36,8 +36,10 @@ def fit_and_score(train_x, train_y, train_groups, test_x) -> tuple[np.ndarray, f
     if len(np.unique(train_y)) < 2:
         return np.full(len(test_x), train_y[0]), float("nan")
     folds = list(GroupKFold(n_splits=min(3, len(np.unique(train_groups)))).split(train_x, train_y, train_groups))
-    scores = [np.mean([np.mean(model(c).fit(train_x[a], train_y[a]).predict(train_x[b]) == train_y[b])
-                       for a, b in folds]) for c in REGULARISATIONS]  # fmt: skip
+    scores = [
+        np.mean([np.mean(model(c).fit(train_x[a], train_y[a]).predict(train_x[b]) == train_y[b]) for a, b in folds])
+        for c in REGULARISATIONS
+    ]
     c = REGULARISATIONS[int(np.argmax(scores))]
     return model(c).fit(train_x, train_y).predict(test_x), c
 
@@ -63,8 +65,11 @@ def foresight_bound(train: dict, test: dict, labels: str, seed: int = 0) -> dict
     on each subset's rows, under `out["subsets"]`."""
     keep_train, keep_test = train[labels] >= 0, test[labels] >= 0
     y_train, y_test = train[labels][keep_train], test[labels][keep_test]
-    out = {"train_samples": int(keep_train.sum()), "test_samples": int(keep_test.sum()),
-           "test_groups": int(len(np.unique(test["group"][keep_test])))}  # fmt: skip
+    out = {
+        "train_samples": int(keep_train.sum()),
+        "test_samples": int(keep_test.sum()),
+        "test_groups": int(len(np.unique(test["group"][keep_test]))),
+    }
     if not len(y_test) or not len(y_train):
         return out
     majority = np.bincount(y_train).argmax()
@@ -72,8 +77,9 @@ def foresight_bound(train: dict, test: dict, labels: str, seed: int = 0) -> dict
     out["test_shares"] = (np.bincount(y_test) / len(y_test)).tolist()  # each label's share of the test rows
     correct = {}
     for name in FEATURE_SETS:
-        predicted, out[f"C {name}"] = fit_and_score(train[name][keep_train], y_train, train["group"][keep_train],
-                                                    test[name][keep_test])  # fmt: skip
+        predicted, out[f"C {name}"] = fit_and_score(
+            train[name][keep_train], y_train, train["group"][keep_train], test[name][keep_test]
+        )
         correct[name] = (predicted == y_test).astype(float)
         out[name] = float(correct[name].mean())
     gain = correct["view + target"] - correct["view"]
@@ -92,8 +98,14 @@ def foresight_bound(train: dict, test: dict, labels: str, seed: int = 0) -> dict
 
 
 # ---------------------------------------------------------------------- the features of first views
-def within_range(sem: np.ndarray, depth: np.ndarray, perception_range: Optional[float], num_semantic: int,
-                 num_targets: int, structural: int) -> tuple[np.ndarray, int]:  # fmt: skip
+def within_range(
+    sem: np.ndarray,
+    depth: np.ndarray,
+    perception_range: Optional[float],
+    num_semantic: int,
+    num_targets: int,
+    structural: int,
+) -> tuple[np.ndarray, int]:
     """A perception range emulated on views (sem, depth [N, 3, W]): the object categories
     (`structural` .. `structural + num_targets`) seen farther than `perception_range` cells
     become one extra class, `num_semantic` ("an object, unresolved"); walls, floor and
@@ -105,8 +117,15 @@ def within_range(sem: np.ndarray, depth: np.ndarray, perception_range: Optional[
     return np.where(far, num_semantic, sem), num_semantic + 1
 
 
-def features(sem: np.ndarray, depth: np.ndarray, target: np.ndarray, num_semantic: int, num_targets: int,
-             structural: int, unresolved: Optional[int] = None) -> dict[str, np.ndarray]:  # fmt: skip
+def features(
+    sem: np.ndarray,
+    depth: np.ndarray,
+    target: np.ndarray,
+    num_semantic: int,
+    num_targets: int,
+    structural: int,
+    unresolved: Optional[int] = None,
+) -> dict[str, np.ndarray]:
     """The feature sets of first views: sem, depth [N, 3, W] (envs' `view`, or
     `within_range`'s, whose `unresolved` class reads as an object in the geometry), the
     target category [N] (ints, the setup's category index)."""
@@ -116,11 +135,17 @@ def features(sem: np.ndarray, depth: np.ndarray, target: np.ndarray, num_semanti
     coarse = np.where(sem >= structural + num_targets, C.SEM_FURNITURE, np.minimum(sem, structural))
     if unresolved is not None:
         coarse = np.where(sem == unresolved, structural, coarse)
-    geometry = np.concatenate([np.eye(structural + 1)[coarse].reshape(n, -1),
-                               depth.reshape(n, -1) / max(float(depth.max()), 1e-9)], axis=1)  # fmt: skip
+    geometry = np.concatenate(
+        [np.eye(structural + 1)[coarse].reshape(n, -1), depth.reshape(n, -1) / max(float(depth.max()), 1e-9)], axis=1
+    )
     half = width // 2
-    sides = np.stack([np.eye(num_semantic)[sem[..., :half]].any(axis=(1, 2)),
-                      np.eye(num_semantic)[sem[..., half:]].any(axis=(1, 2))], axis=1).reshape(n, -1)  # [N, 2 * classes]
+    sides = np.stack(
+        [
+            np.eye(num_semantic)[sem[..., :half]].any(axis=(1, 2)),
+            np.eye(num_semantic)[sem[..., half:]].any(axis=(1, 2)),
+        ],
+        axis=1,
+    ).reshape(n, -1)  # [N, 2 * classes]
     view = np.concatenate([geometry, sides], axis=1)
     onehot = np.eye(num_targets)[target]
     crossed = (onehot[:, :, None] * sides[:, None, :]).reshape(n, -1)
@@ -148,8 +173,15 @@ def anchor_in_view(sem: np.ndarray, target: np.ndarray, setup: str) -> np.ndarra
 
 
 # ---------------------------------------------------------------------- the report
-def markdown(results: dict, seconds: float, setup: str, layout: str, priors: bool, resets: int,
-             perception_range: Optional[float] = None) -> str:  # fmt: skip
+def markdown(
+    results: dict,
+    seconds: float,
+    setup: str,
+    layout: str,
+    priors: bool,
+    resets: int,
+    perception_range: Optional[float] = None,
+) -> str:
     """The report of `foresight_bound`'s results for the turn and the bearing (a Markdown table)."""
     rows = []
     for label, r in results.items():
@@ -157,24 +189,44 @@ def markdown(results: dict, seconds: float, setup: str, layout: str, priors: boo
             rows.append([label, r["train_samples"], r["test_samples"], *["n/a"] * 6])
             continue
         lo, hi = r["gain_ci"]
-        rows.append([label, r["train_samples"], f"{r['test_samples']} ({r['test_groups']} layouts)",
-                     *(f"{100 * r[k]:.1f}" for k in ("majority", *FEATURE_SETS)),
-                     f"{100 * r['gain']:+.1f} [{100 * lo:+.1f}, {100 * hi:+.1f}]"])  # fmt: skip
+        rows.append(
+            [
+                label,
+                r["train_samples"],
+                f"{r['test_samples']} ({r['test_groups']} layouts)",
+                *(f"{100 * r[k]:.1f}" for k in ("majority", *FEATURE_SETS)),
+                f"{100 * r['gain']:+.1f} [{100 * lo:+.1f}, {100 * hi:+.1f}]",
+            ]
+        )
         for name, part in r.get("subsets", {}).items():
             if "gain" in part:
                 lo, hi = part["gain_ci"]
-                rows.append([f"{label}, {name}", "", f"{part['samples']} ({100 * part['share']:.0f}%)", "",
-                             *(f"{100 * part[k]:.1f}" for k in FEATURE_SETS),
-                             f"{100 * part['gain']:+.1f} [{100 * lo:+.1f}, {100 * hi:+.1f}]"])  # fmt: skip
-    shares = "; ".join(f"{label}: " + ", ".join(f"{name} {100 * share:.0f}%" for name, share in zip(names, r["test_shares"]))
-                       for (label, r), names in zip(results.items(), (TURNS, BEARINGS)) if "test_shares" in r)  # fmt: skip
+                rows.append(
+                    [
+                        f"{label}, {name}",
+                        "",
+                        f"{part['samples']} ({100 * part['share']:.0f}%)",
+                        "",
+                        *(f"{100 * part[k]:.1f}" for k in FEATURE_SETS),
+                        f"{100 * part['gain']:+.1f} [{100 * lo:+.1f}, {100 * hi:+.1f}]",
+                    ]
+                )
+    shares = "; ".join(
+        f"{label}: " + ", ".join(f"{name} {100 * share:.0f}%" for name, share in zip(names, r["test_shares"]))
+        for (label, r), names in zip(results.items(), (TURNS, BEARINGS))
+        if "test_shares" in r
+    )
     family = f"{layout} layouts with priors" if priors else f"{layout} layouts"
     if perception_range is not None:
         family += f", objects resolved within {perception_range:g} cells (emulated on the view)"
-    return (f"# Foresight: {setup} setup, {family}\n\n"
-            f"{resets} starts per split; the starts whose first view does not show the target; fitted on the "
-            "train layouts, accuracy (%) on the test layouts; the gain of the target over the view with its 95% "
-            f"interval over the test layouts ({seconds:.0f} s).\n\n"
-            + markdown_table(rows, ["predicts", "train starts", "test starts", "majority", *FEATURE_SETS,
-                                    "gain from the target"]) + "\n"
-            + (f"\nThe test starts' labels: {shares}.\n" if shares else ""))  # fmt: skip
+    return (
+        f"# Foresight: {setup} setup, {family}\n\n"
+        f"{resets} starts per split; the starts whose first view does not show the target; fitted on the "
+        "train layouts, accuracy (%) on the test layouts; the gain of the target over the view with its 95% "
+        f"interval over the test layouts ({seconds:.0f} s).\n\n"
+        + markdown_table(
+            rows, ["predicts", "train starts", "test starts", "majority", *FEATURE_SETS, "gain from the target"]
+        )
+        + "\n"
+        + (f"\nThe test starts' labels: {shares}.\n" if shares else "")
+    )

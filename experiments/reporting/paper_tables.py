@@ -31,12 +31,20 @@ TABLE3 = ("a3c+org", "a3c+org+rnd", "a3c+org+int", "a3c+org+att", "a3c+org+fores
 # The paper's numbers (Tables 1-3), printed beside ours for orientation only: AI2-THOR is
 # not GridNav, so the levels differ; the claims compare methods within this environment.
 PAPER_TABLE1 = {
-    "a3c": (14.68, 33.04, 11.69, 21.44), "a3c+maml": (16.15, 40.86, 13.91, 28.70),
-    "a3c+foresit": (15.23, 36.80, 13.14, 27.55), "a3c+maml+foresit": (16.75, 45.5, 15.8, 34.7),
-    "a3c+org": (37.5, 65.3, 36.1, 54.8), "a3c+org+foresit": (39.41, 68.0, 36.85, 56.11),
-}  # fmt: skip
-PAPER_TABLE3 = {"a3c+org": (37.5, 65.3), "a3c+org+rnd": (37.57, 64.8), "a3c+org+int": (37.78, 63.8),
-                "a3c+org+att": (37.76, 65.4), "a3c+org+foresit": (38.66, 67.6)}  # fmt: skip
+    "a3c": (14.68, 33.04, 11.69, 21.44),
+    "a3c+maml": (16.15, 40.86, 13.91, 28.70),
+    "a3c+foresit": (15.23, 36.80, 13.14, 27.55),
+    "a3c+maml+foresit": (16.75, 45.5, 15.8, 34.7),
+    "a3c+org": (37.5, 65.3, 36.1, 54.8),
+    "a3c+org+foresit": (39.41, 68.0, 36.85, 56.11),
+}
+PAPER_TABLE3 = {
+    "a3c+org": (37.5, 65.3),
+    "a3c+org+rnd": (37.57, 64.8),
+    "a3c+org+int": (37.78, 63.8),
+    "a3c+org+att": (37.76, 65.4),
+    "a3c+org+foresit": (38.66, 67.6),
+}
 NOT_RUN = "not run"
 
 
@@ -63,10 +71,18 @@ def table1(results: dict) -> tuple[str, list[dict]]:
                 continue
             row = report.table({method: selected[method]})[0]
             rows.append({"setup": setup, **row})
-            cells.append([method, *(report.mean_std_ci(row, c) for c in report.COLUMNS),
-                          " / ".join(map(str, PAPER_TABLE1[method]))])  # fmt: skip
-        md += (f"### {setup} setup\n\n" + markdown_table(cells, ["Method", *report.COLUMNS, "paper (SPL / SR / SPL>5 / SR>5)"])
-               + "\n\n")  # fmt: skip
+            cells.append(
+                [
+                    method,
+                    *(report.mean_std_ci(row, c) for c in report.COLUMNS),
+                    " / ".join(map(str, PAPER_TABLE1[method])),
+                ]
+            )
+        md += (
+            f"### {setup} setup\n\n"
+            + markdown_table(cells, ["Method", *report.COLUMNS, "paper (SPL / SR / SPL>5 / SR>5)"])
+            + "\n\n"
+        )
     return md, rows
 
 
@@ -83,8 +99,16 @@ def table2(results: dict) -> tuple[str, list[dict]]:
             for room in rooms:
                 spl, sr = ([r[room][c] for r in per_seed] for c in ("SPL", "SR"))
                 cell.append(f"{_cell(spl)} / {_cell(sr)}")
-                rows.append({"method": method, "room": room, "SPL mean": float(np.mean(spl)), "SR mean": float(np.mean(sr)),
-                             "SPL std": stats.summary(spl)["std"], "SR std": stats.summary(sr)["std"]})  # fmt: skip
+                rows.append(
+                    {
+                        "method": method,
+                        "room": room,
+                        "SPL mean": float(np.mean(spl)),
+                        "SR mean": float(np.mean(sr)),
+                        "SPL std": stats.summary(spl)["std"],
+                        "SR std": stats.summary(sr)["std"],
+                    }
+                )
             cells.append(cell)
     header = ["Method", *(f"{room.replace('_', ' ')} SPL / SR" for room in rooms)]
     return markdown_table(cells, header) + "\n\n(mean ± sample std over seeds)\n", rows
@@ -94,8 +118,15 @@ def table3(results: dict) -> tuple[str, list[dict]]:
     methods = [m for m in TABLE3 if m in results]
     selected = _selected(results, methods)
     rows = report.table(selected)
-    cells = [[r["method"], report.mean_std_ci(r, "SPL"), report.mean_std_ci(r, "SR"),
-              " / ".join(map(str, PAPER_TABLE3[r["method"]]))] for r in rows]  # fmt: skip
+    cells = [
+        [
+            r["method"],
+            report.mean_std_ci(r, "SPL"),
+            report.mean_std_ci(r, "SR"),
+            " / ".join(map(str, PAPER_TABLE3[r["method"]])),
+        ]
+        for r in rows
+    ]
     cells += [[m, NOT_RUN, NOT_RUN, " / ".join(map(str, PAPER_TABLE3[m]))] for m in TABLE3 if m not in results]
     md = markdown_table(cells, ["Method", "SPL", "SR", "paper (SPL / SR)"]) + "\n"
     if "a3c+org" in selected and len(selected) > 1 and len(next(iter(selected.values()))) > 1:
@@ -175,20 +206,47 @@ def claims(results: dict) -> list[tuple[str, str, str]]:
 
     for base, other in PAIRS:
         for col in ("SR", "SPL"):
-            claim(f"Table 1: {other} has a higher {col} than {base}", base, other,
-                  lambda r, c=col: r["overall"][c], f"{col} difference")  # fmt: skip
+            claim(
+                f"Table 1: {other} has a higher {col} than {base}",
+                base,
+                other,
+                lambda r, c=col: r["overall"][c],
+                f"{col} difference",
+            )
         # The paper's Section 5: ForeSIT's gain is larger on long paths (L^g >= 5).
-        claim(f"{other}'s SR gain over {base} is larger on L^g>=5 than overall", base, other,
-              lambda r: _num(r["overall"]["SR>=5"]) - r["overall"]["SR"], "(SR>=5 - SR) difference")  # fmt: skip
-    claim("Table 1: a3c+maml has a higher SR than a3c", "a3c", "a3c+maml", lambda r: r["overall"]["SR"], "SR difference")
+        claim(
+            f"{other}'s SR gain over {base} is larger on L^g>=5 than overall",
+            base,
+            other,
+            lambda r: _num(r["overall"]["SR>=5"]) - r["overall"]["SR"],
+            "(SR>=5 - SR) difference",
+        )
+    claim(
+        "Table 1: a3c+maml has a higher SR than a3c", "a3c", "a3c+maml", lambda r: r["overall"]["SR"], "SR difference"
+    )
     for base, critic, foresit in CRITIC_TRIPLES:  # not the paper's claims: what its rows mix
-        claim(f"Mechanism: {critic} (the attention critic alone) has a higher SR than {base}", base, critic,
-              lambda r: r["overall"]["SR"], "SR difference")  # fmt: skip
-        claim(f"Mechanism: {foresit} has a higher SR than {critic} (the imagination, the critic held)", critic, foresit,
-              lambda r: r["overall"]["SR"], "SR difference")  # fmt: skip
+        claim(
+            f"Mechanism: {critic} (the attention critic alone) has a higher SR than {base}",
+            base,
+            critic,
+            lambda r: r["overall"]["SR"],
+            "SR difference",
+        )
+        claim(
+            f"Mechanism: {foresit} has a higher SR than {critic} (the imagination, the critic held)",
+            critic,
+            foresit,
+            lambda r: r["overall"]["SR"],
+            "SR difference",
+        )
     for ablation in ("a3c+org+rnd", "a3c+org+int", "a3c+org+att"):
-        claim(f"Table 3: a3c+org+foresit has a higher SR than {ablation}", ablation, "a3c+org+foresit",
-              lambda r: r["overall"]["SR"], "SR difference")  # fmt: skip
+        claim(
+            f"Table 3: a3c+org+foresit has a higher SR than {ablation}",
+            ablation,
+            "a3c+org+foresit",
+            lambda r: r["overall"]["SR"],
+            "SR difference",
+        )
     # The protocol (#10): selecting on validation should not lose to taking the last model;
     # every method's seeds pooled (the same test episodes for both models of a seed).
     text = "Protocol: the model selected on validation has a higher test SR than the last one"
@@ -214,17 +272,44 @@ def sampled_markdown(results: dict, sampled: dict[str, list[dict]], base: str = 
             g, x = [greedy[r["seed"]][col] for r in per_seed], [r["overall"][col] for r in per_seed]
             pair = stats.paired(g, x)
             cell += [_cell(g), _cell(x), fmt_pair(pair)]
-            rows.append({"method": method, "metric": col, "greedy mean": float(np.mean(g)), "sampled mean": float(np.mean(x)),
-                         "sampled - greedy": pair["diff"], "ci_low": pair["ci_low"], "ci_high": pair["ci_high"]})  # fmt: skip
+            rows.append(
+                {
+                    "method": method,
+                    "metric": col,
+                    "greedy mean": float(np.mean(g)),
+                    "sampled mean": float(np.mean(x)),
+                    "sampled - greedy": pair["diff"],
+                    "ci_low": pair["ci_low"],
+                    "ci_high": pair["ci_high"],
+                }
+            )
         cells.append(cell)
-    md = markdown_table(cells, ["Method", "SR greedy", "SR sampled", "sampled - greedy [95% CI], p",
-                                "SPL greedy", "SPL sampled", "sampled - greedy"]) + "\n"  # fmt: skip
+    md = (
+        markdown_table(
+            cells,
+            [
+                "Method",
+                "SR greedy",
+                "SR sampled",
+                "sampled - greedy [95% CI], p",
+                "SPL greedy",
+                "SPL sampled",
+                "sampled - greedy",
+            ],
+        )
+        + "\n"
+    )
     if base in sampled and len(sampled) > 1:
         against = []
         for method in (m for m in sampled if m != base):
-            pairs = [stats.paired([r["overall"][c] for r in sampled[base]], [r["overall"][c] for r in sampled[method]])
-                     for c in ("SR", "SPL")]  # fmt: skip
+            pairs = [
+                stats.paired([r["overall"][c] for r in sampled[base]], [r["overall"][c] for r in sampled[method]])
+                for c in ("SR", "SPL")
+            ]
             against.append([method, *(f"{fmt_pair(p)} ({stats.verdict(p)})" for p in pairs)])
-        md += (f"\nWith sampled actions, each against {base} (paired over seeds, the same test episodes):\n\n"
-               + markdown_table(against, ["Method", "SR difference [95% CI], p", "SPL difference"]) + "\n")  # fmt: skip
+        md += (
+            f"\nWith sampled actions, each against {base} (paired over seeds, the same test episodes):\n\n"
+            + markdown_table(against, ["Method", "SR difference [95% CI], p", "SPL difference"])
+            + "\n"
+        )
     return md, rows

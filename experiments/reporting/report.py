@@ -19,8 +19,15 @@ COLUMNS, HOUSE_COLUMNS = tables.RESULT_COLUMNS, tables.HOUSE_COLUMNS  # houses' 
 # Training diagnostics kept per seed and chunk (the chunk's mean), in results.json: what
 # the value baseline explains, how spread the advantages are, the gradient's size, the
 # policy's entropy (why a critic helps or costs, docs/mechanism.md).
-DIAGNOSTICS = ("losses/value_loss", "losses/explained_variance", "losses/advantage_std", "losses/grad_norm",
-               "losses/entropy", "charts/noise_variance", "imagination/loss")  # fmt: skip
+DIAGNOSTICS = (
+    "losses/value_loss",
+    "losses/explained_variance",
+    "losses/advantage_std",
+    "losses/grad_norm",
+    "losses/entropy",
+    "charts/noise_variance",
+    "imagination/loss",
+)
 
 
 def diagnostic_label(name: str) -> str:
@@ -47,7 +54,9 @@ def mean_std_ci(row: dict, col: str) -> str:
         return "n/a"
     if not np.isfinite(row[f"{col} std"]):
         return f"{row[f'{col} mean']:.2f}"
-    return f"{row[f'{col} mean']:.2f} ± {row[f'{col} std']:.2f} [{row[f'{col} ci_low']:.1f}, {row[f'{col} ci_high']:.1f}]"
+    return (
+        f"{row[f'{col} mean']:.2f} ± {row[f'{col} std']:.2f} [{row[f'{col} ci_low']:.1f}, {row[f'{col} ci_high']:.1f}]"
+    )
 
 
 def table_markdown(rows: list[dict], title: str) -> str:
@@ -72,8 +81,15 @@ def paired_markdown(results_by_method: dict[str, list[dict]], room: str = "overa
             p_value = f"{p['p']:.3f}" if np.isfinite(p["p"]) else "n/a"
             cell += [f"{p['diff']:+.2f} [{p['ci_low']:+.1f}, {p['ci_high']:+.1f}]", p_value, stats.verdict(p)]
         cells.append(cell)
-    header = ["Methods", "SR difference [95% CI]", "p (SR)", "higher SR", "SPL difference [95% CI]", "p (SPL)",
-              "higher SPL"]  # fmt: skip
+    header = [
+        "Methods",
+        "SR difference [95% CI]",
+        "p (SR)",
+        "higher SR",
+        "SPL difference [95% CI]",
+        "p (SPL)",
+        "higher SPL",
+    ]
     return "## Paired over seeds (same seeds, same test episodes)\n\n" + markdown_table(cells, header) + "\n"
 
 
@@ -87,10 +103,19 @@ def paired_by_length(results: dict[str, list[dict]], base: str, other: str) -> l
     against `base` seed by seed on each seed's selected model: (bucket, the test episodes
     in it summed over `base`'s seeds, `stats.paired` of SR, of SPL)."""
     buckets = results[base][0]["selected"]["by_length"]
-    return [(bucket, sum(r["selected"]["by_length"][bucket]["episodes"] for r in results[base]),
-             *(stats.paired(*([rate(r["selected"]["by_length"][bucket][col]) for r in results[m]]
-                              for m in (base, other))) for col in ("SR", "SPL")))
-            for bucket in buckets]  # fmt: skip
+    return [
+        (
+            bucket,
+            sum(r["selected"]["by_length"][bucket]["episodes"] for r in results[base]),
+            *(
+                stats.paired(
+                    *([rate(r["selected"]["by_length"][bucket][col]) for r in results[m]] for m in (base, other))
+                )
+                for col in ("SR", "SPL")
+            ),
+        )
+        for bucket in buckets
+    ]
 
 
 def by_length_markdown(results: dict[str, list[dict]]) -> str:
@@ -109,13 +134,20 @@ def by_length_markdown(results: dict[str, list[dict]]) -> str:
         return "n/a" if not np.isfinite(p["diff"]) else f"{p['diff']:+.1f} [{p['ci_low']:+.1f}, {p['ci_high']:+.1f}]"
 
     buckets = list(results[methods[0]][0]["selected"]["by_length"])
-    cells = [[bucket, *(f"{mean_std(m, bucket, 'SR')} / {mean_std(m, bucket, 'SPL')}" for m in methods)]
-             for bucket in buckets]  # fmt: skip
-    md = ("## By optimal path length L^g: SR / SPL (mean ± sample std over seeds)\n\n"
-          + markdown_table(cells, ["L^g", *methods]) + "\n")  # fmt: skip
+    cells = [
+        [bucket, *(f"{mean_std(m, bucket, 'SR')} / {mean_std(m, bucket, 'SPL')}" for m in methods)]
+        for bucket in buckets
+    ]
+    md = (
+        "## By optimal path length L^g: SR / SPL (mean ± sample std over seeds)\n\n"
+        + markdown_table(cells, ["L^g", *methods])
+        + "\n"
+    )
     for other in methods[1:]:
-        rows = [[bucket, episodes, pair(sr), stats.verdict(sr), pair(spl), stats.verdict(spl)]
-                for bucket, episodes, sr, spl in paired_by_length(results, methods[0], other)]  # fmt: skip
+        rows = [
+            [bucket, episodes, pair(sr), stats.verdict(sr), pair(spl), stats.verdict(spl)]
+            for bucket, episodes, sr, spl in paired_by_length(results, methods[0], other)
+        ]
         header = ["L^g", "episodes (all seeds)", "SR difference [95% CI]", "higher SR", "SPL difference", "higher SPL"]
         md += f"\n### {other} - {methods[0]}, paired per bucket\n\n" + markdown_table(rows, header) + "\n"
     return md
@@ -127,13 +159,18 @@ def selection_markdown(results: dict[str, list[dict]]) -> str:
     cells = []
     for method, per_seed in results.items():
         sr = [stats.summary([r[k]["overall"]["SR"] for r in per_seed]) for k in ("selected", "last")]
-        seeds = ", ".join(f"{r['seed']}: {r['selected']['overall']['SR']:.1f} / {r['last']['overall']['SR']:.1f}"
-                          f" (update {r['selected_update']})" for r in per_seed)  # fmt: skip
-        cells.append([method, *(f"{s['mean']:.2f}" + (f" ± {s['std']:.2f}" if np.isfinite(s["std"]) else "")
-                                for s in sr), seeds])  # fmt: skip
+        seeds = ", ".join(
+            f"{r['seed']}: {r['selected']['overall']['SR']:.1f} / {r['last']['overall']['SR']:.1f}"
+            f" (update {r['selected_update']})"
+            for r in per_seed
+        )
+        cells.append(
+            [method, *(f"{s['mean']:.2f}" + (f" ± {s['std']:.2f}" if np.isfinite(s["std"]) else "") for s in sr), seeds]
+        )
     header = ["Method", "SR, selected", "SR, last", "per seed: selected / last (selected update)"]
     return "## Model selection: the model of the best validation SR against the last one, test split\n\n" + (
-        markdown_table(cells, header) + "\n")
+        markdown_table(cells, header) + "\n"
+    )
 
 
 def diagnostics_markdown(results: dict[str, list[dict]]) -> str:
@@ -153,7 +190,7 @@ def diagnostics_markdown(results: dict[str, list[dict]]) -> str:
     if not rows:
         return ""
     header = ["Method", "chunk", *map(diagnostic_label, DIAGNOSTICS)]
-    return ("## Training diagnostics (mean over seeds of each chunk's mean)\n\n" + markdown_table(rows, header) + "\n")
+    return "## Training diagnostics (mean over seeds of each chunk's mean)\n\n" + markdown_table(rows, header) + "\n"
 
 
 TEST = ("SR", "SPL", "SR>=5")
@@ -187,8 +224,11 @@ def load(run: Path) -> dict[str, list[dict]]:
     folder = Path(run) / "methods"
     if not folder.is_dir():
         raise errors.UserError(f"{run} is not a sweep folder (it has no methods/): give --run the folder a sweep wrote")
-    found = {m.name: errors.read_json(m / "results.json", ("results",))["results"]
-             for m in sorted(folder.iterdir()) if (m / "results.json").is_file()}  # fmt: skip
+    found = {
+        m.name: errors.read_json(m / "results.json", ("results",))["results"]
+        for m in sorted(folder.iterdir())
+        if (m / "results.json").is_file()
+    }
     if not found:
         raise errors.UserError(f"{run} has no finished method yet (no methods/*/results.json)")
     return found
@@ -216,7 +256,7 @@ def format_pair(p: dict) -> str:
 
 
 def format_mean_std(x: np.ndarray) -> str:
-    """"mean ± sample std" of the finite values of `x` (n/a when there are none)."""
+    """ "mean ± sample std" of the finite values of `x` (n/a when there are none)."""
     x = x[np.isfinite(x)]
     if not len(x):
         return "n/a"
@@ -240,13 +280,29 @@ def _robust(results: dict, pairs: list, out: dict, level: str = "##") -> str:
             mde = stats.minimum_detectable_effect(float(np.std(y - x, ddof=1)) if len(x) > 1 else np.nan, len(x))
             name = f"{b} - {a}"
             out["pairs"][name].setdefault("robust", {})[column] = {
-                "iqm_a": iqm_a, "iqm_b": iqm_b, "probability_of_improvement": poi, "p_holm": float(p_holm), "mde": mde}
-            rows.append([name, column, _interval(*iqm_a), _interval(*iqm_b), _interval(*poi, digits=2),
-                         f"{p_holm:.3f}" if np.isfinite(p_holm) else "n/a",
-                         f"{mde:.1f}" if np.isfinite(mde) else "n/a"])  # fmt: skip
-    return (f"\n{level} What these seeds can tell: IQM and P(B > A) [95% stratified bootstrap], Holm over the pairs, "
-            "the minimum detectable effect (80% power)\n\n"
-            + markdown_table(rows, ["B - A", "", "IQM of A", "IQM of B", "P(B > A)", "p (Holm)", "MDE"]) + "\n")
+                "iqm_a": iqm_a,
+                "iqm_b": iqm_b,
+                "probability_of_improvement": poi,
+                "p_holm": float(p_holm),
+                "mde": mde,
+            }
+            rows.append(
+                [
+                    name,
+                    column,
+                    _interval(*iqm_a),
+                    _interval(*iqm_b),
+                    _interval(*poi, digits=2),
+                    f"{p_holm:.3f}" if np.isfinite(p_holm) else "n/a",
+                    f"{mde:.1f}" if np.isfinite(mde) else "n/a",
+                ]
+            )
+    return (
+        f"\n{level} What these seeds can tell: IQM and P(B > A) [95% stratified bootstrap], Holm over the pairs, "
+        "the minimum detectable effect (80% power)\n\n"
+        + markdown_table(rows, ["B - A", "", "IQM of A", "IQM of B", "P(B > A)", "p (Holm)", "MDE"])
+        + "\n"
+    )
 
 
 def shown_columns(results: dict, last: int = 250) -> list[str]:
@@ -256,7 +312,9 @@ def shown_columns(results: dict, last: int = 250) -> list[str]:
     return [c for c in columns if any(np.isfinite(values(rs, c, last)).any() for rs in results.values())]
 
 
-def paired_report(results: dict, pairs: list, columns: list[str], last: int = 250, level: str = "##") -> tuple[str, dict]:
+def paired_report(
+    results: dict, pairs: list, columns: list[str], last: int = 250, level: str = "##"
+) -> tuple[str, dict]:
     """Markdown and numbers of `pairs` ([(A, B)] for B - A, the methods of `results`,
     same seeds) on `columns`: the seed-by-seed table, then `_robust`'s. The pairs are one
     family for Holm's correction. Returns (markdown, {"B - A": {column: stats.paired,
@@ -265,11 +323,21 @@ def paired_report(results: dict, pairs: list, columns: list[str], last: int = 25
     cells = []
     for a, b in pairs:
         name = f"{b} - {a}"
-        out["pairs"][name] = {c: stats.paired(values(results[a], c, last), values(results[b], c, last)) for c in columns}
-        cells.append([f"{tables.arm_label(b)} - {tables.arm_label(a)}", *(format_pair(out["pairs"][name][c]) for c in columns),
-                      stats.verdict(out["pairs"][name]["SR"])])  # fmt: skip
+        out["pairs"][name] = {
+            c: stats.paired(values(results[a], c, last), values(results[b], c, last)) for c in columns
+        }
+        cells.append(
+            [
+                f"{tables.arm_label(b)} - {tables.arm_label(a)}",
+                *(format_pair(out["pairs"][name][c]) for c in columns),
+                stats.verdict(out["pairs"][name]["SR"]),
+            ]
+        )
     names = [diagnostic_label(c) for c in columns]
-    md = (f"\n{level} Paired seed by seed: difference [95% CI]\n\n"
-          + markdown_table(cells, ["methods", *names, "higher SR"]) + "\n")  # fmt: skip
+    md = (
+        f"\n{level} Paired seed by seed: difference [95% CI]\n\n"
+        + markdown_table(cells, ["methods", *names, "higher SR"])
+        + "\n"
+    )
     md += _robust(results, pairs, out, level)
     return md, out["pairs"]

@@ -95,8 +95,7 @@ def probability_of_improvement(x, y) -> float:
     x, y = _runs_by_tasks(x), _runs_by_tasks(y)
     if x.shape[1] != y.shape[1]:
         raise ValueError(f"x and y must score the same tasks, got {x.shape[1]} and {y.shape[1]}")
-    per_task = [float(((a[:, None] > b[None, :]) + 0.5 * (a[:, None] == b[None, :])).mean())
-                for a, b in zip(x.T, y.T)]  # fmt: skip
+    per_task = [float(((a[:, None] > b[None, :]) + 0.5 * (a[:, None] == b[None, :])).mean()) for a, b in zip(x.T, y.T)]
     return float(np.mean(per_task))
 
 

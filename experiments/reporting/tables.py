@@ -65,9 +65,11 @@ RESULT_COLUMNS = ("SPL", "SR", "SPL>=5", "SR>=5")  # Table 1's columns
 HOUSE_COLUMNS = ("SPL>=10", "SR>=10", "SPL>=20", "SR>=20")  # and the houses' longer buckets (envs.metrics)
 
 
-PRIVILEGED_NOTE = ("privileged: i_tau is what no agent can see (the oracle: the agent's latent of its episode's "
-                   "goal view; optaction, compass, startcompass: the oracle's action, the target's bearing and "
-                   "distance); a diagnostic of what a channel can carry (docs/ceiling.md), never a method")
+PRIVILEGED_NOTE = (
+    "privileged: i_tau is what no agent can see (the oracle: the agent's latent of its episode's "
+    "goal view; optaction, compass, startcompass: the oracle's action, the target's bearing and "
+    "distance); a diagnostic of what a channel can carry (docs/ceiling.md), never a method"
+)
 
 
 def arm_label(arm: str) -> str:

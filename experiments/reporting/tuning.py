@@ -45,10 +45,27 @@ def grid_table(table: dict, results: dict, chosen: dict) -> tuple[str, list[dict
         for point, name in by_point.items():
             per_seed = results[name]
             val, sr, spl = selection_sr(per_seed), report.values(per_seed, "SR"), report.values(per_seed, "SPL")
-            rows.append({"method": method, "point": point, "arm": name, "val_SR": val.tolist(), "SR": sr.tolist(),
-                         "SPL": spl.tolist(), "chosen": point == chosen[method]})  # fmt: skip
-            cells.append([method, point, _mean_std(val), _mean_std(sr), _mean_std(spl),
-                          "**chosen**" if point == chosen[method] else ""])  # fmt: skip
+            rows.append(
+                {
+                    "method": method,
+                    "point": point,
+                    "arm": name,
+                    "val_SR": val.tolist(),
+                    "SR": sr.tolist(),
+                    "SPL": spl.tolist(),
+                    "chosen": point == chosen[method],
+                }
+            )
+            cells.append(
+                [
+                    method,
+                    point,
+                    _mean_std(val),
+                    _mean_std(sr),
+                    _mean_std(spl),
+                    "**chosen**" if point == chosen[method] else "",
+                ]
+            )
     md = markdown_table(cells, ["method", "value", "validation SR (chooses)", "test SR", "test SPL", ""])
     return md + "\n", rows
 
@@ -86,17 +103,20 @@ def curves_png(path: Path, table: dict, results: dict) -> None:
     fig.savefig(path, dpi=110)
 
 
-def tune_report(methods, fields, grid_points, preset: str, setup: str, sweep_folder: Path, table: dict,
-                results: dict) -> tuple[str, dict]:  # fmt: skip
+def tune_report(
+    methods, fields, grid_points, preset: str, setup: str, sweep_folder: Path, table: dict, results: dict
+) -> tuple[str, dict]:
     """tune.md's text and tune.json's numbers from the arms' per-seed results: `table`
     {method: {grid point: arm}} over `grid_points` of the grid's `fields`, trained in
     `sweep_folder` at `preset` on `setup`."""
     chosen = {m: choose({p: results[a] for p, a in by_point.items()}) for m, by_point in table.items()}
     seeds = [r["seed"] for r in next(iter(results.values()))]
-    md = (f"# Tuning {', '.join(fields)}: {', '.join(methods)}\n\n"
-          f"Preset {preset}, setup {setup}, seeds {', '.join(map(str, seeds))}; each seed's model selected on "
-          "validation, each method's value chosen by its seeds' mean validation SR (the test split does not choose). "
-          "Mean ± sample std over seeds.\n\n## The grid\n\n")  # fmt: skip
+    md = (
+        f"# Tuning {', '.join(fields)}: {', '.join(methods)}\n\n"
+        f"Preset {preset}, setup {setup}, seeds {', '.join(map(str, seeds))}; each seed's model selected on "
+        "validation, each method's value chosen by its seeds' mean validation SR (the test split does not choose). "
+        "Mean ± sample std over seeds.\n\n## The grid\n\n"
+    )
     text, rows = grid_table(table, results, chosen)
     md += text
     out = {"chosen": chosen, "grid": rows, "seeds": seeds, "best_vs_best": {}, "common": {}}
@@ -104,8 +124,11 @@ def tune_report(methods, fields, grid_points, preset: str, setup: str, sweep_fol
     if pairs and len(seeds) > 1:
         best = {m: results[table[m][chosen[m]]] for m in methods}
         columns = [c for c in report.shown_columns(best) if c in (*report.TEST, report.TRAINING)]
-        md += ("\n## Best vs best: each method at its own chosen value\n\n"
-               + ", ".join(f"{m}: {chosen[m]}" for m in methods) + "\n")
+        md += (
+            "\n## Best vs best: each method at its own chosen value\n\n"
+            + ", ".join(f"{m}: {chosen[m]}" for m in methods)
+            + "\n"
+        )
         text, out["best_vs_best"] = report.paired_report(best, pairs, columns, level="###")
         md += text
         for point in grid_points:
@@ -114,7 +137,9 @@ def tune_report(methods, fields, grid_points, preset: str, setup: str, sweep_fol
             text, out["common"][point] = report.paired_report(at, pairs, columns, level="###")
             md += text
     chosen_arms = " ".join(table[m][chosen[m]] for m in methods)
-    md += (f"\n![learning curves per value](tune_curves.png)\n\nThe arms' sweep: {sweep_folder} (its table1.md). "
-           f"The paper's report with each method at its chosen value (the methods of its tables): "
-           f"`python -m experiments.paper --arms {chosen_arms} --reuse {sweep_folder}`.\n")  # fmt: skip
+    md += (
+        f"\n![learning curves per value](tune_curves.png)\n\nThe arms' sweep: {sweep_folder} (its table1.md). "
+        f"The paper's report with each method at its chosen value (the methods of its tables): "
+        f"`python -m experiments.paper --arms {chosen_arms} --reuse {sweep_folder}`.\n"
+    )
     return md, out

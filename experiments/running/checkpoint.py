@@ -60,14 +60,19 @@ def save(manager, step: int, tree) -> None:
     need = sum(int(getattr(leaf, "nbytes", 0)) for leaf in jax.tree.leaves(tree))
     free = shutil.disk_usage(folder).free
     if free < need * 1.25 + (1 << 20):
-        raise OSError(errno.ENOSPC, f"No space left on device for checkpoint {step} (about {need / 2**20:.1f} MB; "
-                                    f"{free / 2**20:.1f} MB free)", str(folder))  # fmt: skip
+        raise OSError(
+            errno.ENOSPC,
+            f"No space left on device for checkpoint {step} (about {need / 2**20:.1f} MB; {free / 2**20:.1f} MB free)",
+            str(folder),
+        )
     try:
         manager.save(step, args=ocp.args.StandardSave(tree), force=True)
         manager.wait_until_finished()
     except Exception as e:
         if "No space left on device" in str(e) or "os_error_code='28'" in str(e):
-            raise OSError(errno.ENOSPC, f"No space left on device while writing checkpoint {step}", str(folder)) from None
+            raise OSError(
+                errno.ENOSPC, f"No space left on device while writing checkpoint {step}", str(folder)
+            ) from None
         raise
     folder = step_dir(manager, step)
     write_json(folder / CHECKSUM_FILE, {"sha256": _digest(folder)})
@@ -86,8 +91,10 @@ def verify(manager, step: int) -> None:
     except (json.JSONDecodeError, KeyError, TypeError, UnicodeDecodeError):
         raise CorruptCheckpoint(f"checkpoint {folder} is damaged (its checksum file cannot be read)") from None
     if _digest(folder) != expected:
-        raise CorruptCheckpoint(f"checkpoint {folder} is corrupt or truncated: its files no longer match the "
-                                "checksum recorded when it was saved")  # fmt: skip
+        raise CorruptCheckpoint(
+            f"checkpoint {folder} is corrupt or truncated: its files no longer match the "
+            "checksum recorded when it was saved"
+        )
 
 
 def intact_step(manager, at_most: int | None = None) -> tuple[int | None, list[str]]:
@@ -124,10 +131,13 @@ def restore(manager, step: int, like):
 
     verify(manager, step)
     first = jax.sharding.SingleDeviceSharding(jax.local_devices()[0])
-    abstract = jax.tree.map(lambda x: jax.ShapeDtypeStruct(np.shape(x), x.dtype, sharding=getattr(x, "sharding", None) or first),
-                            like)  # fmt: skip  (`like` may be arrays or shapes, `jax.eval_shape`'s)
+    abstract = jax.tree.map(
+        lambda x: jax.ShapeDtypeStruct(np.shape(x), x.dtype, sharding=getattr(x, "sharding", None) or first), like
+    )  # (`like` may be arrays or shapes, `jax.eval_shape`'s)
     try:
         return manager.restore(step, args=ocp.args.StandardRestore(abstract))
     except Exception as e:  # orbax's (often multi-line) reason, as one line naming the checkpoint
         reason = " ".join(str(e).split())[:300]
-        raise CorruptCheckpoint(f"cannot restore checkpoint {step_dir(manager, step)}: {type(e).__name__}: {reason}") from None
+        raise CorruptCheckpoint(
+            f"cannot restore checkpoint {step_dir(manager, step)}: {type(e).__name__}: {reason}"
+        ) from None

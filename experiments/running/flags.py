@@ -20,34 +20,72 @@ from typing import Annotated, Optional
 import tyro
 
 # What a run trains: the preset's values, unless given.
-NumUpdates = Annotated[Optional[int], tyro.conf.arg(help=(
-    "Override the preset's number of updates. With --resume, train and sweep extend a run to a larger number "
-    "(as if it had asked for it from the start; its earlier results are kept beside)."))]  # fmt: skip
+NumUpdates = Annotated[
+    Optional[int],
+    tyro.conf.arg(
+        help=(
+            "Override the preset's number of updates. With --resume, train and sweep extend a run to a larger number "
+            "(as if it had asked for it from the start; its earlier results are kept beside)."
+        )
+    ),
+]
 TestEpisodes = Annotated[Optional[int], tyro.conf.arg(help="Override the preset's test episodes per room type.")]
-ValEpisodes = Annotated[Optional[int], tyro.conf.arg(help=(
-    "Override the preset's validation episodes per room type (model selection, after each chunk)."))]  # fmt: skip
-Reuse = Annotated[tuple[Path, ...], tyro.conf.arg(help=(
-    "Folders whose finished arms are taken into --out instead of trained: sweeps (experiments.sweep), and tunes "
-    "for tune, paper runs for paper, of the same protocol (setup, preset and overrides). They combine seed by "
-    "seed: an arm whose every seed they finished between them is copied or assembled (each seed from the first "
-    "folder that has it), e.g. rows run on another machine, or seeds 2-4 (--seed 2 --seeds 3) added to a run of "
-    "seeds 0-1; an arm they finish only some seeds of is trained here."))]  # fmt: skip
+ValEpisodes = Annotated[
+    Optional[int],
+    tyro.conf.arg(
+        help=("Override the preset's validation episodes per room type (model selection, after each chunk).")
+    ),
+]
+Reuse = Annotated[
+    tuple[Path, ...],
+    tyro.conf.arg(
+        help=(
+            "Folders whose finished arms are taken into --out instead of trained: sweeps (experiments.sweep), and tunes "
+            "for tune, paper runs for paper, of the same protocol (setup, preset and overrides). They combine seed by "
+            "seed: an arm whose every seed they finished between them is copied or assembled (each seed from the first "
+            "folder that has it), e.g. rows run on another machine, or seeds 2-4 (--seed 2 --seeds 3) added to a run of "
+            "seeds 0-1; an arm they finish only some seeds of is trained here."
+        )
+    ),
+]
 
 # What this invocation does with --out.
-Resume = Annotated[bool, tyro.conf.arg(help=(
-    "Continue what was started in --out where it stopped (what finished is kept; what was training continues "
-    "from its last intact checkpoint), with the arguments it was started with: another value given is refused "
-    "(one given at its default is ignored, and a line names it), except a larger --num-updates in train and "
-    "sweep, which extends it."))]  # fmt: skip
-Overwrite = Annotated[bool, tyro.conf.arg(help=(
-    "Replace what this program wrote in --out and start again (a folder it did not write is never deleted)."))]
-StopAfterChunks = Annotated[Optional[int], tyro.conf.arg(help=(
-    "Stop (as if killed) after this many chunks trained by this invocation (paper: by each of its sweeps); "
-    "for testing --resume."))]  # fmt: skip
+Resume = Annotated[
+    bool,
+    tyro.conf.arg(
+        help=(
+            "Continue what was started in --out where it stopped (what finished is kept; what was training continues "
+            "from its last intact checkpoint), with the arguments it was started with: another value given is refused "
+            "(one given at its default is ignored, and a line names it), except a larger --num-updates in train and "
+            "sweep, which extends it."
+        )
+    ),
+]
+Overwrite = Annotated[
+    bool,
+    tyro.conf.arg(
+        help=("Replace what this program wrote in --out and start again (a folder it did not write is never deleted).")
+    ),
+]
+StopAfterChunks = Annotated[
+    Optional[int],
+    tyro.conf.arg(
+        help=(
+            "Stop (as if killed) after this many chunks trained by this invocation (paper: by each of its sweeps); "
+            "for testing --resume."
+        )
+    ),
+]
 Progress = Annotated[bool, tyro.conf.arg(help="Show the progress bar.")]
-AllowLarge = Annotated[bool, tyro.conf.arg(help=(
-    "Run past the size bounds instead of refusing: --num-updates over 10**7, --seeds over 4096, or a training "
-    "window whose observations alone exceed the machine's memory (experiments.running.presets.check_sizes)."))]  # fmt: skip
+AllowLarge = Annotated[
+    bool,
+    tyro.conf.arg(
+        help=(
+            "Run past the size bounds instead of refusing: --num-updates over 10**7, --seeds over 4096, or a training "
+            "window whose observations alone exceed the machine's memory (experiments.running.presets.check_sizes)."
+        )
+    ),
+]
 
 # This invocation's own flags: a program that saves its arguments for --resume saves
 # neither these nor resume and overwrite (`rundir.write_started_args`), and takes them

@@ -49,7 +49,9 @@ def divergence(metrics: dict) -> str | None:
     for name, bound in DIVERGENCE_BOUNDS.items():
         x = np.abs(np.asarray(metrics.get(name, 0.0), float))
         if not (x <= bound).all():
-            found.append(f"{name.split('/')[-1]} reached {np.nanmax(np.where(np.isnan(x), -np.inf, x)):.3g} (bound {bound:g})")
+            found.append(
+                f"{name.split('/')[-1]} reached {np.nanmax(np.where(np.isnan(x), -np.inf, x)):.3g} (bound {bound:g})"
+            )
     entropy = np.asarray(metrics.get("losses/entropy", 1.0), float)
     if (entropy < COLLAPSED_ENTROPY).any():
         found.append(f"the policy's entropy fell to {np.nanmin(entropy):.3g} (collapsed below {COLLAPSED_ENTROPY:g})")
@@ -134,8 +136,17 @@ def chunk_sizes(done: int, total: int, chunk_updates: int, budget: Optional[list
             budget[0] -= 1
 
 
-def check(metrics: dict, state, done: int, n: int, *, manager, checkpoints: Path,
-          seeds: Optional[Sequence[int]] = None, label: str = "") -> Optional[str]:  # fmt: skip
+def check(
+    metrics: dict,
+    state,
+    done: int,
+    n: int,
+    *,
+    manager,
+    checkpoints: Path,
+    seeds: Optional[Sequence[int]] = None,
+    label: str = "",
+) -> Optional[str]:
     """A chunk of `n` updates after the first `done`, checked before anything of it is
     recorded: its metrics (numpy, {name: [n]} or [seeds, n]) and the state it left. A
     non-finite loss or parameter stops the process (exit status 1), naming the update, the
@@ -144,8 +155,11 @@ def check(metrics: dict, state, done: int, n: int, *, manager, checkpoints: Path
     of, and returned (None when there is none)."""
     what = nonfinite(metrics, state, done, n, seeds)
     if what is not None:
-        errors.fail(f"{label}{what}; training stopped, {kept_checkpoint(manager, checkpoints)}; "
-                    "a lower --learning-rate may help", status=1)  # fmt: skip
+        errors.fail(
+            f"{label}{what}; training stopped, {kept_checkpoint(manager, checkpoints)}; "
+            "a lower --learning-rate may help",
+            status=1,
+        )
     warning = divergence(metrics)
     if warning:
         warn(f"{label}updates {done + 1}-{done + n}: {warning}")

@@ -55,8 +55,9 @@ def read_trained(folder: Path) -> Trained:
         if not done:
             raise errors.UserError(f"{folder} has no checkpoint yet (no chunk finished); train it first")
         trainer, states, selected = one.load_checkpoint(done)
-        return Trained(one.config, info["schedule"], list(one.seeds), trainer, states, selected,
-                       progress["best_update"], done)  # fmt: skip
+        return Trained(
+            one.config, info["schedule"], list(one.seeds), trainer, states, selected, progress["best_update"], done
+        )
     config = Config(**info["config"])
     trainer = make_trainer(config)
 
@@ -68,7 +69,9 @@ def read_trained(folder: Path) -> Trained:
     managers = [checkpoint.checkpoint_manager(folder / name, 100) for name in ("checkpoints", "best")]
     steps = [m.latest_step() for m in managers]
     if None in steps:
-        raise errors.UserError(f"{folder} has no finished checkpoint (checkpoints/ and best/); train it to the end first")
+        raise errors.UserError(
+            f"{folder} has no finished checkpoint (checkpoints/ and best/); train it to the end first"
+        )
     state = checkpoint.restore(managers[0], steps[0], like)
     selected = checkpoint.restore(managers[1], steps[1], like_selected)
     states, selected = jax.tree.map(lambda x: x[None], (state, selected))
@@ -89,7 +92,9 @@ def _models(config, trainer, seeds, states, selected) -> list[Model]:
 def models_of_run(folder: Path) -> dict[str, list[Model]]:
     """{method: [Model per seed]} of a run folder (`read_trained`)."""
     trained = read_trained(folder)
-    return {trained.config.method: _models(trained.config, trained.trainer, trained.seeds, trained.states, trained.selected)}
+    return {
+        trained.config.method: _models(trained.config, trained.trainer, trained.seeds, trained.states, trained.selected)
+    }
 
 
 def models_of_sweep(folder: Path, methods: tuple[str, ...]) -> dict[str, list[Model]]:
@@ -98,7 +103,9 @@ def models_of_sweep(folder: Path, methods: tuple[str, ...]) -> dict[str, list[Mo
     finished = [m for m in args.methods if sweeps.finished_seeds(folder / "methods" / m)]
     unknown = [m for m in methods if m not in finished]
     if unknown:
-        raise errors.UserError(f"{folder} has no finished {', '.join(unknown)}; finished: {', '.join(finished) or 'none'}")
+        raise errors.UserError(
+            f"{folder} has no finished {', '.join(unknown)}; finished: {', '.join(finished) or 'none'}"
+        )
     out = {}
     for method in methods or finished:
         config, _ = sweeps.method_schedule(method, args)

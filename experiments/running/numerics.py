@@ -52,8 +52,10 @@ def cpu_from_cpuinfo(text: str) -> dict:
             break  # the first processor only: the others are the same chip
         key, _, value = line.partition(":")
         fields[key.strip()] = value.strip()
-    cpu = {k: fields.get(key, "") for k, key in (("name", "model name"), ("vendor", "vendor_id"),
-                                                 ("family", "cpu family"), ("model", "model"))}  # fmt: skip
+    cpu = {
+        k: fields.get(key, "")
+        for k, key in (("name", "model name"), ("vendor", "vendor_id"), ("family", "cpu family"), ("model", "model"))
+    }
     if "flags" in fields:
         cpu["isa"] = isa_level(set(fields["flags"].split()))
     return cpu
@@ -107,8 +109,13 @@ def fingerprint() -> dict:
     import jaxlib
 
     backend = jax.default_backend()
-    fp = {"jax": jax.__version__, "jaxlib": jaxlib.__version__, "backend": backend,
-          "device": jax.devices()[0].device_kind, "xla_flags": xla_flags(os.environ.get("XLA_FLAGS", ""))}  # fmt: skip
+    fp = {
+        "jax": jax.__version__,
+        "jaxlib": jaxlib.__version__,
+        "backend": backend,
+        "device": jax.devices()[0].device_kind,
+        "xla_flags": xla_flags(os.environ.get("XLA_FLAGS", "")),
+    }
     if backend == "cpu":
         fp["cpu"] = host_cpu()
     if fast_compile_on():  # only then: a fingerprint of a normal compile stays as it was
@@ -122,8 +129,15 @@ def describe(fp: dict | None) -> str:
         return "not recorded"
     cpu = fp.get("cpu")
     if cpu:
-        chip = ", ".join(x for x in (cpu.get("name"), cpu.get("vendor") and f"{cpu['vendor']} family "
-                                     f"{cpu.get('family')} model {cpu.get('model')}", cpu.get("isa")) if x)  # fmt: skip
+        chip = ", ".join(
+            x
+            for x in (
+                cpu.get("name"),
+                cpu.get("vendor") and f"{cpu['vendor']} family {cpu.get('family')} model {cpu.get('model')}",
+                cpu.get("isa"),
+            )
+            if x
+        )
         where = f"cpu ({chip})"
     else:
         where = f"{fp['backend']} ({fp['device']})"
@@ -147,13 +161,17 @@ def extend(history: list | None, done: int, here: dict | None = None) -> tuple[l
         return history, None
     kept = history[:-1] if last["from_update"] == done else history  # that stretch trained nothing
     if last["platform"] is None:
-        warning = (f"updates {last['from_update']}-{done} of this run recorded no platform; if they were trained on "
-                   f"another one than this ({describe(here)}), the run will not end with the numbers of an "
-                   "uninterrupted run")  # fmt: skip
+        warning = (
+            f"updates {last['from_update']}-{done} of this run recorded no platform; if they were trained on "
+            f"another one than this ({describe(here)}), the run will not end with the numbers of an "
+            "uninterrupted run"
+        )
     else:
-        warning = (f"continuing on another platform than updates {last['from_update']}-{done} were trained on "
-                   f"({describe(last['platform'])}; here {describe(here)}): from update {done} on this run follows "
-                   "this platform's rounding, so it will not end with the numbers of an uninterrupted run")  # fmt: skip
+        warning = (
+            f"continuing on another platform than updates {last['from_update']}-{done} were trained on "
+            f"({describe(last['platform'])}; here {describe(here)}): from update {done} on this run follows "
+            "this platform's rounding, so it will not end with the numbers of an uninterrupted run"
+        )
     return kept + [{"from_update": done, "platform": here}], (warning if done else None)
 
 
@@ -173,16 +191,25 @@ def markdown(results_by_method: dict[str, list[dict]], pairs) -> str:
     """A report's "Platforms" section: which platforms trained which methods (from each seed's
     result's "numerics" history), and which of the compared `pairs` (method, method) mix
     platforms, whose paired differences then include the platforms' effect."""
-    trained = {m: sorted({p for r in per_seed for p in platforms_of(r.get("numerics"))})
-               for m, per_seed in results_by_method.items()}  # fmt: skip
+    trained = {
+        m: sorted({p for r in per_seed for p in platforms_of(r.get("numerics"))})
+        for m, per_seed in results_by_method.items()
+    }
     names = sorted({p for ps in trained.values() for p in ps})
     lines = [f"- {p}: {', '.join(m for m, ps in trained.items() if p in ps)}" for p in names]
-    text = "## Platforms\n\n" + (f"Every method was trained on {names[0]}.\n" if len(names) == 1
-                                 else "Methods were trained on these platforms:\n\n" + "\n".join(lines) + "\n")  # fmt: skip
-    mixed = [(a, b) for a, b in pairs if a in trained and b in trained and (trained[a] != trained[b] or len(trained[a]) > 1)]
+    text = "## Platforms\n\n" + (
+        f"Every method was trained on {names[0]}.\n"
+        if len(names) == 1
+        else "Methods were trained on these platforms:\n\n" + "\n".join(lines) + "\n"
+    )
+    mixed = [
+        (a, b) for a, b in pairs if a in trained and b in trained and (trained[a] != trained[b] or len(trained[a]) > 1)
+    ]
     if mixed:
-        text += ("\nTrained on different platforms (or a run on several): "
-                 + ", ".join(f"{a} and {b}" for a, b in mixed)
-                 + ". Their paired differences compare trajectories of different rounding, not only different "
-                 "methods: a platform moves one seed's result as much as another seed does (`experiments/running/numerics.py`).\n")  # fmt: skip
+        text += (
+            "\nTrained on different platforms (or a run on several): "
+            + ", ".join(f"{a} and {b}" for a, b in mixed)
+            + ". Their paired differences compare trajectories of different rounding, not only different "
+            "methods: a platform moves one seed's result as much as another seed does (`experiments/running/numerics.py`).\n"
+        )
     return text

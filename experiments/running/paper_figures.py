@@ -34,9 +34,18 @@ def trajectories_figure(loaded: dict, seed: int, candidates: int, path: Path) ->
     env, n = evaluator.env, candidates
     key = selection.test_key(seed)
     rooms = next(iter(loaded.values()))[0].room_types or ROOM_TYPES
-    rollouts = {m: jax.jit(functools.partial(rollout_lib.rollout, build(config), act=base_acting(config).act,
-                                            options=ActOptions(greedy=config.pieces.greedy_evaluation)),
-                           static_argnames="num_steps") for m, (config, _) in loaded.items()}  # fmt: skip
+    rollouts = {
+        m: jax.jit(
+            functools.partial(
+                rollout_lib.rollout,
+                build(config),
+                act=base_acting(config).act,
+                options=ActOptions(greedy=config.pieces.greedy_evaluation),
+            ),
+            static_argnames="num_steps",
+        )
+        for m, (config, _) in loaded.items()
+    }
     replay = jax.jit(functools.partial(replay_positions, env))
     panels, lines = [], []
     for room, k in zip(rooms, jax.random.split(key, len(rooms))):
@@ -59,7 +68,9 @@ def trajectories_figure(loaded: dict, seed: int, candidates: int, path: Path) ->
             state = jax.tree.map(lambda x: x[i], start)
             title = f"{method}: {'success' if ok else 'failure'}, {steps} actions (L^g {int(state.optimal_length)})"
             row.append(render_topdown(env_params, int(state.scene), state=state, trajectory=poses, title=title))
-            lines.append(f"{room} {method}: {'success' if ok else 'failure'} in {steps} actions, L^g {int(state.optimal_length)}")
+            lines.append(
+                f"{room} {method}: {'success' if ok else 'failure'} in {steps} actions, L^g {int(state.optimal_length)}"
+            )
         panels.append(row)
     fig = Figure(figsize=(10, 4.2 * len(panels)))
     FigureCanvasAgg(fig)
@@ -106,7 +117,8 @@ def tsne_figure(config, trainer, state, items, path: Path, points: int, seed: in
     category = np.argmin(((goal[:, None, :] - vectors[None]) ** 2).sum(-1), axis=1)
     names = categories(config.setup)
     points = TSNE(perplexity=min(30.0, (2 * n - 1) / 3), init="pca", random_state=seed).fit_transform(
-        np.concatenate([imagined, subgoal]))  # fmt: skip
+        np.concatenate([imagined, subgoal])
+    )
     fig = Figure(figsize=(7, 6))
     FigureCanvasAgg(fig)
     ax = fig.add_subplot()
@@ -135,7 +147,8 @@ def sampled_results(folder: Path, methods) -> dict[str, list[dict]]:
         for model in models:
             where = Evaluator.scenes_of(model.config)
             evaluator = evaluators.setdefault(where, Evaluator(*where))
-            result = evaluator.evaluate(model.selected, model.config, "test", selection.test_key(model.seed), episodes,
-                                        greedy=False)  # fmt: skip
+            result = evaluator.evaluate(
+                model.selected, model.config, "test", selection.test_key(model.seed), episodes, greedy=False
+            )
             out[method].append({"seed": model.seed, "overall": rundir.jsonable(result["overall"])})
     return out

@@ -44,15 +44,25 @@ class Schedule:
     """Most recent checkpoints kept on disk."""
 
 
-_SMALL_NET = dict(hidden_size=128, attention_size=128, value_hidden=128,
-                  imagination_layer_sizes=(128, 64, 32, 64, 128, 128))  # fmt: skip
+_SMALL_NET = dict(
+    hidden_size=128, attention_size=128, value_hidden=128, imagination_layer_sizes=(128, 64, 32, 64, 128, 128)
+)
 
 PRESETS: dict[str, tuple[dict, Schedule]] = {
     "tiny": (
-        dict(num_lanes=4, num_updates=4, room_types=("bathroom",), hidden_size=32, attention_size=32, value_hidden=32,
-             imagination_layer_sizes=(32, 16, 8, 16, 32, 32), buffer_size=2, imagination_epochs=1),
+        dict(
+            num_lanes=4,
+            num_updates=4,
+            room_types=("bathroom",),
+            hidden_size=32,
+            attention_size=32,
+            value_hidden=32,
+            imagination_layer_sizes=(32, 16, 8, 16, 32, 32),
+            buffer_size=2,
+            imagination_epochs=1,
+        ),
         Schedule(chunk_updates=2, val_episodes_per_room=2, test_episodes_per_room=2),
-    ),  # fmt: skip
+    ),
     "quick": (
         dict(num_lanes=32, num_steps=16, num_updates=3000, learning_rate=1e-3, **_SMALL_NET),
         # 100 validation episodes per room type: SR's standard error ~2.3 points (25 gave ~4.6,
@@ -61,8 +71,15 @@ PRESETS: dict[str, tuple[dict, Schedule]] = {
         Schedule(chunk_updates=500, val_episodes_per_room=100, test_episodes_per_room=250),
     ),
     "house": (  # quick's learner in houses (envs.houses), for longer, the reward shaped
-        dict(layout="house", num_lanes=32, num_steps=16, num_updates=12000, learning_rate=1e-3, progress_reward=0.1,
-             **_SMALL_NET),  # fmt: skip
+        dict(
+            layout="house",
+            num_lanes=32,
+            num_steps=16,
+            num_updates=12000,
+            learning_rate=1e-3,
+            progress_reward=0.1,
+            **_SMALL_NET,
+        ),
         Schedule(chunk_updates=1000, val_episodes_per_room=100, test_episodes_per_room=250),
     ),
     "paper": (
@@ -97,8 +114,10 @@ def split_arm(arm: str) -> tuple[str, dict]:
         if not eq or not text:
             raise ValueError(f"arm {arm!r}: {item!r} is not field=value")
         if field not in defaults or field in ("method", "setup", "layout", "priors", "perception_range"):
-            raise ValueError(f"arm {arm!r}: {field!r} is not a Config field an arm can set (the scenes are "
-                             "the sweep's: --setup, --layout, --priors, --perception-range)")  # fmt: skip
+            raise ValueError(
+                f"arm {arm!r}: {field!r} is not a Config field an arm can set (the scenes are "
+                "the sweep's: --setup, --layout, --priors, --perception-range)"
+            )
         kind = type(defaults[field])
         try:
             if kind is bool:
@@ -146,8 +165,9 @@ def check_seeds(first: int, count: int = 1) -> None:
     lie in 0..MAX_SEED (before anything is written)."""
     if isinstance(first, bool) or not isinstance(first, int) or first < 0 or first + count - 1 > MAX_SEED:
         last = f" to {first + count - 1}" if count > 1 else ""
-        raise ValueError(f"seeds must lie in 0..2**63-1 (what jax.random.PRNGKey takes), got {first}{last}; "
-                         "choose a smaller --seed")  # fmt: skip
+        raise ValueError(
+            f"seeds must lie in 0..2**63-1 (what jax.random.PRNGKey takes), got {first}{last}; choose a smaller --seed"
+        )
 
 
 # The bounds past which a run is refused unless --allow-large is given (`check_sizes`): a
@@ -161,8 +181,9 @@ MAX_INT32 = 2**31 - 1  # what any count must fit in, --allow-large or not
 def observation_bytes(config: Config) -> int:
     """The bytes of one lane's observation at one step (every part of the environment's
     observation space; a wrapper's additions, such as the goal view, are not counted)."""
-    env = GridNav(setup=config.setup, layout=config.layout, priors=config.priors,
-                  perception_range=config.perception_range)  # fmt: skip
+    env = GridNav(
+        setup=config.setup, layout=config.layout, priors=config.priors, perception_range=config.perception_range
+    )
     boxes = env.observation_space().spaces.values()
     return sum(int(math.prod(b.shape)) * np.dtype(b.dtype).itemsize for b in boxes)
 
@@ -173,38 +194,55 @@ def window_bytes(config: Config, seeds: int = 1) -> int:
     return seeds * config.num_lanes * (config.num_steps + 1) * observation_bytes(config)
 
 
-def check_sizes(config: Config, seeds: int = 1, schedule: Schedule | None = None, allow_large: bool = False,
-                memory: int | None = None) -> None:  # fmt: skip
+def check_sizes(
+    config: Config,
+    seeds: int = 1,
+    schedule: Schedule | None = None,
+    allow_large: bool = False,
+    memory: int | None = None,
+) -> None:
     """A ValueError naming the bound, before anything is written or compiled, where a run
     asks for more than MAX_UPDATES updates, more than MAX_SEEDS seeds, more than
     MAX_EPISODES evaluation episodes per room type, a count past int32, or a training
     window whose observations alone (`window_bytes`) exceed `memory` (by default the
     machine's: `devices.memory_bytes`). `allow_large` (--allow-large) lifts every bound but int32's."""
-    counts = {f.name: getattr(config, f.name) for f in dataclasses.fields(config) if type(getattr(config, f.name)) is int}
+    counts = {
+        f.name: getattr(config, f.name) for f in dataclasses.fields(config) if type(getattr(config, f.name)) is int
+    }
     if schedule is not None:
         counts.update((k, v) for k, v in dataclasses.asdict(schedule).items() if type(v) is int)
     for name, value in counts.items():
         if value > MAX_INT32:
-            raise ValueError(f"--{name.replace('_', '-')} {value} is past 2**31-1, the largest count XLA's int32 holds; "
-                             "give a smaller one")  # fmt: skip
+            raise ValueError(
+                f"--{name.replace('_', '-')} {value} is past 2**31-1, the largest count XLA's int32 holds; "
+                "give a smaller one"
+            )
     if allow_large:
         return
     for name in ("test_episodes_per_room", "val_episodes_per_room"):
         if counts.get(name, 0) > MAX_EPISODES:
-            raise ValueError(f"--{name.replace('_', '-')} {counts[name]} is past the bound of {MAX_EPISODES:,} episodes "
-                             "per room type; give fewer, or pass --allow-large")  # fmt: skip
+            raise ValueError(
+                f"--{name.replace('_', '-')} {counts[name]} is past the bound of {MAX_EPISODES:,} episodes "
+                "per room type; give fewer, or pass --allow-large"
+            )
     if config.num_updates > MAX_UPDATES:
-        raise ValueError(f"--num-updates {config.num_updates} is past the bound of {MAX_UPDATES:,} updates; "
-                         "give fewer, or pass --allow-large to run it anyway")  # fmt: skip
+        raise ValueError(
+            f"--num-updates {config.num_updates} is past the bound of {MAX_UPDATES:,} updates; "
+            "give fewer, or pass --allow-large to run it anyway"
+        )
     if seeds > MAX_SEEDS:
-        raise ValueError(f"--seeds {seeds} is past the bound of {MAX_SEEDS} seeds in one program; give fewer (run "
-                         "more seeds as several sweeps with --seed, combined by --reuse), or pass --allow-large")  # fmt: skip
+        raise ValueError(
+            f"--seeds {seeds} is past the bound of {MAX_SEEDS} seeds in one program; give fewer (run "
+            "more seeds as several sweeps with --seed, combined by --reuse), or pass --allow-large"
+        )
     need, have = window_bytes(config, seeds), devices.memory_bytes() if memory is None else memory
     if need > have:
-        raise ValueError(f"{seeds} seed(s) x {config.num_lanes} lanes x {config.num_steps + 1} steps of "
-                         f"{observation_bytes(config)}-byte observations need at least {need / 2**30:,.1f} GiB, "
-                         f"more than this machine's {have / 2**30:,.1f} GiB; lower --num-lanes or --seeds, or pass "
-                         "--allow-large to try anyway")  # fmt: skip
+        raise ValueError(
+            f"{seeds} seed(s) x {config.num_lanes} lanes x {config.num_steps + 1} steps of "
+            f"{observation_bytes(config)}-byte observations need at least {need / 2**30:,.1f} GiB, "
+            f"more than this machine's {have / 2**30:,.1f} GiB; lower --num-lanes or --seeds, or pass "
+            "--allow-large to try anyway"
+        )
 
 
 # ---------------------------------------------------------------------- Config fields as flags
@@ -213,8 +251,11 @@ def _field_docs(cls) -> dict[str, str]:
     (`docstring_parser`, its dependency), with the source's line breaks joined. tyro keeps
     those breaks itself (1.0.17: a line of a field docstring starting with a space starts a
     new help line), so the help it would print for Config's fields is ragged."""
-    return {p.arg_name: " ".join(p.description.split())
-            for p in docstring_parser.parse_from_object(cls).params if p.description}  # fmt: skip
+    return {
+        p.arg_name: " ".join(p.description.split())
+        for p in docstring_parser.parse_from_object(cls).params
+        if p.description
+    }
 
 
 def config_fields(name: str, exclude: tuple[str, ...]) -> type:
@@ -223,9 +264,15 @@ def config_fields(name: str, exclude: tuple[str, ...]) -> type:
     `--room-types bathroom kitchen`) it overrides the preset's value of what it sets,
     with Config's own documentation as its help."""
     docs, hints = _field_docs(Config), typing.get_type_hints(Config)
-    fields = [(f.name, Annotated[Optional[hints[f.name]], tyro.conf.arg(help=docs.get(f.name, ""))],
-               dataclasses.field(default=None))
-              for f in dataclasses.fields(Config) if f.name not in exclude]  # fmt: skip
+    fields = [
+        (
+            f.name,
+            Annotated[Optional[hints[f.name]], tyro.conf.arg(help=docs.get(f.name, ""))],
+            dataclasses.field(default=None),
+        )
+        for f in dataclasses.fields(Config)
+        if f.name not in exclude
+    ]
     return dataclasses.make_dataclass(name, fields, frozen=True)
 
 
@@ -236,8 +283,11 @@ _NOT_FLAGS = ("method", "setup", "num_actions")
 
 def config_flag(fields_type: type):
     """The annotation of a CLI's field holding `fields_type` (`config_fields`): unprefixed."""
-    return Annotated[fields_type, tyro.conf.OmitArgPrefixes,
-                     tyro.conf.arg(help="Config fields: each overrides the preset's value (default: the preset's)")]
+    return Annotated[
+        fields_type,
+        tyro.conf.OmitArgPrefixes,
+        tyro.conf.arg(help="Config fields: each overrides the preset's value (default: the preset's)"),
+    ]
 
 
 def given(fields) -> dict:

@@ -23,9 +23,16 @@ from foresit_jax.imagination import make_imagination_optimizer
 from foresit_jax.networks import build
 from foresit_jax.train import collect_subgoal_items
 from foresit_jax.probes import (
-    fit_imagination_offline, halves, imagination_fit, only_fit_items, r_squared, replay_online_fit,
-    shuffled, signal_to_noise, subgoal_position_histogram,
-)  # fmt: skip
+    fit_imagination_offline,
+    halves,
+    imagination_fit,
+    only_fit_items,
+    r_squared,
+    replay_online_fit,
+    shuffled,
+    signal_to_noise,
+    subgoal_position_histogram,
+)
 
 
 def sr_conditions(model: Model, evaluator, episodes: int, shuffled) -> dict[str, float]:
@@ -74,9 +81,20 @@ def fit_options(model: Model, w_init, items, passes: int) -> dict[str, float]:
             out[name] = float("nan")
             continue
         optimizer = make_imagination_optimizer(config.imagination_optimizer, config.imagination_lr)
-        w = replay_online_fit(model.trainer.networks.imagine, w_init, s_0, goal, subgoal, only_fit_items(add), optimizer,
-                              config.imagination_epochs, config.buffer_size, passes, config.imagination_batch,
-                              keep_state)  # fmt: skip
+        w = replay_online_fit(
+            model.trainer.networks.imagine,
+            w_init,
+            s_0,
+            goal,
+            subgoal,
+            only_fit_items(add),
+            optimizer,
+            config.imagination_epochs,
+            config.buffer_size,
+            passes,
+            config.imagination_batch,
+            keep_state,
+        )
         predicted = np.asarray(model.trainer.networks.imagine(w, s_0[add][held], goal[add][held]))
         out[name] = r_squared(predicted, subgoal[add][held], mean)
     return out
@@ -98,8 +116,9 @@ def imagination_items(model: Model, windows: int, options_passes: int = 0) -> di
         predicted = np.asarray(trainer.networks.imagine(state.imagination_params, s_0, goal))
         w_init = trainer.init(selection.run_key(model.seed)).imagination_params  # the run's own initial f_w
         offline, steps = fit_imagination_offline(trainer.networks.imagine, w_init, s_0, goal, subgoal)
-        out["fit"] = imagination_fit(predicted, subgoal, goal, s_0=s_0,
-                                     offline=np.asarray(trainer.networks.imagine(offline, s_0, goal)))  # fmt: skip
+        out["fit"] = imagination_fit(
+            predicted, subgoal, goal, s_0=s_0, offline=np.asarray(trainer.networks.imagine(offline, s_0, goal))
+        )
         out["fit"]["offline_steps"] = steps
         if options_passes:
             out["fit_options"] = fit_options(model, w_init, items, options_passes)

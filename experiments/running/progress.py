@@ -24,8 +24,14 @@ def progress_bar(total: int, initial: int, enabled: bool):
     `advance.skip(position)` moves it to where a resumed run starts, logging nothing."""
     from tqdm import tqdm
 
-    bar = tqdm(total=total, initial=initial, unit="upd", disable=not enabled, dynamic_ncols=True,
-               bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} updates [{elapsed}<{remaining}{postfix}]")  # fmt: skip
+    bar = tqdm(
+        total=total,
+        initial=initial,
+        unit="upd",
+        disable=not enabled,
+        dynamic_ncols=True,
+        bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} updates [{elapsed}<{remaining}{postfix}]",
+    )
     chunk_end = [initial]
     started = time.time()
 

@@ -69,8 +69,11 @@ def counts_of(progress: dict, i: int) -> dict:
     (a sweep begun before they were kept and resumed since), rather than an undercount."""
     counts = progress.get("counts", {})
     chunks = len(progress["curves"])
-    return {name: float(np.sum([chunk[i] for chunk in counts[name]]))
-            for name in COUNTS if len(counts.get(name, ())) == chunks}  # fmt: skip
+    return {
+        name: float(np.sum([chunk[i] for chunk in counts[name]]))
+        for name in COUNTS
+        if len(counts.get(name, ())) == chunks
+    }
 
 
 def rewind(progress: dict, step: int) -> dict:
@@ -84,19 +87,30 @@ def rewind(progress: dict, step: int) -> dict:
     for b, seed_history in zip(best, history):
         for h in seed_history:
             b.offer(h["SR"], h["update"])
-    diagnostics, counts = ({name: chunks_[:chunks] for name, chunks_ in progress.get(kind, {}).items()}
-                           for kind in ("diagnostics", "counts"))  # fmt: skip
-    return {**progress, "done": step, "history": history, "curves": progress["curves"][:chunks],
-            "diagnostics": diagnostics, "counts": counts, "best_sr": [b.sr for b in best], "best_update": [b.update for b in best],
-            "numerics": numerics.rewind(progress.get("numerics"), step)}  # fmt: skip
+    diagnostics, counts = (
+        {name: chunks_[:chunks] for name, chunks_ in progress.get(kind, {}).items()}
+        for kind in ("diagnostics", "counts")
+    )
+    return {
+        **progress,
+        "done": step,
+        "history": history,
+        "curves": progress["curves"][:chunks],
+        "diagnostics": diagnostics,
+        "counts": counts,
+        "best_sr": [b.sr for b in best],
+        "best_update": [b.update for b in best],
+        "numerics": numerics.rewind(progress.get("numerics"), step),
+    }
 
 
 def initial_states(trainer, seeds: Sequence[int]):
     """(the seeds' training states, stacked; the selected models (`AgentParams`), stacked:
     at first the initial ones): what a run's checkpoints hold, as `checkpoint.restore` needs
     it. One seed is initialised unvmapped (as `train` always was) and given the seed axis."""
-    select = functools.partial(agent_params, sigma2_max=trainer.config.sigma2_max,
-                               evaluation_noise=trainer.config.evaluation_noise)  # fmt: skip
+    select = functools.partial(
+        agent_params, sigma2_max=trainer.config.sigma2_max, evaluation_noise=trainer.config.evaluation_noise
+    )
     if len(seeds) == 1:
         state = trainer.init(selection.run_key(seeds[0]))
         return jax.tree.map(lambda x: x[None], (state, select(state)))
@@ -125,8 +139,10 @@ def check_continuable(folder: Path) -> None:
         return
     where = f"{folder.name} in {folder.parent.parent}" if folder.parent.name == "methods" else str(folder)
     if not (folder / "progress.json").is_file():
-        raise errors.UserError(f"{where} was assembled from other sweeps' seeds (--reuse) and keeps no progress to "
-                               "continue from; extend those sweeps and assemble it again")  # fmt: skip
+        raise errors.UserError(
+            f"{where} was assembled from other sweeps' seeds (--reuse) and keeps no progress to "
+            "continue from; extend those sweeps and assemble it again"
+        )
     done = rundir.read_json(folder / "progress.json", rundir.PROGRESS_KEYS)["done"]
     if not (folder / "checkpoints" / str(done)).is_dir():
         raise errors.UserError(f"{where} keeps no checkpoint of its update {done} to continue from")
@@ -139,8 +155,9 @@ def set_aside(folder: Path, updates: int) -> None:
     kept = folder / f"results_{updates}_updates.json"
     check_continuable(folder)
     if kept.exists():
-        raise errors.UserError(f"{folder} holds both results.json and {kept.name}, both of {updates} updates; "
-                               "move one of them first")  # fmt: skip
+        raise errors.UserError(
+            f"{folder} holds both results.json and {kept.name}, both of {updates} updates; move one of them first"
+        )
     (folder / "results.json").rename(kept)
     print(f"{folder.name}: its {updates}-update results are kept as {kept.name}; it trains on", flush=True)
 
@@ -185,9 +202,16 @@ class Run:
     # ------------------------------------------------------------------ its files
     def info(self) -> dict:
         """What run.json records."""
-        return {"format": RUN_FORMAT, "arm": self.label or self.config.method, "method": self.config.method,
-                "preset": self.preset, "seeds": list(self.seeds), "config": dataclasses.asdict(self.config),
-                "schedule": dataclasses.asdict(self.schedule), "selection_protocol": selection.PROTOCOL_VERSION}  # fmt: skip
+        return {
+            "format": RUN_FORMAT,
+            "arm": self.label or self.config.method,
+            "method": self.config.method,
+            "preset": self.preset,
+            "seeds": list(self.seeds),
+            "config": dataclasses.asdict(self.config),
+            "schedule": dataclasses.asdict(self.schedule),
+            "selection_protocol": selection.PROTOCOL_VERSION,
+        }
 
     def results(self) -> dict | None:
         """results.json when the run has finished its `config.num_updates` updates, else None."""
@@ -202,8 +226,14 @@ class Run:
         if (self.folder / "progress.json").is_file():
             return rundir.read_json(self.folder / "progress.json", rundir.PROGRESS_KEYS)
         n = len(self.seeds)
-        return {"done": 0, "best_sr": [-1.0] * n, "best_update": [None] * n, "history": [[] for _ in self.seeds],
-                "curves": [], "selection_protocol": selection.PROTOCOL_VERSION}  # fmt: skip
+        return {
+            "done": 0,
+            "best_sr": [-1.0] * n,
+            "best_update": [None] * n,
+            "history": [[] for _ in self.seeds],
+            "curves": [],
+            "selection_protocol": selection.PROTOCOL_VERSION,
+        }
 
     def manager(self):
         return checkpoint.checkpoint_manager(self.folder / "checkpoints", self.schedule.keep_checkpoints)
@@ -218,16 +248,21 @@ class Run:
         cannot continue, or a report already kept there."""
         had = self.config.num_updates
         if num_updates < had:
-            raise errors.UserError(f"--num-updates {num_updates} would shorten {self.folder} ({had} updates); a run can "
-                                   "only be extended (or trained anew in another --out)")  # fmt: skip
+            raise errors.UserError(
+                f"--num-updates {num_updates} would shorten {self.folder} ({had} updates); a run can "
+                "only be extended (or trained anew in another --out)"
+            )
         if num_updates == had:
             return self
         check_continuable(self.folder)
         kept = self.folder / f"report_{had}_updates"
         moved = [self.folder / name for name in keep if (self.folder / name).is_file()]
         # (a file kept there already with the same bytes is this report, kept by an extension killed part-way)
-        taken = [f"{kept.name}/{path.name}" for path in moved
-                 if (kept / path.name).exists() and (kept / path.name).read_bytes() != path.read_bytes()]  # fmt: skip
+        taken = [
+            f"{kept.name}/{path.name}"
+            for path in moved
+            if (kept / path.name).exists() and (kept / path.name).read_bytes() != path.read_bytes()
+        ]
         if (self.folder / "results.json").is_file():
             updates = rundir.read_json(self.folder / "results.json", rundir.RESULTS_KEYS)["updates"]
             taken += [f"results_{updates}_updates.json"] * (self.folder / f"results_{updates}_updates.json").exists()
@@ -237,13 +272,19 @@ class Run:
             kept.mkdir(exist_ok=True)
             path.replace(kept / path.name)
         if had % self.schedule.chunk_updates and self.progress()["done"] == had:
-            print(f"warning: {self.folder} has {had} updates, not a whole number of chunks ({self.schedule.chunk_updates}): "
-                  f"extended, it validates at {had}, where a run of {num_updates} from the start does not, so it will "
-                  "not end as one", file=sys.stderr, flush=True)  # fmt: skip
+            print(
+                f"warning: {self.folder} has {had} updates, not a whole number of chunks ({self.schedule.chunk_updates}): "
+                f"extended, it validates at {had}, where a run of {num_updates} from the start does not, so it will "
+                "not end as one",
+                file=sys.stderr,
+                flush=True,
+            )
         longer = dataclasses.replace(self, config=dataclasses.replace(self.config, num_updates=num_updates))
         if (self.folder / "run.json").is_file():
-            rundir.write_json(self.folder / "run.json", {**longer.info(), "commits": rundir.read_json(
-                self.folder / "run.json").get("commits", [])})
+            rundir.write_json(
+                self.folder / "run.json",
+                {**longer.info(), "commits": rundir.read_json(self.folder / "run.json").get("commits", [])},
+            )
         if (self.folder / "results.json").is_file():
             set_aside(self.folder, rundir.read_json(self.folder / "results.json", rundir.RESULTS_KEYS)["updates"])
         return longer
@@ -260,8 +301,9 @@ class Run:
         The run loop, per chunk: learn, check, validate and select (`chunk`), then record and
         checkpoint (`record`), from what `resume` restored."""
         training = self.resume(bar, recorders)
-        for n in loop.chunk_sizes(training.progress["done"], self.config.num_updates, self.schedule.chunk_updates,
-                                  budget):  # fmt: skip
+        for n in loop.chunk_sizes(
+            training.progress["done"], self.config.num_updates, self.schedule.chunk_updates, budget
+        ):
             chunk, validations = self.chunk(training, evaluator, n)
             self.record(training, chunk, validations, bar, recorders)
         return training.progress["done"] >= self.config.num_updates
@@ -273,13 +315,22 @@ class Run:
         config, seeds, folder = self.config, list(self.seeds), self.folder
         label = f"{self.label}: " if self.label else ""
         done_results = folder / "results.json"
-        if done_results.is_file() and rundir.read_json(done_results, rundir.RESULTS_KEYS)["updates"] < config.num_updates:
-            set_aside(folder, rundir.read_json(done_results, rundir.RESULTS_KEYS)["updates"])  # extended, killed before it trained on
+        if (
+            done_results.is_file()
+            and rundir.read_json(done_results, rundir.RESULTS_KEYS)["updates"] < config.num_updates
+        ):
+            set_aside(
+                folder, rundir.read_json(done_results, rundir.RESULTS_KEYS)["updates"]
+            )  # extended, killed before it trained on
         folder.mkdir(parents=True, exist_ok=True)
         if len(seeds) == 1 and not (folder / "run.json").is_file() and (folder / "progress.json").is_file():
-            print(f"warning: {label}{folder} was started by a version that ran a seed alone vmapped; it continues with "
-                  "the unvmapped program train runs, which rounds differently, so it will not end with the numbers of "
-                  "either", file=sys.stderr, flush=True)  # fmt: skip
+            print(
+                f"warning: {label}{folder} was started by a version that ran a seed alone vmapped; it continues with "
+                "the unvmapped program train runs, which rounds differently, so it will not end with the numbers of "
+                "either",
+                file=sys.stderr,
+                flush=True,
+            )
         previous = rundir.read_json(folder / "run.json") if (folder / "run.json").is_file() else None
         info = rundir.with_commit(self.info(), previous)
         if previous != rundir.jsonable(info):
@@ -305,8 +356,10 @@ class Run:
             bar.skip(bar.position() + progress["done"])
         for recorder in recorders:
             recorder.resume(progress["done"])
-        best = [selection.Selection(sr, update, devices.seed_slice(best_params, i))
-                for i, (sr, update) in enumerate(zip(progress["best_sr"], progress["best_update"]))]  # fmt: skip
+        best = [
+            selection.Selection(sr, update, devices.seed_slice(best_params, i))
+            for i, (sr, update) in enumerate(zip(progress["best_sr"], progress["best_update"]))
+        ]
         # With the bar shown, the chunk moves it after every update (`Trainer.run`'s on_update;
         # the state's update count is this run's, the bar may count several runs').
         offset = bar.position() - progress["done"]
@@ -334,8 +387,16 @@ class Run:
         done, started = training.progress["done"], time.time()
         training.states, metrics = training.run(training.states, training.env_params, n)
         metrics = jax.tree.map(np.asarray, metrics)  # [seeds, n]
-        warning = loop.check(metrics, training.states, done, n, manager=training.manager,
-                             checkpoints=self.folder / "checkpoints", seeds=list(self.seeds), label=training.label)  # fmt: skip
+        warning = loop.check(
+            metrics,
+            training.states,
+            done,
+            n,
+            manager=training.manager,
+            checkpoints=self.folder / "checkpoints",
+            seeds=list(self.seeds),
+            label=training.label,
+        )
         chunk = loop.Chunk(metrics, done + n, n, warning, started)
         params_now = training.seed_params(training.states)
         validations = []
@@ -346,8 +407,9 @@ class Run:
             training.best[i].offer(val["overall"]["SR"], chunk.done, params)
         return chunk, validations
 
-    def record(self, training: "Training", chunk: loop.Chunk, validations: list[dict], bar,
-               recorders: Sequence[Recorder] = ()) -> None:  # fmt: skip
+    def record(
+        self, training: "Training", chunk: loop.Chunk, validations: list[dict], bar, recorders: Sequence[Recorder] = ()
+    ) -> None:
         """A chunk recorded (the recorders), then checkpointed (states and selected models),
         then progress.json: a kill between the two repeats the chunk (`Recorder.record`,
         `loop.resume_point`); then the progress bar."""
@@ -362,16 +424,24 @@ class Run:
         for h, val in zip(progress["history"], validations):
             h.append(val)
         best_params = jax.tree.map(lambda *x: np.stack(x), *[b.params for b in training.best])
-        checkpoint.save(training.manager, chunk.done, {"states": training.stacked(training.states), "best": best_params})
-        progress.update(done=chunk.done, best_sr=[b.sr for b in training.best],
-                        best_update=[b.update for b in training.best])  # fmt: skip
+        checkpoint.save(
+            training.manager, chunk.done, {"states": training.stacked(training.states), "best": best_params}
+        )
+        progress.update(
+            done=chunk.done, best_sr=[b.sr for b in training.best], best_update=[b.update for b in training.best]
+        )
         rundir.write_json(self.folder / "progress.json", progress)
         useful = float(np.sum(metrics["frames/useful"]))  # steps that entered the loss, every seed's
-        bar(chunk.n, {**({"method": self.label} if self.label else {}),
-                      "useful fps": f"{useful / (time.time() - chunk.started):,.0f}",
-                      "SR": f"{metrics['charts/success_rate'].mean():.3f}",
-                      "val SR": f"{np.mean([v['SR'] for v in validations]):.1f}%",
-                      **({"warning": "diverging"} if chunk.warning else {})})  # fmt: skip
+        bar(
+            chunk.n,
+            {
+                **({"method": self.label} if self.label else {}),
+                "useful fps": f"{useful / (time.time() - chunk.started):,.0f}",
+                "SR": f"{metrics['charts/success_rate'].mean():.3f}",
+                "val SR": f"{np.mean([v['SR'] for v in validations]):.1f}%",
+                **({"warning": "diverging"} if chunk.warning else {}),
+            },
+        )
 
     def test(self, evaluator) -> dict:
         """Test each seed's selected and last model (on the test episodes of its seed, with SR
@@ -379,24 +449,48 @@ class Run:
         to its end (`train`)."""
         progress = self.progress()
         if progress["done"] < self.config.num_updates:
-            raise errors.UserError(f"{self.folder} has trained {progress['done']} of {self.config.num_updates} updates; "
-                                   "train it to the end first (--resume)")  # fmt: skip
+            raise errors.UserError(
+                f"{self.folder} has trained {progress['done']} of {self.config.num_updates} updates; "
+                "train it to the end first (--resume)"
+            )
         trainer, states, best = self.load_checkpoint(progress["done"])
         last_params = self._params_of(trainer, states)
         curves = np.concatenate([np.array(c, float) for c in progress["curves"]], axis=1)
         results = []
         for i, seed in enumerate(self.seeds):
             chosen, last = devices.seed_slice(best, i), devices.seed_slice(last_params, i)
-            test = [evaluator.evaluate(p, self.config, "test", selection.test_key(seed), self.schedule.test_episodes_per_room,
-                                       by_length=True) for p in (chosen, last)]  # fmt: skip
-            results.append({"seed": seed, "selected_update": progress["best_update"][i], "selected": test[0],
-                            "last": test[1], "validation": progress["history"][i],
-                            "training_success_rate": curves[i].tolist(),
-                            "diagnostics": {name: [chunk[i] for chunk in chunks]
-                                            for name, chunks in progress.get("diagnostics", {}).items()},
-                            "numerics": progress.get("numerics"), "counts": counts_of(progress, i)})  # fmt: skip
-        done = {"updates": progress["done"], "results": results, "curves": curves.tolist(),
-                "selection_protocol": progress.get("selection_protocol", selection.PROTOCOL_VERSION)}  # fmt: skip
+            test = [
+                evaluator.evaluate(
+                    p,
+                    self.config,
+                    "test",
+                    selection.test_key(seed),
+                    self.schedule.test_episodes_per_room,
+                    by_length=True,
+                )
+                for p in (chosen, last)
+            ]
+            results.append(
+                {
+                    "seed": seed,
+                    "selected_update": progress["best_update"][i],
+                    "selected": test[0],
+                    "last": test[1],
+                    "validation": progress["history"][i],
+                    "training_success_rate": curves[i].tolist(),
+                    "diagnostics": {
+                        name: [chunk[i] for chunk in chunks] for name, chunks in progress.get("diagnostics", {}).items()
+                    },
+                    "numerics": progress.get("numerics"),
+                    "counts": counts_of(progress, i),
+                }
+            )
+        done = {
+            "updates": progress["done"],
+            "results": results,
+            "curves": curves.tolist(),
+            "selection_protocol": progress.get("selection_protocol", selection.PROTOCOL_VERSION),
+        }
         rundir.write_json(self.folder / "results.json", done)
         return rundir.read_json(self.folder / "results.json", rundir.RESULTS_KEYS)  # as written (NaN as None)
 
@@ -408,14 +502,19 @@ class Run:
         """(trainer, the seeds' training states, their selected models) of checkpoint `step`,
         stacked over `seeds` (the run's, unless given: a finished run's in results' order)."""
         if not (self.folder / "checkpoints" / str(step)).is_dir():  # before orbax's manager makes checkpoints/
-            raise errors.UserError(f"{self.folder} has lost its checkpoint of update {step} (checkpoints/{step} is not "
-                                   "there: deleted or moved); put it back, or train the run anew")  # fmt: skip
+            raise errors.UserError(
+                f"{self.folder} has lost its checkpoint of update {step} (checkpoints/{step} is not "
+                "there: deleted or moved); put it back, or train the run anew"
+            )
         trainer = make_trainer(self.config)
         # the checkpoint's shapes only (`eval_shape`: nothing runs; initialising for real ran
         # the networks' init op by op, hundreds of small compilations per method)
         states, best = jax.eval_shape(lambda: initial_states(trainer, list(seeds or self.seeds)))
-        restored = checkpoint.restore(checkpoint.checkpoint_manager(self.folder / "checkpoints", self.schedule.keep_checkpoints),
-                                      step, {"states": states, "best": best})  # fmt: skip
+        restored = checkpoint.restore(
+            checkpoint.checkpoint_manager(self.folder / "checkpoints", self.schedule.keep_checkpoints),
+            step,
+            {"states": states, "best": best},
+        )
         return trainer, restored["states"], restored["best"]
 
     def load(self):
@@ -435,8 +534,16 @@ def read(folder: Path) -> Run:
     """The run a folder's run.json describes (one of this format: `RUN_FORMAT`)."""
     info = rundir.read_run_info(folder)
     if is_legacy_train_folder(info):
-        raise errors.UserError(f"{folder} was written by experiments.train before runs had one format (it keeps best/ "
-                               "and validation.jsonl): evaluate, probe and failures read it, but it cannot be trained "
-                               "on; train it anew into another --out")  # fmt: skip
-    return Run(folder, Config(**info["config"]), Schedule(**info["schedule"]), tuple(info["seeds"]), info.get("arm", ""),
-               info.get("preset", ""))  # fmt: skip
+        raise errors.UserError(
+            f"{folder} was written by experiments.train before runs had one format (it keeps best/ "
+            "and validation.jsonl): evaluate, probe and failures read it, but it cannot be trained "
+            "on; train it anew into another --out"
+        )
+    return Run(
+        folder,
+        Config(**info["config"]),
+        Schedule(**info["schedule"]),
+        tuple(info["seeds"]),
+        info.get("arm", ""),
+        info.get("preset", ""),
+    )

@@ -64,8 +64,10 @@ def claim(path: Path) -> None:
         except BlockingIOError:
             holder = os.read(fd, 64).decode(errors="replace").strip() or "unknown"
             os.close(fd)
-            raise UserError(f"{path} is being written by another process (pid {holder}); wait for it to finish, "
-                            "or choose another --out") from None  # fmt: skip
+            raise UserError(
+                f"{path} is being written by another process (pid {holder}); wait for it to finish, "
+                "or choose another --out"
+            ) from None
         os.ftruncate(fd, 0)
         os.write(fd, str(os.getpid()).encode())
         _held[key] = fd
@@ -99,8 +101,9 @@ def _claim_with_filelock(path: Path):
     try:
         lock.acquire(timeout=0)
     except filelock.Timeout:
-        raise UserError(f"{path} is being written by another process; wait for it to finish, or choose another "
-                        "--out") from None  # fmt: skip
+        raise UserError(
+            f"{path} is being written by another process; wait for it to finish, or choose another --out"
+        ) from None
     return lock
 
 
@@ -130,8 +133,11 @@ def prepare_run_dir(path: Path, resume: bool, overwrite: bool, marker: str = RUN
         if (path / marker).is_file():
             claim(path)  # a folder of ours that another process is writing: say so, with its pid
         if not overwrite:
-            hint = "use --resume to continue it or --overwrite to replace it" if kind == "run" else (
-                "use --overwrite to replace it or choose another --out")
+            hint = (
+                "use --resume to continue it or --overwrite to replace it"
+                if kind == "run"
+                else ("use --overwrite to replace it or choose another --out")
+            )
             raise UserError(f"{path} already exists and is not empty; {hint}")
         if not (path / marker).is_file():
             raise UserError(f"{path} is not a {kind} folder (no {marker}); refusing to delete it, choose another --out")
@@ -165,15 +171,19 @@ def resumed_args(args, marker: str, kind: str, keep: tuple[str, ...]):
         mine, theirs, default = (getattr(x, f.name) for x in (args, started, defaults))
         flag = f"--{f.name.replace('_', '-')} {mine} (started with {theirs})"
         if dataclasses.is_dataclass(mine):  # nested flags (e.g. Config fields): each on its own
-            clash += [f"--{k.replace('_', '-')} {v} (started with {getattr(theirs, k)})"
-                      for k, v in dataclasses.asdict(mine).items()
-                      if v is not None and jsonable(v) != jsonable(getattr(theirs, k))]  # fmt: skip
+            clash += [
+                f"--{k.replace('_', '-')} {v} (started with {getattr(theirs, k)})"
+                for k, v in dataclasses.asdict(mine).items()
+                if v is not None and jsonable(v) != jsonable(getattr(theirs, k))
+            ]
         elif jsonable(mine) not in (jsonable(default), jsonable(theirs)):
             clash.append(flag)
         elif jsonable(mine) != jsonable(theirs) and f.name in given_flags():  # given at its default
             ignored.append(flag)
     if clash:
-        raise UserError(f"--resume continues {args.out} with the arguments it was started with; drop {', '.join(clash)}")
+        raise UserError(
+            f"--resume continues {args.out} with the arguments it was started with; drop {', '.join(clash)}"
+        )
     say_ignored(ignored, args.out)
     return dataclasses.replace(started, resume=True, **{k: getattr(args, k) for k in keep})
 

@@ -36,8 +36,10 @@ def check_resumable(recorded: int | None, what: str) -> None:
     than the rest. `recorded` None: the run predates the record (made before protocol 2 was
     written into run.json and progress.json; it cannot be told apart and is let through)."""
     if recorded is not None and recorded != PROTOCOL_VERSION:
-        raise UserError(f"{what} was validated under selection protocol {recorded}, this code's is {PROTOCOL_VERSION} "
-                        "(experiments/running/selection.py): finish it with the code that started it, or start it again")  # fmt: skip
+        raise UserError(
+            f"{what} was validated under selection protocol {recorded}, this code's is {PROTOCOL_VERSION} "
+            "(experiments/running/selection.py): finish it with the code that started it, or start it again"
+        )
 
 
 def run_key(seed: int) -> jax.Array:

@@ -35,12 +35,25 @@ import numpy as np
 from experiments import errors
 from experiments.reporting import figures
 from experiments.reporting.report import (
-    by_length_markdown, diagnostics_markdown, paired_markdown, selection_markdown, table, table_markdown,
-)  # fmt: skip
+    by_length_markdown,
+    diagnostics_markdown,
+    paired_markdown,
+    selection_markdown,
+    table,
+    table_markdown,
+)
 from experiments.reporting.tables import write_csv
 from experiments.running import checkpoint, devices, flags, numerics, rundir, selection
 from experiments.running.run import Run, check_continuable, finished_seeds, set_aside
-from experiments.running.presets import MAX_EPISODES, SweepConfigFields, check_seeds, check_sizes, config_flag, given, preset
+from experiments.running.presets import (
+    MAX_EPISODES,
+    SweepConfigFields,
+    check_seeds,
+    check_sizes,
+    config_flag,
+    given,
+    preset,
+)
 from experiments.running.progress import progress_bar
 from foresit_jax.evaluate import Evaluator
 
@@ -128,17 +141,24 @@ def reuse_sources(spec: Sweep) -> list[Path]:
         if folder.resolve() == Path(spec.out).resolve():
             raise errors.UserError(f"--reuse {folder}: the sweep being written (--out); to continue it use --resume")
         started = saved(folder)
-        clash = [f"--{k.replace('_', '-')} {_protocol_value(started, k)} there, {_protocol_value(spec, k)} here"
-                 for k in PROTOCOL if _protocol_value(started, k) != _protocol_value(spec, k)]  # fmt: skip
+        clash = [
+            f"--{k.replace('_', '-')} {_protocol_value(started, k)} there, {_protocol_value(spec, k)} here"
+            for k in PROTOCOL
+            if _protocol_value(started, k) != _protocol_value(spec, k)
+        ]
         if clash:
-            raise errors.UserError(f"--reuse {folder}: run with another protocol ({'; '.join(clash)}); "
-                                   "only sweeps of the same protocol can be combined")  # fmt: skip
+            raise errors.UserError(
+                f"--reuse {folder}: run with another protocol ({'; '.join(clash)}); "
+                "only sweeps of the same protocol can be combined"
+            )
         for method in spec.methods:
             found = method_folder(folder, method, spec)
             made = method_protocol(found)
             if (found / "results.json").is_file() and made != selection.PROTOCOL_VERSION:
-                raise errors.UserError(f"--reuse {folder}: its {method} was selected by another protocol (version "
-                                       f"{made}; this code's is {selection.PROTOCOL_VERSION}, experiments/running/selection.py)")  # fmt: skip
+                raise errors.UserError(
+                    f"--reuse {folder}: its {method} was selected by another protocol (version "
+                    f"{made}; this code's is {selection.PROTOCOL_VERSION}, experiments/running/selection.py)"
+                )
         sources.append(folder)
     return sources
 
@@ -221,15 +241,20 @@ def copy_finished(spec: Sweep, sources: list[Path]) -> None:
         elif not missing:
             parts = {s: where[s] for s in wanted}
             assemble(method, spec, parts, partial)
-            taken = "; ".join(f"seeds {_seed_ranges([s for s in wanted if parts[s] == f])} from {f.parent.parent}"
-                              for f in dict.fromkeys(parts.values()))  # fmt: skip
+            taken = "; ".join(
+                f"seeds {_seed_ranges([s for s in wanted if parts[s] == f])} from {f.parent.parent}"
+                for f in dict.fromkeys(parts.values())
+            )
             print(f"{method}: assembled ({taken})", flush=True)
         else:
             found = [s for s in wanted if s in where]
             if found:
-                print(f"{method}: seeds {_seed_ranges(found)} are finished in --reuse, but not seeds "
-                      f"{_seed_ranges(missing)}, so all {len(wanted)} seeds train here (to reuse them, run the "
-                      "missing seeds with --seed/--seeds and add that run to --reuse)", flush=True)  # fmt: skip
+                print(
+                    f"{method}: seeds {_seed_ranges(found)} are finished in --reuse, but not seeds "
+                    f"{_seed_ranges(missing)}, so all {len(wanted)} seeds train here (to reuse them, run the "
+                    "missing seeds with --seed/--seeds and add that run to --reuse)",
+                    flush=True,
+                )
             continue
         partial.rename(target)
 
@@ -248,8 +273,10 @@ def assemble(method: str, spec: Sweep, parts: dict[int, Path], target: Path) -> 
     updates = {done["updates"] for done, *_ in loaded.values()}
     protocols = {done.get("selection_protocol") for done, *_ in loaded.values()}
     if len(updates) != 1 or len(protocols) != 1:  # reuse_sources checks both; this guards a hand-edited folder
-        raise errors.UserError(f"--reuse: {method}'s seeds were trained for {sorted(updates)} updates under selection "
-                               f"protocol(s) {sorted(protocols, key=str)}; they cannot be combined")  # fmt: skip
+        raise errors.UserError(
+            f"--reuse: {method}'s seeds were trained for {sorted(updates)} updates under selection "
+            f"protocol(s) {sorted(protocols, key=str)}; they cannot be combined"
+        )
     rows = []  # per seed: (result, curve, states, best)
     for seed in seeds:
         done, order, states, best = loaded[parts[seed]]
@@ -259,10 +286,19 @@ def assemble(method: str, spec: Sweep, parts: dict[int, Path], target: Path) -> 
     stack = lambda trees: jax.tree.map(lambda *x: np.stack(x), *trees)  # noqa: E731
     (step,) = updates
     target.mkdir(parents=True)
-    checkpoint.save(checkpoint.checkpoint_manager(target / "checkpoints", 2), step, {"states": stack(states), "best": stack(best)})
-    rundir.write_json(target / "results.json", {"updates": step, "results": list(results), "curves": list(curves),
-                                                "selection_protocol": protocols.pop(),
-                                                "assembled_from": {str(s): str(parts[s]) for s in seeds}})  # fmt: skip
+    checkpoint.save(
+        checkpoint.checkpoint_manager(target / "checkpoints", 2), step, {"states": stack(states), "best": stack(best)}
+    )
+    rundir.write_json(
+        target / "results.json",
+        {
+            "updates": step,
+            "results": list(results),
+            "curves": list(curves),
+            "selection_protocol": protocols.pop(),
+            "assembled_from": {str(s): str(parts[s]) for s in seeds},
+        },
+    )
 
 
 def assembled_markdown(folders: dict[str, Path]) -> str:
@@ -271,7 +307,11 @@ def assembled_markdown(folders: dict[str, Path]) -> str:
     the folder each seed came from; '' when none was."""
     lines = []
     for method, folder in folders.items():
-        done = rundir.read_json(folder / "results.json", rundir.RESULTS_KEYS) if (folder / "results.json").is_file() else {}
+        done = (
+            rundir.read_json(folder / "results.json", rundir.RESULTS_KEYS)
+            if (folder / "results.json").is_file()
+            else {}
+        )
         where = {}  # source folder -> its seeds
         for seed, source in done.get("assembled_from", {}).items():
             where.setdefault(source, []).append(int(seed))
@@ -279,8 +319,10 @@ def assembled_markdown(folders: dict[str, Path]) -> str:
             lines.append(f"- {method}: " + "; ".join(f"seeds {_seed_ranges(s)} from {f}" for f, s in where.items()))
     if not lines:
         return ""
-    return ("\nSeeds trained in separate sweeps and combined (`--reuse`; seed s is the run `train --seed s` makes "
-            "in any of them):\n\n" + "\n".join(lines) + "\n")  # fmt: skip
+    return (
+        "\nSeeds trained in separate sweeps and combined (`--reuse`; seed s is the run `train --seed s` makes "
+        "in any of them):\n\n" + "\n".join(lines) + "\n"
+    )
 
 
 def load_method(method: str, spec: Sweep, folder: Path):
@@ -344,8 +386,10 @@ def updates_of(spec: Sweep) -> int:
     one number, or a one-line error where its arms set different ones."""
     counts = {method: method_schedule(method, spec)[0].num_updates for method in spec.methods}
     if len(set(counts.values())) != 1:
-        raise errors.UserError(f"the arms of {spec.out} train different numbers of updates ({counts}); "
-                               "a sweep can only be extended as a whole")  # fmt: skip
+        raise errors.UserError(
+            f"the arms of {spec.out} train different numbers of updates ({counts}); "
+            "a sweep can only be extended as a whole"
+        )
     return next(iter(counts.values()))
 
 
@@ -369,8 +413,10 @@ def extend(folder: Path, num_updates: int, allow_large: bool = False) -> Sweep:
     spec = saved(folder)
     had = updates_of(spec)
     if num_updates < had:
-        raise errors.UserError(f"--num-updates {num_updates} would shorten {folder} ({had} updates); a sweep can only "
-                               "be extended (or trained anew in another --out)")  # fmt: skip
+        raise errors.UserError(
+            f"--num-updates {num_updates} would shorten {folder} ({had} updates); a sweep can only "
+            "be extended (or trained anew in another --out)"
+        )
     if num_updates == had:
         return spec
     # The methods --reuse gave the sweep are in it now; its sources, of `had` updates, no
@@ -387,18 +433,27 @@ def extend(folder: Path, num_updates: int, allow_large: bool = False) -> Sweep:
         raise errors.UserError(f"{folder} already holds {', '.join(taken)} in {kept.name}/; move them first")
     chunks = {method_schedule(m, spec)[1].chunk_updates for m in spec.methods}
     if any(had % chunk for chunk in chunks):
-        print(f"warning: {folder} has {had} updates, not a whole number of chunks ({sorted(chunks)}): extended, it "
-              f"validates at {had}, where a sweep of {num_updates} from the start does not, so it will not end as "
-              "one", file=sys.stderr, flush=True)  # fmt: skip
+        print(
+            f"warning: {folder} has {had} updates, not a whole number of chunks ({sorted(chunks)}): extended, it "
+            f"validates at {had}, where a sweep of {num_updates} from the start does not, so it will not end as "
+            "one",
+            file=sys.stderr,
+            flush=True,
+        )
     for path in report_files:  # before sweep.json: a kill in between leaves an extension to repeat
         kept.mkdir(exist_ok=True)
         path.rename(kept / path.name)
     record = rundir.read_json(folder / "sweep.json")
-    extensions = [*record.get("extensions", []), {"from_updates": had, "to_updates": num_updates,
-                                                  "reuse": [str(p) for p in spec.reuse]}]  # fmt: skip
+    extensions = [
+        *record.get("extensions", []),
+        {"from_updates": had, "to_updates": num_updates, "reuse": [str(p) for p in spec.reuse]},
+    ]
     rundir.write_json(folder / "sweep.json", {**dataclasses.asdict(extended), "extensions": extensions})
-    print(f"extending {folder} from {had} to {num_updates} updates"
-          + (f" (its {had}-update report is kept in {kept.name}/)" if report_files else ""), flush=True)  # fmt: skip
+    print(
+        f"extending {folder} from {had} to {num_updates} updates"
+        + (f" (its {had}-update report is kept in {kept.name}/)" if report_files else ""),
+        flush=True,
+    )
     for method in spec.methods:  # no finished arm reads as one of `num_updates` (a kill before: `run_method`)
         results = folder / "methods" / method / "results.json"
         if results.is_file():
@@ -407,12 +462,22 @@ def extend(folder: Path, num_updates: int, allow_large: bool = False) -> Sweep:
 
 
 def _differences(a: Sweep, b: Sweep) -> list[str]:
-    return [f.name for f in dataclasses.fields(Sweep) if f.name != "out"
-            and rundir.jsonable(getattr(a, f.name)) != rundir.jsonable(getattr(b, f.name))]  # fmt: skip
+    return [
+        f.name
+        for f in dataclasses.fields(Sweep)
+        if f.name != "out" and rundir.jsonable(getattr(a, f.name)) != rundir.jsonable(getattr(b, f.name))
+    ]
 
 
-def run(spec: Sweep, *, resume: bool = False, overwrite: bool = False, stop_after_chunks: Optional[int] = None,
-        progress: bool = True, allow_large: bool = False) -> list[dict] | None:  # fmt: skip
+def run(
+    spec: Sweep,
+    *,
+    resume: bool = False,
+    overwrite: bool = False,
+    stop_after_chunks: Optional[int] = None,
+    progress: bool = True,
+    allow_large: bool = False,
+) -> list[dict] | None:
     """Train every arm of `spec` over its seeds (arms other sweeps finished are taken
     from `spec.reuse`), then write the report into `spec.out`: Table 1's layout of the
     selected models (Markdown and CSV), the arms paired with the first, the selected and
@@ -431,9 +496,11 @@ def run(spec: Sweep, *, resume: bool = False, overwrite: bool = False, stop_afte
         rundir.prepare_run_dir(out, resume=True, overwrite=overwrite, marker="sweep.json", kind="sweep")
         differ = _differences(saved(out), spec)
         if differ:
-            raise errors.UserError(f"{out} was started as another sweep (its {', '.join(differ)} differ); continue it "
-                                   "with the arguments in its sweep.json (`experiments.sweep --resume --out` reads "
-                                   "them), or write this one to another folder")  # fmt: skip
+            raise errors.UserError(
+                f"{out} was started as another sweep (its {', '.join(differ)} differ); continue it "
+                "with the arguments in its sweep.json (`experiments.sweep --resume --out` reads "
+                "them), or write this one to another folder"
+            )
         check_started(spec)
     else:
         rundir.prepare_run_dir(out, resume=False, overwrite=overwrite, marker="sweep.json", kind="sweep")
@@ -441,8 +508,11 @@ def run(spec: Sweep, *, resume: bool = False, overwrite: bool = False, stop_afte
     copy_finished(spec, sources)
 
     used = devices.seed_mesh(spec.seeds).devices.size
-    print(f"{len(spec.methods)} method(s) x {spec.seeds} seed(s), the seeds spread over {used} of the "
-          f"{jax.device_count()} local device(s)", flush=True)  # fmt: skip
+    print(
+        f"{len(spec.methods)} method(s) x {spec.seeds} seed(s), the seeds spread over {used} of the "
+        f"{jax.device_count()} local device(s)",
+        flush=True,
+    )
     config, _ = method_schedule(spec.methods[0], spec)
     evaluator = Evaluator.for_config(config)  # one for the sweep: each method's evaluation compiles once
     bar = progress_bar(config.num_updates * len(spec.methods), 0, progress)
@@ -471,8 +541,10 @@ def report(spec: Sweep, results: dict[str, list[dict]]) -> tuple[str, list[dict]
     """(the sweep's Markdown report, Table 1's rows) from its arms' per-seed results."""
     selected = {method: [r["selected"] for r in per_seed] for method, per_seed in results.items()}
     rows = table(selected)
-    title = (f"Table 1 layout: test split, preset {spec.preset}, seeds {spec.seed}-{spec.seed + spec.seeds - 1} "
-             "(each seed's model selected on validation)")  # fmt: skip
+    title = (
+        f"Table 1 layout: test split, preset {spec.preset}, seeds {spec.seed}-{spec.seed + spec.seeds - 1} "
+        "(each seed's model selected on validation)"
+    )
     md = table_markdown(rows, title) + "\n" + selection_markdown(results)
     if len(selected) > 1 and spec.seeds > 1:
         md += "\n" + paired_markdown(selected)

@@ -68,8 +68,15 @@ class WandB(Tracker):
 
         folder.mkdir(parents=True, exist_ok=True)
         mode = os.environ.get("WANDB_MODE") or ("online" if os.environ.get("WANDB_API_KEY") else "offline")
-        self.run = wandb.init(project=os.environ.get("WANDB_PROJECT", "foresit_jax"), name=name, id=run_id,
-                              resume="allow", dir=str(folder), mode=mode, config=config)  # fmt: skip
+        self.run = wandb.init(
+            project=os.environ.get("WANDB_PROJECT", "foresit_jax"),
+            name=name,
+            id=run_id,
+            resume="allow",
+            dir=str(folder),
+            mode=mode,
+            config=config,
+        )
 
     def log(self, rows: list[dict], prefix: str = "") -> None:
         for row in rows:
