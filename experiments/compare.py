@@ -34,14 +34,13 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-from experiments import errors
+from experiments import errors, rundir
 from experiments.reporting import stats
 from experiments.reporting.report import (
     TEST,
     diagnostic_label,
     format_mean_std,
     format_pair,
-    load,
     paired_report,
     shown_columns,
     values,
@@ -85,7 +84,7 @@ def main(args: Args) -> dict:
     "did": {"(D - C) - (B - A)": {column: stats.paired}}}."""
     if args.last < 1:
         raise errors.UserError(f"--last {args.last}: give a positive number of updates")
-    results = load(args.run)
+    results = rundir.sweep_results(args.run)
     pairs = [_split(s, 2, "--pairs", results) for s in args.pairs]
     dids = [_split(s, 4, "--did", results) for s in args.did]
     ceilings = [_split(s, 3, "--ceiling", results) for s in args.ceiling]

@@ -20,7 +20,7 @@ import jax
 
 from experiments import errors
 from experiments.reporting import cvae_comparison
-from experiments.running import rundir
+from experiments import rundir
 from experiments.running.models import read_trained
 from foresit_jax.config import Config
 

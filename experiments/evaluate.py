@@ -17,7 +17,8 @@ import jax
 
 from experiments import errors
 from experiments.reporting import tables
-from experiments.running import presets, rundir, selection, sweeps
+from experiments.running import presets, selection, sweeps
+from experiments import rundir
 from experiments.running.models import read_trained
 from foresit_jax.config import Config
 from foresit_jax.evaluate import agent_params, evaluate

@@ -33,7 +33,8 @@ import numpy as np
 from envs.catalog import ROOM_TYPES
 from experiments import errors
 from experiments.reporting.tables import markdown_table
-from experiments.running import rundir, selection, sweeps
+from experiments.running import selection, sweeps
+from experiments import rundir
 from experiments.running.models import models_of_run, models_of_sweep
 from foresit_jax import rollout as rollout_lib
 from foresit_jax.networks import build
@@ -185,9 +186,9 @@ def markdown(report: dict[str, list[dict]], split: str, episodes: int) -> str:
 
 def models_of(args: Args) -> tuple[dict, int]:
     """({method: [Model per seed]}, episodes per room type) of a run or sweep folder."""
-    if (args.run / "sweep.json").is_file():
+    if rundir.is_sweep(args.run):
         saved = sweeps.saved(args.run)
-        finished = tuple(m for m in saved.methods if sweeps.finished_seeds(args.run / "methods" / m))
+        finished = tuple(m for m in saved.methods if rundir.finished_seeds(rundir.arm_folder(args.run, m)))
         if not finished:
             raise errors.UserError(f"{args.run}: no finished method yet")
         models = models_of_sweep(args.run, args.methods or finished)

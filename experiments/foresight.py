@@ -50,7 +50,8 @@ from envs import catalog as C
 from experiments import errors
 from experiments.reporting.foresight_bound import anchor_in_view, bearing_sector, features, foresight_bound, markdown
 from experiments.reporting.foresight_bound import within_range
-from experiments.running import presets, rundir
+from experiments.running import presets
+from experiments import rundir
 
 
 @dataclasses.dataclass(frozen=True)

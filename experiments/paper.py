@@ -65,8 +65,9 @@ from experiments.reporting.paper_tables import (
     table2,
     table3,
 )
-from experiments.reporting.tables import markdown_table, write_csv
-from experiments.running import devices, flags, numerics, paper_figures, probe_runs, rundir, sweeps
+from experiments.reporting.tables import markdown_table
+from experiments.running import devices, flags, numerics, paper_figures, probe_runs, sweeps
+from experiments import rundir
 from experiments.running.models import models_of_sweep
 from experiments.running.presets import split_arm
 
@@ -147,9 +148,9 @@ def reuse_sweeps(args: Args, setup: str) -> tuple[Path, ...]:
     a sweep folder (`experiments.sweep`) run on `setup` itself."""
     folders = []
     for run in map(Path, args.reuse):
-        if (run / setup / "sweep.json").is_file():
+        if rundir.is_sweep(run / setup):
             folders.append(run / setup)
-        elif not (run / "paper.json").is_file() and rundir.read_json(run / "sweep.json").get("setup") == setup:
+        elif not (run / "paper.json").is_file() and rundir.read_json(run / rundir.SWEEP_FILE).get("setup") == setup:
             folders.append(run)
     return tuple(folders)
 
@@ -174,7 +175,7 @@ def check(args: Args) -> None:
     if args.seeds < 1:
         raise errors.UserError(f"--seeds must be >= 1, got {args.seeds}")
     for run in map(Path, args.reuse):
-        if not (run / "paper.json").is_file() and not (run / "sweep.json").is_file():
+        if not (run / "paper.json").is_file() and not rundir.is_sweep(run):
             raise errors.UserError(
                 f"--reuse {run}: neither a paper run (no paper.json) nor a sweep folder (no sweep.json)"
             )
@@ -185,7 +186,7 @@ def check(args: Args) -> None:
         if setup_args.methods:  # the seeds and sizes of its arms, before anything is written
             sweeps.check(setup_args, args.allow_large)
         sweeps.reuse_sources(setup_args)
-        if args.resume and (setup_args.out / "sweep.json").exists():
+        if args.resume and rundir.is_sweep(setup_args.out):
             sweeps.check_started(setup_args)
     for name in ("cvae_windows", "cvae_epochs", "trajectory_candidates", "tsne_points", "probe_episodes_per_room"):
         if getattr(args, name) < 1:
@@ -223,7 +224,7 @@ def _run(args: Args) -> dict | None:
         spec = sweep_args(args, setup, methods)
         ran = sweeps.run(
             spec,
-            resume=(spec.out / "sweep.json").exists(),
+            resume=rundir.is_sweep(spec.out),
             stop_after_chunks=args.stop_after_chunks,
             progress=args.progress,
             allow_large=args.allow_large,
@@ -231,7 +232,7 @@ def _run(args: Args) -> dict | None:
         if ran is None:
             print("stopped (continue with --resume)")
             return None
-        per_seed = rundir.read_json(args.out / setup / "results_per_seed.json")
+        per_seed = rundir.read_json(args.out / setup / rundir.PER_SEED_FILE)
         results.update(by_method(args, per_seed))
     print(f"sweeps done ({time.time() - t0:.0f} s); writing the report", flush=True)
     return write_report(args, results)
@@ -242,7 +243,7 @@ def by_length_section(args: Args, results: dict) -> str:
     """For each +ForeSIT pair: a PNG of SR and SPL by L^g bucket with 95% bands over seeds,
     and the paired difference per bucket."""
     rows = by_length_rows(results)
-    write_csv(args.out / "by_length.csv", rows)
+    rundir.write_csv(args.out / "by_length.csv", rows)
     md = ""
     for base, other in PAIRS:
         if base not in results or other not in results:
@@ -266,7 +267,7 @@ def _first_seed(args: Args, method: str):
     """(config, trainer, last training state, selected AgentParams) of the first seed."""
     arm = arm_of(args, method)
     config, trainer, states, best = sweeps.load_method(
-        arm, _method_args(args, method), args.out / SETUP_OF[method] / "methods" / arm
+        arm, _method_args(args, method), rundir.arm_folder(args.out / SETUP_OF[method], arm)
     )
     return config, trainer, devices.seed_slice(states, 0), devices.seed_slice(best, 0)
 
@@ -291,7 +292,7 @@ def sampled_section(args: Args, results: dict) -> str:
         arms = [arm_of(args, m) for m in greedy if SETUP_OF[m] == setup]
         sampled.update(by_method(args, paper_figures.sampled_results(args.out / setup, arms)))
     md, rows = sampled_markdown(results, sampled)
-    write_csv(args.out / "sampled.csv", rows)
+    rundir.write_csv(args.out / "sampled.csv", rows)
     return (
         title + "ORG's code acts greedily at evaluation (the argmax of the policy), SAVN's samples; greedy play can "
         "loop where sampling escapes. Each seed's selected model on the same test episodes with each rule; mean "
@@ -333,21 +334,21 @@ def write_report(args: Args, results: dict) -> dict:
     compared = [*PAIRS, *(("a3c+org+foresit", m) for m in TABLE3[1:-1])]  # the claims' pairs
     md.append(
         numerics.markdown(results, compared)
-        + sweeps.assembled_markdown({m: out / SETUP_OF[m] / "methods" / arm_of(args, m) for m in results})
+        + sweeps.assembled_markdown({m: rundir.arm_folder(out / SETUP_OF[m], arm_of(args, m)) for m in results})
     )
     t1, rows1 = table1(results)
-    write_csv(out / "table1.csv", rows1)
+    rundir.write_csv(out / "table1.csv", rows1)
     md.append("## Table 1\n\n" + t1)
     t2, rows2 = table2(results)
-    write_csv(out / "table2.csv", rows2)
+    rundir.write_csv(out / "table2.csv", rows2)
     md.append("## Table 2: SPL / SR per room type\n\n" + t2)
     t3, rows3 = table3(results)
-    write_csv(out / "table3.csv", rows3)
+    rundir.write_csv(out / "table3.csv", rows3)
     md.append("## Table 3: what to imagine (ablations on the ORG base)\n\n" + t3)
     md.append(report.selection_markdown(results))
     md.append("## SR and SPL by optimal path length\n\n" + by_length_section(args, results))
     lines = claims(results)
-    write_csv(out / "claims.csv", [{"claim": c, "verdict": v, "numbers": n} for c, v, n in lines])
+    rundir.write_csv(out / "claims.csv", [{"claim": c, "verdict": v, "numbers": n} for c, v, n in lines])
     md.append("## The paper's claims\n\n" + claims_markdown(lines))
     md.append(sampled_section(args, results))
     md.append(probe_section(args, results))

@@ -30,7 +30,8 @@ from typing import Optional
 
 from experiments import errors
 from experiments.reporting import probing
-from experiments.running import probe_runs, rundir
+from experiments.running import probe_runs
+from experiments import rundir
 from experiments.running.models import models_of_run, models_of_sweep
 
 
@@ -67,7 +68,7 @@ def main(args: Args) -> dict:
     if out_json.exists() and not args.overwrite:
         raise errors.UserError(f"{out_json} exists; pass --overwrite to replace it")
     t0 = time.time()
-    if (args.run / "sweep.json").is_file():
+    if rundir.is_sweep(args.run):
         models = models_of_sweep(args.run, args.methods)
     else:
         if args.methods:

@@ -30,7 +30,8 @@ import dataclasses
 import sys
 
 from experiments import errors
-from experiments.running import devices, flags, rundir, sweeps
+from experiments.running import devices, flags, sweeps
+from experiments import rundir
 
 
 @dataclasses.dataclass(frozen=True)
@@ -50,7 +51,7 @@ def main(args: Args) -> list[dict] | None:
     if args.resume:  # the sweep's own arguments; a flag given that contradicts them is refused
         wanted = args.num_updates  # more updates than the sweep has extend it, once the rest is checked
         args = rundir.resumed_args(
-            dataclasses.replace(args, num_updates=None), "sweep.json", "sweep", keep=flags.INVOCATION
+            dataclasses.replace(args, num_updates=None), rundir.SWEEP_FILE, "sweep", keep=flags.INVOCATION
         )
         if wanted is not None:
             extended = sweeps.extend(args.out, wanted, args.allow_large)

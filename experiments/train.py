@@ -37,7 +37,8 @@ import numpy as np
 
 from experiments import errors
 from experiments.reporting import figures, tables
-from experiments.running import flags, loop, rundir, selection, tracking
+from experiments.running import flags, loop, selection, tracking
+from experiments import rundir
 from experiments.running.presets import TrainConfigFields, check_seeds, check_sizes, config_flag, given, preset
 from experiments.running.progress import progress_bar
 from experiments.running.run import Run, read
@@ -171,7 +172,7 @@ def start(args: Args) -> tuple[Run, bool]:
         return run, False
     rundir.prepare_run_dir(out, resume=True, overwrite=args.overwrite)
     run = read(out)  # refuses a folder of before `run.RUN_FORMAT`, in one line
-    if len(run.seeds) != 1 or (out.parent.name == "methods" and (out.parent.parent / "sweep.json").is_file()):
+    if len(run.seeds) != 1 or rundir.in_sweep(out):
         raise errors.UserError(
             f"{out} is a sweep's arm ({len(run.seeds)} seed(s)); continue its sweep with "
             "experiments.sweep --resume --out <the sweep folder>"

@@ -37,7 +37,8 @@ from pathlib import Path
 
 from experiments import errors
 from experiments.reporting import tuning
-from experiments.running import devices, flags, rundir, sweeps
+from experiments.running import devices, flags, sweeps
+from experiments import rundir
 from experiments.running.presets import split_arm
 
 
@@ -174,7 +175,7 @@ def main(args: Args) -> dict | None:
     )
     ran = sweeps.run(
         sweep_args(args, names, folder),
-        resume=(folder / "sweep.json").is_file(),
+        resume=rundir.is_sweep(folder),
         stop_after_chunks=args.stop_after_chunks,
         progress=args.progress,
         allow_large=args.allow_large,
@@ -182,10 +183,7 @@ def main(args: Args) -> dict | None:
     if ran is None:
         print("continue with: python -m experiments.tune --resume --out " + str(args.out))
         return None
-    results = {
-        a: rundir.read_json(args.out / "sweep" / "methods" / a / "results.json", rundir.RESULTS_KEYS)["results"]
-        for a in names
-    }
+    results = {a: rundir.read_results(rundir.arm_folder(args.out / "sweep", a))["results"] for a in names}
     md, out = tune_report(args, grid, table, results)
     (args.out / "tune.md").write_text(md)
     rundir.write_json(args.out / "tune_results.json", out)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import tarfile
 from pathlib import Path
 
-from experiments.running import rundir
+from experiments import rundir
 
 DATA = Path(__file__).resolve().parents[1] / "docs" / "data"
 

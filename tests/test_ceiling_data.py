@@ -7,7 +7,7 @@ import pytest
 import study_data
 
 from experiments import compare
-from experiments.running import rundir
+from experiments import rundir
 from experiments.reporting import report, stats
 
 REPO = Path(__file__).resolve().parents[1]
@@ -39,7 +39,7 @@ def test_ceiling_md_quotes_the_ceiling(tmp_path, capsys, archive):
     )
     capsys.readouterr()
     doc = (REPO / "docs" / "ceiling.md").read_text()
-    results = report.load(root)
+    results = rundir.sweep_results(root)
     for arm, label in ((CRITIC, "a3c+critic"), (FORESIT, "a3c+foresit"), (ORACLE, "a3c+oracle (privileged)")):
         assert arm_row(results, arm, label) in doc, arm_row(results, arm, label)
     for (a, b), label in (
@@ -102,7 +102,7 @@ def test_ceiling_md_quotes_the_noise_off_oracle(tmp_path, capsys):
     )
     capsys.readouterr()
     doc = (REPO / "docs" / "ceiling.md").read_text()
-    results = report.load(root)
+    results = rundir.sweep_results(root)
     row = arm_row(results, noiseoff, "a3c+oracle@sigma2_max=0 (privileged)")
     assert row in doc, row
     for a, label in (
@@ -183,7 +183,7 @@ def test_ceiling_md_quotes_the_machine_matched_ceilings(tmp_path, capsys, archiv
     out = compare.main(compare.Args(run=root, pairs=tuple(f"{CRITIC}:{arm}" for arm, _, _ in rows)))
     capsys.readouterr()
     doc = (REPO / "docs" / "ceiling.md").read_text()
-    results = report.load(root)
+    results = rundir.sweep_results(root)
     assert arm_row(results, CRITIC, label) in doc, arm_row(results, CRITIC, label)
     results_md = (REPO / "docs" / "results.md").read_text()
     for arm, pair_label, setting in rows:
@@ -205,7 +205,7 @@ def test_ceiling_md_quotes_the_ceiling_at_range_4(tmp_path, capsys):
     trained with the range): both arms' rows, the ceiling resolved below 0 where the docs say
     the oracle costs, results.md's row and the README's sentence."""
     root = study_data.unpack("ceiling_range4.tar.xz", tmp_path, (CRITIC, ORACLE))
-    results = report.load(root)
+    results = rundir.sweep_results(root)
     for arm in (CRITIC, ORACLE):
         config = rundir.read_json(root / "methods" / arm / "run.json")["config"]
         assert config["priors"] is True and config["perception_range"] == 4.0
@@ -236,12 +236,12 @@ def test_ceiling_md_quotes_the_noise_off_ceiling_at_range_4(tmp_path, capsys):
     the critic and the noisy oracle reused, so machine-matched): its row, both pairs (neither
     resolved, as the docs say "cannot tell"), results.md's row and the README's clause."""
     root = study_data.unpack("ceiling_range4_noiseoff.tar.xz", tmp_path, (CRITIC, ORACLE, NOISEOFF))
-    results = report.load(root)
+    results = rundir.sweep_results(root)
     for arm in (CRITIC, ORACLE, NOISEOFF):
         config = rundir.read_json(root / "methods" / arm / "run.json")["config"]
         assert config["priors"] is True and config["perception_range"] == 4.0
     # the reused arms are the noisy study's, seed for seed
-    noisy = report.load(study_data.unpack("ceiling_range4.tar.xz", tmp_path / "noisy", (CRITIC, ORACLE)))
+    noisy = rundir.sweep_results(study_data.unpack("ceiling_range4.tar.xz", tmp_path / "noisy", (CRITIC, ORACLE)))
     for arm in (CRITIC, ORACLE):
         assert list(report.values(results[arm], "SR")) == list(report.values(noisy[arm], "SR"))
     out = compare.main(compare.Args(run=root, pairs=(f"{CRITIC}:{NOISEOFF}", f"{ORACLE}:{NOISEOFF}")))

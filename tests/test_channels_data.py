@@ -12,7 +12,7 @@ from test_ceiling_data import arm_row
 
 from experiments import compare
 from experiments.reporting import report
-from experiments.running import rundir
+from experiments import rundir
 
 REPO = Path(__file__).resolve().parents[1]
 CRITIC = "a3c+critic@learning_rate=3e-4"
@@ -40,7 +40,7 @@ def test_stage_1_is_quoted_with_its_verdicts(tmp_path, capsys):
         assert config["num_updates"] == 3000 and config["setup"] == "savn"
         if arm != CRITIC:
             assert config["imagination_input"] == "encoder" and config["sigma2_max"] == 0
-    results = report.load(root)
+    results = rundir.sweep_results(root)
     assert all([r["seed"] for r in results[arm]] == [0, 1, 2, 3, 4] for arm in results)
     out = compare.main(compare.Args(run=root, pairs=(f"{CRITIC}:{COMPASS}", f"{CRITIC}:{START}")))
     capsys.readouterr()
@@ -63,7 +63,7 @@ def test_stage_1_is_quoted_with_its_verdicts(tmp_path, capsys):
         and study_data.interval(start["SPL"]) == "+4.4 [+1.9, +6.8]"
     )
     # "The critic reproduces bit for bit": the range-4 study's critic (79dce9c), seed for seed
-    earlier = report.load(
+    earlier = rundir.sweep_results(
         study_data.unpack("ceiling_range4.tar.xz", tmp_path / "range4", (CRITIC, "a3c+oracle@learning_rate=3e-4"))
     )
     for column in ("SR", "SPL"):
@@ -125,7 +125,7 @@ def test_stage_2_is_quoted_with_its_verdicts(tmp_path, capsys):
     assert {
         rundir.read_json(root / "methods" / a / "run.json")["config"]["imagination_input"] for a in (MLP, MLP_CRITIC)
     } == {"mlp"}
-    results = report.load(root)
+    results = rundir.sweep_results(root)
     assert all([r["seed"] for r in results[arm]] == [0, 1, 2, 3, 4] for arm in results)
     doc = (REPO / "docs" / "ceiling.md").read_text()
     flat = " ".join(doc.split())
@@ -154,10 +154,12 @@ def test_stage_2_is_quoted_with_its_verdicts(tmp_path, capsys):
     best = max((ENC, MLP, HEAD), key=lambda arm: mean_selected_validation(results[arm]))
     assert f"The best channel by the plan's rule 3 is {STAGE2[best].split(' (')[0].split('through ')[1]}" in flat
     # Stage 1's critic, copied by --reuse: the same numbers
-    first = report.load(study_data.unpack("channels_stage1.tar.xz", tmp_path / "stage1", (CRITIC, COMPASS, START)))
+    first = rundir.sweep_results(
+        study_data.unpack("channels_stage1.tar.xz", tmp_path / "stage1", (CRITIC, COMPASS, START))
+    )
     assert list(report.values(first[CRITIC], "SR")) == list(report.values(results[CRITIC], "SR"))
     # "The head arm reproduces bit for bit": the range-4 study's noise-off oracle (79dce9c)
-    earlier = report.load(
+    earlier = rundir.sweep_results(
         study_data.unpack(
             "ceiling_range4_noiseoff.tar.xz", tmp_path / "noiseoff", (CRITIC, "a3c+oracle@learning_rate=3e-4", HEAD)
         )

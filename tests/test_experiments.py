@@ -30,7 +30,8 @@ from experiments import sweep
 from experiments import train as train_cli
 from experiments.reporting import cvae_comparison, figures, report, tables
 from experiments import errors
-from experiments.running import checkpoint, numerics, presets, progress, rundir, selection, sweeps
+from experiments.running import checkpoint, numerics, presets, progress, selection, sweeps
+from experiments import rundir
 from experiments.errors import RunNotFound
 from experiments.running.run import COUNTS, RUN_FORMAT, initial_states
 from foresit_jax.config import Config
@@ -350,10 +351,10 @@ def test_sweep_pairs_every_method_with_the_first_seed_by_seed():
 
 def test_write_csv(tmp_path):
     path = tmp_path / "t.csv"
-    tables.write_csv(path, [{"method": "a3c", "SR": 1.5}])
-    tables.write_csv(path, [{"method": "b", "SR": None}], append=True)
+    rundir.write_csv(path, [{"method": "a3c", "SR": 1.5}])
+    rundir.write_csv(path, [{"method": "b", "SR": None}], append=True)
     assert list(csv_rows(path)) == [{"method": "a3c", "SR": "1.5"}, {"method": "b", "SR": "nan"}]
-    tables.write_csv(path, [{"x": 1}])  # without append: replaced
+    rundir.write_csv(path, [{"x": 1}])  # without append: replaced
     assert path.read_text() == "x\n1\n"
 
 
@@ -1322,7 +1323,8 @@ def test_episodes_per_room_is_the_folders_own_or_the_users(tmp_path):
     sweep's (its override, else the preset's), or the user's number, within its bounds."""
     from test_fuzz import started_run
 
-    from experiments.running import presets, rundir, sweeps
+    from experiments.running import presets, sweeps
+    from experiments import rundir
 
     _, tiny = presets.preset("tiny", "a3c+foresit")
     run = started_run(tmp_path / "run")

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import study_data
 
-from experiments import compare
+from experiments import compare, rundir
 from experiments.reporting import report, stats
 
 REPO = Path(__file__).resolve().parents[1]
@@ -30,7 +30,7 @@ def study(tmp_path_factory):
     """(per-arm results, experiments.compare's output for results.md's pairs)."""
     root = study_data.unpack("fair_lr3e-4.tar.xz", tmp_path_factory.mktemp("fair"), ARMS.values())
     out = compare.main(compare.Args(run=root, pairs=tuple(f"{ARMS[a]}:{ARMS[b]}" for a, b in PAIRS)))
-    loaded = report.load(root)
+    loaded = rundir.sweep_results(root)
     return {short: loaded[name] for short, name in ARMS.items()}, out["pairs"]
 
 
@@ -171,7 +171,7 @@ def test_results_md_quotes_the_bases_with_savns_head_and_one_step_td(tmp_path, c
     arms = ("a3c@value_head=linear", "a3c@gae_lambda=0")
     out = compare.main(compare.Args(run=root, pairs=tuple(f"a3c:{b}" for b in arms)))
     capsys.readouterr()
-    results, doc = report.load(root), (REPO / "docs" / "results.md").read_text()
+    results, doc = rundir.sweep_results(root), (REPO / "docs" / "results.md").read_text()
     for b in arms:
         row = study_data.pair_row(out, results, "a3c", b)
         assert row in doc, row
@@ -183,7 +183,7 @@ def test_results_md_quotes_the_better_fitted_fw_arm(tmp_path, capsys):
     bases = ("a3c+foresit", "a3c", "a3c+critic")
     out = compare.main(compare.Args(run=root, pairs=tuple(f"{a}:{arm}" for a in bases)))
     capsys.readouterr()
-    results, doc = report.load(root), (REPO / "docs" / "results.md").read_text()
+    results, doc = rundir.sweep_results(root), (REPO / "docs" / "results.md").read_text()
     for a in bases:
         row = study_data.pair_row(out, results, a, arm)
         assert row in doc, row
@@ -221,7 +221,7 @@ def test_results_md_quotes_the_noise_placement_arm_and_its_probe(tmp_path, capsy
     root = study_data.unpack("fair_noise.tar.xz", tmp_path, ("a3c", bases[1], bases[0], arm))
     out = compare.main(compare.Args(run=root, pairs=tuple(f"{a}:{arm}" for a in bases)))
     capsys.readouterr()
-    results, doc = report.load(root), (REPO / "docs" / "results.md").read_text()
+    results, doc = rundir.sweep_results(root), (REPO / "docs" / "results.md").read_text()
     flat = " ".join(doc.split())
     for a in bases:
         row = study_data.pair_row(out, results, a, arm)
@@ -259,7 +259,7 @@ def _three_x_rows(tmp_path) -> tuple[list[str], dict]:
 
     root = study_data.unpack("fair_3x.tar.xz", tmp_path, ARMS.values())
     out = compare.main(compare.Args(run=root, pairs=tuple(f"{ARMS[a]}:{ARMS[b]}" for a, b in PAIRS)))
-    results_9000 = report.load(root)
+    results_9000 = rundir.sweep_results(root)
     at = {
         3000: {
             short: json.loads((root / "methods" / arm / "results_3000_updates.json").read_text())["results"]
@@ -323,7 +323,6 @@ def test_results_md_quotes_a3cs_rate_at_3x(tmp_path):
     the tune report over the two extended sweeps): results.md's grid rows and the paired
     differences it quotes are what its files compute."""
     from experiments.reporting.tuning import selection_sr
-    from experiments.running import rundir
 
     tuned = study_data.tune_report("fair_tune_3x.tar.xz", tmp_path)
     assert tuned["chosen"] == {"a3c": "learning_rate=3e-4"}
@@ -340,7 +339,9 @@ def test_results_md_quotes_a3cs_rate_at_3x(tmp_path):
     assert quote in flat, quote
     # ForeSIT at 3e-4 against a3c at 1e-3, both at 9000 updates (the 3x sweep's ForeSIT), paired
     # by seed: the pair results.md and the README quote beside the exclusion of +3.8.
-    foresit = report.load(study_data.unpack("fair_3x.tar.xz", tmp_path / "3x", ARMS.values()))[ARMS["a3c+foresit"]]
+    foresit = rundir.sweep_results(study_data.unpack("fair_3x.tar.xz", tmp_path / "3x", ARMS.values()))[
+        ARMS["a3c+foresit"]
+    ]
     assert [r["seed"] for r in foresit] == [r["seed"] for r in fast] == [0, 1, 2, 3, 4]
     pair = stats.paired(report.values(fast, "SR"), report.values(foresit, "SR"))
     assert pair["ci_low"] < 3.8 < pair["ci_high"]  # "does not exclude the paper's +3.8"

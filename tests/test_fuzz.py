@@ -23,7 +23,8 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from experiments.running import presets, rundir, sweeps
+from experiments.running import presets, sweeps
+from experiments import rundir
 from experiments.running.run import Run
 
 PROGRAMS = ("train", "sweep", "tune", "paper", "evaluate", "compare", "probe", "failures", "cvae_compare", "foresight")

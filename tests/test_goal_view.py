@@ -235,7 +235,7 @@ def test_train_and_probe_an_oracle_run(tmp_path, method, setup, cheap_experiment
 
     from experiments import probe
     from experiments import train as train_cli
-    from experiments.running import rundir
+    from experiments import rundir
 
     out = tmp_path / "run"
     train_cli.main(train_cli.Args(method=method, preset="tiny", seed=0, out=out, progress=False, setup=setup))

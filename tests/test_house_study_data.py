@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 import study_data
 
-from experiments import compare
+from experiments import compare, rundir
 from experiments.reporting import report, stats
 
 REPO = Path(__file__).resolve().parents[1]
@@ -23,7 +23,7 @@ METHODS = ("a3c", "a3c+critic", "a3c+foresit")
 @pytest.fixture(scope="module")
 def study(tmp_path_factory) -> dict[str, list[dict]]:
     """Each method's per-seed results, read from the unpacked archive as `experiments.compare` reads a sweep."""
-    return report.load(study_data.unpack("house_study.tar.xz", tmp_path_factory.mktemp("house"), METHODS))
+    return rundir.sweep_results(study_data.unpack("house_study.tar.xz", tmp_path_factory.mktemp("house"), METHODS))
 
 
 def sr(results: list[dict]):

@@ -116,6 +116,62 @@ def test_errors_is_a_leaf():
     assert [m for _, m, _ in imports(ROOT / "experiments" / "errors.py") if m.split(".")[0] in PROJECT] == []
 
 
+def test_rundir_is_a_leaf_beside_errors():
+    """The run-folder format (experiments.rundir) imports nothing of the project but
+    experiments.errors: the run machinery and the reporting that reads finished folders
+    both read the format there."""
+    found = {m for _, m, _ in imports(ROOT / "experiments" / "rundir.py") if m.split(".")[0] in PROJECT}
+    assert found == {"experiments.errors"}
+
+
+def format_names_outside(root: Path = ROOT) -> list[str]:
+    """'file:line name' for each place outside experiments/rundir.py that spells one of the
+    run-folder format's names (`rundir.FORMAT_NAMES`) itself: a string constant that is one
+    of them: a file's name anywhere but as a dict key, a folder's name (checkpoints, methods)
+    where it is joined onto a path (`folder / "methods"`). A name inside a longer text (a
+    message, a docstring) is not one."""
+    from experiments import rundir
+
+    names = set(rundir.FORMAT_NAMES)
+    found = []
+    for package in ("experiments", "benchmarks"):
+        for path in modules(package, root):
+            if path == root / "experiments" / "rundir.py":
+                continue
+            tree = ast.parse(path.read_text(), str(path))
+            keys = {id(k) for node in ast.walk(tree) if isinstance(node, ast.Dict) for k in node.keys}
+            joined = {id(n.right) for n in ast.walk(tree) if isinstance(n, ast.BinOp) and isinstance(n.op, ast.Div)}
+            for node in ast.walk(tree):
+                if not (isinstance(node, ast.Constant) and node.value in names) or id(node) in keys:
+                    continue
+                if "." in node.value or id(node) in joined:  # a folder's name (methods) only where joined on
+                    found.append(f"{path.relative_to(root)}:{node.lineno} {node.value}")
+    return found
+
+
+def test_the_run_folder_format_is_spelled_in_one_module():
+    """A run or sweep folder's file names are rundir's constants and path functions; no other
+    module of the programs writes `folder / "results.json"`."""
+    assert format_names_outside() == []
+
+
+def test_the_format_check_sees_a_name_spelled_elsewhere(tmp_path):
+    (tmp_path / "experiments").mkdir()
+    (tmp_path / "benchmarks").mkdir()
+    (tmp_path / "experiments" / "rundir.py").write_text('RESULTS = "results.json"\n')
+    (tmp_path / "experiments" / "x.py").write_text(
+        'def f(folder):\n    """Reads results.json."""\n'
+        '    print("no results.json here", ["methods"])\n    d = {"methods": 1, "results.json": 2}\n'
+        '    name = "run.json"\n'
+        '    return folder / "methods" / "a" / "results.json"\n'
+    )
+    assert sorted(format_names_outside(tmp_path)) == [
+        "experiments/x.py:5 run.json",
+        "experiments/x.py:6 methods",
+        "experiments/x.py:6 results.json",
+    ]
+
+
 def function_level_imports(packages=CHECKED, root: Path = ROOT) -> set[tuple[str, str, str]]:
     """(file, function, module) of each import of a project module made inside a function."""
     return {

@@ -69,7 +69,7 @@ def test_a_plan_precedes_every_run_of_its_archive(plan, archive):
 
 
 def test_runs_record_the_commits_that_trained_them(monkeypatch):
-    from experiments.running import rundir
+    from experiments import rundir
 
     commit = rundir.code_commit()
     if git("rev-parse", "HEAD").returncode == 0:

@@ -265,7 +265,7 @@ def test_the_gpu_script_runs_dry_on_a_cpu(tmp_path):
     assert "a3c+foresit@learning_rate=3e-4 - a3c+critic@learning_rate=3e-4" in savn
     assert "a3c+foresit@learning_rate=3e-4 - a3c" in savn
     assert "a3c+org+foresit - a3c+org" in (runs_ / "org_all" / "compare.md").read_text()
-    from experiments.running import rundir
+    from experiments import rundir
 
     assert all(rundir.read_json(runs_ / f"{s}_all" / "sweep.json")["config"]["priors"] is True for s in ("savn", "org"))
     with tarfile.open(tmp_path / "out" / "priors_gpu.tar.xz") as tar:
@@ -302,8 +302,7 @@ def test_docs_quote_the_study_in_rooms_with_priors(tmp_path, capsys, archive, ar
     from pathlib import Path
 
     import study_data
-    from experiments.running import rundir
-    from experiments.reporting import report
+    from experiments import rundir
     from experiments import compare
 
     root = study_data.unpack(archive, tmp_path, arms)
@@ -311,7 +310,7 @@ def test_docs_quote_the_study_in_rooms_with_priors(tmp_path, capsys, archive, ar
     pairs = [(arms[0], arms[1]), (arms[0], arms[2]), (arms[1], arms[2])]
     out = compare.main(compare.Args(run=root, pairs=tuple(f"{a}:{b}" for a, b in pairs)))
     capsys.readouterr()
-    results = report.load(root)
+    results = rundir.sweep_results(root)
     doc = (Path(__file__).resolve().parents[1] / "docs" / "priors.md").read_text()
     flat = " ".join(doc.split())
 
@@ -399,7 +398,7 @@ def test_docs_quote_the_org_control_in_both_layouts(tmp_path):
 
     import study_data
     from experiments.reporting import stats
-    from experiments.running import rundir
+    from experiments import rundir
 
     study_data.extract("priors_org_control.tar.xz", tmp_path)
     root = tmp_path / "priors_org_control"

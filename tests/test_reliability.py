@@ -30,7 +30,8 @@ from experiments import evaluate as evaluate_cli
 from experiments import sweep
 from experiments import train as train_cli
 from experiments import errors
-from experiments.running import checkpoint, loop, rundir
+from experiments.running import checkpoint, loop
+from experiments import rundir
 from experiments.running.run import counts_of, initial_states, rewind
 from foresit_jax.config import Config
 
@@ -74,7 +75,8 @@ import os, sys, time
 from pathlib import Path
 sys.path.insert(0, {repo!r})
 from experiments import errors
-from experiments.running import checkpoint, loop, rundir
+from experiments.running import checkpoint, loop
+from experiments import rundir
 Path({ready!r}, str(os.getpid())).write_text("")
 while not Path({go!r}).exists():
     time.sleep(0.001)
@@ -126,7 +128,8 @@ def test_a_run_held_by_another_process_is_refused_in_one_line_and_left_as_it_was
         sys.path.insert(0, {str(REPO)!r})
         from pathlib import Path
         from experiments import errors
-        from experiments.running import checkpoint, loop, rundir
+        from experiments.running import checkpoint, loop
+        from experiments import rundir
         rundir.claim(Path({str(out)!r}))
         print("holding", flush=True)
         time.sleep(30)

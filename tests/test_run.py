@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 import train_helpers as H
-from experiments.running import checkpoint, rundir, selection
+from experiments.running import checkpoint, selection
+from experiments import rundir
 from experiments.running.presets import preset
 from experiments.running.progress import progress_bar
 from experiments.running.run import Run, initial_states, read

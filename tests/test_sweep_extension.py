@@ -13,7 +13,8 @@ import pytest
 
 from experiments import sweep
 from experiments import errors
-from experiments.running import rundir, selection, sweeps
+from experiments.running import selection, sweeps
+from experiments import rundir
 
 # Cheap in-process CLI calls (tests/conftest.py).
 pytestmark = pytest.mark.usefixtures("cheap_experiments")

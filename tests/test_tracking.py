@@ -13,7 +13,8 @@ import pytest
 
 from experiments import train as train_cli
 from experiments import errors
-from experiments.running import rundir, tracking
+from experiments.running import tracking
+from experiments import rundir
 
 
 # Cheap in-process CLI calls for every test of this module (tests/conftest.py).

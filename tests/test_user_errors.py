@@ -8,7 +8,7 @@ import pytest
 
 import experiments
 from experiments.errors import RunNotFound, UserError
-from experiments.running import rundir
+from experiments import rundir
 
 
 def test_dir_lists_the_lazily_imported_names():

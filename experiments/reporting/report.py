@@ -5,11 +5,9 @@ length too), model selection, training diagnostics, and `paired_report`'s robust
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 
-from experiments import errors
 from experiments.reporting import stats, tables
 from experiments.reporting.tables import markdown_table
 
@@ -217,21 +215,6 @@ def validation_area(validation: list[dict]) -> float:
     if len(points) == 1:
         return float(sr[0])
     return float(np.trapezoid(sr, updates) / (updates[-1] - updates[0]))
-
-
-def load(run: Path) -> dict[str, list[dict]]:
-    """Every finished method of the sweep folder `run`: its per-seed results, in name order."""
-    folder = Path(run) / "methods"
-    if not folder.is_dir():
-        raise errors.UserError(f"{run} is not a sweep folder (it has no methods/): give --run the folder a sweep wrote")
-    found = {
-        m.name: errors.read_json(m / "results.json", ("results",))["results"]
-        for m in sorted(folder.iterdir())
-        if (m / "results.json").is_file()
-    }
-    if not found:
-        raise errors.UserError(f"{run} has no finished method yet (no methods/*/results.json)")
-    return found
 
 
 def values(per_seed: list[dict], column: str, last: int = 250) -> np.ndarray:

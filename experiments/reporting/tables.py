@@ -1,14 +1,12 @@
 """Tables written by the experiments: Markdown (reports, the paper's layout) and CSV.
 
 `markdown_table(rows, columns)` is the one Markdown table writer (run reports, sweep tables,
-the demo, the benchmarks); `write_csv(path, rows)` writes rows of dicts, appending when asked.
+the demo, the benchmarks); CSV files are written by `experiments.rundir.write_csv`.
 """
 
 from __future__ import annotations
 
-import csv
 import math
-from pathlib import Path
 from typing import Optional, Sequence
 
 from foresit_jax.methods import parse_method
@@ -37,28 +35,6 @@ def markdown_table(rows: Sequence[Sequence], columns: Sequence[str], align: Opti
         return "| " + " | ".join(f"{c:{a}{w}}" for c, a, w in zip(cells, align, widths)) + " |"
 
     return "\n".join([line(columns), "|" + "|".join("-" * (w + 2) for w in widths) + "|"] + [line(r) for r in rows])
-
-
-def write_csv(path: Path, rows: Sequence[dict], append: bool = False) -> None:
-    """Rows of dicts as CSV, columns in the first row's key order; a header only when the
-    file is new. NaN and missing values (None, e.g. read back from strict JSON's null) are
-    written `nan`, as Python's csv writes a float NaN, so a row reads the same either way.
-    No rows: an empty file (a table of nothing that ran), or nothing appended."""
-    path = Path(path)
-    if not rows:
-        if not append:
-            path.write_text("")
-        return
-    new = not (append and path.exists())
-    with open(path, "a" if append else "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        if new:
-            writer.writeheader()
-        writer.writerows({k: _csv_cell(v) for k, v in row.items()} for row in rows)
-
-
-def _csv_cell(value):
-    return "nan" if value is None or (isinstance(value, float) and math.isnan(value)) else value
 
 
 RESULT_COLUMNS = ("SPL", "SR", "SPL>=5", "SR>=5")  # Table 1's columns

@@ -17,7 +17,7 @@ import jax
 import numpy as np
 
 from experiments.errors import UserError
-from experiments.running.rundir import write_json
+from experiments.rundir import write_json
 
 
 def checkpoint_manager(path: Path, keep: int):

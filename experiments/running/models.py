@@ -12,7 +12,8 @@ from typing import Any, Callable, NamedTuple
 import jax
 
 from experiments import errors
-from experiments.running import checkpoint, devices, run, rundir, selection, sweeps
+from experiments.running import checkpoint, devices, run, selection, sweeps
+from experiments import rundir
 from foresit_jax.config import Config
 from foresit_jax.evaluate import acting_policy, agent_params
 from foresit_jax.train import make_trainer
@@ -66,7 +67,7 @@ def read_trained(folder: Path) -> Trained:
         return state, agent_params(state, config.sigma2_max, config.evaluation_noise)
 
     like, like_selected = jax.eval_shape(shapes, selection.run_key(info["seed"]))
-    managers = [checkpoint.checkpoint_manager(folder / name, 100) for name in ("checkpoints", "best")]
+    managers = [checkpoint.checkpoint_manager(folder / name, 100) for name in (rundir.CHECKPOINTS, "best")]
     steps = [m.latest_step() for m in managers]
     if None in steps:
         raise errors.UserError(
@@ -100,7 +101,7 @@ def models_of_run(folder: Path) -> dict[str, list[Model]]:
 def models_of_sweep(folder: Path, methods: tuple[str, ...]) -> dict[str, list[Model]]:
     """{method: [Model per seed]} of a sweep's finished methods."""
     args = sweeps.saved(folder)
-    finished = [m for m in args.methods if sweeps.finished_seeds(folder / "methods" / m)]
+    finished = [m for m in args.methods if rundir.finished_seeds(rundir.arm_folder(folder, m))]
     unknown = [m for m in methods if m not in finished]
     if unknown:
         raise errors.UserError(
@@ -111,8 +112,8 @@ def models_of_sweep(folder: Path, methods: tuple[str, ...]) -> dict[str, list[Mo
         config, _ = sweeps.method_schedule(method, args)
         if not methods and not (config.pieces.imagination_variant.uses_imagination or config.pieces.attention_critic):
             continue
-        config, trainer, states, best = sweeps.load_method(method, args, folder / "methods" / method)
-        out[method] = _models(config, trainer, sweeps.finished_seeds(folder / "methods" / method), states, best)
+        config, trainer, states, best = sweeps.load_method(method, args, rundir.arm_folder(folder, method))
+        out[method] = _models(config, trainer, rundir.finished_seeds(rundir.arm_folder(folder, method)), states, best)
     return out
 
 
@@ -147,7 +148,7 @@ def load(run_dir, seed: int = 0, which: str = "best") -> Policy:
     if which not in WHICH:
         raise errors.UserError(f"which must be one of {WHICH}, got {which!r}")
     folder = Path(run_dir)
-    sweep = (folder / "sweep.json").is_file()
+    sweep = rundir.is_sweep(folder)
     rundir.require_run(folder, " (a sweep folder: give one of its arms, <sweep>/methods/<arm>)" if sweep else "")
     trained = read_trained(folder)
     if seed not in trained.seeds:

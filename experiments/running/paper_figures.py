@@ -12,7 +12,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from envs.catalog import ROOM_TYPES, categories
-from experiments.running import rundir, selection, sweeps
+from experiments.running import selection, sweeps
+from experiments import rundir
 from experiments.running.models import models_of_sweep
 from foresit_jax import rollout as rollout_lib
 from foresit_jax.evaluate import Evaluator, base_acting

@@ -1,19 +1,9 @@
 """A run: one arm trained over seeds s_1..s_N in one folder, the one format `train` and `sweep` write.
 
-`train` is a run of one seed; a sweep is one run per arm (in `methods/<arm>/`). A run folder holds:
-
-  run.json        what was run: the arm, its preset, Config and Schedule, the seeds, the
-                  selection protocol (`RUN_FORMAT`); it reads alone
-  progress.json   updates done; per seed its validations and its best model's SR and update;
-                  per chunk the training SR of every update, diagnostics and counts; the
-                  platform of each stretch of updates (`numerics`)
-  checkpoints/    orbax checkpoints of {"states", "best"}: every seed's training state and
-                  the model selected on validation, stacked over the seeds (the latest few)
-  results.json    at the end: per seed the test results of the selected and the last model
-                  (with SR and SPL by path length), its validations and training curve
-
-and what the program adds through its recorders (`Recorder`: train's metrics.jsonl/csv
-and tracking). `Run.train` continues from the last intact checkpoint (a kill at any point
+`train` is a run of one seed; a sweep is one run per arm (in `methods/<arm>/`). What a run
+folder holds, and how each file is read, is `experiments.rundir`'s (the format, in one
+module); this module writes them in order, and adds what the program records through its
+recorders (`Recorder`: train's metrics.jsonl/csv and tracking). `Run.train` continues from the last intact checkpoint (a kill at any point
 costs at most a chunk, which runs again to the same numbers), `Run.extend` makes it longer,
 `Run.test` writes results.json, `Run.load` reads a finished run back.
 
@@ -37,7 +27,8 @@ import numpy as np
 
 from experiments import errors
 from experiments.reporting.report import DIAGNOSTICS
-from experiments.running import checkpoint, devices, loop, numerics, rundir, selection
+from experiments.running import checkpoint, devices, loop, numerics, selection
+from experiments import rundir
 from experiments.running.presets import Schedule
 from foresit_jax.config import Config
 from foresit_jax.evaluate import agent_params
@@ -124,27 +115,21 @@ def seeds_params(config: Config, states):
     return jax.vmap(lambda s: agent_params(s, config.sigma2_max, config.evaluation_noise))(states)
 
 
-def finished_seeds(folder: Path) -> list[int]:
-    """The seeds a run folder has finished (none when it has not finished)."""
-    if not (folder / "results.json").is_file():
-        return []
-    return [r["seed"] for r in rundir.read_json(folder / "results.json", rundir.RESULTS_KEYS)["results"]]
-
-
 def check_continuable(folder: Path) -> None:
     """Refuse (one line) to train on a finished run folder that cannot continue: one
     assembled from other sweeps' seeds (`sweeps.assemble` keeps no progress.json), or one
     without the checkpoint of its last update (a folder kept without checkpoints, as docs/data's)."""
-    if not (folder / "results.json").is_file():
+    if rundir.read_results(folder) is None:
         return
-    where = f"{folder.name} in {folder.parent.parent}" if folder.parent.name == "methods" else str(folder)
-    if not (folder / "progress.json").is_file():
+    where = f"{folder.name} in {folder.parent.parent}" if rundir.in_sweep(folder) else str(folder)
+    progress = rundir.read_progress(folder)
+    if progress is None:
         raise errors.UserError(
             f"{where} was assembled from other sweeps' seeds (--reuse) and keeps no progress to "
             "continue from; extend those sweeps and assemble it again"
         )
-    done = rundir.read_json(folder / "progress.json", rundir.PROGRESS_KEYS)["done"]
-    if not (folder / "checkpoints" / str(done)).is_dir():
+    done = progress["done"]
+    if not rundir.checkpoint_at(folder, done).is_dir():
         raise errors.UserError(f"{where} keeps no checkpoint of its update {done} to continue from")
 
 
@@ -152,13 +137,13 @@ def set_aside(folder: Path, updates: int) -> None:
     """Keep a run's results.json of `updates` updates as `results_<updates>_updates.json`
     before it trains on (an extended run); one that keeps no progress.json to continue
     from (assembled), or whose name is taken, is refused in one line."""
-    kept = folder / f"results_{updates}_updates.json"
+    kept = folder / rundir.kept_results(updates)
     check_continuable(folder)
     if kept.exists():
         raise errors.UserError(
-            f"{folder} holds both results.json and {kept.name}, both of {updates} updates; move one of them first"
+            f"{folder} holds both {rundir.RESULTS_FILE} and {kept.name}, both of {updates} updates; move one of them first"
         )
-    (folder / "results.json").rename(kept)
+    (folder / rundir.RESULTS_FILE).rename(kept)
     print(f"{folder.name}: its {updates}-update results are kept as {kept.name}; it trains on", flush=True)
 
 
@@ -215,16 +200,14 @@ class Run:
 
     def results(self) -> dict | None:
         """results.json when the run has finished its `config.num_updates` updates, else None."""
-        path = self.folder / "results.json"
-        if not path.is_file():
-            return None
-        done = rundir.read_json(path, rundir.RESULTS_KEYS)
-        return done if done["updates"] >= self.config.num_updates else None
+        done = rundir.read_results(self.folder)
+        return done if done is not None and done["updates"] >= self.config.num_updates else None
 
     def progress(self) -> dict:
         """progress.json, or that of a run not yet started."""
-        if (self.folder / "progress.json").is_file():
-            return rundir.read_json(self.folder / "progress.json", rundir.PROGRESS_KEYS)
+        progress = rundir.read_progress(self.folder)
+        if progress is not None:
+            return progress
         n = len(self.seeds)
         return {
             "done": 0,
@@ -236,7 +219,7 @@ class Run:
         }
 
     def manager(self):
-        return checkpoint.checkpoint_manager(self.folder / "checkpoints", self.schedule.keep_checkpoints)
+        return checkpoint.checkpoint_manager(rundir.checkpoint_at(self.folder), self.schedule.keep_checkpoints)
 
     def extend(self, num_updates: int, keep: Sequence[str] = ()) -> "Run":
         """This run made one of `num_updates` updates, to be trained on by `train` (from its
@@ -255,7 +238,7 @@ class Run:
         if num_updates == had:
             return self
         check_continuable(self.folder)
-        kept = self.folder / f"report_{had}_updates"
+        kept = self.folder / rundir.kept_report(had)
         moved = [self.folder / name for name in keep if (self.folder / name).is_file()]
         # (a file kept there already with the same bytes is this report, kept by an extension killed part-way)
         taken = [
@@ -263,9 +246,10 @@ class Run:
             for path in moved
             if (kept / path.name).exists() and (kept / path.name).read_bytes() != path.read_bytes()
         ]
-        if (self.folder / "results.json").is_file():
-            updates = rundir.read_json(self.folder / "results.json", rundir.RESULTS_KEYS)["updates"]
-            taken += [f"results_{updates}_updates.json"] * (self.folder / f"results_{updates}_updates.json").exists()
+        finished = rundir.read_results(self.folder)
+        if finished is not None:
+            kept_results = rundir.kept_results(finished["updates"])
+            taken += [kept_results] * (self.folder / kept_results).exists()
         if taken:
             raise errors.UserError(f"{self.folder} already holds {', '.join(taken)}; move them first")
         for path in moved:
@@ -280,13 +264,11 @@ class Run:
                 flush=True,
             )
         longer = dataclasses.replace(self, config=dataclasses.replace(self.config, num_updates=num_updates))
-        if (self.folder / "run.json").is_file():
-            rundir.write_json(
-                self.folder / "run.json",
-                {**longer.info(), "commits": rundir.read_json(self.folder / "run.json").get("commits", [])},
-            )
-        if (self.folder / "results.json").is_file():
-            set_aside(self.folder, rundir.read_json(self.folder / "results.json", rundir.RESULTS_KEYS)["updates"])
+        if rundir.is_run(self.folder):
+            previous = rundir.read_json(self.folder / rundir.RUN_FILE)
+            rundir.write_run_info(self.folder, {**longer.info(), "commits": previous.get("commits", [])})
+        if finished is not None:
+            set_aside(self.folder, finished["updates"])
         return longer
 
     # ------------------------------------------------------------------ training
@@ -314,16 +296,11 @@ class Run:
         its last intact checkpoint (fresh states when it has none)."""
         config, seeds, folder = self.config, list(self.seeds), self.folder
         label = f"{self.label}: " if self.label else ""
-        done_results = folder / "results.json"
-        if (
-            done_results.is_file()
-            and rundir.read_json(done_results, rundir.RESULTS_KEYS)["updates"] < config.num_updates
-        ):
-            set_aside(
-                folder, rundir.read_json(done_results, rundir.RESULTS_KEYS)["updates"]
-            )  # extended, killed before it trained on
+        finished = rundir.read_results(folder)
+        if finished is not None and finished["updates"] < config.num_updates:
+            set_aside(folder, finished["updates"])  # extended, killed before it trained on
         folder.mkdir(parents=True, exist_ok=True)
-        if len(seeds) == 1 and not (folder / "run.json").is_file() and (folder / "progress.json").is_file():
+        if len(seeds) == 1 and not rundir.is_run(folder) and rundir.read_progress(folder) is not None:
             print(
                 f"warning: {label}{folder} was started by a version that ran a seed alone vmapped; it continues with "
                 "the unvmapped program train runs, which rounds differently, so it will not end with the numbers of "
@@ -331,10 +308,10 @@ class Run:
                 file=sys.stderr,
                 flush=True,
             )
-        previous = rundir.read_json(folder / "run.json") if (folder / "run.json").is_file() else None
+        previous = rundir.read_json(folder / rundir.RUN_FILE) if rundir.is_run(folder) else None
         info = rundir.with_commit(self.info(), previous)
         if previous != rundir.jsonable(info):
-            rundir.write_json(folder / "run.json", info)
+            rundir.write_run_info(folder, info)
         trainer = make_trainer(config)
         states, best_params = initial_states(trainer, seeds)
         select = functools.partial(agent_params, sigma2_max=config.sigma2_max, evaluation_noise=config.evaluation_noise)
@@ -342,7 +319,7 @@ class Run:
         progress = self.progress()  # its protocol: checked by the program (`selection.check_resumable`)
         # A kill between a chunk's checkpoint and its progress.json leaves a newer checkpoint
         # that nothing else records: it is dropped, and that chunk runs again (to the same result).
-        intact = loop.resume_point(manager, folder / "checkpoints", progress["done"], label=label)
+        intact = loop.resume_point(manager, rundir.checkpoint_at(folder), progress["done"], label=label)
         if intact != progress["done"]:
             progress = rewind(progress, intact)
         # The platform of the updates still to come (experiments.running.numerics).
@@ -393,7 +370,7 @@ class Run:
             done,
             n,
             manager=training.manager,
-            checkpoints=self.folder / "checkpoints",
+            checkpoints=rundir.checkpoint_at(self.folder),
             seeds=list(self.seeds),
             label=training.label,
         )
@@ -430,7 +407,7 @@ class Run:
         progress.update(
             done=chunk.done, best_sr=[b.sr for b in training.best], best_update=[b.update for b in training.best]
         )
-        rundir.write_json(self.folder / "progress.json", progress)
+        rundir.write_json(self.folder / rundir.PROGRESS_FILE, progress)
         useful = float(np.sum(metrics["frames/useful"]))  # steps that entered the loss, every seed's
         bar(
             chunk.n,
@@ -491,8 +468,8 @@ class Run:
             "curves": curves.tolist(),
             "selection_protocol": progress.get("selection_protocol", selection.PROTOCOL_VERSION),
         }
-        rundir.write_json(self.folder / "results.json", done)
-        return rundir.read_json(self.folder / "results.json", rundir.RESULTS_KEYS)  # as written (NaN as None)
+        rundir.write_json(self.folder / rundir.RESULTS_FILE, done)
+        return rundir.read_results(self.folder)  # as written (NaN as None)
 
     # ------------------------------------------------------------------ reading back
     def _params_of(self, trainer, states):
@@ -501,7 +478,7 @@ class Run:
     def load_checkpoint(self, step: int, seeds: Sequence[int] | None = None):
         """(trainer, the seeds' training states, their selected models) of checkpoint `step`,
         stacked over `seeds` (the run's, unless given: a finished run's in results' order)."""
-        if not (self.folder / "checkpoints" / str(step)).is_dir():  # before orbax's manager makes checkpoints/
+        if not rundir.checkpoint_at(self.folder, step).is_dir():  # before orbax's manager makes checkpoints/
             raise errors.UserError(
                 f"{self.folder} has lost its checkpoint of update {step} (checkpoints/{step} is not "
                 "there: deleted or moved); put it back, or train the run anew"
@@ -511,7 +488,7 @@ class Run:
         # the networks' init op by op, hundreds of small compilations per method)
         states, best = jax.eval_shape(lambda: initial_states(trainer, list(seeds or self.seeds)))
         restored = checkpoint.restore(
-            checkpoint.checkpoint_manager(self.folder / "checkpoints", self.schedule.keep_checkpoints),
+            self.manager(),
             step,
             {"states": states, "best": best},
         )
@@ -521,8 +498,8 @@ class Run:
         """A finished run read back: (trainer, the seeds' last training states, their selected
         models), stacked over the seeds it finished (`finished_seeds`, in its results' order)
         on the first local device."""
-        done = rundir.read_json(self.folder / "results.json", rundir.RESULTS_KEYS)["updates"]
-        return self.load_checkpoint(done, finished_seeds(self.folder))
+        done = rundir.read_results(self.folder)["updates"]
+        return self.load_checkpoint(done, rundir.finished_seeds(self.folder))
 
 
 def is_legacy_train_folder(info: dict) -> bool:

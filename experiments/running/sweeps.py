@@ -42,9 +42,10 @@ from experiments.reporting.report import (
     table,
     table_markdown,
 )
-from experiments.reporting.tables import write_csv
-from experiments.running import checkpoint, devices, flags, numerics, rundir, selection
-from experiments.running.run import Run, check_continuable, finished_seeds, set_aside
+
+from experiments.running import checkpoint, devices, flags, numerics, selection
+from experiments import rundir
+from experiments.running.run import Run, check_continuable, set_aside
 from experiments.running.presets import (
     MAX_EPISODES,
     SweepConfigFields,
@@ -106,7 +107,7 @@ def episodes_per_room(folder: Path, split: str, method: Optional[str] = None, gi
     outside 1..MAX_EPISODES."""
     if given is None:
         key = f"{split}_episodes_per_room"
-        if (Path(folder) / "sweep.json").is_file():
+        if rundir.is_sweep(folder):
             given = getattr(method_schedule(method, saved(folder))[1], key)
         else:
             given = rundir.read_run_info(folder)["schedule"][key]
@@ -136,7 +137,7 @@ def reuse_sources(spec: Sweep) -> list[Path]:
     is refused in one line."""
     sources = []
     for folder in map(Path, spec.reuse):  # str when read back from sweep.json by --resume
-        if not (folder / "sweep.json").is_file():
+        if not rundir.is_sweep(folder):
             raise errors.UserError(f"--reuse {folder}: not a sweep folder (no sweep.json)")
         if folder.resolve() == Path(spec.out).resolve():
             raise errors.UserError(f"--reuse {folder}: the sweep being written (--out); to continue it use --resume")
@@ -154,7 +155,7 @@ def reuse_sources(spec: Sweep) -> list[Path]:
         for method in spec.methods:
             found = method_folder(folder, method, spec)
             made = method_protocol(found)
-            if (found / "results.json").is_file() and made != selection.PROTOCOL_VERSION:
+            if rundir.read_results(found) is not None and made != selection.PROTOCOL_VERSION:
                 raise errors.UserError(
                     f"--reuse {folder}: its {method} was selected by another protocol (version "
                     f"{made}; this code's is {selection.PROTOCOL_VERSION}, experiments/running/selection.py)"
@@ -169,11 +170,11 @@ def method_folder(sweep_folder: Path, method: str, spec: Sweep) -> Path:
     protocol, e.g. `a3c` for `a3c@learning_rate=1e-3` at quick, whose learning rate that is
     (so that a tuning grid reuses a sweep of the preset's own values); the folder of that
     name, absent, when none does."""
-    own = sweep_folder / "methods" / method
-    if own.is_dir() or not (sweep_folder / "methods").is_dir():
+    own = rundir.arm_folder(sweep_folder, method)
+    if own.is_dir():
         return own
     config, _ = method_schedule(method, spec)
-    for other in sorted(p for p in (sweep_folder / "methods").iterdir() if p.is_dir()):
+    for other in rundir.arm_folders(sweep_folder):
         try:
             if method_schedule(other.name, spec)[0] == config:
                 return other
@@ -187,9 +188,9 @@ def method_protocol(folder: Path) -> int | None:
     under: its results.json's (1 where it records none: finished before versions were
     recorded), else its progress.json's (None where it records none: started before they
     were recorded there, and so not known), else None (not started)."""
-    for name, unrecorded in (("results.json", 1), ("progress.json", None)):
-        if (folder / name).is_file():
-            return rundir.read_json(folder / name).get("selection_protocol", unrecorded)
+    for read, unrecorded in ((rundir.read_results, 1), (rundir.read_progress, None)):
+        if (done := read(folder)) is not None:
+            return done.get("selection_protocol", unrecorded)
     return None
 
 
@@ -197,7 +198,7 @@ def check_started(spec: Sweep) -> None:
     """For --resume, before anything runs: refuse (one line) to continue a sweep whose
     methods so far were validated under another selection protocol."""
     for method in spec.methods:
-        folder = spec.out / "methods" / method
+        folder = rundir.arm_folder(spec.out, method)
         selection.check_resumable(method_protocol(folder), f"{method} in {folder}")
 
 
@@ -221,9 +222,9 @@ def copy_finished(spec: Sweep, sources: list[Path]) -> None:
     only read; a kill mid-copy leaves no half a method."""
     wanted = seeds_of(spec)
     for method in spec.methods:
-        target = spec.out / "methods" / method
+        target = rundir.arm_folder(spec.out, method)
         folders = [method_folder(f, method, spec) for f in sources]
-        have = {folder: finished_seeds(folder) for folder in folders}
+        have = {folder: rundir.finished_seeds(folder) for folder in folders}
         if target.exists() or not any(have.values()):
             continue
         partial = target.with_name(f".{method}.copying")
@@ -267,9 +268,9 @@ def assemble(method: str, spec: Sweep, parts: dict[int, Path], target: Path) -> 
     seeds = seeds_of(spec)
     loaded = {}
     for folder in dict.fromkeys(parts.values()):
-        done = rundir.read_json(folder / "results.json", rundir.RESULTS_KEYS)
+        done = rundir.read_results(folder)
         *_, states, best = load_method(method, spec, folder)
-        loaded[folder] = (done, finished_seeds(folder), states, best)
+        loaded[folder] = (done, rundir.finished_seeds(folder), states, best)
     updates = {done["updates"] for done, *_ in loaded.values()}
     protocols = {done.get("selection_protocol") for done, *_ in loaded.values()}
     if len(updates) != 1 or len(protocols) != 1:  # reuse_sources checks both; this guards a hand-edited folder
@@ -287,10 +288,12 @@ def assemble(method: str, spec: Sweep, parts: dict[int, Path], target: Path) -> 
     (step,) = updates
     target.mkdir(parents=True)
     checkpoint.save(
-        checkpoint.checkpoint_manager(target / "checkpoints", 2), step, {"states": stack(states), "best": stack(best)}
+        checkpoint.checkpoint_manager(rundir.checkpoint_at(target), 2),
+        step,
+        {"states": stack(states), "best": stack(best)},
     )
     rundir.write_json(
-        target / "results.json",
+        target / rundir.RESULTS_FILE,
         {
             "updates": step,
             "results": list(results),
@@ -307,11 +310,7 @@ def assembled_markdown(folders: dict[str, Path]) -> str:
     the folder each seed came from; '' when none was."""
     lines = []
     for method, folder in folders.items():
-        done = (
-            rundir.read_json(folder / "results.json", rundir.RESULTS_KEYS)
-            if (folder / "results.json").is_file()
-            else {}
-        )
+        done = rundir.read_results(folder) or {}
         where = {}  # source folder -> its seeds
         for seed, source in done.get("assembled_from", {}).items():
             where.setdefault(source, []).append(int(seed))
@@ -331,7 +330,7 @@ def load_method(method: str, spec: Sweep, folder: Path):
     in its results' order) on the first local device (`Run.load`). `spec` gives the
     protocol, not the seeds."""
     config, schedule = method_schedule(method, spec)
-    trainer, states, best = Run(folder, config, schedule, tuple(finished_seeds(folder)), method).load()
+    trainer, states, best = Run(folder, config, schedule, tuple(rundir.finished_seeds(folder)), method).load()
     return config, trainer, states, best
 
 
@@ -374,11 +373,11 @@ def check(spec: Sweep, allow_large: bool = False) -> None:
 
 def saved(folder: Path) -> Sweep:
     """The sweep a folder holds, as its sweep.json records it."""
-    return rundir.args_from_saved(Sweep, rundir.read_json(Path(folder) / "sweep.json"), out=Path(folder))
+    return rundir.args_from_saved(Sweep, rundir.read_json(Path(folder) / rundir.SWEEP_FILE), out=Path(folder))
 
 
 # A sweep's report, rewritten whenever it finishes (`run`); an extension keeps the earlier one.
-REPORT_FILES = ("table1.md", "table1.csv", "results_per_seed.json", "learning_curves.png")
+REPORT_FILES = ("table1.md", "table1.csv", rundir.PER_SEED_FILE, "learning_curves.png")
 
 
 def updates_of(spec: Sweep) -> int:
@@ -409,7 +408,7 @@ def extend(folder: Path, num_updates: int, allow_large: bool = False) -> Sweep:
     cannot continue (`check_continuable`). A kill part-way is repaired by the same call
     again. Returns the extended sweep."""
     folder = Path(folder)
-    rundir.prepare_run_dir(folder, resume=True, overwrite=False, marker="sweep.json", kind="sweep")
+    rundir.prepare_run_dir(folder, resume=True, overwrite=False, marker=rundir.SWEEP_FILE, kind="sweep")
     spec = saved(folder)
     had = updates_of(spec)
     if num_updates < had:
@@ -425,8 +424,8 @@ def extend(folder: Path, num_updates: int, allow_large: bool = False) -> Sweep:
     check(extended, allow_large)
     check_started(extended)
     for method in spec.methods:
-        check_continuable(folder / "methods" / method)
-    kept = folder / f"report_{had}_updates"
+        check_continuable(rundir.arm_folder(folder, method))
+    kept = folder / rundir.kept_report(had)
     report_files = [folder / name for name in REPORT_FILES if (folder / name).is_file()]
     taken = [path.name for path in report_files if (kept / path.name).exists()]
     if taken:
@@ -443,21 +442,21 @@ def extend(folder: Path, num_updates: int, allow_large: bool = False) -> Sweep:
     for path in report_files:  # before sweep.json: a kill in between leaves an extension to repeat
         kept.mkdir(exist_ok=True)
         path.rename(kept / path.name)
-    record = rundir.read_json(folder / "sweep.json")
+    record = rundir.read_json(folder / rundir.SWEEP_FILE)
     extensions = [
         *record.get("extensions", []),
         {"from_updates": had, "to_updates": num_updates, "reuse": [str(p) for p in spec.reuse]},
     ]
-    rundir.write_json(folder / "sweep.json", {**dataclasses.asdict(extended), "extensions": extensions})
+    rundir.write_json(folder / rundir.SWEEP_FILE, {**dataclasses.asdict(extended), "extensions": extensions})
     print(
         f"extending {folder} from {had} to {num_updates} updates"
         + (f" (its {had}-update report is kept in {kept.name}/)" if report_files else ""),
         flush=True,
     )
     for method in spec.methods:  # no finished arm reads as one of `num_updates` (a kill before: `run_method`)
-        results = folder / "methods" / method / "results.json"
-        if results.is_file():
-            set_aside(results.parent, rundir.read_json(results, rundir.RESULTS_KEYS)["updates"])
+        finished = rundir.read_results(rundir.arm_folder(folder, method))
+        if finished is not None:
+            set_aside(rundir.arm_folder(folder, method), finished["updates"])
     return extended
 
 
@@ -493,7 +492,7 @@ def run(
     sources = reuse_sources(spec)
     out = spec.out
     if resume:
-        rundir.prepare_run_dir(out, resume=True, overwrite=overwrite, marker="sweep.json", kind="sweep")
+        rundir.prepare_run_dir(out, resume=True, overwrite=overwrite, marker=rundir.SWEEP_FILE, kind="sweep")
         differ = _differences(saved(out), spec)
         if differ:
             raise errors.UserError(
@@ -503,8 +502,8 @@ def run(
             )
         check_started(spec)
     else:
-        rundir.prepare_run_dir(out, resume=False, overwrite=overwrite, marker="sweep.json", kind="sweep")
-        rundir.write_started_args(out / "sweep.json", spec, ())
+        rundir.prepare_run_dir(out, resume=False, overwrite=overwrite, marker=rundir.SWEEP_FILE, kind="sweep")
+        rundir.write_started_args(out / rundir.SWEEP_FILE, spec, ())
     copy_finished(spec, sources)
 
     used = devices.seed_mesh(spec.seeds).devices.size
@@ -519,7 +518,7 @@ def run(
     t0 = time.time()
     results, curves, budget = {}, {}, [stop_after_chunks]
     for method in spec.methods:
-        ran = run_method(method, spec, bar, evaluator, out / "methods" / method, budget)
+        ran = run_method(method, spec, bar, evaluator, rundir.arm_folder(out, method), budget)
         if ran is None:
             bar(0, None)
             print(f"stopped after {stop_after_chunks} chunks, in {method} (continue with --resume)")
@@ -529,8 +528,8 @@ def run(
     bar(0, None)
     md, rows = report(spec, results)
     (out / "table1.md").write_text(md)
-    write_csv(out / "table1.csv", rows)
-    rundir.write_json(out / "results_per_seed.json", results)
+    rundir.write_csv(out / "table1.csv", rows)
+    rundir.write_json(out / rundir.PER_SEED_FILE, results)
     figures.learning_curve_png(out / "learning_curves.png", curves)
     print(md)
     print(f"wrote {out}/table1.md, table1.csv, results_per_seed.json, learning_curves.png ({time.time() - t0:.0f} s)")
@@ -551,5 +550,5 @@ def report(spec: Sweep, results: dict[str, list[dict]]) -> tuple[str, list[dict]
     md += "\n" + by_length_markdown(results)
     md += "\n" + diagnostics_markdown(results)
     md += "\n" + numerics.markdown(results, [(spec.methods[0], m) for m in spec.methods[1:]])
-    md += assembled_markdown({method: spec.out / "methods" / method for method in spec.methods})
+    md += assembled_markdown({method: rundir.arm_folder(spec.out, method) for method in spec.methods})
     return md, rows

@@ -1,14 +1,35 @@
-"""Run folders: one writer at a time, the arguments a run started with, JSON and metric rows.
+"""The run-folder format, in one module: what each file of a run or sweep folder is called and
+holds, its reading and writing, one writer at a time, and the arguments a program started with.
 
-A run folder (`train`'s, or a sweep's arm's: `experiments.running.run`) holds run.json,
-progress.json, checkpoints/ and results.json, and train adds metrics.jsonl/.csv (one row
-per update), results_<split>.json/.md and learning_curve.png; a sweep's folder holds
-sweep.json and one run folder per arm (`experiments.running.sweeps`). Every folder a
+A run folder (`train`'s, or one arm of a sweep: `experiments.running.run.Run`) holds
+
+  run.json        what was run: the arm, its preset, Config and Schedule, the seeds, the
+                  selection protocol; it reads alone (`RUN_FILE`, `read_run_info`)
+  progress.json   the updates done; per seed its validations and its best model's SR and
+                  update; per chunk the training SR of every update, diagnostics and counts;
+                  the platform of each stretch of updates (`PROGRESS_FILE`, `read_progress`)
+  checkpoints/    orbax checkpoints of {"states", "best"}, named by their update: every
+                  seed's training state and the model selected on validation, stacked over
+                  the seeds (`CHECKPOINTS`, `checkpoint_at`)
+  results.json    at the end: per seed the test results of the selected and the last model,
+                  its validations and its training curve (`RESULTS_FILE`, `read_results`);
+                  an extended run keeps the one before as results_<n>_updates.json
+                  (`kept_results`) and its program's report in report_<n>_updates/
+
+and train adds metrics.jsonl/.csv (one row per update: `append_rows`, `read_rows`) and its
+report. A sweep folder holds sweep.json (its arguments: `SWEEP_FILE`), one run folder per arm
+(methods/<arm>/: `arm_folder`), and results_per_seed.json with its report. Every folder a
 program writes has a `.lock`, held (an OS lock, `claim`) by the one process writing it.
+
+A leaf: it imports nothing of the project but `experiments.errors`, so the run machinery
+(experiments/running) and the analysis that reads finished folders (experiments/reporting)
+both read the format here (tests/test_layering.py). The files a program writes once and
+never reads back (its tables, figures and Markdown) are named where they are written.
 """
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import json
 import math
@@ -21,18 +42,99 @@ from pathlib import Path
 import numpy as np
 
 from experiments.errors import RunNotFound, UserError, given_flags, on_refusal, read_json, say_ignored  # noqa: F401 (rundir.read_json: a run folder's files read back)
-from experiments.reporting.tables import write_csv
 
 try:  # POSIX: flock on the folder's .lock, which also names the holder's pid
     import fcntl
 except ImportError:  # native Windows (jax runs there on the CPU): filelock's msvcrt lock
     fcntl = None
 
+# ---------------------------------------------------------------------- the format
 RUN_FILE = "run.json"
+PROGRESS_FILE = "progress.json"
+RESULTS_FILE = "results.json"
+CHECKPOINTS = "checkpoints"
+SWEEP_FILE = "sweep.json"
+METHODS = "methods"
+PER_SEED_FILE = "results_per_seed.json"
+FORMAT_NAMES = (RUN_FILE, PROGRESS_FILE, RESULTS_FILE, CHECKPOINTS, SWEEP_FILE, METHODS, PER_SEED_FILE)
 # What every run.json, progress.json and results.json holds (a damaged one lacks some: `read_json`).
 RUN_KEYS = ("config", "schedule")
 PROGRESS_KEYS = ("done",)
 RESULTS_KEYS = ("updates", "results")
+
+
+def arm_folder(sweep: Path, arm: str) -> Path:
+    """The run folder of the arm `arm` in the sweep folder `sweep`."""
+    return Path(sweep) / METHODS / arm
+
+
+def arm_folders(sweep: Path) -> list[Path]:
+    """The run folders of a sweep folder's arms, in name order (none before one starts)."""
+    folder = Path(sweep) / METHODS
+    return sorted(p for p in folder.iterdir() if p.is_dir()) if folder.is_dir() else []
+
+
+def is_sweep(path: Path) -> bool:
+    return (Path(path) / SWEEP_FILE).is_file()
+
+
+def in_sweep(folder: Path) -> bool:
+    """Whether the run folder `folder` is an arm of a sweep (methods/<arm>/ of a sweep folder)."""
+    folder = Path(folder)
+    return folder.parent.name == METHODS and is_sweep(folder.parent.parent)
+
+
+def checkpoint_at(folder: Path, update: int | None = None) -> Path:
+    """A run folder's checkpoints/, or its checkpoint of update `update`."""
+    path = Path(folder) / CHECKPOINTS
+    return path if update is None else path / str(update)
+
+
+def kept_results(updates: int) -> str:
+    """The name an extended run keeps its results.json of `updates` updates under."""
+    return f"results_{updates}_updates.json"
+
+
+def kept_report(updates: int) -> str:
+    """The folder an extended run keeps its program's report of `updates` updates in."""
+    return f"report_{updates}_updates"
+
+
+def read_results(folder: Path) -> dict | None:
+    """A run folder's results.json ({"updates", "results": one per seed, ...}), or None
+    before the run has finished."""
+    path = Path(folder) / RESULTS_FILE
+    return read_json(path, RESULTS_KEYS) if path.is_file() else None
+
+
+def read_progress(folder: Path) -> dict | None:
+    """A run folder's progress.json, or None where it keeps none (not started, or assembled
+    from other sweeps' seeds)."""
+    path = Path(folder) / PROGRESS_FILE
+    return read_json(path, PROGRESS_KEYS) if path.is_file() else None
+
+
+def finished_seeds(folder: Path) -> list[int]:
+    """The seeds a run folder has finished (none when it has not finished)."""
+    done = read_results(folder)
+    return [] if done is None else [r["seed"] for r in done["results"]]
+
+
+def sweep_results(sweep: Path) -> dict[str, list[dict]]:
+    """Every finished arm of the sweep folder `sweep`: its per-seed results (results.json's
+    "results"), in name order; a UserError (one line) where it is no sweep folder or no arm
+    has finished."""
+    if not (Path(sweep) / METHODS).is_dir():
+        raise UserError(f"{sweep} is not a sweep folder (it has no {METHODS}/): give --run the folder a sweep wrote")
+    found = {
+        f.name: read_json(f / RESULTS_FILE, ("results",))["results"]
+        for f in arm_folders(sweep)
+        if (f / RESULTS_FILE).is_file()
+    }
+    if not found:
+        raise UserError(f"{sweep} has no finished method yet (no {METHODS}/*/{RESULTS_FILE})")
+    return found
+
 
 # ---------------------------------------------------------------------- one writer per folder
 LOCK_FILE = ".lock"
@@ -208,7 +310,7 @@ def code_commit() -> str | None:
     `experiments` package), with "+dirty" where tracked files differ from it; None outside a
     git checkout (an installed wheel). Runs record it (run.json's "commits"), so a study's
     plan can be checked to precede them (docs/plans/)."""
-    root = Path(__file__).resolve().parents[2]
+    root = Path(__file__).resolve().parents[1]
     try:
         head = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True, timeout=30)
         if head.returncode != 0:
@@ -282,6 +384,29 @@ def write_json(path: Path, x) -> None:
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(to_json(x, indent=2))
     os.replace(tmp, path)
+
+
+# ---------------------------------------------------------------------- CSV
+def write_csv(path: Path, rows: list[dict], append: bool = False) -> None:
+    """Rows of dicts as CSV, columns in the first row's key order; a header only when the
+    file is new. NaN and missing values (None, e.g. read back from strict JSON's null) are
+    written `nan`, as Python's csv writes a float NaN, so a row reads the same either way.
+    No rows: an empty file (a table of nothing that ran), or nothing appended."""
+    path = Path(path)
+    if not rows:
+        if not append:
+            path.write_text("")
+        return
+    new = not (append and path.exists())
+    with open(path, "a" if append else "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        if new:
+            writer.writeheader()
+        writer.writerows({k: _csv_cell(v) for k, v in row.items()} for row in rows)
+
+
+def _csv_cell(value):
+    return "nan" if value is None or (isinstance(value, float) and math.isnan(value)) else value
 
 
 # ---------------------------------------------------------------------- metrics files
