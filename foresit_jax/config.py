@@ -45,12 +45,12 @@ class Config:
     """Scenes with the regularities of real homes (`envs.priors`): furniture of distinct
     kinds seen as their own classes, each target placed by relations to furniture and to
     other targets, houses' rooms in adjacent pairs, related savn word vectors. False:
-    today's GridNav scenes, where every target stands uniformly at random."""
+    GridNav's default scenes, where every target stands uniformly at random."""
     perception_range: Optional[float] = None
     """A perception range, in cells (0.25 m): object pixels deeper than it show one
     'unresolved object' class, so a far target is seen as some object and its anchor
     furniture as what it is (`envs.GridNav`'s `perception_range`; docs/foresight.md,
-    "Levers"). None, the default: every object resolved at any depth, today's view."""
+    "Levers"). None, the default: every object resolved at any depth."""
     progress_reward: float = 0.0
     """Reward shaping (a deviation from the paper's reward, which is +5 on success and
     -0.01 a step): each step also earns w (d_t - d_{t+1}), d the oracle's actions to

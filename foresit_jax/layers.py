@@ -5,10 +5,9 @@ of their own, tested equal to `nn.Dense` in tests/test_layers.py).
   its input. Flax's Dense contracts the last axis of an input of any rank; for the
   batched inputs of a training window (`[T * B, 3, W, C]` grids, `[B, K, H]` keys,
   `[T * B, N, 6]` detections) XLA:CPU then runs the backward pass (the kernel's and the
-  bias's gradients, contractions over several leading axes) 2-4x slower than the same
-  layer on `[T * B * 3 * W, C]` (measured on jax 0.7.2: 7.5 vs 1.7 ms for the 23 -> 64
-  view convolution of a 512-step window, forward and backward). Flattening the leading
-  axes changes nothing else.
+  bias's gradients, contractions over several leading axes) much slower than the same
+  layer on `[T * B * 3 * W, C]` (docs/design.md, 'Speed'). Flattening the leading axes
+  changes nothing else.
 * `GridDense`: `Dense([grid : tile(v_1) : ... : tile(v_n)])` over a `[..., R, W, C]` grid
   and per-sample vectors `v_i [..., D_i]` tiled over it, without building the tiled
   input: the kernel's rows split into the grid's and each vector's, so the vectors'
@@ -68,7 +67,8 @@ def orthogonal(scale: float = 1.0):
     two such QRs running side by side (the LSTM's recurrent kernels and the actor) can
     occupy every thread of a 2-thread pool and wait on each other forever. Here a batch of
     keys is drawn by `lax.map`, one unbatched QR after another: the same per-sample
-    values (LAPACK factors each matrix of a batch on its own), nothing batched to split."""
+    values (LAPACK factors each matrix of a batch on its own), nothing batched to split
+    (docs/design.md, 'A known hazard')."""
     base = nn.initializers.orthogonal(scale)
 
     def init(key, shape, dtype=jnp.float32):

@@ -152,8 +152,8 @@ def materialized_transpose(kernel: chex.Array) -> chex.Array:
     """`kernel.T` as an array of its own (XLA may not fold it back into a matmul).
 
     XLA:CPU runs `g @ kernel.T` (a dot contracting both operands' last axes: what
-    autodiff emits for the input gradient of `x @ kernel`) about 4x slower than a plain
-    matmul (measured on jax 0.7.2); with the transpose materialised once, every such
+    autodiff emits for the input gradient of `x @ kernel`) much slower than a plain
+    matmul (docs/design.md, 'Speed'); with the transpose materialised once, every such
     product is a plain matmul."""
     return jax.lax.optimization_barrier(jnp.transpose(kernel))
 

@@ -262,7 +262,7 @@ PAPER_METHODS: tuple[str, ...] = (
     "a3c+org+att",
     "a3c+org+int",
 )
-# Methods that run today: the paper's rows and ablations, and the attention critic alone
+# The methods that run: the paper's rows and ablations, and the attention critic alone
 # (any other combination of the pieces, e.g. 'a3c+maml+org', 'a3c+maml+rnd' or
 # 'a3c+foresit+plaincritic', runs too).
 IMPLEMENTED_METHODS: tuple[str, ...] = (

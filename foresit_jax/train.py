@@ -44,8 +44,9 @@ from foresit_jax.networks import CriticOutput, EncoderInputs, Networks, build, s
 from foresit_jax.rollout import ActOptions, ActorState, AgentParams, BoundEnv, Trajectory, WindowEnd, ended_episodes
 
 
-# How often `Trainer.run` reports progress to the host (a callback after every update
-# cost ~5% of quick a3c+foresit's updates/s, measured ABAB; every 10th, ~1 s apart).
+# How often `Trainer.run` reports progress to the host, in updates: a host callback after
+# every update slows training (docs/design.md, 'Speed'), and every 10th is often enough for
+# a progress display.
 PROGRESS_EVERY = 10
 
 
@@ -559,7 +560,7 @@ class Trainer:
 
         def body(s, _):
             s, metrics = self.update(s, env_params)
-            if on_update is not None:  # every 10th update: a callback per update cost ~5% at quick
+            if on_update is not None:  # every PROGRESS_EVERY-th update (a callback per update slows training)
                 jax.lax.cond(
                     s.update % PROGRESS_EVERY == 0, lambda: jax.debug.callback(on_update, s.update), lambda: None
                 )
@@ -624,15 +625,14 @@ class GridTrainer(Trainer):
     rate as an array multiplies as the constant does); vmapped over the seeds of one rate,
     it is the program `experiments.sweep` runs at that rate (`Trainer.run_seeds`), bit for
     bit. A grid of several rates in one program is a batch of V x S lanes instead of S,
-    another XLA program: the per-rate sweeps up to float rounding (up to 4e-5 on a parameter
-    after 3 tiny updates), as a sweep's seed is `train --seed` up to float rounding.
-    `experiments.tune` trains its arms one after another instead, each its own sweep: on a
-    2-core CPU the seeds' lanes already fill the cores (`benchmarks.bench_grid`: 0.98x;
-    docs/reproducibility.md)."""
+    another XLA program: the per-rate sweeps up to float rounding, as a sweep's seed is
+    `train --seed` up to float rounding. `experiments.tune` trains its arms one after
+    another instead, each its own sweep: on a CPU of few cores the seeds' lanes already
+    fill the cores (`benchmarks.bench_grid`; docs/reproducibility.md)."""
 
-    # Adam's settings other than the rate stay Python constants: with all of them traced,
-    # the parameters moved by up to 6e-8 (a3c) and 2e-7 (a3c+foresit) in 6 tiny updates;
-    # with the rate alone traced, not at all (measured, the 2-core Xeon).
+    # Adam's settings other than the rate stay Python constants: traced, they move the
+    # parameters off `Trainer`'s by float rounding; with the rate alone traced, the
+    # parameters are `Trainer`'s bit for bit (docs/reproducibility.md).
     STATIC_ADAM_ARGS = ("b1", "b2", "eps", "eps_root", "mu_dtype", "nesterov")
 
     def __init__(self, config: Config, env=None, env_params=None):
