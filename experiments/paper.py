@@ -48,27 +48,12 @@ import time
 from pathlib import Path
 
 from experiments import errors
-from experiments.reporting import cvae_comparison, probing, report, stats
 from experiments.reporting.paper_tables import (
     GROUPS,
-    PAIRS,
-    PROBED,
     SETUP_OF,
-    TABLE3,
-    by_length_png,
-    by_length_rows,
-    claims,
-    claims_markdown,
-    fmt_pair,
-    sampled_markdown,
-    table1,
-    table2,
-    table3,
 )
-from experiments.reporting.tables import markdown_table
-from experiments.running import devices, flags, numerics, paper_figures, probe_runs, sweeps
+from experiments.running import devices, flags, numerics, paper_report, sweeps
 from experiments import rundir
-from experiments.running.models import models_of_sweep
 from experiments.running.presets import split_arm
 
 
@@ -125,12 +110,6 @@ def fast_compile(args: Args) -> bool:
 def arm_of(args: Args, method: str) -> str:
     """The arm `method` runs as (`--arms`), or the method itself: its folder's name in its sweep."""
     return {split_arm(a)[0]: a for a in args.arms}.get(method, method)
-
-
-def by_method(args: Args, by_arm: dict) -> dict:
-    """`by_arm` (keyed by the arms' folder names) keyed by their methods."""
-    names = {arm_of(args, m): m for m in SETUP_OF}
-    return {names.get(name, name): value for name, value in by_arm.items()}
 
 
 def sweep_args(args: Args, setup: str, methods: tuple[str, ...]) -> sweeps.Sweep:
@@ -214,7 +193,7 @@ def main(args: Args) -> dict | None:
 
 def _run(args: Args) -> dict | None:
     """`main` after its checks: the sweeps, then the report."""
-    t0 = time.time()
+    t0, run = time.time(), paper_run(args)
     results = {}
     for setup, group in GROUPS.items():
         methods = tuple(m for m in group if m not in args.exclude)
@@ -233,173 +212,30 @@ def _run(args: Args) -> dict | None:
             print("stopped (continue with --resume)")
             return None
         per_seed = rundir.read_json(args.out / setup / rundir.PER_SEED_FILE)
-        results.update(by_method(args, per_seed))
+        results.update(run.by_method(per_seed))
     print(f"sweeps done ({time.time() - t0:.0f} s); writing the report", flush=True)
-    return write_report(args, results)
+    return paper_report.write(run, results)
 
 
-# ---------------------------------------------------------------------- the report: L^g buckets
-def by_length_section(args: Args, results: dict) -> str:
-    """For each +ForeSIT pair: a PNG of SR and SPL by L^g bucket with 95% bands over seeds,
-    and the paired difference per bucket."""
-    rows = by_length_rows(results)
-    rundir.write_csv(args.out / "by_length.csv", rows)
-    md = ""
-    for base, other in PAIRS:
-        if base not in results or other not in results:
-            continue
-        name = f"by_length_{base}_vs_{other}.png".replace("+", "_")
-        by_length_png(args.out / name, [r for r in rows if r["method"] in (base, other)])
-        cells = [
-            [bucket, episodes, *(f"{fmt_pair(p)} ({stats.verdict(p)})" for p in pairs)]
-            for bucket, episodes, *pairs in report.paired_by_length(results, base, other)
-        ]
-        md += (
-            f"### {other} against {base}\n\n![SR and SPL by L^g]({name})\n\n"
-            + markdown_table(cells, ["L^g", "episodes (all seeds)", "SR difference [95% CI], p", "SPL difference"])
-            + "\n\n"
-        )
-    return md or "(no +ForeSIT pair was run)\n"
-
-
-# ---------------------------------------------------------------------- the models of figures 3 and 4
-def _first_seed(args: Args, method: str):
-    """(config, trainer, last training state, selected AgentParams) of the first seed."""
-    arm = arm_of(args, method)
-    config, trainer, states, best = sweeps.load_method(
-        arm, _method_args(args, method), rundir.arm_folder(args.out / SETUP_OF[method], arm)
+def paper_run(args: Args) -> paper_report.PaperRun:
+    """What the report needs of this paper run (`paper_report.PaperRun`)."""
+    return paper_report.PaperRun(
+        out=args.out,
+        preset=args.preset,
+        seed=args.seed,
+        seeds=args.seeds,
+        arms={split_arm(a)[0]: a for a in args.arms},
+        specs={
+            setup: sweep_args(args, setup, tuple(m for m in group if m not in args.exclude))
+            for setup, group in GROUPS.items()
+        },
+        excluded=tuple(m for m in SETUP_OF if m in args.exclude),
+        cvae_windows=args.cvae_windows,
+        cvae_epochs=args.cvae_epochs,
+        trajectory_candidates=args.trajectory_candidates,
+        tsne_points=args.tsne_points,
+        probe_episodes_per_room=args.probe_episodes_per_room,
     )
-    return config, trainer, devices.seed_slice(states, 0), devices.seed_slice(best, 0)
-
-
-def _method_args(args: Args, method: str) -> sweeps.Sweep:
-    setup = SETUP_OF[method]
-    return sweep_args(args, setup, tuple(m for m in GROUPS[setup] if m not in args.exclude))
-
-
-def sampled_section(args: Args, results: dict) -> str:
-    """ORG's rows (evaluated greedily, as ORG's code does) evaluated with sampled actions
-    too, on the same test episodes (also written to sampled.csv)."""
-    greedy = [
-        m for m in results if sweeps.method_schedule(m, sweep_args(args, SETUP_OF[m], (m,)))[0].pieces.greedy_evaluation
-    ]
-    title = "## ORG's rows with sampled actions\n\n"
-    if not greedy:
-        return title + "Not run: no method evaluated greedily (ORG's rows) was trained.\n"
-    print(f"sampled actions: {', '.join(greedy)}", flush=True)
-    sampled = {}
-    for setup in dict.fromkeys(SETUP_OF[m] for m in greedy):
-        arms = [arm_of(args, m) for m in greedy if SETUP_OF[m] == setup]
-        sampled.update(by_method(args, paper_figures.sampled_results(args.out / setup, arms)))
-    md, rows = sampled_markdown(results, sampled)
-    rundir.write_csv(args.out / "sampled.csv", rows)
-    return (
-        title + "ORG's code acts greedily at evaluation (the argmax of the policy), SAVN's samples; greedy play can "
-        "loop where sampling escapes. Each seed's selected model on the same test episodes with each rule; mean "
-        "± sample std over seeds, the difference paired over seeds.\n\n" + md
-    )
-
-
-# ---------------------------------------------------------------------- report.md
-def probe_section(args: Args, results: dict) -> str:
-    """The imagination probes (`experiments.probe`) of the +ForeSIT methods of `PROBED`
-    that ran, every seed, as a report section (also written to probe.json)."""
-    methods = [m for m in PROBED if m in results]
-    if not methods:
-        return "## Imagination probes\n\nNot run: no probed ForeSIT method was trained.\n"
-    models = {}
-    for m in methods:
-        models.update(by_method(args, models_of_sweep(args.out / SETUP_OF[m], (arm_of(args, m),))))
-    report = probe_runs.probe(models, args.probe_episodes_per_room, args.cvae_windows)
-    rundir.write_json(args.out / "probe.json", report)
-    return probing.markdown(report, args.probe_episodes_per_room, args.cvae_windows, level=2)
-
-
-def write_report(args: Args, results: dict) -> dict:
-    out = args.out
-    seeds = f"{args.seed}-{args.seed + args.seeds - 1}" if args.seeds > 1 else str(args.seed)
-    excluded = [m for m in SETUP_OF if m not in results]
-    md = [
-        f"# ForeSIT on GridNav: the paper's evaluation (preset {args.preset}, seeds {seeds})\n",
-        f"Test split, each seed's model selected on validation (`experiments.running.selection`); mean ± sample std "
-        f"[95% Student-t interval] over {args.seeds} seed(s). Not run: {', '.join(excluded) or 'none'}.\n",
-    ]
-    if args.arms:
-        md.append(
-            "Methods run with fields of their own (`--arms`; the rows keep the method's name): "
-            + "; ".join(f"{split_arm(a)[0]} at {a.partition('@')[2]}" for a in args.arms)
-            + ".\n"
-        )
-
-    compared = [*PAIRS, *(("a3c+org+foresit", m) for m in TABLE3[1:-1])]  # the claims' pairs
-    md.append(
-        numerics.markdown(results, compared)
-        + sweeps.assembled_markdown({m: rundir.arm_folder(out / SETUP_OF[m], arm_of(args, m)) for m in results})
-    )
-    t1, rows1 = table1(results)
-    rundir.write_csv(out / "table1.csv", rows1)
-    md.append("## Table 1\n\n" + t1)
-    t2, rows2 = table2(results)
-    rundir.write_csv(out / "table2.csv", rows2)
-    md.append("## Table 2: SPL / SR per room type\n\n" + t2)
-    t3, rows3 = table3(results)
-    rundir.write_csv(out / "table3.csv", rows3)
-    md.append("## Table 3: what to imagine (ablations on the ORG base)\n\n" + t3)
-    md.append(report.selection_markdown(results))
-    md.append("## SR and SPL by optimal path length\n\n" + by_length_section(args, results))
-    lines = claims(results)
-    rundir.write_csv(out / "claims.csv", [{"claim": c, "verdict": v, "numbers": n} for c, v, n in lines])
-    md.append("## The paper's claims\n\n" + claims_markdown(lines))
-    md.append(sampled_section(args, results))
-    md.append(probe_section(args, results))
-
-    foresit = next((m for m in ("a3c+foresit", "a3c+org+foresit", "a3c+maml+foresit") if m in results), None)
-    if foresit is None:
-        md.append("## C-VAE comparison, Figures 3 and 4\n\nNot run: no ForeSIT method was trained.\n")
-    else:
-        print(f"the C-VAE comparison on {foresit}", flush=True)
-        config, trainer, state, _ = _first_seed(args, foresit)
-        items = cvae_comparison.collect_items(trainer, state, args.cvae_windows, args.seed)
-        result = cvae_comparison.compare(config, items, args.cvae_epochs, args.seed)
-        rundir.write_json(out / "cvae_comparison.json", result)
-        md.append(
-            f"## The C-VAE comparison ({foresit}, seed {args.seed})\n\n"
-            + (
-                cvae_comparison.markdown(result, config, args.cvae_windows, level=3)
-                if "direct" in result
-                else f"Not run: {result['items']} successful episodes in {args.cvae_windows} windows.\n"
-            )
-        )
-        print("Figure 4: t-SNE", flush=True)
-        n = paper_figures.tsne_figure(config, trainer, state, items, out / "fig4_tsne.png", args.tsne_points, args.seed)
-        md.append(
-            f"## Figure 4: t-SNE of imagined states and selected sub-goals ({foresit}, seed {args.seed})\n\n"
-            + (f"![t-SNE](fig4_tsne.png)\n\n{n} items.\n" if n >= 5 else f"Not drawn: {n} items.\n")
-        )
-    md.append("## Figure 3: trajectories on the same test episodes\n")
-    for base, other in PAIRS:
-        if base in results and other in results:
-            name = f"fig3_{base}_vs_{other}.png".replace("+", "_")
-            print(f"Figure 3: {base} and {other}", flush=True)
-            loaded = {m: _first_seed(args, m)[::3] for m in (base, other)}  # (config, selected params)
-            summary = paper_figures.trajectories_figure(loaded, args.seed, args.trajectory_candidates, out / name)
-            md.append(
-                f"![{base} and {other}]({name})\n\n{base} left, {other} right (seed {args.seed}; the arrow is the "
-                f"start pose, the target framed in red). {summary}.\n\n"
-            )
-    md.append(
-        "## Learning curves (mean and band of one std over seeds)\n\n"
-        + "".join(
-            f"![{setup}]({setup}/learning_curves.png)\n\n"
-            for setup in GROUPS
-            if (out / setup / "learning_curves.png").exists()
-        )
-    )
-    text = "\n".join(md)
-    (out / "report.md").write_text(text)
-    print(text)
-    print(f"wrote {out / 'report.md'}")
-    return {c: f"{v}: {n}" for c, v, n in lines}
 
 
 def cli(argv=None) -> dict | None:

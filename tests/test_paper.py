@@ -250,7 +250,9 @@ def test_arms_name_the_folders_and_the_rows_keep_the_method(tmp_path):
     assert paper.arm_of(args, "a3c+foresit") == "a3c+foresit@learning_rate=3e-4"
     assert paper.arm_of(args, "a3c") == "a3c"
     assert paper.sweep_args(args, "savn", ("a3c", "a3c+foresit")).methods == ("a3c", "a3c+foresit@learning_rate=3e-4")
-    assert paper.by_method(args, {"a3c": 1, "a3c+foresit@learning_rate=3e-4": 2}) == {"a3c": 1, "a3c+foresit": 2}
+    run = paper.paper_run(args)
+    assert run.by_method({"a3c": 1, "a3c+foresit@learning_rate=3e-4": 2}) == {"a3c": 1, "a3c+foresit": 2}
+    assert run.folder("a3c+foresit") == tmp_path / "savn" / "methods" / "a3c+foresit@learning_rate=3e-4"
 
 
 def test_paper_rejects_bad_input_in_one_line(tmp_path, capsys):
