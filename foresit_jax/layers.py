@@ -67,8 +67,7 @@ def orthogonal(scale: float = 1.0):
     two such QRs running side by side (the LSTM's recurrent kernels and the actor) can
     occupy every thread of a 2-thread pool and wait on each other forever. Here a batch of
     keys is drawn by `lax.map`, one unbatched QR after another: the same per-sample
-    values (LAPACK factors each matrix of a batch on its own), nothing batched to split
-    (docs/design.md, 'A known hazard')."""
+    values (LAPACK factors each matrix of a batch on its own), nothing batched to split (docs/design.md)."""
     base = nn.initializers.orthogonal(scale)
 
     def init(key, shape, dtype=jnp.float32):
