@@ -42,9 +42,8 @@ from experiments.reporting.report import (
     table,
     table_markdown,
 )
-
-from experiments.running import checkpoint, devices, flags, numerics, selection
 from experiments import rundir
+from experiments.running import checkpoint, devices, flags, numerics, selection
 from experiments.running.run import Run, check_continuable, set_aside
 from experiments.running.presets import (
     MAX_EPISODES,
@@ -155,7 +154,7 @@ def reuse_sources(spec: Sweep) -> list[Path]:
         for method in spec.methods:
             found = method_folder(folder, method, spec)
             made = method_protocol(found)
-            if rundir.read_results(found) is not None and made != selection.PROTOCOL_VERSION:
+            if (found / rundir.RESULTS_FILE).is_file() and made != selection.PROTOCOL_VERSION:
                 raise errors.UserError(
                     f"--reuse {folder}: its {method} was selected by another protocol (version "
                     f"{made}; this code's is {selection.PROTOCOL_VERSION}, experiments/running/selection.py)"
@@ -188,9 +187,9 @@ def method_protocol(folder: Path) -> int | None:
     under: its results.json's (1 where it records none: finished before versions were
     recorded), else its progress.json's (None where it records none: started before they
     were recorded there, and so not known), else None (not started)."""
-    for read, unrecorded in ((rundir.read_results, 1), (rundir.read_progress, None)):
-        if (done := read(folder)) is not None:
-            return done.get("selection_protocol", unrecorded)
+    for name, unrecorded in ((rundir.RESULTS_FILE, 1), (rundir.PROGRESS_FILE, None)):
+        if (folder / name).is_file():
+            return rundir.read_json(folder / name).get("selection_protocol", unrecorded)
     return None
 
 
