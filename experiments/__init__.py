@@ -3,10 +3,11 @@
 
 experiments/            the programs: train, evaluate, sweep, tune, paper, compare, probe,
                         failures, foresight, demo, cvae_compare (none imports another);
-                        errors, the one-line user errors every layer raises (a leaf)
+                        and two leaves every layer imports: errors, the one-line user
+                        errors, and rundir, the run-folder format
 experiments/running/    the run machinery: presets, the run flags, sweeps (a sweep's spec
-                        and run), the run loop, selection, run folders, checkpoints,
-                        trained models and the probes run over them
+                        and run), the run loop, selection, checkpoints, trained models,
+                        the probes run over them and the paper report
 experiments/reporting/  statistics, tables, figures, the probes' and the C-VAE's reports:
                         below running/, which imports it, never the other way
 

@@ -129,7 +129,9 @@ def reuse_sweeps(args: Args, setup: str) -> tuple[Path, ...]:
     for run in map(Path, args.reuse):
         if rundir.is_sweep(run / setup):
             folders.append(run / setup)
-        elif not (run / "paper.json").is_file() and rundir.read_json(run / rundir.SWEEP_FILE).get("setup") == setup:
+        elif (
+            not (run / rundir.PAPER_FILE).is_file() and rundir.read_json(run / rundir.SWEEP_FILE).get("setup") == setup
+        ):
             folders.append(run)
     return tuple(folders)
 
@@ -154,7 +156,7 @@ def check(args: Args) -> None:
     if args.seeds < 1:
         raise errors.UserError(f"--seeds must be >= 1, got {args.seeds}")
     for run in map(Path, args.reuse):
-        if not (run / "paper.json").is_file() and not rundir.is_sweep(run):
+        if not (run / rundir.PAPER_FILE).is_file() and not rundir.is_sweep(run):
             raise errors.UserError(
                 f"--reuse {run}: neither a paper run (no paper.json) nor a sweep folder (no sweep.json)"
             )
@@ -176,7 +178,7 @@ def main(args: Args) -> dict | None:
     """Run (or continue) every sweep, then write the report; returns the claims
     ({claim: verdict line}), or None when stopped by --stop-after-chunks."""
     if args.resume:
-        args = rundir.resumed_args(args, "paper.json", "paper run", keep=flags.INVOCATION)
+        args = rundir.resumed_args(args, rundir.PAPER_FILE, "paper run", keep=flags.INVOCATION)
     check(args)
     if importlib.util.find_spec("sklearn") is None:  # Figure 4's t-SNE, drawn after the training
         raise errors.UserError(
@@ -185,8 +187,10 @@ def main(args: Args) -> dict | None:
     for method in SETUP_OF:  # fail before any training
         sweeps.method_schedule(arm_of(args, method), sweeps.Sweep(preset=args.preset, setup=SETUP_OF[method]))
     if not args.resume:
-        rundir.prepare_run_dir(args.out, resume=False, overwrite=args.overwrite, marker="paper.json", kind="paper run")
-        rundir.write_started_args(args.out / "paper.json", args, flags.INVOCATION)
+        rundir.prepare_run_dir(
+            args.out, resume=False, overwrite=args.overwrite, marker=rundir.PAPER_FILE, kind="paper run"
+        )
+        rundir.write_started_args(args.out / rundir.PAPER_FILE, args, flags.INVOCATION)
     with numerics.compiled_fast(fast_compile(args)):
         return _run(args)
 
@@ -229,7 +233,6 @@ def paper_run(args: Args) -> paper_report.PaperRun:
             setup: sweep_args(args, setup, tuple(m for m in group if m not in args.exclude))
             for setup, group in GROUPS.items()
         },
-        excluded=tuple(m for m in SETUP_OF if m in args.exclude),
         cvae_windows=args.cvae_windows,
         cvae_epochs=args.cvae_epochs,
         trajectory_candidates=args.trajectory_candidates,

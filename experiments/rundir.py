@@ -18,13 +18,14 @@ A run folder (`train`'s, or one arm of a sweep: `experiments.running.run.Run`) h
 
 and train adds metrics.jsonl/.csv (one row per update: `append_rows`, `read_rows`) and its
 report. A sweep folder holds sweep.json (its arguments: `SWEEP_FILE`), one run folder per arm
-(methods/<arm>/: `arm_folder`), and results_per_seed.json with its report. Every folder a
+(methods/<arm>/: `arm_folder`), and results_per_seed.json with its report; a tune's folder
+holds tune.json and its sweep, a paper run's paper.json and one sweep per setup. Every folder a
 program writes has a `.lock`, held (an OS lock, `claim`) by the one process writing it.
 
 A leaf: it imports nothing of the project but `experiments.errors`, so the run machinery
 (experiments/running) and the analysis that reads finished folders (experiments/reporting)
-both read the format here (tests/test_layering.py). The files a program writes once and
-never reads back (its tables, figures and Markdown) are named where they are written.
+both read the format here (tests/test_layering.py). A program's report (its tables,
+figures, Markdown and the JSON beside them) is named where it is written.
 """
 
 from __future__ import annotations
@@ -56,7 +57,19 @@ CHECKPOINTS = "checkpoints"
 SWEEP_FILE = "sweep.json"
 METHODS = "methods"
 PER_SEED_FILE = "results_per_seed.json"
-FORMAT_NAMES = (RUN_FILE, PROGRESS_FILE, RESULTS_FILE, CHECKPOINTS, SWEEP_FILE, METHODS, PER_SEED_FILE)
+TUNE_FILE = "tune.json"  # a tune's folder: its arguments, and its sweep in sweep/
+PAPER_FILE = "paper.json"  # a paper run's folder: its arguments, and one sweep per setup
+FORMAT_NAMES = (
+    RUN_FILE,
+    PROGRESS_FILE,
+    RESULTS_FILE,
+    CHECKPOINTS,
+    SWEEP_FILE,
+    METHODS,
+    PER_SEED_FILE,
+    TUNE_FILE,
+    PAPER_FILE,
+)
 # What every run.json, progress.json and results.json holds (a damaged one lacks some: `read_json`).
 RUN_KEYS = ("config", "schedule")
 PROGRESS_KEYS = ("done",)
@@ -100,11 +113,15 @@ def kept_report(updates: int) -> str:
     return f"report_{updates}_updates"
 
 
-def read_results(folder: Path) -> dict | None:
+def read_results(folder: Path, required: bool = False) -> dict | None:
     """A run folder's results.json ({"updates", "results": one per seed, ...}), or None
-    before the run has finished."""
+    before the run has finished (`required`: a RunNotFound naming the file instead)."""
     path = Path(folder) / RESULTS_FILE
-    return read_json(path, RESULTS_KEYS) if path.is_file() else None
+    if path.is_file():
+        return read_json(path, RESULTS_KEYS)
+    if required:
+        raise RunNotFound(f"{folder} has not finished ({RESULTS_FILE} is not there); train it to the end first")
+    return None
 
 
 def read_progress(folder: Path) -> dict | None:

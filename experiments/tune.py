@@ -130,7 +130,7 @@ def arms(args: Args, grid) -> dict[str, dict[str, str]]:
 
 def sweep_args(args: Args, methods: tuple[str, ...], folder: Path) -> sweeps.Sweep:
     """The sweep of `methods` (arms) in `folder` under the tune's protocol."""
-    reuse = tuple(f / "sweep" if (Path(f) / "tune.json").is_file() else Path(f) for f in map(Path, args.reuse))
+    reuse = tuple(f / "sweep" if (Path(f) / rundir.TUNE_FILE).is_file() else Path(f) for f in map(Path, args.reuse))
     return sweeps.Sweep(
         methods=methods,
         setup=args.setup,
@@ -155,7 +155,7 @@ def tune_report(args: Args, grid, table: dict, results: dict) -> tuple[str, dict
 def main(args: Args) -> dict | None:
     """Run (or continue) the tune; returns tune.json's numbers (None when stopped early)."""
     if args.resume:
-        args = rundir.resumed_args(args, "tune.json", "tune", keep=flags.INVOCATION)
+        args = rundir.resumed_args(args, rundir.TUNE_FILE, "tune", keep=flags.INVOCATION)
     if args.seeds < 1:
         raise errors.UserError(f"--seeds must be >= 1, got {args.seeds}")
     if not args.methods or len(set(args.methods)) != len(args.methods):
@@ -166,8 +166,8 @@ def main(args: Args) -> dict | None:
     folder = args.out / "sweep"
     sweeps.check(sweep_args(args, names, folder), args.allow_large)  # the seeds and sizes, before writing
     if not args.resume:
-        rundir.prepare_run_dir(args.out, resume=False, overwrite=args.overwrite, marker="tune.json", kind="tune")
-        rundir.write_started_args(args.out / "tune.json", args, flags.INVOCATION)
+        rundir.prepare_run_dir(args.out, resume=False, overwrite=args.overwrite, marker=rundir.TUNE_FILE, kind="tune")
+        rundir.write_started_args(args.out / rundir.TUNE_FILE, args, flags.INVOCATION)
     print(
         f"tuning {', '.join(f for f, _ in grid)}: {len(args.methods)} method(s) x {len(points(grid))} value(s) "
         f"= {len(names)} arms, {args.seeds} seed(s) each",
@@ -183,7 +183,9 @@ def main(args: Args) -> dict | None:
     if ran is None:
         print("continue with: python -m experiments.tune --resume --out " + str(args.out))
         return None
-    results = {a: rundir.read_results(rundir.arm_folder(args.out / "sweep", a))["results"] for a in names}
+    results = {
+        a: rundir.read_results(rundir.arm_folder(args.out / "sweep", a), required=True)["results"] for a in names
+    }
     md, out = tune_report(args, grid, table, results)
     (args.out / "tune.md").write_text(md)
     rundir.write_json(args.out / "tune_results.json", out)

@@ -1,4 +1,5 @@
-"""How the project's modules import each other, read from their source (ast; nothing is imported):
+"""How the project's modules import each other, read from their source (ast; nothing of the project is
+imported but `experiments.rundir`, for the format's names):
 
 * experiments/reporting (statistics, tables, figures, reports: pure functions of results)
   is the lower layer and imports nothing of experiments/running (the run machinery), which

@@ -59,7 +59,7 @@ def test_the_path_from_the_cli_to_the_optimiser():
     assert reader.index("foresit_jax/train.py") < reader.index("foresit_jax/rollout.py")
     assert {"foresit_jax/lstm.py", "foresit_jax/imagination.py", "envs/gridnav.py", "envs/dynamics.py"} <= set(reader)
     # setup is not what one update is: the run folder's helpers and the scene banks are run, not followed
-    assert not {"experiments/running/rundir.py", "envs/bank.py"} & set(reader)
+    assert not {"experiments/rundir.py", "envs/bank.py"} & set(reader)
     # what the Config says: the preset, the Config's defaults and checks, the method's parser
     assert {"experiments/running/presets.py", "foresit_jax/config.py", "foresit_jax/methods.py"} <= set(config)
     assert not set(config) & set(reader) and path.to_read == reader + config

@@ -1,3 +1,4 @@
 """The run machinery the programs share: presets, the run flags, sweeps, the run loop,
-validation and selection, run folders, checkpoints, trained models read back and the
-probes run over them (docs/design.md). Above experiments/reporting, which it imports."""
+validation and selection, checkpoints, trained models read back, the probes run over
+them and the paper report (docs/design.md). Above experiments/reporting, which it imports;
+both read and write run folders through `experiments.rundir`."""

@@ -36,7 +36,7 @@ class PaperRun:
     """A paper run's folder `out` and what its report needs: the seeds `seed`..`seed +
     seeds - 1` of preset `preset`; `arms` {method: the arm it ran as, its folder's name in
     its setup's sweep}; `specs` {setup: the sweep it ran, which gives its methods' Config};
-    `excluded`, the methods left out; and the sizes of the report's parts (the C-VAE
+    and the sizes of the report's parts (the C-VAE
     comparison's windows and epochs, Figure 3's candidates, Figure 4's points, the probes'
     episodes per room type)."""
 
@@ -46,7 +46,6 @@ class PaperRun:
     seeds: int
     arms: dict[str, str]
     specs: dict[str, sweeps.Sweep]
-    excluded: tuple[str, ...] = ()
     cvae_windows: int = 100
     cvae_epochs: int = 50
     trajectory_candidates: int = 32
@@ -71,16 +70,16 @@ def write(run: PaperRun, results: dict) -> dict:
     ({method: per-seed results}); prints it and returns the claims ({claim: verdict line})."""
     out = run.out
     seeds = f"{run.seed}-{run.seed + run.seeds - 1}" if run.seeds > 1 else str(run.seed)
+    excluded = [m for m in SETUP_OF if m not in results]
     md = [
         f"# ForeSIT on GridNav: the paper's evaluation (preset {run.preset}, seeds {seeds})\n",
         f"Test split, each seed's model selected on validation (`experiments.running.selection`); mean ± sample std "
-        f"[95% Student-t interval] over {run.seeds} seed(s). Not run: {', '.join(run.excluded) or 'none'}.\n",
+        f"[95% Student-t interval] over {run.seeds} seed(s). Not run: {', '.join(excluded) or 'none'}.\n",
     ]
-    own = [arm for method, arm in run.arms.items() if arm != method]
-    if own:
+    if run.arms:
         md.append(
             "Methods run with fields of their own (`--arms`; the rows keep the method's name): "
-            + "; ".join(f"{arm.partition('@')[0]} at {arm.partition('@')[2]}" for arm in own)
+            + "; ".join(f"{method} at {arm.partition('@')[2]}" for method, arm in run.arms.items())
             + ".\n"
         )
     compared = [*PAIRS, *(("a3c+org+foresit", m) for m in TABLE3[1:-1])]  # the claims' pairs

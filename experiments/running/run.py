@@ -496,9 +496,9 @@ class Run:
 
     def load(self):
         """A finished run read back: (trainer, the seeds' last training states, their selected
-        models), stacked over the seeds it finished (`finished_seeds`, in its results' order)
+        models), stacked over the seeds it finished (`rundir.finished_seeds`, in its results' order)
         on the first local device."""
-        done = rundir.read_results(self.folder)["updates"]
+        done = rundir.read_results(self.folder, required=True)["updates"]
         return self.load_checkpoint(done, rundir.finished_seeds(self.folder))
 
 

@@ -325,7 +325,7 @@ def assembled_markdown(folders: dict[str, Path]) -> str:
 
 def load_method(method: str, spec: Sweep, folder: Path):
     """A finished method of a sweep read back: (Config, trainer, the seeds' last training
-    states, their selected models), stacked over the seeds it finished (`finished_seeds`,
+    states, their selected models), stacked over the seeds it finished (`rundir.finished_seeds`,
     in its results' order) on the first local device (`Run.load`). `spec` gives the
     protocol, not the seeds."""
     config, schedule = method_schedule(method, spec)
