@@ -206,3 +206,19 @@ def test_no_two_modules_share_a_stem_or_its_plural():
     assert not {s: p for s, p in by_stem.items() if len(p) > 1}
     assert _stem("probes") == _stem("probe") and _stem("sweeps") == _stem("sweep") and _stem("boxes") == "box"
     assert _stem("stats") == "stat" and _stem("tuning") == "tuning" and _stem("progress") == "progress"
+
+
+def test_the_citation_and_the_changelog_name_the_packages_version():
+    """A released version (pyproject.toml's, not a .dev one, which cites the last release) is
+    CITATION.cff's and has its CHANGELOG section ("## 0.3.0 (...)"), so a release cannot
+    leave either behind."""
+    import re
+    import tomllib
+
+    root = Path(__file__).resolve().parents[1]
+    version = tomllib.loads((root / "pyproject.toml").read_text())["project"]["version"]
+    if ".dev" in version:
+        pytest.skip(f"{version} is a development version")
+    cited = re.search(r"^version: (\S+)$", (root / "CITATION.cff").read_text(), re.M)
+    assert cited is not None and cited.group(1) == version
+    assert re.search(rf"^## {re.escape(version)} \(", (root / "CHANGELOG.md").read_text(), re.M)
