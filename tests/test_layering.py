@@ -129,8 +129,9 @@ def format_names_outside(root: Path = ROOT) -> list[str]:
     """'file:line name' for each place outside experiments/rundir.py that spells one of the
     run-folder format's names (`rundir.FORMAT_NAMES`) itself: a string constant that is one
     of them: a file's name anywhere but as a dict key, a folder's name (checkpoints, methods)
-    where it is joined onto a path (`folder / "methods"`). A name inside a longer text (a
-    message, a docstring) is not one."""
+    where it is joined onto a path (`folder / "methods"`, `Path(folder, "methods")`,
+    `folder.joinpath("methods")`). A name inside a longer text (a message, a docstring) is
+    not one."""
     from experiments import rundir
 
     names = set(rundir.FORMAT_NAMES)
@@ -142,6 +143,13 @@ def format_names_outside(root: Path = ROOT) -> list[str]:
             tree = ast.parse(path.read_text(), str(path))
             keys = {id(k) for node in ast.walk(tree) if isinstance(node, ast.Dict) for k in node.keys}
             joined = {id(n.right) for n in ast.walk(tree) if isinstance(n, ast.BinOp) and isinstance(n.op, ast.Div)}
+            joined |= {  # Path(x, "methods"), x.joinpath("methods")
+                id(a)
+                for n in ast.walk(tree)
+                if isinstance(n, ast.Call)
+                and (getattr(n.func, "id", None) == "Path" or getattr(n.func, "attr", None) == "joinpath")
+                for a in n.args
+            }
             for node in ast.walk(tree):
                 if not (isinstance(node, ast.Constant) and node.value in names) or id(node) in keys:
                     continue
@@ -164,12 +172,15 @@ def test_the_format_check_sees_a_name_spelled_elsewhere(tmp_path):
         'def f(folder):\n    """Reads results.json."""\n'
         '    print("no results.json here", ["methods"])\n    d = {"methods": 1, "results.json": 2}\n'
         '    name = "run.json"\n'
+        '    Path(folder, "checkpoints"), folder.joinpath("methods"), Path("checkpoints.txt")\n'
         '    return folder / "methods" / "a" / "results.json"\n'
     )
     assert sorted(format_names_outside(tmp_path)) == [
         "experiments/x.py:5 run.json",
+        "experiments/x.py:6 checkpoints",
         "experiments/x.py:6 methods",
-        "experiments/x.py:6 results.json",
+        "experiments/x.py:7 methods",
+        "experiments/x.py:7 results.json",
     ]
 
 
