@@ -358,6 +358,30 @@ def test_write_csv(tmp_path):
     assert path.read_text() == "x\n1\n"
 
 
+def test_the_format_reads_a_sweep_folder_and_says_what_is_missing(tmp_path):
+    """rundir's reads on a hand-made sweep folder: one finished arm, one started, one empty."""
+    sweep = tmp_path / "sweep"
+    with pytest.raises(errors.UserError, match="is not a sweep folder"):
+        rundir.sweep_results(sweep)
+    sweep.mkdir()
+    (sweep / rundir.SWEEP_FILE).write_text("{}")
+    done, started = rundir.arm_folder(sweep, "b"), rundir.arm_folder(sweep, "a")
+    for folder in (done, started, rundir.arm_folder(sweep, "c")):
+        folder.mkdir(parents=True)
+    with pytest.raises(errors.UserError, match="has no finished method yet"):
+        rundir.sweep_results(sweep)
+    rundir.write_json(done / rundir.RESULTS_FILE, {"updates": 4, "results": [{"seed": 3}, {"seed": 1}]})
+    rundir.write_json(started / rundir.PROGRESS_FILE, {"done": 2})
+    assert rundir.sweep_results(sweep) == {"b": [{"seed": 3}, {"seed": 1}]}
+    assert [f.name for f in rundir.arm_folders(sweep)] == ["a", "b", "c"]
+    assert rundir.finished_seeds(done) == [3, 1] and rundir.finished_seeds(started) == []
+    assert rundir.read_results(started) is None and rundir.read_progress(started) == {"done": 2}
+    with pytest.raises(errors.RunNotFound, match="has not finished"):
+        rundir.read_results(started, required=True)
+    assert rundir.in_sweep(done) and not rundir.in_sweep(tmp_path) and rundir.is_sweep(sweep)
+    assert rundir.checkpoint_at(done, 4) == done / "checkpoints" / "4"
+
+
 @pytest.mark.parametrize("marker, kind", [(rundir.RUN_FILE, "run"), ("sweep.json", "sweep")])
 def test_prepare_run_dir_never_deletes_what_it_did_not_write(tmp_path, marker, kind):
     out = tmp_path / "out"
