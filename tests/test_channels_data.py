@@ -166,3 +166,73 @@ def test_stage_2_is_quoted_with_its_verdicts(tmp_path, capsys):
     )
     for column in ("SR", "SPL"):
         assert list(report.values(results[HEAD], column)) == list(report.values(earlier[HEAD], column))
+
+
+# ---------------------------------------------------------------------- stage 3
+STAGE3 = {
+    CRITIC: "a3c+critic, 9000 updates",
+    HEAD: "a3c+oracle through `head` (privileged), no noise, 9000 updates",
+}
+
+
+def test_stage_3_is_quoted_with_its_verdicts(tmp_path, capsys):
+    """Stage 3, the budget branch (docs/data/channels_stage3.tar.xz): the critic and the best
+    channel, `head`, extended from stage 2's 3000 updates to 9000; each arm's row, the goal
+    view's ceiling at 9000 (the selected model's test SR and SPL, and the area under the
+    validation curve) with the plan's rule 2, and each arm's gain from the longer budget
+    against its own 3000-update results (kept beside as results_3000_updates.json)."""
+    if not (study_data.DATA / "channels_stage3.tar.xz").exists():
+        pytest.skip("channels_stage3.tar.xz: not run yet")
+    from experiments.reporting import stats
+
+    root = study_data.unpack("channels_stage3.tar.xz", tmp_path, (CRITIC, HEAD))
+    for arm in STAGE3:
+        config = rundir.read_json(rundir.arm_folder(root, arm) / "run.json")["config"]
+        assert config["priors"] is True and config["perception_range"] == 4.0 and config["learning_rate"] == 3e-4
+        assert config["num_updates"] == 9000 and config["setup"] == "savn"
+    assert rundir.read_json(rundir.arm_folder(root, HEAD) / "run.json")["config"]["sigma2_max"] == 0
+    results = rundir.sweep_results(root)
+    assert all([r["seed"] for r in results[arm]] == [0, 1, 2, 3, 4] for arm in results)
+    doc = (REPO / "docs" / "ceiling.md").read_text()
+    flat = " ".join(doc.split())
+    for arm, label in STAGE3.items():
+        assert arm_row(results, arm, label) in doc, arm_row(results, arm, label)
+    out = compare.main(compare.Args(run=root, pairs=(f"{CRITIC}:{HEAD}",)))
+    capsys.readouterr()
+    pair = out["pairs"][f"{HEAD} - {CRITIC}"]
+    row = (
+        f"| the goal view through `head` - its base, 9000 updates | {study_data.interval(pair['SR'])} | "
+        f"{study_data.interval(pair['SPL'])} | {study_data.interval(pair[report.VALIDATION_AREA])} | "
+        f"{pair['robust']['SR']['mde']:.1f} | {pair['robust']['SR']['p_holm']:.3f} | "
+        f"{'resolved' if resolved(pair) else 'not resolved'} |"
+    )
+    assert row in doc, row
+    # the budget: each arm at 9000 against its own 3000-update results, seed by seed
+    stage2 = rundir.sweep_results(
+        study_data.unpack("channels_stage2.tar.xz", tmp_path / "stage2", (CRITIC, ENC, MLP_CRITIC, MLP, HEAD))
+    )
+    for arm, label in STAGE3.items():
+        before = rundir.read_json(rundir.arm_folder(root, arm) / rundir.kept_results(3000), ("results",))["results"]
+        for column in ("SR", "SPL"):  # the runs were copied from stage 2, then extended
+            assert list(report.values(before, column)) == list(report.values(stage2[arm], column))
+        gains = {c: stats.paired(report.values(before, c), report.values(results[arm], c)) for c in ("SR", "SPL")}
+        row = (
+            f"| {label.split(',')[0]}: 9000 - 3000 updates | {study_data.interval(gains['SR'])} | "
+            f"{study_data.interval(gains['SPL'])} |"
+        )
+        assert row in doc, row
+    # the README's and results.md's sentences quote the ceiling and the critic's budget gain
+    readme = " ".join((REPO / "README.md").read_text().split())
+    assert f"we still cannot tell it from 0: {study_data.interval(pair['SR'])} SR" in readme
+    assert study_data.readme_links("stage 3")
+    critic_before = rundir.read_json(rundir.arm_folder(root, CRITIC) / rundir.kept_results(3000), ("results",))
+    critic_gain = stats.paired(report.values(critic_before["results"], "SR"), report.values(results[CRITIC], "SR"))
+    results_md = " ".join((REPO / "docs" / "results.md").read_text().split())
+    assert (
+        f"{study_data.interval(pair['SR'])} SR (MDE {pair['robust']['SR']['mde']:.1f}), while the budget itself is "
+        f"worth {study_data.interval(critic_gain)} SR to the critic"
+    ) in results_md
+    selected = {arm: [r["selected_update"] for r in results[arm]] for arm in results}
+    for arm, label in STAGE3.items():
+        line = f"{label.split(',')[0]} selected updates {', '.join(map(str, selected[arm]))}"
+        assert line in flat, line
