@@ -109,6 +109,17 @@ def mean_selected_validation(results: list[dict]) -> float:
     )
 
 
+def quoted_arms(root: Path, labels: dict) -> tuple[dict, str, str]:
+    """A stage's results (every arm over seeds 0-4) and docs/ceiling.md, checked to hold each
+    arm's row under its label: (results, the doc, the doc on one line)."""
+    results = rundir.sweep_results(root)
+    assert all([r["seed"] for r in results[arm]] == [0, 1, 2, 3, 4] for arm in results)
+    doc = (REPO / "docs" / "ceiling.md").read_text()
+    for arm, label in labels.items():
+        assert arm_row(results, arm, label) in doc, arm_row(results, arm, label)
+    return results, doc, " ".join(doc.split())
+
+
 def test_stage_2_is_quoted_with_its_verdicts(tmp_path, capsys):
     if not (study_data.DATA / "channels_stage2.tar.xz").exists():
         pytest.skip("channels_stage2.tar.xz: not run yet")
@@ -125,12 +136,7 @@ def test_stage_2_is_quoted_with_its_verdicts(tmp_path, capsys):
     assert {
         rundir.read_json(root / "methods" / a / "run.json")["config"]["imagination_input"] for a in (MLP, MLP_CRITIC)
     } == {"mlp"}
-    results = rundir.sweep_results(root)
-    assert all([r["seed"] for r in results[arm]] == [0, 1, 2, 3, 4] for arm in results)
-    doc = (REPO / "docs" / "ceiling.md").read_text()
-    flat = " ".join(doc.split())
-    for arm, label in STAGE2.items():
-        assert arm_row(results, arm, label) in doc, arm_row(results, arm, label)
+    results, doc, flat = quoted_arms(root, STAGE2)
     out = compare.main(compare.Args(run=root, pairs=tuple(f"{a}:{b}" for a, b, _ in CEILINGS)))
     capsys.readouterr()
     for a, b, name in CEILINGS:
@@ -191,12 +197,7 @@ def test_stage_3_is_quoted_with_its_verdicts(tmp_path, capsys):
         assert config["priors"] is True and config["perception_range"] == 4.0 and config["learning_rate"] == 3e-4
         assert config["num_updates"] == 9000 and config["setup"] == "savn"
     assert rundir.read_json(rundir.arm_folder(root, HEAD) / "run.json")["config"]["sigma2_max"] == 0
-    results = rundir.sweep_results(root)
-    assert all([r["seed"] for r in results[arm]] == [0, 1, 2, 3, 4] for arm in results)
-    doc = (REPO / "docs" / "ceiling.md").read_text()
-    flat = " ".join(doc.split())
-    for arm, label in STAGE3.items():
-        assert arm_row(results, arm, label) in doc, arm_row(results, arm, label)
+    results, doc, flat = quoted_arms(root, STAGE3)
     out = compare.main(compare.Args(run=root, pairs=(f"{CRITIC}:{HEAD}",)))
     capsys.readouterr()
     pair = out["pairs"][f"{HEAD} - {CRITIC}"]
