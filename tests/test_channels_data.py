@@ -237,3 +237,69 @@ def test_stage_3_is_quoted_with_its_verdicts(tmp_path, capsys):
     for arm, label in STAGE3.items():
         line = f"{label.split(',')[0]} selected updates {', '.join(map(str, selected[arm]))}"
         assert line in flat, line
+
+
+# ---------------------------------------------------------------------- stage 4
+STAGE4 = {
+    CRITIC: "a3c+critic, today's rooms (channels study)",
+    HEAD: "a3c+oracle through `head` (privileged), no noise, today's rooms",
+}
+
+
+def first_difference(a: list, b: list) -> int:
+    """The first update at which two training curves differ."""
+    return next(i for i, (x, y) in enumerate(zip(a, b, strict=True)) if x != y)
+
+
+def test_stage_4_is_quoted_with_its_verdicts(tmp_path, capsys):
+    """Stage 4, today's rooms (docs/data/channels_rooms.tar.xz): the critic and the best
+    channel, `head`, at quick's budget without priors or range; each arm's row, the goal
+    view's ceiling (test SR and SPL, the area under the validation curve) with the plan's
+    rule 2, the validation curve's rows, and the claim that neither arm repeats its 2498418
+    run (docs/data/ceiling_savn_epyc.tar.xz): the training curves agree for the first 74 to
+    325 updates, then part."""
+    if not (study_data.DATA / "channels_rooms.tar.xz").exists():
+        pytest.skip("channels_rooms.tar.xz: not run yet")
+    root = study_data.unpack("channels_rooms.tar.xz", tmp_path, (CRITIC, HEAD))
+    for arm in STAGE4:
+        config = rundir.read_json(rundir.arm_folder(root, arm) / "run.json")["config"]
+        assert config["priors"] is False and config.get("perception_range") is None
+        assert config["num_updates"] == 3000 and config["setup"] == "savn" and config["learning_rate"] == 3e-4
+        assert config["room_types"] == [] and config["layout"] == "room"
+    assert rundir.read_json(rundir.arm_folder(root, HEAD) / "run.json")["config"]["sigma2_max"] == 0
+    results, doc, flat = quoted_arms(root, STAGE4)
+    out = compare.main(compare.Args(run=root, pairs=(f"{CRITIC}:{HEAD}",)))
+    capsys.readouterr()
+    pair = out["pairs"][f"{HEAD} - {CRITIC}"]
+    row = (
+        f"| the goal view through `head` - its base, today's rooms | {study_data.interval(pair['SR'])} | "
+        f"{study_data.interval(pair['SPL'])} | {study_data.interval(pair[report.VALIDATION_AREA])} | "
+        f"{pair['robust']['SR']['mde']:.1f} | {pair['robust']['SR']['p_holm']:.3f} | "
+        f"{'resolved' if resolved(pair) else 'not resolved'} |"
+    )
+    assert row in doc, row
+    # the words: SR cannot be told from 0; SPL and the validation area exclude it
+    assert pair["SR"]["ci_low"] < 0 < pair["SR"]["ci_high"] and not resolved(pair)
+    assert pair["SPL"]["ci_low"] > 0 and pair[report.VALIDATION_AREA]["ci_low"] > 0
+    section = doc.split("### Stage 4")[1]
+    for arm, label in STAGE4.items():
+        curve = {}
+        for r in results[arm]:
+            for v in r["validation"]:
+                curve.setdefault(v["update"], []).append(v["SR"])
+        name = label.split(",")[0].split(" (privileged)")[0]
+        line = f"| {name} | " + " | ".join(f"{sum(x) / len(x):.1f}" for _, x in sorted(curve.items())) + " |"
+        assert line in section, line
+    assert [r["selected_update"] for r in results[HEAD]] == [3000] * 5
+    assert sorted(r["selected_update"] for r in results[CRITIC]) == [2500, 3000, 3000, 3000, 3000]
+    # neither arm repeats its 2498418 run: the curves agree at first, then part
+    earlier = study_data.unpack(
+        "ceiling_savn_epyc.tar.xz", tmp_path / "epyc", (CRITIC, "a3c+oracle@learning_rate=3e-4", HEAD)
+    )
+    firsts = []
+    for arm in STAGE4:
+        now = rundir.read_json(rundir.arm_folder(root, arm) / rundir.RESULTS_FILE)["curves"]
+        before = rundir.read_json(rundir.arm_folder(earlier, arm) / rundir.RESULTS_FILE)["curves"]
+        firsts += [first_difference(a, b) for a, b in zip(now, before, strict=True)]
+    assert f"for its first {min(firsts)} to {max(firsts)} updates, then the two part" in flat
+    assert study_data.readme_links("stage 4")
