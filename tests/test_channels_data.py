@@ -181,6 +181,22 @@ STAGE3 = {
 }
 
 
+def head_ceiling(root: Path, doc: str, where: str, capsys) -> dict:
+    """The pair `head` - critic of a stage's sweep, checked to be docs/ceiling.md's row for
+    `where`: SR, SPL, the validation area, the MDE, Holm's p and the plan's rule 2."""
+    out = compare.main(compare.Args(run=root, pairs=(f"{CRITIC}:{HEAD}",)))
+    capsys.readouterr()
+    pair = out["pairs"][f"{HEAD} - {CRITIC}"]
+    row = (
+        f"| the goal view through `head` - its base, {where} | {study_data.interval(pair['SR'])} | "
+        f"{study_data.interval(pair['SPL'])} | {study_data.interval(pair[report.VALIDATION_AREA])} | "
+        f"{pair['robust']['SR']['mde']:.1f} | {pair['robust']['SR']['p_holm']:.3f} | "
+        f"{'resolved' if resolved(pair) else 'not resolved'} |"
+    )
+    assert row in doc, row
+    return pair
+
+
 def test_stage_3_is_quoted_with_its_verdicts(tmp_path, capsys):
     """Stage 3, the budget branch (docs/data/channels_stage3.tar.xz): the critic and the best
     channel, `head`, extended from stage 2's 3000 updates to 9000; each arm's row, the goal
@@ -198,16 +214,7 @@ def test_stage_3_is_quoted_with_its_verdicts(tmp_path, capsys):
         assert config["num_updates"] == 9000 and config["setup"] == "savn"
     assert rundir.read_json(rundir.arm_folder(root, HEAD) / "run.json")["config"]["sigma2_max"] == 0
     results, doc, flat = quoted_arms(root, STAGE3)
-    out = compare.main(compare.Args(run=root, pairs=(f"{CRITIC}:{HEAD}",)))
-    capsys.readouterr()
-    pair = out["pairs"][f"{HEAD} - {CRITIC}"]
-    row = (
-        f"| the goal view through `head` - its base, 9000 updates | {study_data.interval(pair['SR'])} | "
-        f"{study_data.interval(pair['SPL'])} | {study_data.interval(pair[report.VALIDATION_AREA])} | "
-        f"{pair['robust']['SR']['mde']:.1f} | {pair['robust']['SR']['p_holm']:.3f} | "
-        f"{'resolved' if resolved(pair) else 'not resolved'} |"
-    )
-    assert row in doc, row
+    pair = head_ceiling(root, doc, "9000 updates", capsys)
     # the budget: each arm at 9000 against its own 3000-update results, seed by seed
     stage2 = rundir.sweep_results(
         study_data.unpack("channels_stage2.tar.xz", tmp_path / "stage2", (CRITIC, ENC, MLP_CRITIC, MLP, HEAD))
@@ -268,16 +275,7 @@ def test_stage_4_is_quoted_with_its_verdicts(tmp_path, capsys):
         assert config["room_types"] == [] and config["layout"] == "room"
     assert rundir.read_json(rundir.arm_folder(root, HEAD) / "run.json")["config"]["sigma2_max"] == 0
     results, doc, flat = quoted_arms(root, STAGE4)
-    out = compare.main(compare.Args(run=root, pairs=(f"{CRITIC}:{HEAD}",)))
-    capsys.readouterr()
-    pair = out["pairs"][f"{HEAD} - {CRITIC}"]
-    row = (
-        f"| the goal view through `head` - its base, today's rooms | {study_data.interval(pair['SR'])} | "
-        f"{study_data.interval(pair['SPL'])} | {study_data.interval(pair[report.VALIDATION_AREA])} | "
-        f"{pair['robust']['SR']['mde']:.1f} | {pair['robust']['SR']['p_holm']:.3f} | "
-        f"{'resolved' if resolved(pair) else 'not resolved'} |"
-    )
-    assert row in doc, row
+    pair = head_ceiling(root, doc, "today's rooms", capsys)
     # the words: SR cannot be told from 0; SPL and the validation area exclude it
     assert pair["SR"]["ci_low"] < 0 < pair["SR"]["ci_high"] and not resolved(pair)
     assert pair["SPL"]["ci_low"] > 0 and pair[report.VALIDATION_AREA]["ci_low"] > 0
