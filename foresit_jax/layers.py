@@ -66,8 +66,10 @@ def orthogonal(scale: float = 1.0):
     over XLA:CPU's intra-op thread pool and block a pool thread until its chunks are done;
     two such QRs running side by side (the LSTM's recurrent kernels and the actor) can
     occupy every thread of a 2-thread pool and wait on each other forever. Here a batch of
-    keys is drawn by `lax.map`, one unbatched QR after another: the same per-sample
-    values (LAPACK factors each matrix of a batch on its own), nothing batched to split (docs/design.md)."""
+    keys is drawn by `lax.map`, one unbatched QR after another, nothing batched to split.
+    Under `jit` the values are flax's batched draw's, bit for bit. Eagerly vmapped they are
+    flax's compiled draw's, which for a non-square matrix can differ from flax's eager draw
+    in the last bit (docs/design.md, "A known hazard")."""
     base = nn.initializers.orthogonal(scale)
 
     def init(key, shape, dtype=jnp.float32):

@@ -253,9 +253,9 @@ STAGE4 = {
 }
 
 
-def first_difference(a: list, b: list) -> int:
-    """The first update at which two training curves differ."""
-    return next(i for i, (x, y) in enumerate(zip(a, b, strict=True)) if x != y)
+def first_difference(a: list, b: list) -> int | None:
+    """The first update at which two training curves differ (None: they never do)."""
+    return next((i for i, (x, y) in enumerate(zip(a, b, strict=True)) if x != y), None)
 
 
 def test_stage_4_is_quoted_with_its_verdicts(tmp_path, capsys):
@@ -296,8 +296,33 @@ def test_stage_4_is_quoted_with_its_verdicts(tmp_path, capsys):
     )
     firsts = []
     for arm in STAGE4:
-        now = rundir.read_json(rundir.arm_folder(root, arm) / rundir.RESULTS_FILE)["curves"]
-        before = rundir.read_json(rundir.arm_folder(earlier, arm) / rundir.RESULTS_FILE)["curves"]
-        firsts += [first_difference(a, b) for a, b in zip(now, before, strict=True)]
+        now = rundir.read_json(rundir.arm_folder(root, arm) / rundir.RESULTS_FILE)
+        before = rundir.read_json(rundir.arm_folder(earlier, arm) / rundir.RESULTS_FILE)
+        # the same platform, so the parting is the start's, not the machine's
+        assert [r["numerics"] for r in now["results"]] == [r["numerics"] for r in before["results"]]
+        commits = rundir.read_json(rundir.arm_folder(root, arm) / "run.json")["commits"]
+        assert [c[:7] for c in commits] == ["431bbf4"]
+        firsts += [first_difference(a, b) for a, b in zip(now["curves"], before["curves"], strict=True)]
+    assert None not in firsts, "a curve repeats its 2498418 run to the end: the docs say they part"
     assert f"for its first {min(firsts)} to {max(firsts)} updates, then the two part" in flat
+    # the earlier run of the pair, quoted beside this one
+    old = compare.main(compare.Args(run=earlier, pairs=(f"{CRITIC}:{HEAD}",)))["pairs"][f"{HEAD} - {CRITIC}"]
+    capsys.readouterr()
+    quoted = (
+        f"gave {study_data.interval(old['SR'])} SR, {study_data.interval(old['SPL'])} SPL and "
+        f"{study_data.interval(old[report.VALIDATION_AREA])} validation SR area: the area's interval lies above 0 "
+        "in both runs, SPL's in this one only"
+    )
+    assert quoted in flat, quoted
+    assert old[report.VALIDATION_AREA]["ci_low"] > 0 and old["SPL"]["ci_low"] < 0
+    # the README's and results.md's sentences
+    sr, mde = study_data.interval(pair["SR"]), f"{pair['robust']['SR']['mde']:.1f}"
+    readme = " ".join((REPO / "README.md").read_text().split())
+    assert f"nor in today's rooms at the quick budget: {sr} SR, MDE {mde} ([stage 4]" in readme
     assert study_data.readme_links("stage 4")
+    results_md = " ".join((REPO / "docs" / "results.md").read_text().split())
+    assert (
+        f"(the plan's stage 4), through `head`: {sr} SR (MDE {mde}), not resolved; in SPL this run's interval "
+        f"lies above 0, {study_data.interval(pair['SPL'])}, and an earlier run of the same pair gave "
+        f"{study_data.interval(old['SPL'])}"
+    ) in results_md
