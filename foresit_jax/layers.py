@@ -68,8 +68,8 @@ def orthogonal(scale: float = 1.0):
     occupy every thread of a 2-thread pool and wait on each other forever. Here a batch of
     keys is drawn by `lax.map`, one unbatched QR after another, nothing batched to split.
     Under `jit` the values are flax's batched draw's, bit for bit. Eagerly vmapped they are
-    flax's compiled draw's, which for a non-square matrix can differ from flax's eager draw
-    in the last bit (docs/design.md, "A known hazard")."""
+    flax's compiled draw's, which for some shapes (the actor's) differs from flax's eager
+    draw in the last bit (docs/design.md, "A known hazard")."""
     base = nn.initializers.orthogonal(scale)
 
     def init(key, shape, dtype=jnp.float32):

@@ -91,7 +91,7 @@ def test_the_orthogonal_initialiser_draws_each_seed_as_flax_does_unbatched():
 def test_the_orthogonal_initialiser_vmapped_eagerly_draws_flax_compiled_values():
     """Eagerly vmapped, as experiments.sweep initialises its seeds, layers.orthogonal gives
     each key flax's compiled draw at the actor's shape and scale (128 x 6, 0.01): `lax.map`
-    runs the draw compiled. (flax's eager draw of a non-square matrix can differ from it in
+    runs the draw compiled. (flax's eager draw at this shape differs from it in
     the last bit: docs/design.md, "A known hazard".)"""
     import flax.linen as nn
 
