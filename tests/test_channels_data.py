@@ -269,7 +269,9 @@ def test_stage_4_is_quoted_with_its_verdicts(tmp_path, capsys):
         pytest.skip("channels_rooms.tar.xz: not run yet")
     root = study_data.unpack("channels_rooms.tar.xz", tmp_path, (CRITIC, HEAD))
     for arm in STAGE4:
-        config = rundir.read_json(rundir.arm_folder(root, arm) / "run.json")["config"]
+        run = rundir.read_json(rundir.arm_folder(root, arm) / rundir.RUN_FILE)
+        assert [c[:7] for c in run["commits"]] == ["431bbf4"]  # the worktree's commit
+        config = run["config"]
         assert config["priors"] is False and config.get("perception_range") is None
         assert config["num_updates"] == 3000 and config["setup"] == "savn" and config["learning_rate"] == 3e-4
         assert config["room_types"] == [] and config["layout"] == "room"
@@ -300,8 +302,6 @@ def test_stage_4_is_quoted_with_its_verdicts(tmp_path, capsys):
         before = rundir.read_json(rundir.arm_folder(earlier, arm) / rundir.RESULTS_FILE)
         # the same platform, so the parting is the start's, not the machine's
         assert [r["numerics"] for r in now["results"]] == [r["numerics"] for r in before["results"]]
-        commits = rundir.read_json(rundir.arm_folder(root, arm) / "run.json")["commits"]
-        assert [c[:7] for c in commits] == ["431bbf4"]
         firsts += [first_difference(a, b) for a, b in zip(now["curves"], before["curves"], strict=True)]
     assert None not in firsts, "a curve repeats its 2498418 run to the end: the docs say they part"
     assert f"for its first {min(firsts)} to {max(firsts)} updates, then the two part" in flat
