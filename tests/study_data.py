@@ -123,6 +123,7 @@ README_LINKS = {
     "stage 1": "docs/ceiling.md#stage-1-can-a-compass-be-carried-rooms-with-priors-range-4-quick-seeds-0-4-2026-11-29",
     "stage 3": "docs/ceiling.md#stage-3-three-times-the-budget-rooms-with-priors-range-4-seeds-0-4-2026-11-29",
     "stage 4": "docs/ceiling.md#stage-4-the-best-channel-in-todays-rooms-quick-seeds-0-4-2026-11-29",
+    "replication": "docs/results.md#replication-the-3x-pair-on-fresh-seeds-seeds-5-9-2026-11-29",
 }
 
 
