@@ -71,10 +71,13 @@ def test_the_replication_ran_as_the_plan_says(replication):
             assert [n["platform"]["cpu"] for n in r["numerics"]] == [EPYC] * len(r["numerics"])
 
 
+def selected_validation(results: list[dict]) -> list[float]:
+    """Each seed's validation SR at its selected update (rule 1 averages these)."""
+    return [next(v["SR"] for v in r["validation"] if v["update"] == r["selected_update"]) for r in results]
+
+
 def grid_row(arm: str, results: list[dict], chosen: bool) -> str:
-    val = stats.summary(
-        [next(v["SR"] for v in r["validation"] if v["update"] == r["selected_update"]) for r in results]
-    )
+    val = stats.summary(selected_validation(results))
     sr, spl = (stats.summary(report.values(results, m)) for m in ("SR", "SPL"))
     method, rate = arm.split("@learning_rate=")
     return (
@@ -96,10 +99,7 @@ def test_results_md_quotes_the_replication_by_the_plans_rule(replication, capsys
         row = grid_row(arm, results[arm], arm == chosen)
         assert row in section, row
 
-    def selected(arm):
-        return [next(v["SR"] for v in r["validation"] if v["update"] == r["selected_update"]) for r in results[arm]]
-
-    val = study_data.interval(stats.paired(selected(A10), selected(A3)))
+    val = study_data.interval(stats.paired(*(selected_validation(results[a]) for a in (A10, A3))))
     sr, spl = (
         study_data.interval(stats.paired(*(report.values(results[a], m) for a in (A10, A3)))) for m in ("SR", "SPL")
     )
