@@ -9,9 +9,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 import study_data
-from test_channels_data import mean_selected_validation
 
 from experiments import compare, rundir
 from experiments.reporting import report, stats
@@ -48,7 +48,7 @@ def replication(tmp_path_factory):
         pytest.skip("replication_3x.tar.xz: not run yet")
     root = study_data.unpack("replication_3x.tar.xz", tmp_path_factory.mktemp("replication"), (A3, A10, F))
     results = rundir.sweep_results(root)
-    chosen = max((A3, A10), key=lambda arm: mean_selected_validation(results[arm]))  # rule 1
+    chosen = max((A3, A10), key=lambda arm: np.mean(selected_validation(results[arm])))  # rule 1
     other = A10 if chosen == A3 else A3
     out = compare.main(compare.Args(run=root, pairs=(f"{chosen}:{F}", f"{other}:{F}")))
     return {"root": root, "results": results, "chosen": chosen, "other": other, "pairs": out["pairs"]}
@@ -140,6 +140,11 @@ def test_the_readme_quotes_both_sets_by_the_plans_rule(replication, tmp_path, ca
     first = compare.main(compare.Args(run=fair, pairs=(f"{A3}:{F}",)))["pairs"][f"{F} - {A3}"]
     capsys.readouterr()
     assert replication["chosen"] == A3  # both sets chose 3e-4 for a3c
+    tuned = study_data.tune_report("fair_tune_3x.tar.xz", tmp_path / "tune")  # seeds 0-4's rule 1
+    assert tuned["chosen"] == {"a3c": "learning_rate=3e-4"}
+    val = {row["point"]: np.mean(row["val_SR"]) for row in tuned["grid_rows"]}
+    quote = f"a3c chooses 3e-4 again, as on seeds 0-4 ({val['learning_rate=3e-4']:.1f} against "
+    quote += f"{val['learning_rate=1e-3']:.1f} there)"
     second = replication["pairs"][f"{F} - {A3}"]
     both_exclude = first["SR"]["ci_high"] < MARGIN and second["SR"]["ci_high"] < MARGIN
     readme = " ".join((REPO / "README.md").read_text().split())
@@ -162,6 +167,7 @@ def test_the_readme_quotes_both_sets_by_the_plans_rule(replication, tmp_path, ca
         )
         assert row in doc, row
     flat = " ".join(doc.split())
+    assert quote in flat, quote
     assert ("So the exclusion replicated on fresh seeds" in flat) == both_exclude
     training = [study_data.interval(p[report.TRAINING]) for p in (second, first)]
     assert "a3c+foresit - a3c is {} ({} on seeds 0-4), where test SR resolves no cost".format(*training) in flat
