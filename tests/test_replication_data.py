@@ -15,6 +15,7 @@ import study_data
 
 from experiments import compare, rundir
 from experiments.reporting import report, stats
+from experiments.reporting.tuning import choose, selection_sr
 
 REPO = Path(__file__).resolve().parents[1]
 A3, A10, F = "a3c@learning_rate=3e-4", "a3c@learning_rate=1e-3", "a3c+foresit@learning_rate=3e-4"
@@ -48,7 +49,7 @@ def replication(tmp_path_factory):
         pytest.skip("replication_3x.tar.xz: not run yet")
     root = study_data.unpack("replication_3x.tar.xz", tmp_path_factory.mktemp("replication"), (A3, A10, F))
     results = rundir.sweep_results(root)
-    chosen = max((A3, A10), key=lambda arm: np.mean(selected_validation(results[arm])))  # rule 1
+    chosen = choose({arm: results[arm] for arm in (A3, A10)})  # rule 1: experiments.tune's rule
     other = A10 if chosen == A3 else A3
     out = compare.main(compare.Args(run=root, pairs=(f"{chosen}:{F}", f"{other}:{F}")))
     return {"root": root, "results": results, "chosen": chosen, "other": other, "pairs": out["pairs"]}
@@ -71,13 +72,8 @@ def test_the_replication_ran_as_the_plan_says(replication):
             assert [n["platform"]["cpu"] for n in r["numerics"]] == [EPYC] * len(r["numerics"])
 
 
-def selected_validation(results: list[dict]) -> list[float]:
-    """Each seed's validation SR at its selected update (rule 1 averages these)."""
-    return [next(v["SR"] for v in r["validation"] if v["update"] == r["selected_update"]) for r in results]
-
-
 def grid_row(arm: str, results: list[dict], chosen: bool) -> str:
-    val = stats.summary(selected_validation(results))
+    val = stats.summary(selection_sr(results))
     sr, spl = (stats.summary(report.values(results, m)) for m in ("SR", "SPL"))
     method, rate = arm.split("@learning_rate=")
     return (
@@ -99,7 +95,7 @@ def test_results_md_quotes_the_replication_by_the_plans_rule(replication, capsys
         row = grid_row(arm, results[arm], arm == chosen)
         assert row in section, row
 
-    val = study_data.interval(stats.paired(*(selected_validation(results[a]) for a in (A10, A3))))
+    val = study_data.interval(stats.paired(*(selection_sr(results[a]) for a in (A10, A3))))
     sr, spl = (
         study_data.interval(stats.paired(*(report.values(results[a], m) for a in (A10, A3)))) for m in ("SR", "SPL")
     )
