@@ -22,6 +22,8 @@ VALUE_HEADS: tuple[str, ...] = ("mlp", "linear")
 IMAGINATION_NOISES: tuple[str, ...] = ("output", "input")
 ATTENTION_VALUE_INITS: tuple[str, ...] = ("lecun", "zeros")
 ATTENTION_KEY_GRADIENTS: tuple[str, ...] = ("full", "stopped")
+# The auxiliary training targets (`foresit_jax.targets`); "none": no target.
+AUX_TARGETS: tuple[str, ...] = ("none", "compass", "goal_view", "success")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -169,6 +171,19 @@ class Config:
     variance when training stopped: the imagination the policy was trained with) or
     'off' (i_tau = f_w([s_0 : g_tau]) exactly). The paper does not say."""
 
+    # Imagination as a training target (`foresit_jax.targets`): nothing of it acts.
+    aux_target: str = "none"
+    """An auxiliary target that a linear head on s_t learns to predict at every valid step,
+    in training only (its parameters are a tree of their own; the agent that acts and is
+    evaluated is the base's): 'compass' (the bearing and distance of the nearest target
+    cell, a privileged label in training), 'goal_view' (the agent's latent of the episode's
+    goal view, a privileged label in training), 'success' (the agent's own state at the
+    step its episode succeeded, for the earlier steps of that episode in the same window;
+    not privileged), or 'none'."""
+    aux_weight: float = 1.0
+    """lambda: the auxiliary loss's weight beside the actor-critic loss (ignored without a
+    target; 0 trains the head and leaves the agent the base's)."""
+
     # The maml base (SAVN, `foresit_jax.maml`): SAVN's values.
     maml_segment: int = 6
     """Steps between inner updates, and the learned loss's segment length (SAVN's num_steps)."""
@@ -241,6 +256,20 @@ class Config:
                 f"method {self.method!r} gives the policy an exact privileged cue, without Eq. 7's noise: "
                 "set sigma2_max=0 (and leave imagination_noise at 'output')."
             )
+        if self.aux_target not in AUX_TARGETS:
+            raise ValueError(f"aux_target must be one of {AUX_TARGETS}, got {self.aux_target!r}.")
+        if self.aux_target != "none":
+            if pieces.base_piece.adapts_in_episode or self.gradient != "replay":
+                raise ValueError(
+                    f"aux_target {self.aux_target!r} needs the replay loss (gradient='replay'), which method "
+                    f"{self.method!r} with gradient {self.gradient!r} does not compute: use the a3c base, or "
+                    "aux_target='none'."
+                )
+            if pieces.imagination_variant.reads_goal_view or pieces.imagination_variant.reads_cue:
+                raise ValueError(
+                    f"aux_target {self.aux_target!r} with method {self.method!r}: a method that reads a "
+                    "privileged input takes no training target (their wrappers would stack); choose one."
+                )
         if self.imagination_optimizer not in IMAGINATION_OPTIMIZERS:
             raise ValueError(
                 f"imagination_optimizer must be one of {IMAGINATION_OPTIMIZERS}, got {self.imagination_optimizer!r}."
@@ -287,7 +316,7 @@ class Config:
             raise ValueError(f"gamma must be in (0, 1], got {self.gamma!r}.")
         if not 0.0 <= self.gae_lambda <= 1.0:
             raise ValueError(f"gae_lambda must be in [0, 1], got {self.gae_lambda!r}.")
-        for name in ("entropy_coef", "value_coef", "sigma2_max", "progress_reward"):
+        for name in ("entropy_coef", "value_coef", "sigma2_max", "progress_reward", "aux_weight"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}.")
         sizes = self.imagination_layer_sizes

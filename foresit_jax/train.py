@@ -37,7 +37,7 @@ import jax.numpy as jnp
 import optax
 
 import envs
-from foresit_jax import distributions, imagination, maml, rollout
+from foresit_jax import distributions, imagination, maml, rollout, targets
 from foresit_jax.config import Config
 from foresit_jax.lstm import LSTMCarry
 from foresit_jax.networks import CriticOutput, EncoderInputs, Networks, build, subgoals_of_rows, window_attention_mask
@@ -60,6 +60,7 @@ class RunnerState(NamedTuple):
     actor: ActorState  # per lane: env, LSTM carry, running episode (tracker included)
     key: chex.PRNGKey
     update: chex.Array  # int32 [] updates done
+    targets: Any = None  # the auxiliary target's head and its optimiser (`targets.TargetState`); None: no target
 
 
 class WindowResult(NamedTuple):
@@ -298,7 +299,7 @@ def make_env(config: Config, split: str = "train", room_types=None, training: bo
 # methods declare `gradients = ('through_rollout',)` and `Config` refuses the replay.
 
 
-def replayed(nets: Networks, params, traj: Trajectory, initial_carry: LSTMCarry) -> Trajectory:
+def replayed(nets: Networks, params, traj: Trajectory, initial_carry: LSTMCarry, offset=None) -> Trajectory:
     """`traj` (recorded with `record_inputs=True`) with its states `[T, B, H]` and logits
     `[T, B, A]` recomputed as a differentiable function of `params`, through the two
     methods acting calls at T = 1: `ActorCritic.encode` over the window, then
@@ -313,6 +314,8 @@ def replayed(nets: Networks, params, traj: Trajectory, initial_carry: LSTMCarry)
     seen = jax.lax.stop_gradient(traj.inputs)
     inputs = EncoderInputs(seen.obs, seen.prev_action_probs, seen.encoder_imagined)
     _, states = nets.model.apply(params, initial_carry, inputs, traj.episode_step == 0, method="encode")
+    if offset is not None:  # zeros whose gradient is the loss's at s_t (`Trainer.loss_and_grad_with_target`)
+        states = states + offset
     logits = nets.model.apply(params, states, seen.imagined, method="heads")
     return traj._replace(states=states, logits=logits)
 
@@ -373,6 +376,7 @@ class Trainer:
     def __init__(self, config: Config, env=None, env_params=None):
         if env is None:
             env, env_params = make_env(config)
+        env = targets.label_env(config, env)  # the training labels' wrapper (none without a target)
         limit = int(jnp.max(env_params.max_steps))
         self.packed = config.rollout == "packed"
         if not self.packed and config.num_steps < limit:
@@ -411,7 +415,11 @@ class Trainer:
         lanes = lambda x: jnp.broadcast_to(x, (cfg.num_lanes,) + x.shape)  # noqa: E731
         buffers = jax.tree.map(lanes, imagination.buffer_init(cfg.buffer_size, cfg.hidden_size, goal_size))
         actor = rollout.start(self.networks, k_actor, self.bind(self.env_params), cfg.num_lanes, self.memory_size)
-        return RunnerState(params, self.optimizer.init(params), w_params, buffers, actor, key, jnp.zeros((), jnp.int32))
+        # The target's head from a key of its own, folded from the model's: the keys above are the base's.
+        head = targets.init(cfg, jax.random.fold_in(k_params, 1), self.optimizer)
+        return RunnerState(
+            params, self.optimizer.init(params), w_params, buffers, actor, key, jnp.zeros((), jnp.int32), head
+        )
 
     # ------------------------------------------------------------------ the loss
     def window_loss(self, params, traj: Trajectory, end: WindowEnd, memory: chex.Array):
@@ -485,7 +493,15 @@ class Trainer:
         cfg, variant, env = self.config, self.networks.imagination_variant, self.bind(env_params)
         actor, key, k_act = self.begin_window(state.actor, state.key, env)
         rho = jax.vmap(imagination.success_rate)(actor.tracker)  # [B] at the window's start
-        (loss, window), grads = self.loss_and_grad(state.params, state.imagination_params, env, actor, k_act)
+        head = state.targets
+        if head is None:
+            (loss, window), grads = self.loss_and_grad(state.params, state.imagination_params, env, actor, k_act)
+        else:  # an auxiliary target: its head trains beside the agent, on its own optimiser state
+            (loss, window), grads, head_grads = loss_and_grad_with_target(
+                self, state.params, state.imagination_params, env, actor, k_act, head.params
+            )
+            head_updates, head_opt_state = self.optimizer.update(head_grads, head.opt_state, head.params)
+            head = targets.TargetState(optax.apply_updates(head.params, head_updates), head_opt_state)
         next_actor, traj, alpha, key_states, metrics = window
         updates, opt_state = self.optimizer.update(grads, state.opt_state, state.params)
         params = optax.apply_updates(state.params, updates)
@@ -520,7 +536,7 @@ class Trainer:
                 "losses/grad_norm": optax.tree.norm(grads),
             }
         )
-        new_state = RunnerState(params, opt_state, w_params, buffers, next_actor, key, state.update + 1)
+        new_state = RunnerState(params, opt_state, w_params, buffers, next_actor, key, state.update + 1, head)
         return new_state, metrics
 
     def store_and_train(self, w_params, buffers, items):
@@ -579,6 +595,51 @@ class Trainer:
     def train(self, key: chex.PRNGKey) -> tuple[RunnerState, dict]:
         """The whole run in one jittable function: init, then `config.num_updates` updates."""
         return self.run(self.init(key), self.env_params, self.config.num_updates)
+
+
+def loss_and_grad_with_target(trainer: Trainer, params, w_params, env: BoundEnv, actor: ActorState, key, head_params):
+    """`trainer`'s ((loss, WindowResult), grads of `params`, grads of the target's head) of one window:
+    the A3C loss plus `aux_weight` times the target's (`foresit_jax.targets`), by the
+    replay (`Config` refuses a target elsewhere). The head learns its own loss at full
+    weight; lambda scales only the gradient that reaches the encoder through s_t:
+
+        L = L_A3C(theta) + lambda * L_aux(s_t(theta), sg(head)) + L_aux(sg(s_t), head)
+
+    so lambda = 0 leaves the agent's gradient the base's. `losses/aux_grad_ratio`: the
+    norm of the target's gradient at s_t (the encoder's output, through which alone
+    either loss reaches the encoder) over the actor-critic's, from zero offsets added
+    to s_t (`replayed`'s `offset`), whose gradients are those two."""
+    cfg = trainer.config
+    next_actor, traj, end = trainer.act(AgentParams(params, w_params), env, actor, key)
+    zeros = jnp.zeros_like(traj.states)
+    obs = jax.lax.stop_gradient(traj.inputs.obs)
+
+    def goal_latent(flat_obs):  # the goal view's latent under this update's parameters
+        return rollout.goal_latent(trainer.networks, jax.lax.stop_gradient(params), None, flat_obs)
+
+    def loss_fn(p, head, offset_ac, offset_aux):
+        replay_traj = replayed(trainer.networks, p, traj, actor.lstm, offset_ac)
+        loss, aux = trainer.window_loss(p, replay_traj, end, actor.memory)
+        states = replay_traj.states - offset_ac + offset_aux  # s_t, seen by the target through its own offset
+        labels = targets.labels(cfg, obs, jax.lax.stop_gradient(states), traj, goal_latent)
+        to_encoder, _ = targets.window_loss(cfg, jax.lax.stop_gradient(head), states, labels)
+        aux_loss, aux_metrics = targets.window_loss(cfg, head, jax.lax.stop_gradient(states), labels)
+        alpha, key_states, metrics = aux
+        valid = jnp.maximum(jnp.sum(traj.valid.astype(jnp.float32)), 1.0)
+        metrics = {
+            **metrics,
+            **aux_metrics,
+            "charts/aux_labelled_fraction": aux_metrics["charts/aux_labelled"] / valid,
+        }
+        total = loss + cfg.aux_weight * to_encoder + aux_loss
+        return total, WindowResult(next_actor, replay_traj, alpha, key_states, metrics)
+
+    (total, window), (grads, head_grads, g_ac, g_aux) = jax.value_and_grad(loss_fn, argnums=(0, 1, 2, 3), has_aux=True)(
+        params, head_params, zeros, zeros
+    )
+    ratio = optax.tree.norm(g_aux) / jnp.maximum(optax.tree.norm(g_ac), 1e-12)
+    window = window._replace(metrics={**window.metrics, "losses/aux_grad_ratio": ratio})
+    return (total, window), grads, head_grads
 
 
 def seeds_runner(trainer: Trainer, on_update: Callable | None):

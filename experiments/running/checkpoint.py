@@ -119,6 +119,30 @@ def drop_steps_after(manager, step: int) -> None:
             manager.delete(s)
 
 
+def _fields_added_since(like, saved) -> object:
+    """`like` as the checkpoint holds it: a NamedTuple field that is None in `like` and absent
+    from the checkpoint (`saved`, its metadata tree: dicts by field name), a field added to
+    a record after the checkpoint was written (`RunnerState.targets`, 0.4.0), is dropped, and
+    the record becomes a dict of its other fields; `_rebuild` puts it back."""
+    if isinstance(like, tuple) and hasattr(like, "_fields") and isinstance(saved, dict):
+        kept = [f for f in like._fields if f in saved or getattr(like, f) is not None]
+        inner = {f: _fields_added_since(getattr(like, f), saved.get(f)) for f in kept}
+        return inner if len(kept) < len(like._fields) else type(like)(**inner)
+    if isinstance(like, dict) and isinstance(saved, dict):
+        return {k: _fields_added_since(v, saved.get(k)) for k, v in like.items()}
+    return like
+
+
+def _rebuild(like, restored) -> object:
+    """The restored tree in `like`'s records (the inverse of `_fields_added_since`)."""
+    if isinstance(like, tuple) and hasattr(like, "_fields"):
+        get = restored.get if isinstance(restored, dict) else lambda f, d=None: getattr(restored, f)
+        return type(like)(**{f: _rebuild(getattr(like, f), get(f, None)) for f in like._fields})
+    if isinstance(like, dict):
+        return {k: _rebuild(v, restored[k]) for k, v in like.items()}
+    return restored
+
+
 def restore(manager, step: int, like):
     """The checkpoint of `step`, shaped as `like` and placed where `like`'s arrays are
     (numpy leaves and shapes without a sharding, `jax.eval_shape`'s: on the first local
@@ -131,11 +155,16 @@ def restore(manager, step: int, like):
 
     verify(manager, step)
     first = jax.sharding.SingleDeviceSharding(jax.local_devices()[0])
+    try:
+        saved = manager.item_metadata(step).tree
+    except Exception:  # no metadata to read: orbax's own error below names the checkpoint
+        saved = None
     abstract = jax.tree.map(
-        lambda x: jax.ShapeDtypeStruct(np.shape(x), x.dtype, sharding=getattr(x, "sharding", None) or first), like
+        lambda x: jax.ShapeDtypeStruct(np.shape(x), x.dtype, sharding=getattr(x, "sharding", None) or first),
+        _fields_added_since(like, saved),
     )  # (`like` may be arrays or shapes, `jax.eval_shape`'s)
     try:
-        return manager.restore(step, args=ocp.args.StandardRestore(abstract))
+        return _rebuild(like, manager.restore(step, args=ocp.args.StandardRestore(abstract)))
     except Exception as e:  # orbax's (often multi-line) reason, as one line naming the checkpoint
         reason = " ".join(str(e).split())[:300]
         raise CorruptCheckpoint(
