@@ -77,7 +77,7 @@ class Args:
     (offline without WANDB_API_KEY, <out>/wandb); needs pip install 'foresit_jax[track]'."""
     config: config_flag(TrainConfigFields) = dataclasses.field(default_factory=TrainConfigFields)
     """Every other Config field, e.g. --learning-rate 3e-4 --num-lanes 16 --gamma 0.9 --room-types bathroom: the
-    preset's value (or the arm's, METHOD@field=value) unless given."""
+    preset's value (or the arm's, METHOD@field=value) unless given; one the arm sets otherwise is refused."""
 
 
 def build(args: Args):

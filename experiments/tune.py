@@ -39,7 +39,7 @@ from experiments import errors
 from experiments.reporting import tuning
 from experiments.running import devices, flags, sweeps
 from experiments import rundir
-from experiments.running.presets import split_arm
+from experiments.running.presets import duplicate_arms, normalise_arm, split_arm
 
 
 @dataclasses.dataclass(frozen=True)
@@ -158,8 +158,11 @@ def main(args: Args) -> dict | None:
         args = rundir.resumed_args(args, rundir.TUNE_FILE, "tune", keep=flags.INVOCATION)
     if args.seeds < 1:
         raise errors.UserError(f"--seeds must be >= 1, got {args.seeds}")
-    if not args.methods or len(set(args.methods)) != len(args.methods):
+    if not args.methods:
         raise errors.UserError("--methods needs at least one method, each once")
+    for first, again in duplicate_arms(args.methods):  # the same arm however it is spelt (`normalise_arm`)
+        same = "more than once" if first == again else f"and {again}, the same arm ({normalise_arm(first)})"
+        raise errors.UserError(f"--methods lists {first} {same}; give each method once")
     grid = parse_grid(args.grid)
     table = arms(args, grid)
     names = tuple(a for by_point in table.values() for a in by_point.values())

@@ -9,8 +9,12 @@ paper's reward: without it a3c learns to give up at the start; docs/houses.md me
 `paper` is the paper's sizes and schedule (512-unit LSTM, Adam 1e-4), for long runs on
 accelerators.  `tiny` is for tests and smoke runs (bathrooms only, tiny networks).
 A method's own requirements (`Method.required_config`: the maml base runs whole
-episodes, differentiated through the rollout) are applied over the preset's fields;
-fields given explicitly override both.
+episodes, differentiated through the rollout) are applied over the preset's fields only:
+an arm's field (`METHOD@field=value`) or a flag that breaks one is refused, with what the
+method needs; one that meets it is kept. A field an arm sets and a flag gives otherwise is
+refused too, naming both: a run is what its label (the arm, as the user wrote it) says.
+Arms are compared by `normalise_arm` (method case, `1e-3` and `0.001`, spaces, a trailing
+comma), never renamed by it.
 """
 
 from __future__ import annotations
@@ -130,28 +134,112 @@ def split_arm(arm: str) -> tuple[str, dict]:
                 raise ValueError
         except ValueError:
             raise ValueError(f"arm {arm!r}: {field}={text!r} is not a {kind.__name__}") from None
+        if field in fields and fields[field] != value:
+            raise ValueError(f"arm {arm!r} sets {field} twice ({fields[field]!r} and {value!r}); give it once")
         fields[field] = value
     return method.strip(), fields
 
 
+def _text(value) -> str:
+    """A value of an arm's field as `split_arm` reads it back: bools as true/false."""
+    return str(value).lower() if isinstance(value, bool) else format(value)
+
+
+def normalise_arm(arm: str) -> str:
+    """The canonical spelling of an arm, to compare two arms (never to name a run: a run
+    keeps the user's spelling as its label and folder name): the method as `parse_method`
+    names it (lower case, its pieces in order, `a3c+maml` for `maml`), the fields sorted,
+    each value as `split_arm` reads it (`1e-3` and `0.001` are both `0.001`), no spaces
+    and no trailing comma. `a3c@learning_rate=1e-3,` and `A3C@ learning_rate=0.001` are
+    both `a3c@learning_rate=0.001`. A one-line ValueError names an arm that does not parse
+    (a field set twice to different values included)."""
+    method, fields = split_arm(arm)
+    check_method(method)
+    name = parse_method(method).name
+    return name + ("@" + ",".join(f"{k}={_text(fields[k])}" for k in sorted(fields)) if fields else "")
+
+
+def duplicate_arms(arms) -> list[tuple[str, str]]:
+    """The pairs (first, later) of `arms` that normalise the same (`normalise_arm`): the
+    same arm twice, however it is spelt."""
+    seen, pairs = {}, []
+    for arm in arms:
+        key = normalise_arm(arm)
+        if key in seen:
+            pairs.append((seen[key], arm))
+        else:
+            seen[key] = arm
+    return pairs
+
+
+def _flag(field: str) -> str:
+    return "--" + field.replace("_", "-")
+
+
+def _required_hint(method: str, field: str, need) -> str:
+    """Why `method` needs `field` = `need` (`Method.required_config`), as a refusal says it."""
+    if field == "rollout":
+        return f"{method} needs whole episodes (rollout={need!r}: its inner loop adapts within each episode)"
+    if field == "gradient":
+        return (
+            f"{method} differentiates through the rollout (gradient={need!r}: a replay cannot re-run the steps "
+            "its inner loop adapted)"
+        )
+    return f"{method} needs {field}={need!r}"
+
+
 def preset(name: str, method: str, **overrides) -> tuple[Config, Schedule]:
     """The Config and Schedule of a preset for a method (or an arm, `split_arm`: its
-    fields override the preset's), with field overrides (None values are ignored)."""
+    fields override the preset's), with field overrides (None values are ignored).
+
+    Refused in one line (ValueError), before a program writes anything: a field the arm
+    sets and an override gives with another value (a run is what its label says); an arm
+    field or override that breaks the method's requirements (`Method.required_config`,
+    which apply over the preset's fields only); with whole-episode rollouts
+    (rollout='episodes', maml's), num_steps below the environment's training time limit
+    (the preset's own num_steps is raised to the limit for maml)."""
     if name not in PRESETS:
         raise ValueError(f"unknown preset {name!r}; valid presets: {', '.join(PRESETS)}")
-    method, arm_fields = split_arm(method)
+    arm = method
+    method, arm_fields = split_arm(arm)
     check_method(method)
-    fields, schedule = PRESETS[name]
-    fields = {**fields, **arm_fields}
+    preset_fields, schedule = PRESETS[name]
     given = {k: v for k, v in overrides.items() if v is not None}
     unknown = set(given) - {f.name for f in dataclasses.fields(Config)}
     if unknown:
         raise ValueError(f"unknown config fields {sorted(unknown)}")
-    required = parse_method(method).required_config
-    if required.get("rollout") == "episodes":  # whole training episodes per update
-        limit = int(max(time_limits(True, given.get("layout", fields.get("layout", Config.layout)))))
-        required = {**required, "num_steps": max(fields.get("num_steps", Config.num_steps), limit)}
-    config = Config(method=method, **{**fields, **required, **given})
+    for field, value in arm_fields.items():
+        if field in given and given[field] != value:
+            raise ValueError(f"arm {arm!r} sets {field}={value!r} but {_flag(field)} gives {given[field]!r}; drop one")
+    chosen = {**arm_fields, **given}  # what the user set: kept, or refused
+    source = {
+        **{k: f"arm {arm!r} sets {k}={v!r}" for k, v in arm_fields.items()},
+        **{k: f"{_flag(k)} {v!r}" for k, v in given.items() if k not in arm_fields},
+    }
+    pieces = parse_method(method)
+    required = pieces.required_config
+    for field, need in required.items():
+        if field in chosen and chosen[field] != need:
+            raise ValueError(f"{source[field]}, but {_required_hint(pieces.name, field, need)}; drop it")
+    fields = {**preset_fields, **required, **chosen}
+    if fields.get("rollout", Config.rollout) == "episodes":  # whole training episodes per update
+        limit = int(max(time_limits(True, fields.get("layout", Config.layout))))
+        steps = fields.get("num_steps", Config.num_steps)
+        maml = required.get("rollout") == "episodes"
+        runs = f"runs whole episodes, of up to {limit} steps in training here"
+        if steps < limit and "num_steps" in chosen:
+            raise ValueError(
+                f"{source['num_steps']}, but {pieces.name if maml else 'rollout=episodes'} {runs}: give num_steps "
+                f">= {limit}" + (" (or leave it to the preset)" if maml else ", or use rollout='packed'")
+            )
+        if steps < limit and not maml:
+            raise ValueError(
+                f"{source.get('rollout', f'preset {name!r} sets rollout=episodes')}, which {runs}, but preset "
+                f"{name!r} steps {steps} at a time: give num_steps >= {limit} too, or use rollout='packed'"
+            )
+        if steps < limit:
+            fields["num_steps"] = limit  # the preset's window, raised to whole episodes for the method
+    config = Config(method=method, **fields)
     if config.room_types:  # checked here, before a program writes anything in its --out
         check_room_types(config.room_types)
     return config, schedule

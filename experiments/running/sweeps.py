@@ -51,7 +51,9 @@ from experiments.running.presets import (
     check_seeds,
     check_sizes,
     config_flag,
+    duplicate_arms,
     given,
+    normalise_arm,
     preset,
 )
 from experiments.running.progress import progress_bar
@@ -84,7 +86,8 @@ class Sweep:
     test_episodes_per_room: flags.TestEpisodes = None
     val_episodes_per_room: flags.ValEpisodes = None
     config: config_flag(SweepConfigFields) = dataclasses.field(default_factory=SweepConfigFields)
-    """Every other Config field for every method, e.g. --learning-rate 3e-4: the preset's (or the arm's) unless given."""
+    """Every other Config field for every method, e.g. --learning-rate 3e-4: the preset's (or the arm's) unless
+    given; one an arm sets otherwise is refused."""
 
 
 def seeds_of(spec: Sweep) -> list[int]:
@@ -353,14 +356,18 @@ def run_method(method: str, spec: Sweep, bar, evaluator, folder: Path, budget: l
 def check(spec: Sweep, allow_large: bool = False) -> None:
     """Refuse (one line) a sweep that cannot run, before anything is written or trained:
     no arms, no seeds, an episode count below 1, an arm this code does not know, an arm
-    listed twice, and (unless `allow_large`) sizes past `presets.check_sizes`'s bounds."""
+    listed twice (however it is spelt: `presets.normalise_arm`), and (unless `allow_large`)
+    sizes past `presets.check_sizes`'s bounds."""
     if spec.seeds < 1:
         raise errors.UserError(f"--seeds must be >= 1, got {spec.seeds}")
     if not spec.methods:
         raise errors.UserError("--methods needs at least one method")
-    twice = sorted({m for m in spec.methods if spec.methods.count(m) > 1})
-    if twice:
-        raise errors.UserError(f"--methods lists {', '.join(twice)} more than once; list each arm once")
+    for first, again in duplicate_arms(spec.methods):  # the same arm however it is spelt (`normalise_arm`)
+        if first == again:
+            raise errors.UserError(f"--methods lists {first} more than once; list each arm once")
+        raise errors.UserError(
+            f"--methods lists {first} and {again}, the same arm ({normalise_arm(first)}); list it once"
+        )
     check_seeds(spec.seed, spec.seeds)
     for name in ("test_episodes_per_room", "val_episodes_per_room"):
         if getattr(spec, name) is not None and getattr(spec, name) < 1:
