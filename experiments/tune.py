@@ -39,7 +39,7 @@ from experiments import errors
 from experiments.reporting import tuning
 from experiments.running import devices, flags, sweeps
 from experiments import rundir
-from experiments.running.presets import duplicate_arms, normalise_arm, split_arm
+from experiments.running.presets import SweepConfigFields, config_flag, duplicate_arms, normalise_arm, split_arm
 
 
 @dataclasses.dataclass(frozen=True)
@@ -69,6 +69,9 @@ class Args:
     stop_after_chunks: flags.StopAfterChunks = None
     progress: flags.Progress = True
     allow_large: flags.AllowLarge = False
+    config: config_flag(SweepConfigFields) = dataclasses.field(default_factory=SweepConfigFields)
+    """Every other Config field for every arm, e.g. --priors True --perception-range 4: the preset's (or the
+    arm's) unless given; a field --grid varies is refused here."""
 
 
 def parse_grid(specs) -> list[tuple[str, list[str]]]:
@@ -142,6 +145,7 @@ def sweep_args(args: Args, methods: tuple[str, ...], folder: Path) -> sweeps.Swe
         num_updates=args.num_updates,
         test_episodes_per_room=args.test_episodes_per_room,
         val_episodes_per_room=args.val_episodes_per_room,
+        config=args.config,
     )
 
 

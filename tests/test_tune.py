@@ -208,3 +208,34 @@ def test_reuse_takes_a_tune_folder_by_its_sweep(tmp_path):
         tmp_path / "tune" / "sweep",
         tmp_path / "a_sweep",
     )
+
+
+def test_tune_takes_the_scene_settings_of_a_family_from_the_command_line(tmp_path):
+    """--priors and --perception-range (issue 79's family) reach every arm of the tune's sweep,
+    from the command line as a user writes them."""
+    import tyro
+
+    args = tyro.cli(
+        tune.Args,
+        args=[
+            "--methods",
+            "a3c",
+            "--grid",
+            "learning_rate=3e-4,1e-3",
+            "--priors",
+            "True",
+            "--perception-range",
+            "4",
+            "--preset",
+            "tiny",
+            "--out",
+            str(tmp_path / "t"),
+        ],
+    )
+    grid = tune.parse_grid(args.grid)
+    for name in tune.arms(args, grid)["a3c"].values():
+        config, _ = sweeps.method_schedule(name, tune.sweep_args(args, (name,), tmp_path))
+        assert config.priors is True and config.perception_range == 4.0
+    plain = tune.Args(methods=("a3c",), preset="tiny", out=tmp_path / "u")
+    config, _ = sweeps.method_schedule("a3c", tune.sweep_args(plain, ("a3c",), tmp_path))
+    assert config.priors is False and config.perception_range is None
