@@ -313,3 +313,17 @@ def test_a_checkpoint_saved_before_the_targets_field_restores(tmp_path):
         manager, 2, {"states": New({"w": jnp.zeros(3)}, None, (jnp.zeros(2),)), "best": jnp.zeros(2)}
     )
     np.testing.assert_array_equal(again["states"].targets[0], [7.0, 7.0])
+
+
+def test_a_targets_diagnostics_are_shown_where_an_arm_recorded_them():
+    from experiments.reporting import report
+
+    base = {"diagnostics": {n: [1.0, 1.0] for n in report.DIAGNOSTICS}}
+    target = {"diagnostics": {**base["diagnostics"], **{n: [0.5, 0.25] for n in report.TARGET_DIAGNOSTICS}}}
+    assert "labelled_fraction" not in report.diagnostics_markdown({"a3c": [base]})
+    md = report.diagnostics_markdown({"a3c": [base], "a3c@aux_target=success": [target]})
+    header = next(line for line in md.splitlines() if line.startswith("| Method"))
+    assert header.rstrip(" |").endswith("aux_loss | aux_labelled_fraction | aux_grad_ratio")
+    last = [line for line in md.splitlines() if line.startswith("| a3c@aux_target=success")][-1]
+    assert last.rstrip(" |").endswith("0.25 | 0.25 | 0.25")
+    assert report.values([target], "charts/aux_labelled_fraction")[0] == 0.25

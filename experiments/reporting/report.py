@@ -27,10 +27,21 @@ DIAGNOSTICS = (
     "imagination/loss",
 )
 
+# An auxiliary target's (`foresit_jax.targets`), recorded and shown where an arm has one:
+# its loss, the share of valid steps it labels, and its gradient's norm at s_t over the
+# actor-critic's.
+TARGET_DIAGNOSTICS = ("losses/aux_loss", "charts/aux_labelled_fraction", "losses/aux_grad_ratio")
+
 
 def diagnostic_label(name: str) -> str:
     """A table's column name for a diagnostic of `DIAGNOSTICS`: 'value_loss', ..., 'f_w loss'."""
     return "f_w loss" if name == "imagination/loss" else name.split("/")[-1]
+
+
+def recorded_diagnostics(results: dict[str, list[dict]]) -> tuple[str, ...]:
+    """`DIAGNOSTICS`, then the `TARGET_DIAGNOSTICS` some seed of `results` recorded."""
+    recorded = {n for rs in results.values() for r in rs for n in (r.get("diagnostics") or {})}
+    return DIAGNOSTICS + tuple(n for n in TARGET_DIAGNOSTICS if n in recorded)
 
 
 def table(results_by_method: dict[str, list[dict]], room: str = "overall") -> list[dict]:
@@ -174,20 +185,20 @@ def selection_markdown(results: dict[str, list[dict]]) -> str:
 def diagnostics_markdown(results: dict[str, list[dict]]) -> str:
     """Training diagnostics (`DIAGNOSTICS`) per method: the mean over seeds of each
     chunk's mean, at the first, middle and last chunk; '' when no seed recorded any."""
-    rows = []
+    rows, shown = [], recorded_diagnostics(results)
     for method, per_seed in results.items():
         recorded = [r.get("diagnostics") or {} for r in per_seed]
-        names = [n for n in DIAGNOSTICS if all(n in d for d in recorded)]
+        names = [n for n in shown if all(n in d for d in recorded)]
         if not names:
             continue
         chunks = len(recorded[0][names[0]])
         picks = sorted({0, chunks // 2, chunks - 1})
         for i in picks:
-            cells = [f"{np.mean([d[n][i] for d in recorded]):.3g}" if n in names else "" for n in DIAGNOSTICS]
+            cells = [f"{np.mean([d[n][i] for d in recorded]):.3g}" if n in names else "" for n in shown]
             rows.append([method, f"{i + 1}/{chunks}", *cells])
     if not rows:
         return ""
-    header = ["Method", "chunk", *map(diagnostic_label, DIAGNOSTICS)]
+    header = ["Method", "chunk", *map(diagnostic_label, shown)]
     return "## Training diagnostics (mean over seeds of each chunk's mean)\n\n" + markdown_table(rows, header) + "\n"
 
 
@@ -291,7 +302,7 @@ def _robust(results: dict, pairs: list, out: dict, level: str = "##") -> str:
 def shown_columns(results: dict, last: int = 250) -> list[str]:
     """The columns of `TEST`, the training SR, the validation curve's area and
     `DIAGNOSTICS` that some seed recorded."""
-    columns = (*TEST, TRAINING, VALIDATION_AREA, *DIAGNOSTICS)
+    columns = (*TEST, TRAINING, VALIDATION_AREA, *DIAGNOSTICS, *TARGET_DIAGNOSTICS)
     return [c for c in columns if any(np.isfinite(values(rs, c, last)).any() for rs in results.values())]
 
 

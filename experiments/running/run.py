@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from experiments import errors
-from experiments.reporting.report import DIAGNOSTICS
+from experiments.reporting.report import DIAGNOSTICS, TARGET_DIAGNOSTICS
 from experiments.running import checkpoint, devices, loop, numerics, selection
 from experiments import rundir
 from experiments.running.presets import Schedule
@@ -394,7 +394,7 @@ class Run:
         for recorder in recorders:
             recorder.record(chunk, validations)
         progress["curves"].append(metrics["charts/success_rate"].tolist())
-        for name in filter(metrics.__contains__, DIAGNOSTICS):  # each seed's mean over the chunk
+        for name in filter(metrics.__contains__, DIAGNOSTICS + TARGET_DIAGNOSTICS):  # each seed's mean over the chunk
             progress.setdefault("diagnostics", {}).setdefault(name, []).append(metrics[name].mean(axis=1).tolist())
         for name in COUNTS:  # each seed's total over the chunk
             progress.setdefault("counts", {}).setdefault(name, []).append(metrics[name].sum(axis=1).tolist())
