@@ -463,6 +463,15 @@ def check_room_types(room_types) -> tuple[int, ...]:
     return rooms
 
 
+def room_names(room_types) -> tuple[str, ...]:
+    """The room types an evaluation plays, as names: all four for None or (); else those of
+    `check_room_types` (names or indices, a name alone one room type: "bathroom" is
+    ("bathroom",), as `make_params` and `Config` read it)."""
+    if room_types is None or (not isinstance(room_types, str) and len(room_types) == 0):
+        return tuple(C.ROOM_TYPES)
+    return tuple(C.ROOM_TYPES[r] for r in check_room_types(room_types))
+
+
 def _room_indices(room_types) -> tuple[int, ...]:
     """Room type names or indices as indices; one ValueError names what is wrong."""
     if isinstance(room_types, (str, int, np.integer)):
@@ -492,6 +501,7 @@ __all__ = [
     "GRID_SIZES",
     "check_perception_range",
     "check_room_types",
+    "room_names",
     "time_limits",
     "UNREACHABLE",
 ]

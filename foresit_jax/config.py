@@ -8,7 +8,9 @@ a config: use `dataclasses.replace(config, field=value)` for a variant (it re-va
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
+import typing
 from typing import Optional
 
 from foresit_jax.methods import GRADIENTS, ROLLOUTS, Method, parse_method
@@ -24,6 +26,9 @@ ATTENTION_VALUE_INITS: tuple[str, ...] = ("lecun", "zeros")
 ATTENTION_KEY_GRADIENTS: tuple[str, ...] = ("full", "stopped")
 # The auxiliary training targets (`foresit_jax.targets`); "none": no target.
 AUX_TARGETS: tuple[str, ...] = ("none", "compass", "goal_view", "success")
+# The environment's actions (`envs.catalog.ACTIONS`, written again here: importing envs loads
+# jax, and a Config is jax-free; tests/test_user_checks.py holds the two equal).
+ACTIONS: tuple[str, ...] = ("MoveAhead", "RotateLeft", "RotateRight", "LookUp", "LookDown", "Done")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -95,7 +100,8 @@ class Config:
 
     # Networks.
     num_actions: int = 6
-    """Actions: MoveAhead, RotateLeft, RotateRight, LookUp, LookDown, Done."""
+    """Actions: MoveAhead, RotateLeft, RotateRight, LookUp, LookDown, Done (the environment's
+    six; no other count is accepted)."""
     hidden_size: int = 512
     """LSTM hidden units; s_t, i_tau and ŝ_tau have this size."""
     attention_size: int = 512
@@ -123,7 +129,9 @@ class Config:
     its query and residual, as the plain critic's does through its MLP). A candidate cause
     of the attention critic's cost (docs/mechanism.md)."""
     imagination_layer_sizes: tuple[int, ...] = (512, 256, 64, 256, 512, 512)
-    """Widths of f_w's 6 tanh layers (bottleneck 64); the last must equal hidden_size."""
+    """Widths of f_w's tanh layers, one layer per width (`networks.ImaginationNet`): the
+    paper's 6, with a bottleneck of 64; any number from one up, the last equal to
+    hidden_size (f_w imagines a state)."""
 
     # Imagination (Section 4.3-4.4).
     buffer_size: int = 32
@@ -197,13 +205,27 @@ class Config:
     their gradient only through the inner gradient."""
 
     def __post_init__(self):
-        # Keep the config hashable (usable as a jit static argument) if given a list.
-        object.__setattr__(self, "imagination_layer_sizes", tuple(self.imagination_layer_sizes))
-        object.__setattr__(self, "room_types", tuple(self.room_types))
+        # Plain Python values, so that the config stays hashable (a jit static argument) and
+        # JSON-able: numpy scalars as Python's, a list (or a numpy array) for a tuple as a
+        # tuple, one room type's name as a tuple of it (as `envs.make` reads it).
+        for name, hint in field_types().items():
+            value = getattr(self, name)
+            if typing.get_origin(hint) is tuple:
+                if isinstance(value, str) and typing.get_args(hint)[0] is str:
+                    value = (value,)
+                elif _is_numpy(value) and getattr(value, "ndim", 0) > 0:
+                    value = value.tolist()
+                if isinstance(value, (list, tuple)):
+                    value = tuple(_plain(v) for v in value)
+            else:
+                value = _plain(value)
+            object.__setattr__(self, name, value)
         self.validate()
 
     def validate(self) -> None:
         """Raise ValueError on bad values. The method is parsed here, once (`pieces`)."""
+        for name, hint in field_types().items():  # each field's type first: a str for a bool is no bool
+            check_type(name, hint, getattr(self, name))
         pieces = parse_method(self.method)
         if self.setup not in SETUPS:
             raise ValueError(f"setup must be one of {SETUPS}, got {self.setup!r}.")
@@ -319,8 +341,18 @@ class Config:
         for name in ("entropy_coef", "value_coef", "sigma2_max", "progress_reward", "aux_weight"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}.")
+        if self.num_actions != len(ACTIONS):
+            raise ValueError(
+                f"num_actions must be {len(ACTIONS)}, the environment's actions ({', '.join(ACTIONS)}), got "
+                f"{self.num_actions}: the agent's policy has one output per action; leave num_actions out."
+            )
         sizes = self.imagination_layer_sizes
-        if len(sizes) < 1 or any(isinstance(s, bool) or not isinstance(s, int) or s < 1 for s in sizes):
+        if len(sizes) < 1:
+            raise ValueError(
+                "imagination_layer_sizes must give at least one width: f_w is one tanh layer per width, the last "
+                f"of hidden_size units (the paper's 6: {Config.imagination_layer_sizes}), got ()."
+            )
+        if any(s < 1 for s in sizes):
             raise ValueError(f"imagination_layer_sizes must be positive ints, got {sizes!r}.")
         if sizes[-1] != self.hidden_size:
             raise ValueError(
@@ -339,3 +371,60 @@ class Config:
     def frames_per_update(self) -> int:
         """Environment steps per update (all lanes)."""
         return self.num_lanes * self.num_steps
+
+
+@functools.cache
+def field_types() -> dict[str, object]:
+    """Each Config field's type (`typing.get_type_hints`), in the fields' order."""
+    hints = typing.get_type_hints(Config)
+    return {f.name: hints[f.name] for f in dataclasses.fields(Config)}
+
+
+def _is_numpy(value) -> bool:
+    return type(value).__module__ == "numpy"
+
+
+def _plain(value):
+    """A numpy scalar (np.float32(1e-3), np.int64(5), np.bool_(True), a 0-d array) as the
+    Python value it holds; anything else as it is."""
+    if _is_numpy(value) and getattr(value, "ndim", None) == 0 and hasattr(value, "item"):
+        return value.item()
+    return value
+
+
+_NAMES = {bool: "a bool", int: "an int", float: "a float", str: "a str"}
+
+
+def check_type(name: str, hint, value) -> None:
+    """A ValueError where `value` is not of the field `name`'s type `hint`: a bool is a bool
+    (not 'False', not 0), an int an int (not a bool, not 5.0), a float a number (an int is
+    one; not '1e-3'), a str a str, a tuple a tuple of its type (`__post_init__` made lists
+    tuples), an Optional one of them or None."""
+    args = typing.get_args(hint)
+    if typing.get_origin(hint) is typing.Union:  # Optional[X]
+        if value is None:
+            return
+        (hint,) = [a for a in args if a is not type(None)]
+        want = f"{_NAMES[hint]} or None"
+    elif typing.get_origin(hint) is tuple:
+        what = {str: "strs", int: "ints"}[args[0]]
+        if not isinstance(value, tuple):
+            raise ValueError(f"{name} must be a tuple of {what}, got {value!r} ({type(value).__name__}).")
+        for item in value:
+            if not _is_a(item, args[0]):
+                raise ValueError(
+                    f"{name} must be a tuple of {what}, got {value!r}, which holds {item!r} ({type(item).__name__})."
+                )
+        return
+    else:
+        want = _NAMES[hint]
+    if not _is_a(value, hint):
+        raise ValueError(f"{name} must be {want}, got {value!r} ({type(value).__name__}).")
+
+
+def _is_a(value, kind) -> bool:
+    if kind is bool:
+        return isinstance(value, bool)
+    if isinstance(value, bool):
+        return False
+    return isinstance(value, (int, float) if kind is float else kind)

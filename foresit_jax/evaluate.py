@@ -325,7 +325,7 @@ class Evaluator:
         self._check(config, split, episodes_per_room)
         key = jax.random.PRNGKey(0) if key is None else key
         greedy = config.pieces.greedy_evaluation if greedy is None else bool(greedy)
-        rooms = tuple(room_types or config.room_types or ROOM_TYPES)
+        rooms = envs.gridnav.room_names(room_types or config.room_types)
         sigma2 = jnp.full((episodes_per_room,), agent_params.noise_variance, jnp.float32)
 
         def run_room(env_params, num_steps, k):
@@ -432,7 +432,7 @@ def evaluate_policy(
     evaluator = Evaluator.for_config(config)
     evaluator._check(config, split, episodes_per_room)
     key = jax.random.PRNGKey(0) if key is None else key
-    rooms = tuple(room_types or config.room_types or ROOM_TYPES)
+    rooms = envs.gridnav.room_names(room_types or config.room_types)
     env = rollout.acting_env(build(config), BoundEnv(evaluator.env, None)).env
     compiled = {}
 

@@ -3,12 +3,27 @@ as experiments.compare reads a sweep."""
 
 from __future__ import annotations
 
+import json
 import tarfile
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 
 from experiments import rundir
 
 DATA = Path(__file__).resolve().parents[1] / "docs" / "data"
+
+
+ARCHIVES = sorted(p.name for p in DATA.glob("*.tar.xz"))
+
+
+def read_archive_json(archive: str) -> dict[str, dict]:
+    """{member name: parsed JSON} of every sweep.json, tune.json and run.json in
+    docs/data/`archive`, read without extracting anything else."""
+    with tarfile.open(DATA / archive) as tar:
+        return {
+            m.name: json.load(tar.extractfile(m))
+            for m in tar.getmembers()
+            if m.isfile() and PurePosixPath(m.name).name in ("sweep.json", "tune.json", "run.json")
+        }
 
 
 def extract(archive: str, folder: Path) -> None:

@@ -18,7 +18,6 @@ import dataclasses
 import json
 import re
 import shlex
-import tarfile
 from pathlib import Path, PurePosixPath
 
 import pytest
@@ -27,7 +26,7 @@ from experiments import rundir, sweep, train, tune
 from experiments.running import presets
 from experiments.running.presets import normalise_arm, preset, split_arm
 from foresit_jax.methods import parse_method
-from study_data import DATA
+from study_data import ARCHIVES, read_archive_json
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -200,20 +199,6 @@ def test_tune_refuses_two_spellings_of_one_method(tmp_path, capsys):
 
 
 # ---------------------------------------------------------------------- the archives
-ARCHIVES = sorted(p.name for p in DATA.glob("*.tar.xz"))
-
-
-def read_archive_json(archive: str) -> dict[str, dict]:
-    """{member name: parsed JSON} of every sweep.json, tune.json and run.json in
-    docs/data/`archive`, read without extracting anything else."""
-    with tarfile.open(DATA / archive) as tar:
-        return {
-            m.name: json.load(tar.extractfile(m))
-            for m in tar.getmembers()
-            if m.isfile() and PurePosixPath(m.name).name in ("sweep.json", "tune.json", "run.json")
-        }
-
-
 @pytest.fixture(scope="module")
 def archives() -> dict[str, dict[str, dict]]:
     return {archive: read_archive_json(archive) for archive in ARCHIVES}
