@@ -126,23 +126,3 @@ def probe_fit_row(r: dict) -> str:
         )
     ]
     return f"| {r['seed']} | " + " | ".join(cells) + " |"
-
-
-# The README's Results are plain words (issue 71); each verdict links to the docs section
-# whose table holds its interval, and these are those sections.
-README_LINKS = {
-    "tuned": "docs/results.md#fairness-each-arm-at-its-own-validated-learning-rate-5-seeds-2026-11-27",
-    "3x": "docs/results.md#fairness-the-three-arms-at-3e-4-for-3x-the-budget-5-seeds-2026-11-27",
-    "houses": "docs/houses.md",
-    "ceilings": "docs/results.md#the-papers-question-with-power-not-run-because-the-ceiling-does-not-allow-it-2026-11-28",
-    "stage 1": "docs/ceiling.md#stage-1-can-a-compass-be-carried-rooms-with-priors-range-4-quick-seeds-0-4-2026-11-29",
-    "stage 3": "docs/ceiling.md#stage-3-three-times-the-budget-rooms-with-priors-range-4-seeds-0-4-2026-11-29",
-    "stage 4": "docs/ceiling.md#stage-4-the-best-channel-in-todays-rooms-quick-seeds-0-4-2026-11-29",
-    "replication": "docs/results.md#replication-the-3x-pair-on-fresh-seeds-seeds-5-9-2026-11-29",
-}
-
-
-def readme_links(name: str) -> bool:
-    """Whether the README's Results link to the section `README_LINKS[name]`."""
-    readme = (DATA.parents[1] / "README.md").read_text()
-    return f"]({README_LINKS[name]})" in readme

@@ -69,12 +69,6 @@ def test_stage_1_is_quoted_with_its_verdicts(tmp_path, capsys):
     for column in ("SR", "SPL"):
         assert list(report.values(results[CRITIC], column)) == list(report.values(earlier[CRITIC], column))
     assert all(r["selected_update"] == 3000 for arm in results for r in results[arm])  # "its last model"
-    # The README's plain words: the per-step compass "adds about 26 SR points", the start compass "adds little".
-    readme = " ".join((REPO / "README.md").read_text().split())
-    compass = out["pairs"][f"{COMPASS} - {CRITIC}"]["SR"]
-    assert round(compass["diff"]) == 26 and compass["ci_low"] > 20 and "adds about 26 SR points" in readme
-    assert start["SR"]["ci_low"] < 0 and "one held from the start adds little" in readme
-    assert study_data.readme_links("stage 1")
 
 
 # ---------------------------------------------------------------------- stage 2
@@ -230,9 +224,6 @@ def test_stage_3_is_quoted_with_its_verdicts(tmp_path, capsys):
         )
         assert row in doc, row
     # the README's and results.md's sentences quote the ceiling and the critic's budget gain
-    readme = " ".join((REPO / "README.md").read_text().split())
-    assert f"we still cannot tell it from 0: {study_data.interval(pair['SR'])} SR" in readme
-    assert study_data.readme_links("stage 3")
     critic_before = rundir.read_json(rundir.arm_folder(root, CRITIC) / rundir.kept_results(3000), ("results",))
     critic_gain = stats.paired(report.values(critic_before["results"], "SR"), report.values(results[CRITIC], "SR"))
     results_md = " ".join((REPO / "docs" / "results.md").read_text().split())
@@ -317,9 +308,6 @@ def test_stage_4_is_quoted_with_its_verdicts(tmp_path, capsys):
     assert old[report.VALIDATION_AREA]["ci_low"] > 0 and old["SPL"]["ci_low"] < 0
     # the README's and results.md's sentences
     sr, mde = study_data.interval(pair["SR"]), f"{pair['robust']['SR']['mde']:.1f}"
-    readme = " ".join((REPO / "README.md").read_text().split())
-    assert f"nor in today's rooms at the quick budget: {sr} SR, MDE {mde} ([stage 4]" in readme
-    assert study_data.readme_links("stage 4")
     results_md = " ".join((REPO / "docs" / "results.md").read_text().split())
     assert (
         f"(the plan's stage 4), through `head`: {sr} SR (MDE {mde}), not resolved; in SPL this run's interval "

@@ -162,7 +162,6 @@ def test_results_md_quotes_the_tuned_comparison(tmp_path):
         f"a3c+foresit - a3c+critic is {interval(best_vs_best['a3c+foresit - a3c+critic']['SR'])} SR",
     ):
         assert quoted in summary, quoted
-    assert study_data.readme_links("tuned")  # "ForeSIT does not beat its base at the quick budget"
     assert headline["SR"]["ci_low"] < 0 < headline["SR"]["ci_high"] and headline["SPL"]["ci_high"] < 0  # the words
 
 
@@ -315,7 +314,6 @@ def test_results_md_quotes_the_3x_study(tmp_path, capsys):
     assert pair["SR"]["ci_high"] < 3.8  # the paper's gain is outside the interval
     quote = f"a3c+foresit - a3c is {study_data.interval(pair['SR'])} SR (five seeds detect {mde:.1f} points here,"
     assert quote in " ".join(doc.split()), quote  # results.md's "In brief"
-    assert study_data.readme_links("3x")  # the README's "the two come close", linked to this study
 
 
 def test_results_md_quotes_a3cs_rate_at_3x(tmp_path):
@@ -346,7 +344,6 @@ def test_results_md_quotes_a3cs_rate_at_3x(tmp_path):
     pair = stats.paired(report.values(fast, "SR"), report.values(foresit, "SR"))
     assert pair["ci_low"] < 3.8 < pair["ci_high"]  # "does not exclude the paper's +3.8"
     assert f"ForeSIT - a3c at 9000 updates is {study_data.interval(pair)}, which does not exclude it" in flat
-    assert study_data.readme_links("3x")
 
 
 def test_results_md_quotes_the_archived_replicate_of_its_first_table(tmp_path):

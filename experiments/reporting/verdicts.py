@@ -41,17 +41,23 @@ class Verdict(NamedTuple):
     within_margin: bool  # the 90% interval lies inside (-margin, +margin)
     p: float  # the paired t-test's p-value, Holm-adjusted when p_adjusted was given
 
+    def figures(self) -> str:
+        """The mean difference and its 95% interval, "+2.1 [-1.0, +5.2]"."""
+        return f"{_signed(self.diff)} [{_signed(self.ci95[0])}, {_signed(self.ci95[1])}]"
+
+    def words(self) -> str:
+        """The words the rule gives, with what they rest on: "cannot tell (MDE 4.4)",
+        "level within ±3.8", "helps", "costs, within ±3.8"."""
+        if self.word == "cannot tell":
+            return f"cannot tell (MDE {self.mde:.1f})" if math.isfinite(self.mde) else "cannot tell (no spread)"
+        if self.word == "level":
+            return f"level within ±{self.margin:g}"
+        return self.word + (f", within ±{self.margin:g}" if self.within_margin else "")
+
     def sentence(self, name: str = "B - A") -> str:
         """The verdict as the docs write it, e.g. "compass - a3c, SR: +2.1 [-1.0, +5.2]: cannot
         tell (MDE 4.4)"."""
-        figures = f"{_signed(self.diff)} [{_signed(self.ci95[0])}, {_signed(self.ci95[1])}]"
-        if self.word == "cannot tell":
-            tail = f"cannot tell (MDE {self.mde:.1f})" if math.isfinite(self.mde) else "cannot tell (no spread)"
-        elif self.word == "level":
-            tail = f"level within ±{self.margin:g}"
-        else:
-            tail = self.word + (f", within ±{self.margin:g}" if self.within_margin else "")
-        return f"{name}, {self.metric}: {figures}: {tail}"
+        return f"{name}, {self.metric}: {self.figures()}: {self.words()}"
 
 
 def _signed(x: float) -> str:

@@ -1,0 +1,374 @@
+"""The studies as data: each study's plan, runner, archives, data test and doc sections
+(`STUDIES`, from which docs/studies.md's table is generated), and the comparisons whose
+figures and words the docs quote (`Comparison`), each read from its archive and judged by
+the project's one rule (`experiments.reporting.verdicts.verdict`).
+
+Nothing here writes: `experiments.regenerate` puts what `BLOCKS` makes between the docs'
+markers, and a default-tier test (tests/test_regenerate.py) fails when the docs drift from
+the archives. An archive is read in place (`Archives`: the JSON members of a
+docs/data/*.tar.xz, each read once), never unpacked.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import tarfile
+from pathlib import Path
+from typing import Callable, Optional, Union
+
+import numpy as np
+
+from experiments.reporting import report, tuning
+from experiments.reporting.verdicts import verdict
+
+ROOT = Path(__file__).resolve().parents[2]
+DATA = ROOT / "docs" / "data"
+# The paper's gain (Table 1): the margin every "level" of the studies here is declared against.
+PAPER_MARGIN = 3.8
+
+
+@dataclasses.dataclass(frozen=True)
+class Study:
+    """One study's home (a row of docs/studies.md). Paths are the repository's; an archive
+    not made yet is named in words (no '/')."""
+
+    name: str
+    question: str
+    plan: Optional[str]
+    runner: str  # "commands" (written in its doc section or plan) or a script's path
+    archives: tuple[str, ...]
+    data_test: str
+    sections: tuple[str, ...]  # "doc.md#anchor"
+
+
+STUDIES: tuple[Study, ...] = (
+    Study(
+        "fair",
+        "Does ForeSIT beat its base when each arm has its own validated settings?",
+        None,
+        "commands",
+        tuple(
+            f"docs/data/{n}"
+            for n in (
+                "fair_lr3e-4.tar.xz",
+                "fair_tune.tar.xz",
+                "fair_3x.tar.xz",
+                "fair_tune_3x.tar.xz",
+                "fair_tune_org.tar.xz",
+                "fair_bases.tar.xz",
+                "fair_fw.tar.xz",
+                "fair_noise.tar.xz",
+                "fair_probe_lr3e-4.json",
+                "fair_probe_noise.json",
+            )
+        ),
+        "tests/test_fair_study_data.py",
+        (
+            "docs/results.md#fairness-each-arm-at-its-own-validated-learning-rate-5-seeds-2026-11-27",
+            "docs/results.md#fairness-the-three-arms-at-3e-4-for-3x-the-budget-5-seeds-2026-11-27",
+        ),
+    ),
+    Study(
+        "replication_3x",
+        "Does the 3x answer hold on fresh seeds (issue 69)?",
+        "docs/plans/replication_3x.md",
+        "commands",
+        ("docs/data/replication_3x.tar.xz",),
+        "tests/test_replication_data.py",
+        ("docs/results.md#replication-the-3x-pair-on-fresh-seeds-seeds-5-9-2026-11-29",),
+    ),
+    Study(
+        "reference_ppo",
+        "Where does a plain PPO land on the same episodes?",
+        None,
+        "benchmarks/reference_ppo.py",
+        ("docs/data/reference_ppo_epyc.json", "docs/data/reference_ppo_h200.json"),
+        "tests/test_reference_ppo.py",
+        ("docs/results.md#a-reference-row-purejaxrls-ppo-on-the-same-episodes-5-seeds-2026-11-28",),
+    ),
+    Study(
+        "priors",
+        "The paper's question in rooms that keep real homes' regularities",
+        None,
+        "scripts/priors_study_gpu.sh",
+        tuple(
+            f"docs/data/{n}"
+            for n in (
+                "priors_savn.tar.xz",
+                "priors_org.tar.xz",
+                "priors_org_control.tar.xz",
+                "priors_probe_savn.json",
+                "priors_probe_org.json",
+            )
+        ),
+        "tests/test_priors.py",
+        ("docs/priors.md#the-papers-question-there-5-seeds-2026-11-27",),
+    ),
+    Study(
+        "houses",
+        "Does imagination help on long paths in houses?",
+        None,
+        "commands",
+        ("docs/data/house_study.tar.xz",),
+        "tests/test_house_study_data.py",
+        ("docs/houses.md#does-imagination-help-on-long-paths-in-houses-the-mechanism-study-repeated",),
+    ),
+    Study(
+        "foresight",
+        "Can a first view tell where an unseen target is?",
+        None,
+        "commands",
+        ("docs/data/foresight_today.json", "docs/data/foresight_priors.json", "docs/data/foresight_levers.json"),
+        "tests/test_foresight.py",
+        ("docs/foresight.md#the-method",),
+    ),
+    Study(
+        "ceiling",
+        "What would a perfect imagination of success give, through the head?",
+        None,
+        "commands",
+        tuple(
+            f"docs/data/{n}"
+            for n in (
+                "ceiling_savn.tar.xz",
+                "ceiling_savn_epyc.tar.xz",
+                "ceiling_savn_noiseoff.tar.xz",
+                "ceiling_priors.tar.xz",
+                "ceiling_priors_epyc.tar.xz",
+                "ceiling_priors_noiseoff.tar.xz",
+                "ceiling_range4.tar.xz",
+                "ceiling_range4_noiseoff.tar.xz",
+                "ceiling_probe_savn.json",
+                "ceiling_probe_range4.json",
+            )
+        ),
+        "tests/test_ceiling_data.py",
+        ("docs/ceiling.md#the-oracle-imagination-privileged",),
+    ),
+    Study(
+        "channels",
+        "Through which channel can the goal view help (issue 68)?",
+        "docs/plans/ceiling_channels.md",
+        "commands",
+        tuple(
+            f"docs/data/{n}"
+            for n in (
+                "channels_stage1.tar.xz",
+                "channels_stage2.tar.xz",
+                "channels_stage3.tar.xz",
+                "channels_rooms.tar.xz",
+            )
+        ),
+        "tests/test_channels_data.py",
+        ("docs/ceiling.md#channels-that-can-carry-it-compasses-first-issue-68-docsplansceiling_channelsmd",),
+    ),
+    Study(
+        "targets",
+        "Which form of imagining success helps as a training target (issue 79)?",
+        "docs/plans/imagination_targets.md",
+        "commands",
+        ("the pilot's, stage 1's and stage 2's archives, once run",),
+        "tests/test_targets.py",
+        ("docs/plans/imagination_targets.md#plan-imagination-as-a-training-target-issue-79",),
+    ),
+)
+
+
+def _code(items) -> str:
+    return ", ".join(f"`{x}`" if "/" in x else x for x in items)
+
+
+def studies_table() -> str:
+    """docs/studies.md's table, one row a study."""
+    header = (
+        "| study | question | plan | runner | archives | data test | doc section |\n|---|---|---|---|---|---|---|\n"
+    )
+    rows = []
+    for s in STUDIES:
+        runner = "commands" if s.runner == "commands" else f"`{s.runner}`"
+        plan = f"`{s.plan}`" if s.plan else ""
+        cells = [s.name, s.question, plan, runner, _code(s.archives), f"`{s.data_test}`", _code(s.sections)]
+        rows.append("| " + " | ".join(cells).replace("|  |", "| |") + " |")
+    return header + "\n".join(rows) + "\n"
+
+
+# ---------------------------------------------------------------------- reading archives
+class Archives:
+    """The per-seed results of the arms of docs/data's archives, read in place: each
+    archive's `.../methods/<arm>/results.json` members, once (`results`)."""
+
+    def __init__(self, data: Path = DATA):
+        self.data = data
+        self._read: dict[str, dict[str, list[dict]]] = {}
+
+    def _archive(self, archive: str) -> dict[str, list[dict]]:
+        if archive not in self._read:
+            arms = {}
+            with tarfile.open(self.data / archive) as tar:
+                for member in tar.getmembers():
+                    parts = member.name.split("/")
+                    if parts[-1] == "results.json" and len(parts) >= 3 and parts[-3] == "methods":
+                        arms[parts[-2]] = json.load(tar.extractfile(member))["results"]
+            self._read[archive] = arms
+        return self._read[archive]
+
+    def results(self, archive: str, arm: str) -> list[dict]:
+        """The per-seed results (results.json's "results") of `arm` in docs/data/`archive`."""
+        arms = self._archive(archive)
+        if arm not in arms:
+            raise KeyError(f"{archive} holds no arm {arm!r}; it holds {sorted(arms)}")
+        return arms[arm]
+
+
+@dataclasses.dataclass(frozen=True)
+class Chosen:
+    """An arm chosen on validation among candidates (`experiments.tune`'s rule,
+    `tuning.choose`: the highest mean validation SR of the selected models)."""
+
+    candidates: tuple[str, ...]
+
+
+Arm = Union[str, Chosen]
+
+
+def resolve(archives: Archives, archive: str, arm: Arm) -> str:
+    if isinstance(arm, str):
+        return arm
+    return tuning.choose({c: archives.results(archive, c) for c in arm.candidates})
+
+
+@dataclasses.dataclass(frozen=True)
+class Comparison:
+    """B - A on `metric`, paired over the seeds of one archive, judged by the rule with
+    `margin`."""
+
+    label: str  # what the docs call it
+    scope: str  # the family, budget, seeds and machine, in words
+    archive: str
+    a: Arm
+    b: Arm
+    metric: str = "SR"
+    margin: float = PAPER_MARGIN
+    section: str = ""  # where the docs report it ("doc.md#anchor")
+
+    def differences(self, archives: Archives) -> np.ndarray:
+        a, b = (resolve(archives, self.archive, x) for x in (self.a, self.b))
+        ra, rb = archives.results(self.archive, a), archives.results(self.archive, b)
+        if [r["seed"] for r in ra] != [r["seed"] for r in rb]:
+            raise ValueError(f"{self.label}: {a} and {b} in {self.archive} were not run on the same seeds")
+        return report.values(rb, self.metric) - report.values(ra, self.metric)
+
+    def row(self, archives: Archives) -> str:
+        v = verdict(self.differences(archives), self.metric, self.margin)
+        label = f"[{self.label}]({self.section})" if self.section else self.label
+        return f"| {label} | {self.scope} | {self.metric} | {v.figures()} | {v.words()} |"
+
+
+def comparisons_table(comparisons, archives: Archives) -> str:
+    header = "| B - A | where, how long, which seeds | metric | mean [95% CI] | verdict |\n|---|---|---|---|---|\n"
+    return header + "\n".join(c.row(archives) for c in comparisons) + "\n"
+
+
+A3 = "a3c@learning_rate=3e-4"
+F3 = "a3c+foresit@learning_rate=3e-4"
+CRITIC = "a3c+critic@learning_rate=3e-4"
+HEAD_ORACLE = "a3c+oracle@learning_rate=3e-4,sigma2_max=0"
+RESULTS = "docs/results.md"
+CEILING = "docs/ceiling.md"
+
+# The comparisons the README's Results quote, in the order a reader asks them.
+README_COMPARISONS: tuple[Comparison, ...] = (
+    Comparison(
+        "a3c+foresit - a3c, each at its validated rate",
+        "rooms, 3000, 0-4",
+        "fair_tune.tar.xz",
+        Chosen((A3, "a3c@learning_rate=1e-3")),
+        Chosen((F3, "a3c+foresit@learning_rate=1e-3")),
+        section=f"{RESULTS}#fairness-each-arm-at-its-own-validated-learning-rate-5-seeds-2026-11-27",
+    ),
+    Comparison(
+        "a3c+foresit - a3c, both at 3e-4",
+        "rooms, 9000, 0-4 (Xeon)",
+        "fair_3x.tar.xz",
+        A3,
+        F3,
+        section=f"{RESULTS}#fairness-the-three-arms-at-3e-4-for-3x-the-budget-5-seeds-2026-11-27",
+    ),
+    Comparison(
+        "a3c+foresit@3e-4 - a3c at its validated rate",
+        "rooms, 9000, 5-9 (EPYC)",
+        "replication_3x.tar.xz",
+        Chosen((A3, "a3c@learning_rate=1e-3")),
+        F3,
+        section=f"{RESULTS}#replication-the-3x-pair-on-fresh-seeds-seeds-5-9-2026-11-29",
+    ),
+    Comparison(
+        "a3c+foresit - a3c",
+        "houses, 12,000, 0-4",
+        "house_study.tar.xz",
+        "a3c",
+        "a3c+foresit",
+        section="docs/houses.md#does-imagination-help-on-long-paths-in-houses-the-mechanism-study-repeated",
+    ),
+    Comparison(
+        "a3c+foresit - a3c+critic (the critic held)",
+        "houses, 12,000, 0-4",
+        "house_study.tar.xz",
+        "a3c+critic",
+        "a3c+foresit",
+        section="docs/houses.md#does-imagination-help-on-long-paths-in-houses-the-mechanism-study-repeated",
+    ),
+    Comparison(
+        "compass every step, encoder (privileged) - critic",
+        "priors, range 4, 3000, 0-4",
+        "channels_stage1.tar.xz",
+        CRITIC,
+        "a3c+compass@learning_rate=3e-4,imagination_input=encoder,sigma2_max=0",
+        section=f"{CEILING}#stage-1-can-a-compass-be-carried-rooms-with-priors-range-4-quick-seeds-0-4-2026-11-29",
+    ),
+    Comparison(
+        "compass of the start, held (privileged) - critic",
+        "priors, range 4, 3000, 0-4",
+        "channels_stage1.tar.xz",
+        CRITIC,
+        "a3c+startcompass@learning_rate=3e-4,imagination_input=encoder,sigma2_max=0",
+        section=f"{CEILING}#stage-1-can-a-compass-be-carried-rooms-with-priors-range-4-quick-seeds-0-4-2026-11-29",
+    ),
+    Comparison(
+        "compass of the start, held (privileged) - critic",
+        "priors, range 4, 3000, 0-4",
+        "channels_stage1.tar.xz",
+        CRITIC,
+        "a3c+startcompass@learning_rate=3e-4,imagination_input=encoder,sigma2_max=0",
+        metric="SPL",
+        section=f"{CEILING}#stage-1-can-a-compass-be-carried-rooms-with-priors-range-4-quick-seeds-0-4-2026-11-29",
+    ),
+    Comparison(
+        "goal view, head (privileged) - critic",
+        "priors, range 4, 9000, 0-4",
+        "channels_stage3.tar.xz",
+        CRITIC,
+        HEAD_ORACLE,
+        section=f"{CEILING}#stage-3-three-times-the-budget-rooms-with-priors-range-4-seeds-0-4-2026-11-29",
+    ),
+    Comparison(
+        "goal view, head (privileged) - critic",
+        "rooms, 3000, 0-4",
+        "channels_rooms.tar.xz",
+        CRITIC,
+        HEAD_ORACLE,
+        section=f"{CEILING}#stage-4-the-best-channel-in-todays-rooms-quick-seeds-0-4-2026-11-29",
+    ),
+)
+
+
+def readme_results(archives: Archives) -> str:
+    return comparisons_table(README_COMPARISONS, archives)
+
+
+# The generated blocks: name -> (file, a function of the archives giving the block's text).
+BLOCKS: dict[str, tuple[str, Callable[[Archives], str]]] = {
+    "studies": ("docs/studies.md", lambda archives: studies_table()),
+    "readme-results": ("README.md", readme_results),
+}
