@@ -15,6 +15,7 @@ functions `evaluate` and `evaluate_random_policy` make one when none is given.
 from __future__ import annotations
 
 import functools
+import inspect
 from typing import Any, Callable, NamedTuple
 
 import chex
@@ -78,15 +79,66 @@ def base_acting(config: Config) -> BaseActing:
     return BaseActing(rollout.act_window, policy.policy, policy.policy_carry, None)
 
 
-def acting_policy(config: Config, params: AgentParams) -> Acting:
+def acting_policy(config: Config, params: AgentParams, where: str = "acting_policy") -> Acting:
     """The agent of `config` acting with `params` (`AgentParams`, the evaluation's noise
-    variance set) as its evaluation acts: greedy or sampled by the method's protocol."""
+    variance set) as its evaluation acts: greedy or sampled by the method's protocol.
+    Parameters whose tree or shapes are not those of `config`'s networks are refused here,
+    in one line naming the first mismatch (`check_agent_params`; `where` names the caller),
+    not at the first act."""
     nets, base = build(config), base_acting(config)
     env = rollout.acting_env(nets, BoundEnv(Evaluator.for_config(config).env, None)).env
     shapes = {k: jax.ShapeDtypeStruct(b.shape, b.dtype) for k, b in env.observation_space().spaces.items()}
+    check_agent_params(nets, shapes, params, where)
     # (the maml base's carry holds theta_i and the running segment's observations: it reads both)
     carry = functools.partial(base.policy_carry, nets, acting=params, obs=shapes)
     return Acting(base.policy(nets, config.pieces.greedy_evaluation), params, carry, config)
+
+
+def check_agent_params(nets: Networks, obs_shapes: dict, params: AgentParams, where: str) -> None:
+    """A ValueError naming the first parameter whose place in the tree or whose shape differs
+    between `params` (theta/omega and f_w's w) and what `nets.init` makes for observations
+    of `obs_shapes` (`jax.eval_shape`: nothing runs). Catches a state trained under another
+    Config (another hidden size, method or setup) before flax's ScopeParamShapeError would."""
+    config = nets.config
+    want = jax.eval_shape(nets.init, jax.random.PRNGKey(0), obs_shapes)
+    got = (params.params, params.imagination_params)
+    names = ("params", "imagination_params")
+    hint = (
+        f"pass the Config the state was trained with (this one: method {config.method!r}, setup {config.setup!r}, "
+        f"hidden_size {config.hidden_size})"
+    )
+    for name, w, g in zip(names, want, got):
+        w_leaves = dict(jax.tree_util.tree_flatten_with_path(w)[0])
+        g_leaves = dict(jax.tree_util.tree_flatten_with_path(g)[0])
+        w_paths = {jax.tree_util.keystr(k): v for k, v in w_leaves.items()}
+        g_paths = {jax.tree_util.keystr(k): v for k, v in g_leaves.items()}
+        missing = [k for k in w_paths if k not in g_paths]
+        extra = [k for k in g_paths if k not in w_paths]
+        if missing or extra:
+            what = (
+                f"lacks {name}{missing[0]}, which the config's networks have"
+                if missing
+                else f"has {name}{extra[0]}, which the config's networks do not"
+            )
+            raise ValueError(
+                f"{where}: the state's parameters do not match the config: the state {what} "
+                f"({len(missing)} missing, {len(extra)} extra); {hint}"
+            )
+        for k, w_leaf in w_paths.items():
+            if tuple(np.shape(g_paths[k])) != tuple(w_leaf.shape):
+                raise ValueError(
+                    f"{where}: the state's parameters do not match the config: {name}{k} has shape "
+                    f"{tuple(np.shape(g_paths[k]))}, the config's networks have {tuple(w_leaf.shape)}; {hint}"
+                )
+
+
+def _check_seed(seed, where: str) -> int:
+    """`seed` as an int: a ValueError for a bool, a float or anything not an integer."""
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
+        raise ValueError(
+            f"{where}: seed must be an int (one of the seeds trained), got {seed!r} ({type(seed).__name__})"
+        )
+    return int(seed)
 
 
 def make_act(config: Config, state, seed: int | None = None) -> Acting:
@@ -97,7 +149,12 @@ def make_act(config: Config, state, seed: int | None = None) -> Acting:
 
         act = make_act(config, state)
         results = evaluate_policy(act.act, act.params, act.initial_carry, config, "test")
-    """
+
+    Checked before acting, each in one line: `seed` is an int among the states' seeds, and
+    the state's parameters have the tree and shapes of `config`'s networks (a state trained
+    under another Config is refused here, not by flax at the first act)."""
+    if seed is not None:
+        seed = _check_seed(seed, "make_act")
     stacked = np.ndim(state.update) > 0
     if stacked != (seed is not None):
         raise ValueError(
@@ -108,7 +165,7 @@ def make_act(config: Config, state, seed: int | None = None) -> Acting:
         if not 0 <= seed < np.shape(state.update)[0]:
             raise ValueError(f"make_act: seed {seed} is not one of the {np.shape(state.update)[0]} seeds trained")
         state = jax.tree.map(lambda x: x[seed], state)
-    return acting_policy(config, agent_params(state, config.sigma2_max, config.evaluation_noise))
+    return acting_policy(config, agent_params(state, config.sigma2_max, config.evaluation_noise), "make_act")
 
 
 def outcome_metrics(outcomes: EpisodeStats, layout: str = "room") -> dict[str, float]:
@@ -409,6 +466,102 @@ def policy_episodes(
     return EpisodeStats(success, length, optimal[0], jnp.any(ended, axis=0), spl, room[0])
 
 
+def _described(x) -> str:
+    """What a policy returned, in a few words (for `check_policy_return`'s messages)."""
+    if isinstance(x, (tuple, list)):
+        return f"a {type(x).__name__} of {len(x)} values"
+    if hasattr(x, "shape") and hasattr(x, "dtype"):
+        return f"an array of shape {tuple(x.shape)} and dtype {x.dtype}"
+    return f"a {type(x).__name__}"
+
+
+def check_policy_return(out, carry, num_lanes: int, where: str = "evaluate_policy") -> None:
+    """Refuse, in one line saying what was expected and what came, a policy's return that is
+    not `(actions [num_lanes] of an integer dtype, carry)` with `carry` of the tree, shapes
+    and dtypes of the carry it was given. Runs while the policy is traced (shapes only:
+    free at run time), so a bad policy fails here, not inside `lax.scan` or `vmap`."""
+    expected = f"(actions [{num_lanes}] of an integer dtype, carry)"
+    if not isinstance(out, (tuple, list)) or len(out) != 2:
+        missing = " (no carry: return the carry too, even None for a policy without one)"
+        raise TypeError(
+            f"{where}: the policy must return {expected}; it returned {_described(out)}"
+            + (missing if not isinstance(out, (tuple, list)) or len(out) == 1 else "")
+        )
+    actions, new_carry = out
+    shape = tuple(np.shape(actions))
+    if shape != (num_lanes,):
+        scalar = " (a scalar: the policy is batched, one action per lane)" if shape == () else ""
+        raise ValueError(
+            f"{where}: the policy's actions must have shape ({num_lanes},), one per lane; got shape {shape}{scalar}"
+        )
+    dtype = jnp.result_type(actions)
+    if not jnp.issubdtype(dtype, jnp.integer):
+        raise TypeError(
+            f"{where}: the policy's actions must have an integer dtype (actions 0..{envs.catalog.NUM_ACTIONS - 1}); "
+            f"got {dtype} (cast them: jnp.argmax(...) or .astype(jnp.int32))"
+        )
+    given, got = jax.tree.structure(carry), jax.tree.structure(new_carry)
+    if given != got:
+        raise TypeError(
+            f"{where}: the policy must return the carry it was given, updated (the structure of "
+            f"initial_carry({num_lanes})); it returned {_described(new_carry)} of structure {got}, not {given}"
+        )
+    for (path, a), b in zip(jax.tree_util.tree_flatten_with_path(carry)[0], jax.tree.leaves(new_carry)):
+        if np.shape(a) != np.shape(b) or jnp.result_type(a) != jnp.result_type(b):
+            raise TypeError(
+                f"{where}: the policy's returned carry{jax.tree_util.keystr(path)} has shape {tuple(np.shape(b))} "
+                f"and dtype {jnp.result_type(b)}; the carry it was given has {tuple(np.shape(a))} and "
+                f"{jnp.result_type(a)}"
+            )
+
+
+def _raise_on_bad_policy_action(action) -> None:
+    action = np.asarray(action)
+    bad = (action < 0) | (action >= envs.catalog.NUM_ACTIONS)
+    if bad.any():
+        raise ValueError(
+            f"evaluate_policy: the policy chose action {action[bad].ravel()[0]}, outside "
+            f"0..{envs.catalog.NUM_ACTIONS - 1} ({int(bad.sum())} of {action.size} lanes at this step)"
+        )
+
+
+def checked_policy(policy_fn: Callable, num_lanes: int, check_actions: bool = False) -> Callable:
+    """`policy_fn` whose every return is checked by `check_policy_return` while it is traced
+    (its first call) and, with `check_actions`, whose actions outside 0..5 raise at run time
+    (a host callback per step, as `envs.GridNav(check_actions=True)`: for debugging). Keeps
+    the policy's `step_keys` (the keys `policy_episodes` gives it)."""
+
+    def checked(params, carry, obs, first, key):
+        out = policy_fn(params, carry, obs, first, key)
+        check_policy_return(out, carry, num_lanes)
+        actions, carry = out
+        if check_actions:
+            jax.debug.callback(_raise_on_bad_policy_action, actions)
+        return actions, carry
+
+    checked.step_keys = getattr(policy_fn, "step_keys", policy.lockstep_keys)
+    return checked
+
+
+def _check_policy_signature(policy_fn: Callable) -> None:
+    """A TypeError when `policy_fn` cannot take `(params, carry, obs, first, key)`."""
+    if not callable(policy_fn):
+        raise TypeError(
+            f"evaluate_policy: policy_fn must be a function (params, carry, obs, first, key), got {_described(policy_fn)}"
+        )
+    try:
+        signature = inspect.signature(policy_fn)
+    except (TypeError, ValueError):  # a builtin or an object without one: its first call tells
+        return
+    try:
+        signature.bind(*range(5))
+    except TypeError:
+        raise TypeError(
+            f"evaluate_policy: policy_fn must take 5 arguments (params, carry, obs, first, key); "
+            f"{getattr(policy_fn, '__name__', type(policy_fn).__name__)}{signature} does not"
+        ) from None
+
+
 def evaluate_policy(
     policy_fn: Callable,
     params,
@@ -418,28 +571,45 @@ def evaluate_policy(
     key: chex.PRNGKey | None = None,
     episodes_per_room: int = 250,
     room_types: tuple[str, ...] | None = None,
+    check_actions: bool = False,
 ) -> dict[str, dict[str, float]]:
     """SR, SPL and SR by path length of any policy, the user's own included, on the episodes
     `Evaluator.evaluate` plays for `config`'s scenes (setup, layout, priors; its room types
     unless `room_types`) with `key` (PRNGKey(0) by default; the reports' test episodes of
     seed s: `experiments.load`'s `test_key(s)`): {"overall": ..., room: ..., "by_length": ...}.
+    Each room's and "overall"'s metrics are `summarize`'s: "SR", "SPL", "SR>=5", "SPL>=5"
+    (houses: also >=10 and >=20) in percent (0..100, not fractions), and "episodes", a count.
 
     policy_fn: `(params, carry, obs, first, key) -> (action [B], carry)`, batched over lanes
     (`base_acting(config).policy(nets)` is the agent's; see `policy_episodes` for the keys it gets);
     initial_carry: `num_lanes -> carry`. The agent's own policy gives `Evaluator.evaluate`'s
     numbers exactly (tests/test_policy.py). The privileged `oracle` reads the goal view: its
-    observations come from the environment wrapped as `rollout.acting_env` wraps it."""
+    observations come from the environment wrapped as `rollout.acting_env` wraps it.
+
+    The policy is checked on its first call (while it is traced: free at run time): it must
+    take those five arguments and return a pair, its actions of shape [B] (B =
+    `episodes_per_room`) and an integer dtype, and a carry of the tree, shapes and dtypes of
+    the one it was given; anything else is refused in one line saying what was expected and
+    what came. An action outside 0..5 is a step that changes nothing (as `envs.GridNav`'s);
+    `check_actions=True` raises on one instead (a host callback per step: for debugging, as
+    `envs.make_gymnax(..., check_actions=True)`)."""
+    _check_policy_signature(policy_fn)
+    if not callable(initial_carry):
+        raise TypeError(
+            f"evaluate_policy: initial_carry must be a function num_lanes -> carry, got {_described(initial_carry)}"
+        )
     evaluator = Evaluator.for_config(config)
     evaluator._check(config, split, episodes_per_room)
     key = jax.random.PRNGKey(0) if key is None else key
     rooms = envs.gridnav.room_names(room_types or config.room_types)
     env = rollout.acting_env(build(config), BoundEnv(evaluator.env, None)).env
+    checked = checked_policy(policy_fn, episodes_per_room, check_actions)
     compiled = {}
 
     def run_room(env_params, num_steps, k):
         if num_steps not in compiled:  # one program per time limit (room types share one in rooms)
             compiled[num_steps] = jax.jit(
-                lambda p, c, e, k: policy_episodes(policy_fn, p, c, BoundEnv(env, e), k, num_steps, episodes_per_room)
+                lambda p, c, e, k: policy_episodes(checked, p, c, BoundEnv(env, e), k, num_steps, episodes_per_room)
             )
         return compiled[num_steps](params, initial_carry(episodes_per_room), env_params, k)
 

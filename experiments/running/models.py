@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any, Callable, NamedTuple
 
 import jax
+import numpy as np
 
 from experiments import errors
 from experiments.running import checkpoint, devices, run, selection, sweeps
@@ -144,9 +145,16 @@ def load(run_dir, seed: int = 0, which: str = "best") -> Policy:
     validation (what results.json reports as "selected"), or "last", the state at the run's
     last checkpoint. Acts as the run's evaluation does (its greedy or sampled protocol, the
     evaluation noise): `evaluate_policy(p.act, p.params, p.initial_carry, p.config, "test",
-    p.test_key, p.test_episodes_per_room)` gives results.json's test numbers."""
+    p.test_key, p.test_episodes_per_room)` gives results.json's test numbers. A `seed` that is
+    not an int (0.0, True) is refused in one line before anything is read; one the run did
+    not train, or parameters whose shapes are not those of the run's Config, before acting."""
     if which not in WHICH:
         raise errors.UserError(f"which must be one of {WHICH}, got {which!r}")
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):  # 0.0 == 0 would pass below
+        raise errors.UserError(
+            f"load: seed must be an int (one of the run's seeds), got {seed!r} ({type(seed).__name__})"
+        )
+    seed = int(seed)
     folder = Path(run_dir)
     sweep = rundir.is_sweep(folder)
     rundir.require_run(folder, " (a sweep folder: give one of its arms, <sweep>/methods/<arm>)" if sweep else "")
@@ -158,5 +166,8 @@ def load(run_dir, seed: int = 0, which: str = "best") -> Policy:
         params = devices.seed_slice(trained.selected, i)
     else:  # as the run's report computes the last model's (`Run.test`)
         params = devices.seed_slice(run.seeds_params(config, trained.states), i)
-    act, params, carry, _ = acting_policy(config, params)
+    try:  # the parameters' tree and shapes against the run's Config (a run.json edited by hand)
+        act, params, carry, _ = acting_policy(config, params, "load")
+    except ValueError as e:
+        raise errors.UserError(f"{folder}: {e}") from None
     return Policy(act, params, carry, config, selection.test_key(seed), trained.schedule["test_episodes_per_room"])
