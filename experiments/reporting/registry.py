@@ -19,6 +19,7 @@ from typing import Callable, Optional, Union
 
 import numpy as np
 
+from experiments import rundir
 from experiments.reporting import report, tuning
 from experiments.reporting.verdicts import verdict
 
@@ -196,7 +197,7 @@ def studies_table() -> str:
 # ---------------------------------------------------------------------- reading archives
 class Archives:
     """The per-seed results of the arms of docs/data's archives, read in place: each
-    archive's `.../methods/<arm>/results.json` members, once (`results`)."""
+    archive's arms' results files (`rundir.RESULTS_FILE` under `rundir.METHODS`), once (`results`)."""
 
     def __init__(self, data: Path = DATA):
         self.data = data
@@ -208,7 +209,7 @@ class Archives:
             with tarfile.open(self.data / archive) as tar:
                 for member in tar.getmembers():
                     parts = member.name.split("/")
-                    if parts[-1] == "results.json" and len(parts) >= 3 and parts[-3] == "methods":
+                    if parts[-1] == rundir.RESULTS_FILE and len(parts) >= 3 and parts[-3] == rundir.METHODS:
                         arms[parts[-2]] = json.load(tar.extractfile(member))["results"]
             self._read[archive] = arms
         return self._read[archive]
