@@ -264,6 +264,14 @@ def test_ceiling_md_quotes_the_noise_off_ceiling_at_range_4(tmp_path, capsys):
     )
     assert "**Without the noise we cannot tell the ceiling from 0**, and its point estimate is the" in doc
     assert f"noisy arm's: {sr} SR over the critic alone (MDE {mde})" in " ".join(doc.split())
+    # the noise's own effect, noise-off - noisy oracle, and its upper end (issue 81: once quoted
+    # as the other pair's +0.7)
+    noise = out["pairs"][f"{NOISEOFF} - {ORACLE}"]
+    quote = (
+        f"Taking Eq. 7's noise away moves the oracle by {study_data.interval(noise['SR'])} SR "
+        f"(MDE {noise['robust']['SR']['mde']:.1f}), an interval whose upper end is {study_data.signed(noise['SR']['ci_high'])}."
+    )
+    assert quote in " ".join(doc.split()), quote
 
 
 def test_ceiling_md_quotes_the_probe_at_range_4():
@@ -330,3 +338,25 @@ def test_ceiling_md_quotes_the_range_4_arms_along_training(tmp_path):
         for arm, p in zip((ORACLE, NOISEOFF), pairs):
             above[arm] += p["ci_low"] > 0
     assert above == {ORACLE: 0, NOISEOFF: 2}  # "the noise-off arm's interval lies above 0 at two of the six"
+
+
+def test_ceiling_md_quotes_the_machine_shift_of_the_critic():
+    """The critic trained on the EPYC against the Xeon's, the same seeds and program (each
+    family's two archives, read in place): ceiling.md's EPYC - Xeon intervals, judged by
+    experiments.reporting.verdicts (issue 81: once worded "the machine moved each seed, not
+    the mean" with no interval)."""
+    from experiments.reporting.registry import Archives
+    from experiments.reporting.verdicts import verdict
+
+    archives = Archives(study_data.DATA)
+    flat = " ".join((REPO / "docs" / "ceiling.md").read_text().split())
+    for epyc, xeon, words in (
+        ("ceiling_savn_epyc.tar.xz", "ceiling_savn.tar.xz", "EPYC - Xeon is {} SR (MDE {:.1f}), and each seed moved"),
+        ("ceiling_priors_epyc.tar.xz", "ceiling_priors.tar.xz", "EPYC - Xeon is {} SR for the critic (not resolved)"),
+    ):
+        a, b = archives.results(xeon, CRITIC), archives.results(epyc, CRITIC)
+        assert [r["seed"] for r in a] == [r["seed"] for r in b] == [0, 1, 2, 3, 4]
+        v = verdict(report.values(b, "SR") - report.values(a, "SR"), "SR", 3.8)
+        assert v.word == "cannot tell"
+        quote = words.format(v.figures(), v.mde)
+        assert quote in flat, quote

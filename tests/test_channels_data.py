@@ -6,12 +6,13 @@ passes if its SR interval's lower bound is at least the pair's MDE), as the docs
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 import study_data
 from test_ceiling_data import arm_row
 
 from experiments import compare
-from experiments.reporting import report
+from experiments.reporting import report, stats
 from experiments import rundir
 
 REPO = Path(__file__).resolve().parents[1]
@@ -23,6 +24,19 @@ LABELS = {
     COMPASS: "a3c+compass through `encoder` (privileged), per step",
     START: "a3c+startcompass through `encoder` (privileged), held from the start",
 }
+
+
+def curve_means(per_seed: list[dict]) -> list[float]:
+    """The mean over seeds of the validation SR at each of 500, ..., 3000 updates."""
+    updates = [[v["update"] for v in r["validation"]] for r in per_seed]
+    assert all(u[:6] == [500, 1000, 1500, 2000, 2500, 3000] for u in updates)
+    return [float(np.mean([r["validation"][i]["SR"] for r in per_seed])) for i in range(6)]
+
+
+def curve_row(name: str, per_seed: list[dict]) -> str:
+    """The docs' row of the validation table: the means to two decimals (exact: five seeds of
+    400 episodes give multiples of 0.05, which one decimal rounds either way)."""
+    return f"| {name} | " + " | ".join(f"{m:.2f}" for m in curve_means(per_seed)) + " |"
 
 
 def passes(pair: dict) -> bool:
@@ -69,6 +83,14 @@ def test_stage_1_is_quoted_with_its_verdicts(tmp_path, capsys):
     for column in ("SR", "SPL"):
         assert list(report.values(results[CRITIC], column)) == list(report.values(earlier[CRITIC], column))
     assert all(r["selected_update"] == 3000 for arm in results for r in results[arm])  # "its last model"
+    # the validation table, exact, and the per-step compass's last 500 updates (issue 81: once
+    # +3.6 from the rounded table, the critic's row rounded two ways across stages)
+    section = doc.split("### Stage 1")[1].split("### Stage 2")[0]
+    for arm, name in ((CRITIC, "a3c+critic"), (COMPASS, "a3c+compass, per step"), (START, "a3c+startcompass")):
+        assert curve_row(name, results[arm]) in section, curve_row(name, results[arm])
+    means = curve_means(results[COMPASS])
+    last = f"(+{means[5] - means[4]:.1f} over the last 500: {means[5]:.2f} - {means[4]:.2f})"
+    assert last in flat, last
 
 
 # ---------------------------------------------------------------------- stage 2
@@ -153,11 +175,46 @@ def test_stage_2_is_quoted_with_its_verdicts(tmp_path, capsys):
         assert row in doc, row
     best = max((ENC, MLP, HEAD), key=lambda arm: mean_selected_validation(results[arm]))
     assert f"The best channel by the plan's rule 3 is {STAGE2[best].split(' (')[0].split('through ')[1]}" in flat
+    # rule 3's figures, and its margin: `head` over `encoder` by 0.1 points (results.md says so)
+    chosen = {arm: mean_selected_validation(results[arm]) for arm in (HEAD, ENC, MLP)}
+    quote = "the selected models is {:.2f} through `head`, {:.2f} through `encoder` and {:.2f} through `mlp`".format(
+        *chosen.values()
+    )
+    assert quote in flat, quote
+    lead = chosen[HEAD] - chosen[ENC]
+    assert f"`head` leads `encoder` by {lead:.1f} points" in flat
+    results_md = " ".join((REPO / "docs" / "results.md").read_text().split())
+    assert (
+        f"rule 3 chose `head` as the best channel by {lead:.1f} points of mean validation SR over `encoder` "
+        f"({chosen[HEAD]:.2f} against {chosen[ENC]:.2f}; `mlp` {chosen[MLP]:.2f};"
+    ) in results_md
+    section = doc.split("### Stage 2")[1].split("### Stage 3")[0]
+    for arm, label in STAGE2.items():
+        name = label.split(" (")[0]
+        assert curve_row(name, results[arm]) in section, curve_row(name, results[arm])
     # Stage 1's critic, copied by --reuse: the same numbers
     first = rundir.sweep_results(
         study_data.unpack("channels_stage1.tar.xz", tmp_path / "stage1", (CRITIC, COMPASS, START))
     )
     assert list(report.values(first[CRITIC], "SR")) == list(report.values(results[CRITIC], "SR"))
+    # the goal view against its timing-matched control, the start compass, paired directly over
+    # the same seeds (stage 1's arm, this stage's arms): ceiling.md and results.md quote them
+    start = first[START]
+    direct = {}
+    for arm in (ENC, MLP, HEAD):
+        assert [r["seed"] for r in results[arm]] == [r["seed"] for r in start]
+        direct[arm] = {
+            m: study_data.interval(stats.paired(report.values(start, m), report.values(results[arm], m)))
+            for m in ("SR", "SPL")
+        }
+    assert stats.paired(report.values(start, "SR"), report.values(results[MLP], "SR"))["ci_high"] < 0
+    quote = (
+        f"is {direct[ENC]['SR']} SR through `encoder`, {direct[MLP]['SR']} through `mlp` and "
+        f"{direct[HEAD]['SR']} through `head`"
+    )
+    assert quote in flat, quote
+    assert f"(SPL through `head`: {direct[HEAD]['SPL']})" in flat
+    assert quote.replace("is ", "the goal view is ", 1) in results_md, quote
     # "The head arm reproduces bit for bit": the range-4 study's noise-off oracle (79dce9c)
     earlier = rundir.sweep_results(
         study_data.unpack(
@@ -308,6 +365,8 @@ def test_stage_4_is_quoted_with_its_verdicts(tmp_path, capsys):
     assert old[report.VALIDATION_AREA]["ci_low"] > 0 and old["SPL"]["ci_low"] < 0
     # the README's and results.md's sentences
     sr, mde = study_data.interval(pair["SR"]), f"{pair['robust']['SR']['mde']:.1f}"
+    # the ceiling study's summary names this run's upper end beside its own (issue 81: +4.9 alone)
+    assert f"reaches {study_data.signed(pair['SR']['ci_high'])} ({sr} SR)" in flat
     results_md = " ".join((REPO / "docs" / "results.md").read_text().split())
     assert (
         f"(the plan's stage 4), through `head`: {sr} SR (MDE {mde}), not resolved; in SPL this run's interval "

@@ -109,14 +109,14 @@ def test_results_md_quotes_the_replication_by_the_plans_rule(replication, capsys
     best = replication["pairs"][f"{F} - {chosen}"]
     # rule 3: the words the interval earns, with the MDE where it cannot tell
     said, mde = words(best), f"{best['robust']['SR']['mde']:.1f}"
-    quote = f"best against best, a3c+foresit - a3c is {study_data.interval(best['SR'])} SR: {said}"
+    quote = f"a3c+foresit at 3e-4 - a3c at its validated rate is {study_data.interval(best['SR'])} SR: {said}"
     assert quote in flat, quote
     assert f"(MDE {mde})" in flat
     assert ("excludes the paper's +3.8" in flat) == (best["SR"]["ci_high"] < MARGIN)
     # the pair's other columns the section quotes
     training = study_data.interval(best[report.TRAINING])
     assert f"Training SR again ends lower: over the last 250 updates a3c+foresit - a3c is {training}" in flat
-    assert f"in SPL too ({study_data.interval(best['SPL'])})" in flat
+    assert f"In SPL: {study_data.interval(best['SPL'])}." in flat
     iqm = [replication["pairs"][f"{F} - {arm}"]["robust"]["SR"]["iqm_a"] for arm in (A3, A10)]
     assert (
         "(a3c's IQM of SR: {:.1f} [{:.1f}, {:.1f}] at 3e-4, {:.1f} [{:.1f}, {:.1f}] at 1e-3.)".format(*iqm[0], *iqm[1])
