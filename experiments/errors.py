@@ -32,8 +32,10 @@ def fail(message: str, status: int = 2) -> None:
 
 def run_cli(args_class, main, argv=None):
     """A CLI's body: parse `argv` into `args_class` with tyro and run `main`; what the user
-    asked wrongly (UserError, ValueError, a number too large) is one line on stderr and
-    exit status 2, XLA's out-of-memory one line and exit status 1."""
+    asked wrongly (UserError, ValueError, a number too large, a path the OS refuses) is one
+    line on stderr and exit status 2, XLA's out-of-memory one line and exit status 1, a
+    Ctrl-C that ends the program (`experiments.running.loop.interruptible`) one line and
+    exit status 130."""
     import tyro
 
     argv = sys.argv[1:] if argv is None else list(argv)
@@ -58,6 +60,11 @@ def run_cli(args_class, main, argv=None):
         if e.errno not in _USER_ERRNOS:
             raise
         refuse(os_message(e), status=1 if e.errno in (errno.ENOSPC, errno.EDQUOT) else 2)
+    except KeyboardInterrupt:  # a second Ctrl-C in a run (the first stops it after its chunk), or one outside
+        fail(
+            "interrupted (Ctrl-C); what was written is kept: a run continues from its last checkpoint with --resume",
+            status=130,
+        )
     finally:
         _GIVEN.reset(given)
         _UNDO.reset(undo)
@@ -118,14 +125,24 @@ _USER_ERRNOS = {
     errno.EISDIR,
     errno.EEXIST,
     errno.ENOENT,
+    errno.ENAMETOOLONG,
+    errno.ELOOP,
+}
+
+
+_OS_HINTS = {
+    errno.ENOSPC: " (free some space, then continue with --resume)",
+    errno.EDQUOT: " (free some space, then continue with --resume)",
+    errno.ENAMETOOLONG: " (choose a shorter path)",
+    errno.ELOOP: " (a symbolic link on the path leads back to itself: remove it, or choose another path)",
 }
 
 
 def os_message(e: OSError) -> str:
     where = f"{e.filename}: " if e.filename else ""
-    return f"{where}{e.strerror or e}" + (
-        " (free some space, then continue with --resume)" if e.errno in (errno.ENOSPC, errno.EDQUOT) else ""
-    )
+    if len(where) > 160:  # a path too long for the file system, as one readable line
+        where = f"{where[:80]}...{where[-40:]}"
+    return f"{where}{e.strerror or e}" + _OS_HINTS.get(e.errno, "")
 
 
 def read_json(path: Path, keys: tuple[str, ...] = ()):

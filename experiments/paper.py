@@ -177,6 +177,7 @@ def check(args: Args) -> None:
 def main(args: Args) -> dict | None:
     """Run (or continue) every sweep, then write the report; returns the claims
     ({claim: verdict line}), or None when stopped by --stop-after-chunks."""
+    flags.check_stop_after_chunks(args.stop_after_chunks, least=0)
     if args.resume:
         args = rundir.resumed_args(args, rundir.PAPER_FILE, "paper run", keep=flags.INVOCATION)
     check(args)

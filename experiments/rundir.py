@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import errno
 import json
 import math
 import os
@@ -158,6 +159,55 @@ LOCK_FILE = ".lock"
 _held: dict[Path, object] = {}  # folder -> its lock (a file descriptor, or filelock's), for this process's life
 
 
+# What a file system takes: a name of at most 255 bytes (ext4, APFS, NTFS), a path of at
+# most 4096 (Linux's PATH_MAX). A longer one fails with ENAMETOOLONG.
+NAME_MAX = 255
+PATH_MAX = 4096
+
+
+def _shown(text: str) -> str:
+    """A name too long to print whole, shortened for a one-line message."""
+    return text if len(text) <= 60 else f"{text[:40]}...{text[-12:]}"
+
+
+def check_path(path: Path, what: str = "--out") -> None:
+    """A UserError, before anything is written, where the folder `path` (given as `what`)
+    cannot be made or used: a name in it longer than a file system takes (`NAME_MAX` bytes;
+    ENAMETOOLONG), the whole path longer than `PATH_MAX`, or a symbolic link on the way
+    that loops (ELOOP) or leads nowhere."""
+    path = Path(path)
+    for part in path.parts:
+        size = len(os.fsencode(part))
+        if size > NAME_MAX:
+            raise UserError(
+                f"{what} {_shown(str(path))}: the name {_shown(part)} is {size} bytes, longer than the {NAME_MAX} "
+                "a file or folder name can have; choose a shorter one"
+            )
+    size = len(os.fsencode(str(path.absolute())))
+    if size >= PATH_MAX:
+        raise UserError(
+            f"{what} {_shown(str(path))}: the path is {size} bytes, longer than the {PATH_MAX - 1} a path can have; "
+            "choose a shorter one"
+        )
+    step = Path(path.anchor) if path.anchor else Path()
+    for part in path.parts[1 if path.anchor else 0 :]:
+        step = step / part
+        try:
+            os.stat(step)
+        except OSError as e:
+            if e.errno == errno.ELOOP:
+                raise UserError(
+                    f"{what} {path}: {step} is a symbolic link that leads back to itself (a loop); remove the link, "
+                    f"or choose another {what}"
+                ) from None
+            if os.path.islink(step):
+                raise UserError(
+                    f"{what} {path}: {step} is a symbolic link to {os.readlink(step)}, which is not there; make that "
+                    f"folder, remove the link, or choose another {what}"
+                ) from None
+            return  # not there (made later), or under a file (`claim` says so)
+
+
 def claim(path: Path) -> None:
     """Make this process the one writer of the folder `path` (created if missing): an
     exclusive OS lock (flock) on `path`/.lock, held until the process exits (a crash
@@ -166,6 +216,7 @@ def claim(path: Path) -> None:
     `run_cli` runs, a refusal releases the claim and deletes the .lock and the folders it
     made (`errors.on_refusal`, `_release`): a refused command leaves --out as it found it."""
     path = Path(path)
+    check_path(path)
     if path.exists() and not path.is_dir():
         raise UserError(f"{path} is a file, not a folder; choose another --out")
     made = next((p for p in (*reversed(path.absolute().parents), path.absolute()) if not p.exists()), None)
@@ -173,6 +224,13 @@ def claim(path: Path) -> None:
     key = path.resolve()
     if key in _held:
         return
+    if not os.access(path, os.W_OK | os.X_OK):  # read-only: refused before any work, not at its end
+        if made is not None:
+            _remove_empty(key, made)
+        raise UserError(
+            f"{path} is read-only (this user cannot write in it, or its file system is mounted read-only); "
+            "make it writable, or copy it to a folder you can write and give that"
+        )
     new_lock = not (path / LOCK_FILE).exists()
     if fcntl is None:
         _held[key] = _claim_with_filelock(path)
@@ -203,12 +261,17 @@ def _release(key: Path, new_lock: bool, made: Path | None) -> None:
     if new_lock:
         (key / LOCK_FILE).unlink(missing_ok=True)
     if made is not None:
-        for folder in (key, *key.parents):
-            if not folder.is_dir() or any(folder.iterdir()):
-                break
-            folder.rmdir()
-            if folder == made.resolve():
-                break
+        _remove_empty(key, made)
+
+
+def _remove_empty(key: Path, made: Path) -> None:
+    """Delete the folder `key` and those above it up to `made` (what a claim made), while empty."""
+    for folder in (key, *key.parents):
+        if not folder.is_dir() or any(folder.iterdir()):
+            break
+        folder.rmdir()
+        if folder == made.resolve():
+            break
 
 
 def _claim_with_filelock(path: Path):
@@ -241,6 +304,7 @@ def prepare_run_dir(path: Path, resume: bool, overwrite: bool, marker: str = RUN
     emptied, and only with --overwrite."""
     if resume and overwrite:
         raise UserError("--resume and --overwrite exclude each other")
+    check_path(path)  # before `exists`, which a name too long for the file system fails
     if resume:
         if not path.exists():
             raise RunNotFound(f"{path} is not there; nothing to resume (give the --out it was started with)")
@@ -356,6 +420,7 @@ def write_run_info(path: Path, info: dict) -> None:
 def require_run(path: Path, hint: str = "; pass the --out folder of experiments.train") -> None:
     """A RunNotFound, saying whether `path` is not there or holds no run.json, unless it is a run."""
     if not is_run(Path(path)):
+        check_path(Path(path), "run folder")  # a link that loops or leads nowhere, a name too long: said so
         what = "is not there" if not Path(path).exists() else f"is not a run folder (no {RUN_FILE})"
         raise RunNotFound(f"{path} {what}{hint}")
 

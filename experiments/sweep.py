@@ -48,6 +48,7 @@ class Args(sweeps.Sweep):
 def main(args: Args) -> list[dict] | None:
     """Run (or, with --resume, continue) the sweep (`experiments.running.sweeps.run`);
     returns Table 1's rows (None when stopped by --stop-after-chunks)."""
+    flags.check_stop_after_chunks(args.stop_after_chunks, least=0)  # before --resume extends anything
     if args.resume:  # the sweep's own arguments; a flag given that contradicts them is refused
         wanted = args.num_updates  # more updates than the sweep has extend it, once the rest is checked
         args = rundir.resumed_args(

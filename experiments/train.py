@@ -204,6 +204,7 @@ REPORT_FILES = ("results_test.json", "results_test.md", "learning_curve.png")
 
 def main(args: Args) -> dict:
     out = args.out
+    flags.check_stop_after_chunks(args.stop_after_chunks)
     tracking.check(args.track)
     run, resumed = start(args)
     config, seed = run.config, run.seeds[0]
@@ -220,12 +221,16 @@ def main(args: Args) -> dict:
         tracker = tracking.make(args.track, out, f"{config.method} seed {seed}", run.info()["config"])
         metrics = Metrics(out, tracker, rows)
         bar = progress_bar(config.num_updates, 0, args.progress)
-        finished = run.train(evaluator, bar, [args.stop_after_chunks], [metrics])
+        with loop.interruptible() as stop:  # a first Ctrl-C stops after the current chunk
+            finished = run.train(evaluator, bar, [args.stop_after_chunks], [metrics])
         bar(0, None)
         tracker.close()
         if not finished:
             done = run.progress()["done"]
-            print(f"stopped after {args.stop_after_chunks} chunks at update {done} (resume with --resume)")
+            if stop.requested:
+                print(f"interrupted at update {done}; continue with --resume", flush=True)
+            else:
+                print(f"stopped after {args.stop_after_chunks} chunks at update {done} (resume with --resume)")
             return {"stopped_at": done}
         done = run.test(evaluator)
     else:  # killed after results.json, before the report

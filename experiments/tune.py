@@ -158,6 +158,7 @@ def tune_report(args: Args, grid, table: dict, results: dict) -> tuple[str, dict
 
 def main(args: Args) -> dict | None:
     """Run (or continue) the tune; returns tune.json's numbers (None when stopped early)."""
+    flags.check_stop_after_chunks(args.stop_after_chunks, least=0)
     if args.resume:
         args = rundir.resumed_args(args, rundir.TUNE_FILE, "tune", keep=flags.INVOCATION)
     if args.seeds < 1:

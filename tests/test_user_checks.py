@@ -160,3 +160,197 @@ def test_every_archived_runs_config_still_loads(archived_configs):
             pytest.fail(f"{name}: {e}")
         rebuilt = json.loads(json.dumps(dataclasses.asdict(config)))
         assert {k: rebuilt[k] for k in recorded} == recorded, name
+
+
+# ---------------------------------------------------------------------- every check before anything is written
+def cli_error(cli, argv, capsys, code: int = 2) -> str:
+    """Run a CLI that must fail: its exit status, one `error:` line on stderr, no traceback."""
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exc:
+        cli([str(a) for a in argv])
+    err = capsys.readouterr().err
+    assert exc.value.code == code, err
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: ") and "Traceback" not in err, err
+    return lines[0]
+
+
+@pytest.mark.parametrize("chunks", ["0", "-1"])
+def test_train_refuses_a_stop_after_chunks_below_one_before_writing(chunks, tmp_path, capsys):
+    from experiments import train
+
+    out = tmp_path / "run"
+    line = cli_error(train.cli, ["--preset", "tiny", "--out", out, "--stop-after-chunks", chunks], capsys)
+    assert f"--stop-after-chunks must be >= 1 (train at least one chunk), got {chunks}" in line
+    assert not out.exists()
+
+
+def test_sweep_refuses_a_negative_stop_after_chunks_before_writing(tmp_path, capsys):
+    from experiments import sweep, tune
+
+    out = tmp_path / "sweep"
+    argv = ["--preset", "tiny", "--methods", "a3c", "--seeds", "1", "--out", out, "--stop-after-chunks", "-1"]
+    assert "--stop-after-chunks must be >= 0 (0 trains nothing), got -1" in cli_error(sweep.cli, argv, capsys)
+    argv = ["--preset", "tiny", "--methods", "a3c", "--grid", "learning_rate=1e-3", "--seeds", "1", "--out", out]
+    assert "--stop-after-chunks must be >= 0" in cli_error(tune.cli, [*argv, "--stop-after-chunks", "-2"], capsys)
+    assert not out.exists()
+
+
+def test_a_sweep_arm_too_long_for_a_folder_name_is_refused_before_writing(tmp_path, capsys):
+    from experiments import sweep
+
+    arm = "a3c@learning_rate=0." + "0" * 300 + "1"  # parses: a learning rate of 1e-301
+    out = tmp_path / "sweep"
+    line = cli_error(sweep.cli, ["--preset", "tiny", "--methods", "a3c", arm, "--seeds", "1", "--out", out], capsys)
+    assert f"is {len(arm)} bytes, longer than the 255 a folder name can have" in line and "shorten it" in line
+    assert not out.exists()
+
+
+def test_an_out_too_long_for_the_file_system_is_one_line_and_makes_nothing(tmp_path, capsys):
+    from experiments import sweep, train
+
+    out = tmp_path / "made" / ("x" * 300) / "run"
+    line = cli_error(train.cli, ["--preset", "tiny", "--out", out], capsys)
+    assert "is 300 bytes, longer than the 255 a file or folder name can have; choose a shorter one" in line
+    line = cli_error(train.cli, ["--preset", "tiny", "--out", out, "--resume"], capsys)
+    assert "longer than the 255" in line
+    line = cli_error(sweep.cli, ["--preset", "tiny", "--methods", "a3c", "--seeds", "1", "--out", out], capsys)
+    assert "longer than the 255" in line
+    deep = tmp_path.joinpath(*["d" * 200] * 25)  # every name short, the path past 4096 bytes
+    assert "choose a shorter one" in cli_error(train.cli, ["--preset", "tiny", "--out", deep], capsys)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_symbolic_link_loop_or_a_dangling_link_in_out_is_one_line(tmp_path, capsys):
+    from experiments import evaluate, train
+
+    (tmp_path / "a").symlink_to(tmp_path / "b")
+    (tmp_path / "b").symlink_to(tmp_path / "a")
+    (tmp_path / "nowhere").symlink_to(tmp_path / "gone")
+    for out in (tmp_path / "a", tmp_path / "a" / "run"):
+        line = cli_error(train.cli, ["--preset", "tiny", "--out", out], capsys)
+        assert f"{tmp_path / 'a'} is a symbolic link that leads back to itself (a loop)" in line, line
+    line = cli_error(train.cli, ["--preset", "tiny", "--out", tmp_path / "nowhere" / "run"], capsys)
+    assert f"is a symbolic link to {tmp_path / 'gone'}, which is not there" in line
+    line = cli_error(evaluate.cli, ["--run", tmp_path / "a" / "run"], capsys)  # read before any claim
+    assert f"{tmp_path / 'a'} is a symbolic link that leads back to itself (a loop)" in line, line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a", "b", "nowhere"]
+
+
+def test_os_errors_a_user_causes_are_one_line_wherever_they_come_from(capsys):
+    """The backstop (`errors.run_cli`): ENAMETOOLONG and ELOOP raised anywhere are one line with a hint."""
+    import errno
+    import os
+
+    from experiments import errors
+
+    @dataclasses.dataclass
+    class Args:
+        code: int = 0
+
+    def main(args):
+        raise OSError(args.code, os.strerror(args.code), "/x/" + "y" * 400)
+
+    for code, hint in ((errno.ENAMETOOLONG, "choose a shorter path"), (errno.ELOOP, "leads back to itself")):
+        line = cli_error(lambda argv: errors.run_cli(Args, main, argv), ["--code", code], capsys)
+        assert hint in line and len(line) < 300, line
+
+
+def test_evaluate_refuses_a_read_only_run_folder_before_any_work(tmp_path, capsys, monkeypatch):
+    """A read-only folder, simulated (root writes in one): `claim` asks the OS (`os.access`)
+    before taking the lock, so evaluate stops before it loads or plays anything."""
+    import os
+
+    from experiments import evaluate, rundir
+
+    run = tmp_path / "run"
+    run.mkdir()
+    info = read_archive_json("replication_3x.tar.xz")["replication_3x/methods/a3c@learning_rate=1e-3/run.json"]
+    (run / "run.json").write_text(json.dumps(info))
+    real = os.access
+    monkeypatch.setattr(rundir.os, "access", lambda p, mode: False if str(p) == str(run) else real(p, mode))
+    monkeypatch.setattr(evaluate, "read_trained", None)  # evaluating would fail on it: it must not get there
+    line = cli_error(evaluate.cli, ["--run", run, "--split", "val"], capsys)
+    assert line.startswith(f"error: {run} is read-only") and "make it writable" in line, line
+    assert sorted(p.name for p in run.iterdir()) == ["run.json"]  # no .lock, no results
+
+
+# ---------------------------------------------------------------------- Ctrl-C
+def test_the_first_ctrl_c_asks_to_stop_and_the_second_aborts(capsys):
+    from experiments.running import loop
+
+    request = loop.StopRequest()
+    assert not request.requested
+    request()  # the first Ctrl-C: a request, no exception
+    assert request.requested and "stopping after the current chunk" in capsys.readouterr().err
+    with pytest.raises(KeyboardInterrupt):
+        request()  # the second: abort now
+
+
+def test_the_handler_is_installed_for_a_run_and_restored_after_and_the_loop_checks_it():
+    import signal
+
+    from experiments.running import loop
+
+    before = signal.getsignal(signal.SIGINT)
+    sizes = []
+    with loop.interruptible() as request:
+        assert signal.getsignal(signal.SIGINT) is request and not loop.stop_requested()
+        for n in loop.chunk_sizes(0, 10, 2, [None]):
+            sizes.append(n)
+            if len(sizes) == 2:
+                request()  # Ctrl-C during the second chunk: it ends, no third starts
+    assert sizes == [2, 2]
+    assert signal.getsignal(signal.SIGINT) is before and not loop.stop_requested()
+    assert list(loop.chunk_sizes(0, 10, 2, [None])) == [2] * 5  # no run in progress, nothing asked
+
+
+def test_a_second_ctrl_c_is_one_line_with_status_130(capsys):
+    from experiments import errors
+
+    @dataclasses.dataclass
+    class Args:
+        x: int = 0
+
+    def main(args):
+        raise KeyboardInterrupt
+
+    line = cli_error(lambda argv: errors.run_cli(Args, main, argv), [], capsys, code=130)
+    assert "interrupted (Ctrl-C)" in line and "--resume" in line
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_a_run_after_its_chunk_checkpointed_and_resume_finishes_it(tmp_path, capsys, monkeypatch):
+    """A tiny train run (4 updates, chunks of 2) whose stop flag is set as a first Ctrl-C
+    sets it, during the first chunk: it stops after that chunk, checkpointed, says so, and
+    --resume trains it to the end."""
+    import contextlib
+
+    from experiments import rundir, train
+    from experiments.running import loop
+    from experiments.running.run import Run
+
+    real_interruptible, real_record = loop.interruptible, Run.record
+
+    @contextlib.contextmanager
+    def ctrl_c_in_the_first_chunk():
+        with real_interruptible() as request:
+
+            def record(self, *args, **kwargs):
+                request()  # as the SIGINT handler does on a first Ctrl-C
+                real_record(self, *args, **kwargs)
+
+            with monkeypatch.context() as m:
+                m.setattr(Run, "record", record)
+                yield request
+
+    monkeypatch.setattr(loop, "interruptible", ctrl_c_in_the_first_chunk)
+    out = tmp_path / "run"
+    capsys.readouterr()
+    assert train.main(train.Args(method="a3c", preset="tiny", out=out, progress=False)) == {"stopped_at": 2}
+    assert "interrupted at update 2; continue with --resume" in capsys.readouterr().out
+    assert rundir.checkpoint_at(out, 2).is_dir() and rundir.read_progress(out)["done"] == 2
+    assert not (out / rundir.RESULTS_FILE).exists()
+    monkeypatch.setattr(loop, "interruptible", real_interruptible)
+    train.main(train.Args(out=out, resume=True, progress=False))
+    assert rundir.read_results(out)["updates"] == 4 and (out / "results_test.json").is_file()

@@ -19,6 +19,8 @@ from typing import Annotated, Optional
 
 import tyro
 
+from experiments.errors import UserError
+
 # What a run trains: the preset's values, unless given.
 NumUpdates = Annotated[
     Optional[int],
@@ -72,7 +74,8 @@ StopAfterChunks = Annotated[
     tyro.conf.arg(
         help=(
             "Stop (as if killed) after this many chunks trained by this invocation (paper: by each of its sweeps); "
-            "for testing --resume."
+            "for testing --resume. At least 1 (sweep, tune, paper: 0 trains nothing, e.g. only takes what --reuse "
+            "finished). Ctrl-C does the same after the current chunk (a second Ctrl-C aborts at once)."
         )
     ),
 ]
@@ -91,3 +94,14 @@ AllowLarge = Annotated[
 # neither these nor resume and overwrite (`rundir.write_started_args`), and takes them
 # from the resuming invocation (`rundir.resumed_args`).
 INVOCATION = ("stop_after_chunks", "progress", "allow_large")
+
+
+def check_stop_after_chunks(value: Optional[int], least: int = 1) -> None:
+    """A one-line UserError, before anything is written, for a --stop-after-chunks below
+    `least` (train: 1, a run that trains nothing would only write an empty folder; sweep,
+    tune and paper: 0, which takes what --reuse finished and trains nothing)."""
+    if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < least):
+        what = "train at least one chunk" if least == 1 else "0 trains nothing"
+        raise UserError(
+            f"--stop-after-chunks must be >= {least} ({what}), got {value!r}; leave it out to train to the end"
+        )

@@ -3,7 +3,8 @@ chunks: learn, check, validate and select, record, checkpoint):
 
     resume_point       where a resumed run continues: its newest intact checkpoint
     chunk_sizes        the chunks from where the run stands to its end, while the
-                       invocation's chunk budget (--stop-after-chunks) lasts
+                       invocation's chunk budget (--stop-after-chunks) lasts and no stop
+                       was asked for (Ctrl-C: `interruptible`, `StopRequest`)
     check              a chunk's metrics and state before anything of it is recorded: stop,
                        naming the update and the seed, on a non-finite loss or parameter;
                        warn of divergence short of NaN
@@ -11,7 +12,10 @@ chunks: learn, check, validate and select, record, checkpoint):
 
 from __future__ import annotations
 
+import contextlib
+import signal
 import sys
+import threading
 from pathlib import Path
 from typing import Iterator, NamedTuple, Optional, Sequence
 
@@ -121,13 +125,63 @@ def kept_checkpoint(manager, folder: Path) -> str:
     return f"its last checkpoint (update {step}, finite) is kept in {folder}"
 
 
+class StopRequest:
+    """Ctrl-C during a run, as a flag: called as the SIGINT handler (`interruptible`), the
+    first call sets `requested` (the run loop stops after the chunk it is in, checkpointed:
+    `chunk_sizes`), a second raises KeyboardInterrupt (abort at once; the programs print
+    it as one line, `errors.run_cli`)."""
+
+    def __init__(self):
+        self.requested = False
+
+    def __call__(self, signum=None, frame=None) -> None:
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+        print(
+            "\nCtrl-C: stopping after the current chunk, which is checkpointed (press Ctrl-C again to abort now)",
+            file=sys.stderr,
+            flush=True,
+        )
+
+
+_STOP: Optional[StopRequest] = None  # the stop request of the run in progress (`interruptible`)
+
+
+@contextlib.contextmanager
+def interruptible() -> Iterator[StopRequest]:
+    """For the duration of a run: a `StopRequest`, installed as the SIGINT handler (in the
+    main thread; elsewhere only the flag) and as the one `chunk_sizes` checks; the handler
+    and the request before are restored after."""
+    global _STOP
+    request, outer = StopRequest(), _STOP
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, request) if main else None
+    _STOP = request
+    try:
+        yield request
+    finally:
+        _STOP = outer
+        if main:
+            signal.signal(signal.SIGINT, signal.SIG_DFL if previous is None else previous)
+
+
+def stop_requested() -> bool:
+    """Whether a stop was asked for in the run in progress (a first Ctrl-C)."""
+    return _STOP is not None and _STOP.requested
+
+
 def chunk_sizes(done: int, total: int, chunk_updates: int, budget: Optional[list] = None) -> Iterator[int]:
     """The sizes of the chunks that train from update `done` to `total`, `chunk_updates`
     each (the last one what remains), while `budget` lasts: a one-item list of the chunks
     this invocation may still run ([None]: no limit; a sweep's arms share it), one spent
-    each time the loop's body over a chunk has returned."""
+    each time the loop's body over a chunk has returned; and until a stop is asked for
+    (`stop_requested`: a first Ctrl-C), checked before each chunk, so after the last one's
+    checkpoint."""
     while done < total:
         if budget is not None and budget[0] is not None and budget[0] <= 0:
+            return
+        if stop_requested():
             return
         n = min(chunk_updates, total - done)
         yield n

@@ -23,6 +23,7 @@ takes arms other sweeps of the same protocol finished (`reuse_sources`), seed by
 from __future__ import annotations
 
 import dataclasses
+import os
 import shutil
 import sys
 import time
@@ -43,7 +44,7 @@ from experiments.reporting.report import (
     table_markdown,
 )
 from experiments import rundir
-from experiments.running import checkpoint, devices, flags, numerics, selection
+from experiments.running import checkpoint, devices, flags, loop, numerics, selection
 from experiments.running.run import Run, check_continuable, set_aside
 from experiments.running.presets import (
     MAX_EPISODES,
@@ -362,6 +363,16 @@ def check(spec: Sweep, allow_large: bool = False) -> None:
         raise errors.UserError(f"--seeds must be >= 1, got {spec.seeds}")
     if not spec.methods:
         raise errors.UserError("--methods needs at least one method")
+    for method in spec.methods:  # each arm is a folder, methods/<arm>: its name must be one
+        size = len(os.fsencode(method))
+        if size > rundir.NAME_MAX:
+            raise errors.UserError(
+                f"the arm {method[:40]}... is {size} bytes, longer than the {rundir.NAME_MAX} a folder name can have "
+                "(each arm is the folder methods/<arm>); shorten it, e.g. drop the fields at the preset's values"
+            )
+        if "/" in method or method in (".", ".."):
+            raise errors.UserError(f"the arm {method!r} cannot be a folder name (methods/<arm>); write it without '/'")
+        rundir.check_path(rundir.arm_folder(spec.out, method))
     for first, again in duplicate_arms(spec.methods):  # the same arm however it is spelt (`normalise_arm`)
         if first == again:
             raise errors.UserError(f"--methods lists {first} more than once; list each arm once")
@@ -494,6 +505,7 @@ def run(
     (`saved`); without it `spec.out` must be new or empty, or a sweep folder (sweep.json)
     to replace with `overwrite` (`rundir.prepare_run_dir`); `allow_large` runs past
     `presets.check_sizes`'s bounds."""
+    flags.check_stop_after_chunks(stop_after_chunks, least=0)
     check(spec, allow_large)
     sources = reuse_sources(spec)
     out = spec.out
@@ -523,14 +535,19 @@ def run(
     bar = progress_bar(config.num_updates * len(spec.methods), 0, progress)
     t0 = time.time()
     results, curves, budget = {}, {}, [stop_after_chunks]
-    for method in spec.methods:
-        ran = run_method(method, spec, bar, evaluator, rundir.arm_folder(out, method), budget)
-        if ran is None:
-            bar(0, None)
-            print(f"stopped after {stop_after_chunks} chunks, in {method} (continue with --resume)")
-            return None
-        results[method], x, y = ran
-        curves[method] = (x, figures.smooth(y))
+    with loop.interruptible() as stop:  # a first Ctrl-C stops after the current chunk
+        for method in spec.methods:
+            ran = run_method(method, spec, bar, evaluator, rundir.arm_folder(out, method), budget)
+            if ran is None:
+                bar(0, None)
+                if stop.requested:
+                    done = (rundir.read_progress(rundir.arm_folder(out, method)) or {"done": 0})["done"]
+                    print(f"interrupted at update {done} of {method}; continue with --resume", flush=True)
+                else:
+                    print(f"stopped after {stop_after_chunks} chunks, in {method} (continue with --resume)")
+                return None
+            results[method], x, y = ran
+            curves[method] = (x, figures.smooth(y))
     bar(0, None)
     md, rows = report(spec, results)
     (out / "table1.md").write_text(md)
