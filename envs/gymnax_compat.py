@@ -27,7 +27,10 @@ What it returns is what ``gymnax.make`` returns for one of gymnax's own environm
   - ``"auto"``: the installed gymnax's convention (six values from gymnax 1.0 on, five
     before it or without it: ``installed_step_api()``).
 
-  The default is ``"done"`` whatever is installed, and it warns of nothing.
+  The default is ``"done"`` whatever is installed, and nothing is warned of. gymnax 1.x's
+  own wrappers (``gymnax.wrappers.purerl.LogWrapper``, ``FlattenObservationWrapper``)
+  unpack six values: wrap ``make_gymnax("GridNav-v0", step_api="terminated_truncated")``
+  with them (the default five-value env fails their unpacking), as docs/usage.md shows.
 
   Either way ``info`` holds GridNav's facts about the step (``success``,
   ``episode_length``, ``optimal_length``, ``room_type``, ``scene``, ``target``,
@@ -39,9 +42,11 @@ What it returns is what ``gymnax.make`` returns for one of gymnax's own environm
   which cannot be hashed), and copied as themselves (they are immutable: ``copy.deepcopy``
   of a client's config shares the bank instead of copying it, and stays the same key).
 - gymnax 1.x ``Environment``'s other members, which do not depend on what is installed:
-  ``name``, ``num_actions``, ``reset_env``, ``get_obs``; ``step_env`` (no automatic reset;
-  five values as gymnax 1.x's: ``obs, state, reward, terminated, info`` under
-  ``"terminated_truncated"``, ``obs, state, reward, done, info`` under ``"done"``);
+  ``name``, ``num_actions``, ``reset_env``, ``get_obs`` (``get_obs(state, params=None,
+  key=None)``, gymnax 1.x's signature: GridNav's observation does not depend on the key);
+  ``step_env`` (no automatic reset; five values as gymnax 1.x's: ``obs, state, reward,
+  terminated, info`` under ``"terminated_truncated"``, ``obs, state, reward, done, info``
+  under ``"done"``);
   ``is_terminated`` (always False: GridNav's episodes end by the Done action, which the
   state does not record), ``is_truncated`` (GridNav's own time limit,
   ``state.time >= params.max_steps[state.room_type]``), ``discount`` (0 where terminated,
@@ -50,13 +55,13 @@ What it returns is what ``gymnax.make`` returns for one of gymnax's own environm
 ``register_gymnax()`` adds GridNav-v0 to gymnax's registry (gymnax 1.0 and later have
 one; it returns False for an older gymnax or none), after which
 ``gymnax.make("GridNav-v0", **kwargs)`` is ``make_gymnax`` with those keywords, with the
-same defaults: ``gymnax.make("GridNav-v0")`` returns the five-value env (and warns as
-``make_gymnax`` does), ``gymnax.make("GridNav-v0", step_api="terminated_truncated")`` the
-six-value one.  rejax's string path goes through it too:
+same defaults: ``gymnax.make("GridNav-v0")`` returns the five-value env,
+``gymnax.make("GridNav-v0", step_api="terminated_truncated")`` the six-value one.
+rejax's string path goes through it too:
 ``PPO.create(env="GridNav-v0", env_params={"room_types": ["bathroom"]}, ...)`` (after
 ``envs.register_gymnax()``) calls ``gymnax.make("GridNav-v0", room_types=["bathroom"])``
 (rejax 0.1.3 passes ``env_params`` as ``gymnax.make``'s keywords), so it trains on the
-five-value env rejax unpacks; ``env_params={..., "step_api": "done"}`` silences the warning.
+five-value env rejax unpacks (leave ``step_api`` at its default there).
 ``import envs`` registers it when gymnax has been imported already; importing gymnax takes
 seconds, so ``envs`` never imports it itself.  gymnax is an optional dependency: nothing
 here needs it.
@@ -233,7 +238,10 @@ class GymnaxGridNav:
         flag = terminated | truncated if self.step_api == "done" else terminated
         return self._flat.flatten(obs, params), state, reward, flag, info
 
-    def get_obs(self, state, params=None):
+    def get_obs(self, state, params=None, key=None):
+        """The flat observation of ``state``: gymnax 1.x's ``get_obs(state, params=None,
+        key=None)`` (GridNav's observation does not depend on ``key``)."""
+        del key
         params = self.default_params if params is None else params
         return self._flat.flatten(self.gridnav.get_obs(state, params), params)
 

@@ -318,4 +318,4 @@ def main(config: DemoConfig) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main(tyro.cli(DemoConfig)))
+    sys.exit(main(tyro.cli(DemoConfig, prog="python -m experiments.demo")))

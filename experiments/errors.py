@@ -39,7 +39,7 @@ def run_cli(args_class, main, argv=None):
     import tyro
 
     argv = sys.argv[1:] if argv is None else list(argv)
-    args = tyro.cli(args_class, args=argv)
+    args = tyro.cli(args_class, args=argv, prog=program_name(args_class))
     given = _GIVEN.set(frozenset(t[2:].split("=")[0].replace("-", "_") for t in argv if t.startswith("--")))
     undo = _UNDO.set([])
     try:
@@ -161,3 +161,15 @@ def read_json(path: Path, keys: tuple[str, ...] = ()):
     if missing:
         raise UserError(f"{path} lacks {', '.join(missing)}; it was damaged after it was written")
     return value
+
+
+def program_name(args_class) -> str | None:
+    """`python -m experiments.<name>`, the usage line of a program's `--help` (tyro's `prog`;
+    without it the usage line is the module's file path), for a program whose `Args` is
+    defined in `experiments.<name>` (run as `python -m`, its module is `__main__`: its spec
+    names it); None otherwise (tyro's own)."""
+    module = getattr(args_class, "__module__", "")
+    if module == "__main__":
+        spec = getattr(sys.modules.get("__main__"), "__spec__", None)
+        module = getattr(spec, "name", "") or ""
+    return f"python -m {module}" if module.startswith("experiments.") else None

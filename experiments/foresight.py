@@ -58,8 +58,7 @@ from experiments import rundir
 class Args:
     """Measure how well a first view foresees where an unseen target is, on held-out layouts."""
 
-    setup: str = "savn"
-    """Environment setup: savn or org."""
+    setup: presets.SetupFlag = "savn"
     layout: str = "room"
     """Layout family: room or house."""
     priors: bool = False

@@ -52,7 +52,7 @@ from experiments.reporting.paper_tables import (
     GROUPS,
     SETUP_OF,
 )
-from experiments.running import devices, flags, numerics, paper_report, sweeps
+from experiments.running import devices, flags, numerics, paper_report, presets, sweeps
 from experiments import rundir
 from experiments.running.presets import split_arm
 
@@ -61,8 +61,7 @@ from experiments.running.presets import split_arm
 class Args:
     """Train the paper's methods over seeds and write its tables, figures and verdicts."""
 
-    preset: str = "quick"
-    """Preset: tiny, quick, house or paper."""
+    preset: presets.PresetFlag = "quick"
     seeds: int = 5
     """Seeds per method."""
     seed: int = 0

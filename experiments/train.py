@@ -37,7 +37,7 @@ import numpy as np
 
 from experiments import errors
 from experiments.reporting import figures, tables
-from experiments.running import flags, loop, selection, tracking
+from experiments.running import flags, loop, presets, selection, tracking
 from experiments import rundir
 from experiments.running.presets import TrainConfigFields, check_seeds, check_sizes, config_flag, given, preset
 from experiments.running.progress import progress_bar
@@ -49,15 +49,9 @@ from foresit_jax.evaluate import Evaluator
 class Args:
     """Train one ForeSIT (or baseline) agent."""
 
-    method: str = "a3c+foresit"
-    """Method: '+'-joined pieces, e.g. a3c, a3c+foresit, a3c+rnd/att/int, a3c+critic, a3c+maml, a3c+maml+foresit,
-    a3c+org, a3c+org+foresit; with Config fields of its own as METHOD@field=value,... (e.g.
-    a3c+foresit@imagination_input=encoder)."""
-    setup: str = "savn"
-    """Environment setup: savn (first setup, word-vector targets) or org (second setup, detector features)."""
-    preset: str = "quick"
-    """Preset: tiny (seconds), quick (minutes on a laptop CPU), house (quick's learner in houses),
-    paper (the paper's sizes)."""
+    method: presets.MethodFlag = "a3c+foresit"
+    setup: presets.SetupFlag = "savn"
+    preset: presets.PresetFlag = "quick"
     seed: int = 0
     """Random seed (same seed, same result, bit for bit, on the same machine)."""
     out: Path = Path("runs/x")
@@ -267,6 +261,9 @@ def report(run: Run, done: dict, evaluator, seconds: float) -> dict:
     )
     print(text)
     print(f"wrote {out}/results_test.md, results_test.json, learning_curve.png, metrics.csv ({seconds:.0f} s)")
+    note = presets.smoke_note(run.preset, run.schedule, config)  # tiny: say what its numbers are not
+    if note:
+        print(note)
     return rundir.read_json(out / "results_test.json")["results"]
 
 

@@ -37,7 +37,7 @@ from pathlib import Path
 
 from experiments import errors
 from experiments.reporting import tuning
-from experiments.running import devices, flags, sweeps
+from experiments.running import devices, flags, presets, sweeps
 from experiments import rundir
 from experiments.running.presets import SweepConfigFields, config_flag, duplicate_arms, normalise_arm, split_arm
 
@@ -46,16 +46,13 @@ from experiments.running.presets import SweepConfigFields, config_flag, duplicat
 class Args:
     """Train every method at every grid value over the same seeds, choose each method's value on validation, pair them."""
 
-    methods: tuple[str, ...] = ("a3c", "a3c+critic", "a3c+foresit")
-    """Methods (or arms, METHOD@field=value,...) to tune and compare; the first is the base."""
+    methods: presets.MethodsFlag = ("a3c", "a3c+critic", "a3c+foresit")
     grid: tuple[str, ...] = ("learning_rate=3e-4,1e-3",)
     """FIELD=V1,V2,...: a Config field and its values; several fields make their product."""
-    setup: str = "savn"
-    """Environment setup: savn or org."""
+    setup: presets.SetupFlag = "savn"
     seeds: int = 5
     """Seeds per arm (vmapped in one program)."""
-    preset: str = "quick"
-    """Preset: tiny, quick, house or paper."""
+    preset: presets.PresetFlag = "quick"
     seed: int = 0
     """Base seed: seed i is the run `train --seed <seed + i>` would make."""
     out: Path = Path("runs/tune")

@@ -436,7 +436,7 @@ def test_progress_bar_is_shared_and_without_the_bar_logs_a_line_per_chunk(capsys
     # Where a resumed run starts: no line, and not counted in the rate (tqdm's `initial`).
     for enabled in (True, False):
         capsys.readouterr()
-        advance = progress.progress_bar(total=10, initial=0, enabled=enabled)
+        advance = progress.progress_bar(total=10, initial=0, enabled=enabled, tty=True)
         advance.skip(6)
         advance.skip(4)  # never back
         assert advance.position() == 6

@@ -355,7 +355,10 @@ def config_fields(name: str, exclude: tuple[str, ...]) -> type:
     fields = [
         (
             f.name,
-            Annotated[Optional[hints[f.name]], tyro.conf.arg(help=docs.get(f.name, ""))],
+            Annotated[
+                Optional[hints[f.name]],
+                tyro.conf.arg(help=docs.get(f.name, ""), help_behavior_hint="(default: the preset's; see --preset)"),
+            ],
             dataclasses.field(default=None),
         )
         for f in dataclasses.fields(Config)
@@ -386,3 +389,72 @@ def given(fields) -> dict:
 # num_updates is a run flag (`flags.NumUpdates`: with --resume it extends a run), not one of these.
 TrainConfigFields = config_fields("TrainConfigFields", (*_NOT_FLAGS, "num_updates"))
 SweepConfigFields = config_fields("SweepConfigFields", (*_NOT_FLAGS, "num_updates"))
+
+
+# ---------------------------------------------------------------------- the programs' named flags
+def preset_values(name: str) -> str:
+    """What preset `name` sets, as --help shows it: its Config fields and its schedule."""
+    fields, schedule = PRESETS[name]
+    values = ", ".join(f"{k}={v}" for k, v in fields.items())
+    return (
+        f"{values}; chunks of {schedule.chunk_updates} updates, {schedule.val_episodes_per_room} validation and "
+        f"{schedule.test_episodes_per_room} test episodes per room type"
+    )
+
+
+_PRESET_USES = {
+    "tiny": "a smoke check in seconds: it says whether a run works, not what it learns",
+    "quick": "a result in minutes on a laptop CPU",
+    "house": "quick's learner in houses",
+    "paper": "the paper's sizes, for accelerators",
+}
+_DEFAULTS = Config()
+
+# --preset: its choices and each one's values in --help (tyro: a str shown as the choices, so that
+# a name not among them is refused in one line by `preset`, not by tyro's usage box).
+PresetFlag = Annotated[
+    str,
+    tyro.conf.arg(
+        metavar="{" + ",".join(PRESETS) + "}",
+        help="Preset, a Config and a schedule: "
+        + " | ".join(f"{name} ({_PRESET_USES.get(name, '')}): {preset_values(name)}" for name in PRESETS)
+        + f" | any field not named is Config's default (e.g. hidden_size={_DEFAULTS.hidden_size}, "
+        f"learning_rate={_DEFAULTS.learning_rate}, num_steps={_DEFAULTS.num_steps}); a flag overrides a value.",
+    ),
+]
+# --setup: the environment's two setups.
+SetupFlag = Annotated[
+    str,
+    tyro.conf.arg(
+        metavar="{savn,org}",
+        help="Environment setup: savn (the first setup: 18 categories, word-vector targets) or org (the second: "
+        "22 categories, detector features; the object-graph methods need it).",
+    ),
+]
+_METHODS_HELP = (
+    "'+'-joined pieces, one of: " + ", ".join(IMPLEMENTED_METHODS) + "; or an arm, a method with Config fields of "
+    "its own, METHOD@field=value,... (e.g. a3c+foresit@imagination_input=encoder)"
+)
+# --method (train): one method or arm; the choices are in the help, not the type, so that an arm is accepted.
+MethodFlag = Annotated[str, tyro.conf.arg(metavar="METHOD[@FIELD=VALUE,...]", help=f"Method: {_METHODS_HELP}.")]
+# --methods (sweep, tune): several, the first the base.
+MethodsFlag = Annotated[
+    tuple[str, ...],
+    tyro.conf.arg(
+        metavar="METHOD[@FIELD=VALUE,...] ...",
+        help=f"Methods (or arms) to compare, the first the base: each {_METHODS_HELP}.",
+    ),
+]
+
+
+def smoke_note(name: str, schedule: Schedule, config: Config) -> str | None:
+    """What a run of preset `name` is, for its report to say, when it is a smoke check
+    (`tiny`: its few updates and episodes tell whether a run works, not what it learns);
+    None for the presets that give a result."""
+    if name != "tiny":
+        return None
+    return (
+        f"this is a smoke check (preset tiny: {config.num_updates} updates, {schedule.test_episodes_per_room} test "
+        "episodes per room type): it shows that training runs, not what the agent learns; for a result run "
+        "--preset quick (minutes on a laptop CPU)"
+    )

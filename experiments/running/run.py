@@ -414,7 +414,7 @@ class Run:
             {
                 **({"method": self.label} if self.label else {}),
                 "useful fps": f"{useful / (time.time() - chunk.started):,.0f}",
-                "SR": f"{metrics['charts/success_rate'].mean():.3f}",
+                "SR": f"{100 * metrics['charts/success_rate'].mean():.1f}%",  # in percent, as everywhere
                 "val SR": f"{np.mean([v['SR'] for v in validations]):.1f}%",
                 **({"warning": "diverging"} if chunk.warning else {}),
             },

@@ -44,7 +44,7 @@ from experiments.reporting.report import (
     table_markdown,
 )
 from experiments import rundir
-from experiments.running import checkpoint, devices, flags, loop, numerics, selection
+from experiments.running import checkpoint, devices, flags, loop, numerics, presets, selection
 from experiments.running.run import Run, check_continuable, set_aside
 from experiments.running.presets import (
     MAX_EPISODES,
@@ -68,16 +68,11 @@ class Sweep:
     it (`rundir.write_started_args`), and the programs that read a sweep folder (probe,
     failures, paper) read it back (`saved`)."""
 
-    methods: tuple[str, ...] = ("a3c", "a3c+foresit")
-    """Methods to compare ('+'-joined pieces, see foresit_jax.methods), or arms: a method
-    with Config fields of its own, METHOD@field=value,... (e.g.
-    a3c+foresit@imagination_input=encoder; experiments.running.presets.split_arm)."""
-    setup: str = "savn"
-    """Environment setup: savn or org (the object-graph methods need org)."""
+    methods: presets.MethodsFlag = ("a3c", "a3c+foresit")
+    setup: presets.SetupFlag = "savn"
     seeds: int = 5
     """Seeds per method (vmapped in one program)."""
-    preset: str = "quick"
-    """Preset: tiny, quick, house or paper."""
+    preset: presets.PresetFlag = "quick"
     seed: int = 0
     """Base seed: seed i of a method is the run `train --seed <seed + i>` would make."""
     out: Path = Path("runs/sweep")
