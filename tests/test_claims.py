@@ -14,7 +14,23 @@ are worded"), held by a test:
 
 Words in quotes or code are mentions, not verdicts; `EXEMPT` lists the uses that are not
 verdicts. `OVERREACHES` are sentences an independent read found saying more than their
-intervals (issue 68), each of which the rule must refuse."""
+intervals (issue 68), each of which the rule must refuse.
+
+Hand prose describes and never judges (issue 81): outside the generated blocks (what
+`python -m experiments.regenerate` writes from the archives, skipped here), a sentence that
+names an arm, a pair, a metric or an imagination term (`TERMS`)
+
+- says no synonym of a verdict (`SYNONYMS`: "adds nothing", "the same", "little", "no gain",
+  "no ceiling", "does not help", "does not matter"): the rule's own words, with their
+  interval, or none;
+- makes no causal claim (`CAUSAL`: "because", "the cause", "explains", "why"), unless it is
+  labelled as a reading ("a reading, not measured"), and then it carries no verdict word
+  and no interval;
+- quotes a registry comparison's interval under its own metric (an SR interval is not SPL's).
+
+A plan (docs/plans/) is a committed record: only its appended "Status" section is held to
+these. `MUST_FAIL` are sentences of every kind above, written for this test, each of which
+the check must refuse; `MUST_PASS` are descriptions it must leave alone."""
 
 import re
 from pathlib import Path
@@ -59,7 +75,10 @@ LEXICON = re.compile(
     re.I,
 )
 # What makes a sentence a verdict: it names an arm, a pair, a ceiling or a metric.
-SUBJECT = re.compile(r"\b(?:a3c[\w+@=.,-]*|foresit|oracle|critic|ceiling|pairs?|SR|SPL|compass\w*|optaction)\b", re.I)
+SUBJECT = re.compile(
+    r"\b(?:a3c[\w+@=.,-]*|foresit|oracle|critic|ceilings?|pairs?|SR|SPL|compass\w*|optaction|imagination|goal views?)\b",
+    re.I,
+)
 SECTION_LINK = re.compile(r"\]\([^)\s]*#[^)\s]+\)")
 # Mentions, not verdicts: quoted or in code.
 MENTION = re.compile(r'"[^"]*"|`[^`]*`|\*\*"[^"]*"\*\*')
@@ -199,6 +218,170 @@ def problems(text: str) -> list[str]:
     return [f"{v}: {s.strip()[:160]}" for s in sentences(text, rows=True) for v in checks(s)]
 
 
+# ---------------------------------------------------------------------- issue 81: describe, never judge
+GENERATED = re.compile(r"<!-- generated: (?P<name>[\w-]+) .*?-->.*?<!-- end generated: (?P=name) -->", re.S)
+# What names an arm, a pair, a metric or an imagination term.
+TERMS = re.compile(
+    r"\b(?:a3c[\w+@=.,-]*|foresit|oracle|critic|ceilings?|pairs?|arms?|SR|SPL|compass\w*|imagination|imagined?|"
+    r"goal views?|polic(?:y|ies)|f_w)\b",
+    re.I,
+)
+# Synonyms of a verdict: the rule's words, with their interval, say it instead.
+SYNONYMS = re.compile(
+    r"\b(?:adds? nothing|add(?:s|ed)? little|carr(?:y|ies|ied) little|little|no gain|no ceiling|"
+    r"(?:does|do|did) not (?:help|matter)|(?:is|are|was|were|be|stays?|remains?|looks?|ends?) (?:about |much |nearly "
+    r"|exactly )?the same(?: as\b| (?:on|in|at|for|across)\b|(?! \w)))",
+    re.I,
+)
+# A cause claimed: measured nowhere in this project's studies.
+CAUSAL = re.compile(r"\b(?:because|the cause|caus(?:es|ed)|explains?|explained|explanation|why)\b", re.I)
+# Not causal: the value baseline's statistic.
+NOT_CAUSAL = re.compile(r"\bexplained variance\b|\bexplains? (?:less|more|as much|about|[+-]?\d)", re.I)
+READING = re.compile(r"\breading, not measured\b", re.I)
+VERDICT_WORDS = re.compile(f"{LEXICON.pattern}|{SYNONYMS.pattern}|\\bcannot tell\\b", re.I)
+LINK_TARGET = re.compile(r"\]\([^)\s]*\)")
+
+
+def prose(text: str, name: str = "") -> str:
+    """What of a Markdown text is the authors': the generated blocks left out, and of a plan
+    (docs/plans/, a committed record) only its appended Status section."""
+    text = GENERATED.sub("", text)
+    if name.startswith("docs/plans/"):
+        status = re.search(r"^## Status\b", text, re.M)
+        text = text[status.start() :] if status else ""
+    return text
+
+
+def judging(sentence: str) -> list[str]:
+    """What in `sentence` judges where it should describe: a verdict's synonym or a cause in
+    a sentence that names an arm, a pair, a metric or an imagination term; in a sentence
+    labelled as a reading, any verdict word or interval."""
+    plain = LINK_TARGET.sub("]", MENTION.sub(lambda m: " " * len(m.group(0)), sentence))
+    plain = NOT_CAUSAL.sub(lambda m: " " * len(m.group(0)), plain)
+    if not TERMS.search(plain):
+        return []
+    if READING.search(plain):
+        words = [w.group(0) for w in VERDICT_WORDS.finditer(plain)]
+        out = [f"{w!r} in a sentence labelled as a reading" for w in words]
+        return out + [
+            f"{m.group(0)!r}: an interval in a sentence labelled as a reading" for m in INTERVAL.finditer(plain)
+        ]
+    out = [
+        f"{w.group(0)!r} is a verdict's synonym: say what the rule gives, with its interval"
+        for w in SYNONYMS.finditer(plain)
+    ]
+    out += [f"{w.group(0)!r} claims a cause: label it as a reading, not measured" for w in CAUSAL.finditer(plain)]
+    return out
+
+
+METRIC_AFTER = re.compile(r"\s*(SR|SPL)\b")
+METRIC_BEFORE = re.compile(r"\b(SR|SPL)\b[^\[\]\d+-]{0,12}$")
+
+
+def metric_swaps(sentence: str, known: dict[str, set[str]]) -> list[str]:
+    """Each interval of `sentence` that is a registry comparison's figures for one metric
+    (`known`: "+4.4 [+1.9, +6.8]" -> {"SPL"}) but is quoted under the other."""
+    out = []
+    for m in INTERVAL.finditer(sentence):
+        metrics = known.get(m.group(0))
+        if not metrics:
+            continue
+        after = METRIC_AFTER.match(sentence, m.end())
+        before = METRIC_BEFORE.search(sentence[: m.start()])
+        said = after.group(1) if after else before.group(1) if before else None
+        if said and said not in metrics:
+            out.append(f"{m.group(0)} is {'/'.join(sorted(metrics))}'s interval, quoted as {said}'s")
+    return out
+
+
+@pytest.fixture(scope="module")
+def registry_intervals() -> dict[str, set[str]]:
+    """The figures of every comparison of experiments.reporting.registry, SR and SPL, as
+    the docs quote them: "+1.5 [-2.7, +5.8]" -> {"SR"}."""
+    from experiments.reporting import registry
+    from experiments.reporting.verdicts import verdict
+
+    archives = registry.Archives()
+    known: dict[str, set[str]] = {}
+    for c in registry.README_COMPARISONS:
+        for metric in ("SR", "SPL"):
+            other = registry.Comparison(c.label, c.scope, c.archive, c.a, c.b, metric, c.margin)
+            figures = verdict(other.differences(archives), metric, c.margin).figures()
+            known.setdefault(figures, set()).add(metric)
+    return known
+
+
+# Sentences written for this test, one or more of every kind issue 81 names; each must be refused.
+MUST_FAIL = (
+    # synonyms of a verdict
+    "Held from the start, the compass adds little through the same channel: +1.5 [-2.7, +5.8] SR.",
+    "At 3e-4 the critic and the MLP are the same (+1.1 [-1.4, +3.6] SR).",
+    "With sigma2_max=0.1 the imagination adds nothing over the critic (-0.8 [-9.8, +8.1]).",
+    "Through `head` there is no ceiling for ForeSIT to close.",
+    "Imagination does not help on long paths in houses.",
+    "What is imagined does not matter on the ORG base.",
+    "Machine-matched, the goal view gives this policy no gain at quick's budget.",
+    "The curves of the critic and the MLP are the same.",
+    # causes
+    "ForeSIT loses to its base because the critic's sub-goals are early states.",
+    "Stale memory is not the cause of the critic's SPL gap, +2.9 [+0.4, +5.5].",
+    "The key gradient explains most of the critic's cost in training.",
+    "ForeSIT does not beat its base here, and the project can say why.",
+    # a reading that judges
+    "A reading, not measured: the critic costs -4.3 [-10.9, +2.3] SR through its keys.",
+    "A reading, not measured: the imagination adds little the target does not give.",
+    # equivalence words outside the margin, direction words on an interval holding 0
+    "At 3x ForeSIT and a3c end level in SPL: +0.6 [-3.3, +4.5].",
+    "The noise-off ceiling is level with the critic's: -4.0 [-8.7, +0.7] SR.",
+    "The start compass helps in SPL: +1.5 [-2.7, +5.8].",
+)
+# An SR interval quoted for SPL, and SPL's for SR: refused by the registry's figures.
+MUST_FAIL_SWAPPED = (
+    "Held from the start, the compass gives +1.5 [-2.7, +5.8] SPL over the critic.",
+    "Held from the start, the compass gives SR +4.4 [+1.9, +6.8] over the critic.",
+)
+MUST_PASS = (
+    "The per-step compass through `encoder` gives +26.3 [+21.7, +30.9] SR over the critic: helps.",
+    "At 3e-4, a3c+critic - a3c is +1.1 [-1.4, +3.6] SR, level within 3.8.",
+    "Held from the start, the compass gives +1.5 [-2.7, +5.8] SR (cannot tell, MDE 5.7) and +4.4 [+1.9, +6.8] SPL.",
+    "The plan's rule 3 chose `head` by 0.1 points of mean validation SR; `head` alone went on to 3x.",
+    "The critic's explained variance is 0.563, and its baseline explains less of the returns' variance.",
+    "Both arms ran on the same seeds, the same machine and the same test episodes.",
+    "A reading, not measured: a bearing taken at the start goes stale because the agent turns and moves.",
+    'By the plan\'s rule 1 this is read as "less than the per-step compass", not as "no ceiling".',
+    "The budget was measured next (Study 5), for that [reason](mechanism.md#why-the-attention-critic-costs).",
+)
+
+
+@pytest.mark.parametrize("sentence", MUST_FAIL, ids=range(len(MUST_FAIL)))
+def test_each_judging_sentence_written_for_the_check_is_refused(sentence):
+    assert problems(sentence) + [v for s in sentences(sentence) for v in judging(s)], sentence
+
+
+@pytest.mark.parametrize("sentence", MUST_FAIL_SWAPPED, ids=range(len(MUST_FAIL_SWAPPED)))
+def test_an_interval_quoted_under_the_other_metric_is_refused(sentence, registry_intervals):
+    assert metric_swaps(sentence, registry_intervals), sentence
+
+
+@pytest.mark.parametrize("sentence", MUST_PASS, ids=range(len(MUST_PASS)))
+def test_descriptions_pass(sentence, registry_intervals):
+    found = [v for s in sentences(sentence) for v in judging(s) + metric_swaps(s, registry_intervals)]
+    assert problems(sentence) + found == [], found
+
+
+@pytest.mark.parametrize("name", CLAIM_FILES)
+def test_hand_prose_describes_and_never_judges(name, registry_intervals):
+    path = REPO / name
+    if not path.exists():
+        pytest.skip(f"{name} is not there")
+    bad = [
+        f"{v}: {s.strip()[:160]}"
+        for s in sentences(prose(path.read_text(), name), rows=True)
+        for v in judging(s) + metric_swaps(s, registry_intervals)
+    ]
+    assert not bad, f"{name}: prose that judges (issue 81; say what was run, or label a reading):\n" + "\n".join(bad)
+
+
 @pytest.mark.parametrize("sentence", OVERREACHES, ids=range(len(OVERREACHES)))
 def test_each_quoted_overreach_fails_the_rule_when_put_back(sentence):
     assert problems(sentence)
@@ -226,7 +409,7 @@ def test_every_claim_sentence_follows_the_rule(name):
     path = REPO / name
     if not path.exists():
         pytest.skip(f"{name} is not there")
-    bad = problems(path.read_text())
+    bad = problems(GENERATED.sub("", path.read_text()))
     assert not bad, f"{name}: words stronger than their intervals (docs/results.md's rule):\n" + "\n".join(bad)
 
 
@@ -243,8 +426,17 @@ def slug(heading: str) -> str:
 
 
 def anchors(path: Path) -> set[str]:
+    """A page's headings' anchors, and its `<a id="...">` tags: a heading that moves keeps its
+    old anchor as a tag above it (issue 81)."""
     text = re.sub(r"```.*?```", "", path.read_text(), flags=re.S)
-    return {slug(line) for line in text.splitlines() if line.startswith("#")}
+    kept = set(re.findall(r'<a id="([^"]+)"></a>', text))
+    return {slug(line) for line in text.splitlines() if line.startswith("#")} | kept
+
+
+def test_a_kept_anchor_resolves(tmp_path):
+    page = tmp_path / "page.md"
+    page.write_text('<a id="old-name"></a>\n\n## New name\n')
+    assert anchors(page) == {"old-name", "new-name"}
 
 
 def test_slugs_are_githubs():
