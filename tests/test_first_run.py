@@ -139,7 +139,7 @@ def test_the_gymnax_docstring_speaks_of_no_warning_and_keeps_the_default():
 def test_usage_gives_the_step_api_recipe_for_gymnaxs_own_wrappers():
     text = (ROOT / "docs" / "usage.md").read_text()
     assert "from gymnax.wrappers.purerl import LogWrapper" in text
-    assert 'envs.make_gymnax("GridNav-v0", step_api="terminated_truncated")' in text
+    assert 'envs.make_gymnax("GridNav-v0", step_api="terminated_truncated"' in text
 
 
 @pytest.mark.slow  # compiles GridNav's reset and step under LogWrapper (~7 s on 2 cores)

@@ -79,7 +79,13 @@ StopAfterChunks = Annotated[
         )
     ),
 ]
-Progress = Annotated[bool, tyro.conf.arg(help="Show the progress bar.")]
+Progress = Annotated[
+    bool,
+    tyro.conf.arg(
+        help="Show the progress bar on a terminal; off one (stderr redirected), and with --no-progress, one plain "
+        "line per chunk instead."
+    ),
+]
 AllowLarge = Annotated[
     bool,
     tyro.conf.arg(
