@@ -327,3 +327,41 @@ def test_a_targets_diagnostics_are_shown_where_an_arm_recorded_them():
     last = [line for line in md.splitlines() if line.startswith("| a3c@aux_target=success")][-1]
     assert last.rstrip(" |").endswith("0.25 | 0.25 | 0.25")
     assert report.values([target], "charts/aux_labelled_fraction")[0] == 0.25
+
+
+def test_the_head_probes_measures_by_hand():
+    from experiments.running import target_probe as P
+
+    y = np.array([[1.0, 0.0, 0.1], [0.0, 1.0, 0.3], [-1.0, 0.0, 0.5], [0.0, -1.0, 0.7]])
+    assert P.r2(y[:, 2:], y[:, 2:]) == 1.0
+    assert P.r2(y[:, 2:], np.full((4, 1), 0.4)) == 0.0  # the mean predicts nothing
+    assert P.angular_error(y[:, :2], 3 * y[:, :2]) == pytest.approx(0.0, abs=1e-9)  # any scale
+    rotated = np.stack([-y[:, 1], y[:, 0]], axis=1)  # every bearing turned by 90 degrees
+    assert P.angular_error(y[:, :2], rotated) == pytest.approx(90.0)
+    exact = P.head_metrics("compass", y, y, None, None)
+    assert exact["learned"] and exact["r2_distance"] == 1.0 and exact["labelled_steps"] == 4
+    mean = P.head_metrics("compass", y, np.broadcast_to(y.mean(axis=0), y.shape), None, None)
+    assert not mean["learned"] and mean["r2_distance"] == 0.0
+    latents = P.head_metrics("success", y, y + 0.01, y[:2], np.ones((2, 3)))
+    assert latents["learned"] and latents["state_spread"] == 0.0 and latents["label_spread"] > 0
+    assert P.head_metrics("success", y[:0], y[:0], y[:0], y[:0]) == {"labelled_steps": 0, "learned": False}
+
+
+@pytest.mark.slow
+def test_target_probe_scores_each_arms_head_from_a_sweep(tmp_path, capsys):
+    import json
+
+    from experiments import sweep, target_probe
+
+    arms = ("a3c@aux_target=compass,aux_weight=1.0", "a3c@aux_target=goal_view,aux_weight=1.0")
+    sweep.main(sweep.Args(methods=arms, seeds=2, preset="tiny", out=tmp_path / "s", num_updates=2, progress=False))
+    with pytest.raises(ValueError, match="has no arm"):
+        target_probe.main(target_probe.Args(run=tmp_path / "s", methods=("a3c",)))
+    target_probe.main(target_probe.Args(run=tmp_path / "s", episodes=8))
+    saved = json.loads((tmp_path / "s" / "targets_probe.json").read_text())
+    assert set(saved["arms"]) == set(arms)
+    assert [s["seed"] for s in saved["arms"][arms[0]]] == [0, 1]
+    assert {"angular_error", "r2_distance"} <= set(saved["arms"][arms[0]][0])
+    assert {"r2", "label_spread", "state_spread"} <= set(saved["arms"][arms[1]][0])
+    with pytest.raises(ValueError, match="--overwrite"):
+        target_probe.main(target_probe.Args(run=tmp_path / "s", episodes=8))

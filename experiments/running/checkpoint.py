@@ -10,6 +10,7 @@ from __future__ import annotations
 import errno
 import hashlib
 import json
+import logging
 import shutil
 from pathlib import Path
 
@@ -155,10 +156,15 @@ def restore(manager, step: int, like):
 
     verify(manager, step)
     first = jax.sharding.SingleDeviceSharding(jax.local_devices()[0])
+    absl = logging.getLogger("absl")  # orbax warns that it cannot restore what it only describes here
+    level = absl.level
+    absl.setLevel(logging.ERROR)
     try:
         saved = manager.item_metadata(step).tree
     except Exception:  # no metadata to read: orbax's own error below names the checkpoint
         saved = None
+    finally:
+        absl.setLevel(level)
     abstract = jax.tree.map(
         lambda x: jax.ShapeDtypeStruct(np.shape(x), x.dtype, sharding=getattr(x, "sharding", None) or first),
         _fields_added_since(like, saved),
