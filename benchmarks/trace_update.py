@@ -199,6 +199,38 @@ def files_from_cli(method: str, preset: str = "tiny") -> CliPath:
     return CliPath(entered, reader, [f for f in config if f not in reader])
 
 
+def acting_depth(trainer, state, module: str = "rollout.py") -> list[str]:
+    """The deepest chain of `module`'s functions below `act_window` while one training
+    window is lowered, outermost first (`act_window`'s scan body first): what a reader
+    follows down one acting step. Tracing runs every branch of `lax.cond` and
+    `lax.switch`, so a branch's calls count; lambdas and comprehensions do not (a reader
+    does not leave the line for them)."""
+    deepest: list[str] = []
+
+    def tracer(frame, event, arg):
+        if event != "call" or not frame.f_code.co_filename.endswith(module) or frame.f_code.co_name.startswith("<"):
+            return None
+        chain, f = [], frame
+        while f is not None and f.f_code.co_name != "act_window":
+            if f.f_code.co_filename.endswith(module) and not f.f_code.co_name.startswith("<"):
+                chain.append(f.f_code.co_name)
+            f = f.f_back
+        if f is not None and len(chain) > len(deepest):
+            deepest[:] = chain[::-1]
+        return None
+
+    env = trainer.bind(trainer.env_params)
+    window = functools.partial(trainer.act, env=env)
+    from foresit_jax.rollout import AgentParams  # the acting record, only here
+
+    sys.settrace(tracer)
+    try:
+        jax.jit(window).lower(AgentParams(state.params, state.imagination_params), actor=state.actor, key=state.key)
+    finally:
+        sys.settrace(None)
+    return deepest
+
+
 def program_hashes(trainer, state) -> dict[str, str]:
     """Short hashes of the lowered training chunk (2 updates), evaluation rollout and
     sub-goal collection (2 windows) of `trainer` from `state`."""
@@ -224,6 +256,7 @@ def main(args: Args) -> dict:
         state = trainer.init(jax.random.PRNGKey(0))
         crossed = functions_crossed(trainer.update, state, trainer.env_params)
         report[method] = {"files": crossed, "hashes": program_hashes(trainer, state)}
+        report[method]["acting_depth"] = acting_depth(trainer, state)
         functions = sum(f for f, _ in crossed.values())
         lines = sum(n for _, n in crossed.values())
         print(
@@ -232,6 +265,8 @@ def main(args: Args) -> dict:
         )
         for name, (f, n) in crossed.items():
             print(f"  {name:18s} {f:3d} functions {n:5d} lines")
+        depth = report[method]["acting_depth"]
+        print(f"  one acting step: {len(depth)} rollout.py calls deep below act_window ({' -> '.join(depth)})")
         print("  lowered programs: " + ", ".join(f"{k} {v}" for k, v in report[method]["hashes"].items()))
         if args.cli_path:
             path = files_from_cli(method, args.preset)

@@ -1,13 +1,14 @@
 """The shape of the foresit_jax package, read from its source (ast) and, for the lazy face,
 from a fresh interpreter (issue 60; docs/design.md):
 
-* at most 6 import floors (a module with no import of the package is on floor 1; one that
-  imports modules of floor k at most is on floor k + 1), the package's __init__ importing
-  none of its modules at load (its names load lazily);
+* at most 7 import floors (`MAX_FLOORS`; a module with no import of the package is on floor
+  1; one that imports modules of floor k at most is on floor k + 1), the package's __init__
+  importing none of its modules at load (its names load lazily);
 * methods.py imports nothing of the package and config.py only methods.py, so a Config,
   a record of hyperparameters, pulls in neither jax nor the algorithm;
-* no class has more than 12 methods (properties, static methods aside, and dunders not
-  counted), and no acting entry point takes more than 8 parameters;
+* no class has more than 12 methods (`MAX_METHODS`, every function its body defines:
+  `__init__`, properties, cached properties and static methods count), and no acting entry
+  point takes more than 8 parameters (`MAX_ACTING_PARAMETERS`);
 * a method's pieces become modules in one place (`networks.build`).
 """
 
@@ -22,7 +23,7 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "foresit_jax"
 MAX_FLOORS = 7  # policy (the step) and maml (the base that builds on it) sit above rollout: docs/design.md
-MAX_METHODS = 10
+MAX_METHODS = 12  # the Trainer's 12 (0.3.0 counted 10, leaving out __init__ and run_seeds)
 MAX_ACTING_PARAMETERS = 8
 
 
@@ -128,20 +129,20 @@ def test_foresit_jax_evaluate_is_the_module_whatever_was_imported_before(before)
 
 
 def _counted_methods(cls: ast.ClassDef) -> list[str]:
-    names = []
-    for node in cls.body:
-        if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
-            continue
-        decorators = {d.id if isinstance(d, ast.Name) else getattr(d, "attr", "") for d in node.decorator_list}
-        if node.name.startswith("__") and node.name.endswith("__"):
-            continue
-        if decorators & {"property", "cached_property", "staticmethod"}:
-            continue
-        names.append(node.name)
-    return names
+    """Every function a class's body defines: methods, `__init__` and other dunders,
+    properties, cached properties, static and class methods."""
+    return [node.name for node in cls.body if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))]
 
 
-def test_no_class_has_more_than_ten_methods():
+def test_the_count_takes_in_init_and_properties():
+    cls = ast.parse(
+        "class A:\n    def __init__(self): ...\n    @property\n    def p(self): ...\n"
+        "    @functools.cached_property\n    def c(self): ...\n    @staticmethod\n    def s(): ...\n    x = 1\n"
+    ).body[0]
+    assert _counted_methods(cls) == ["__init__", "p", "c", "s"]
+
+
+def test_no_class_has_more_than_twelve_methods():
     crowded = {}
     for module in _modules():
         for node in ast.walk(_tree(module)):

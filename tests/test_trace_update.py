@@ -64,3 +64,17 @@ def test_the_path_from_the_cli_to_the_optimiser():
     assert {"experiments/running/presets.py", "foresit_jax/config.py", "foresit_jax/methods.py"} <= set(config)
     assert not set(config) & set(reader) and path.to_read == reader + config
     assert len(reader) <= 12 and len(path.to_read) <= 15  # 15 at 4b5e70b; issue 70's target is 12 (docs/design.md)
+
+
+# ForeSIT's acting step, through the lax.cond branch that renews i_tau: step, agent_step,
+# imagined_at_step, renewed, _imagine (0.3.0's docs counted 4, leaving the branch out).
+MAX_ACTING_DEPTH = 5
+
+
+@pytest.mark.slow  # the trace hook slows lowering to about 13 s
+def test_an_acting_step_is_counted_through_its_cond_branch():
+    config, _ = preset("tiny", "a3c+foresit")
+    trainer = make_trainer(config)
+    chain = trace_update.acting_depth(trainer, trainer.init(jax.random.PRNGKey(0)))
+    assert chain == ["step", "agent_step", "imagined_at_step", "renewed", "_imagine"]
+    assert len(chain) <= MAX_ACTING_DEPTH
