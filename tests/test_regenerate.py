@@ -66,3 +66,33 @@ def test_a_comparison_reads_its_seeds_in_pairs(archives):
     assert d[0] == pytest.approx(b[0]["selected"]["overall"]["SR"] - a[0]["selected"]["overall"]["SR"])  # in %
     with pytest.raises(KeyError, match="holds no arm"):
         archives.results(c.archive, "a3c+nothing")
+
+
+def test_the_targets_pilots_table_from_a_hand_made_archive(tmp_path):
+    import json
+    import tarfile
+
+    def seed(s, curve, labelled):
+        validation = [{"update": u, "SR": sr} for u, sr in curve]
+        return {"seed": s, "validation": validation, "diagnostics": {"charts/aux_labelled_fraction": labelled}}
+
+    arms = {
+        "a3c@aux_target=compass,aux_weight=0.1": [seed(10, [(500, 10.0), (1000, 30.0)], [1.0, 1.0])],  # area 20
+        "a3c@aux_target=compass,aux_weight=1.0": [seed(10, [(500, 10.0), (1000, 20.0)], [1.0, 1.0])],  # area 15
+        "a3c@aux_target=success,aux_weight=0.1": [seed(10, [(500, 5.0), (1000, 5.0)], [0.05, 0.15])],  # area 5
+        "a3c@aux_target=success,aux_weight=1.0": [seed(10, [(500, 5.0), (1000, 5.0)], [0.1, 0.2])],  # a tie: 1.0
+    }
+    for arm, results in arms.items():
+        folder = tmp_path / "pilot" / "methods" / arm
+        folder.mkdir(parents=True)
+        (folder / "results.json").write_text(json.dumps({"results": results}))
+    (tmp_path / "data").mkdir()
+    with tarfile.open(tmp_path / "data" / "targets_pilot.tar.xz", "w:xz") as tar:
+        tar.add(tmp_path / "pilot", arcname="pilot")
+    rows = registry.targets_pilot(registry.Archives(tmp_path / "data")).splitlines()[2:]
+    assert rows == [
+        "| compass | 0.1 | 20.0 | 20.0 | 100.0% | **chosen** |",
+        "| compass | 1 | 15.0 | 15.0 | 100.0% |  |",
+        "| success | 0.1 | 5.0 | 5.0 | 10.0% |  |",
+        "| success | 1 | 5.0 | 5.0 | 15.0% | **chosen** |",
+    ]

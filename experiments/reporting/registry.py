@@ -214,6 +214,10 @@ class Archives:
             self._read[archive] = arms
         return self._read[archive]
 
+    def arms(self, archive: str) -> list[str]:
+        """The arms of docs/data/`archive` that hold results, in the archive's order."""
+        return list(self._archive(archive))
+
     def results(self, archive: str, arm: str) -> list[dict]:
         """The per-seed results (results.json's "results") of `arm` in docs/data/`archive`."""
         arms = self._archive(archive)
@@ -366,6 +370,30 @@ README_COMPARISONS: tuple[Comparison, ...] = (
 
 def readme_results(archives: Archives) -> str:
     return comparisons_table(README_COMPARISONS, archives)
+
+
+def targets_pilot(archives: Archives, archive: str = "targets_pilot.tar.xz") -> str:
+    """The targets pilot's table (docs/plans/imagination_targets.md): per arm, each seed's
+    validation SR area, their mean, the share of valid steps its target labels (the mean over
+    seeds of each chunk's mean), and the weight the plan's rule chooses per target
+    (`targets_study.pilot_choice`)."""
+    from experiments.reporting import targets_study
+
+    results = {arm: archives.results(archive, arm) for arm in archives.arms(archive)}
+    chosen = set(targets_study.pilot_choice(results).values())
+    rows = []
+    for arm, per_seed in results.items():
+        target, weight = targets_study.target_of(arm)
+        areas = report.values(per_seed, report.VALIDATION_AREA)
+        labelled = [np.mean(r["diagnostics"]["charts/aux_labelled_fraction"]) for r in per_seed]
+        rows.append(
+            f"| {target} | {weight:g} | {' / '.join(f'{a:.1f}' for a in areas)} | {np.mean(areas):.1f} | "
+            f"{100 * np.mean(labelled):.1f}% | {'**chosen**' if arm in chosen else ''} |"
+        )
+    header = (
+        "| target | weight | validation SR area per seed | mean | valid steps labelled | |\n|---|---|---|---|---|---|\n"
+    )
+    return header + "\n".join(rows) + "\n"
 
 
 # The generated blocks: name -> (file, a function of the archives giving the block's text).
