@@ -64,7 +64,7 @@ STUDIES: tuple[Study, ...] = (
                 "fair_probe_noise.json",
             )
         ),
-        "tests/test_fair_study_data.py",
+        "tests/studies/test_fair_study_data.py",
         (
             "docs/results.md#fairness-each-arm-at-its-own-validated-learning-rate-5-seeds-2026-11-27",
             "docs/results.md#fairness-the-three-arms-at-3e-4-for-3x-the-budget-5-seeds-2026-11-27",
@@ -76,7 +76,7 @@ STUDIES: tuple[Study, ...] = (
         "docs/plans/replication_3x.md",
         "commands",
         ("docs/data/replication_3x.tar.xz",),
-        "tests/test_replication_data.py",
+        "tests/studies/test_replication_data.py",
         ("docs/results.md#replication-the-3x-pair-on-fresh-seeds-seeds-5-9-2026-11-29",),
     ),
     Study(
@@ -85,7 +85,7 @@ STUDIES: tuple[Study, ...] = (
         None,
         "benchmarks/reference_ppo.py",
         ("docs/data/reference_ppo_epyc.json", "docs/data/reference_ppo_h200.json"),
-        "tests/test_reference_ppo.py",
+        "tests/studies/test_reference_ppo_data.py",
         ("docs/results.md#a-reference-row-purejaxrls-ppo-on-the-same-episodes-5-seeds-2026-11-28",),
     ),
     Study(
@@ -103,7 +103,7 @@ STUDIES: tuple[Study, ...] = (
                 "priors_probe_org.json",
             )
         ),
-        "tests/test_priors.py",
+        "tests/studies/test_priors_data.py",
         ("docs/priors.md#the-papers-question-there-5-seeds-2026-11-27",),
     ),
     Study(
@@ -112,7 +112,7 @@ STUDIES: tuple[Study, ...] = (
         None,
         "commands",
         ("docs/data/house_study.tar.xz",),
-        "tests/test_house_study_data.py",
+        "tests/studies/test_house_study_data.py",
         ("docs/houses.md#does-imagination-help-on-long-paths-in-houses-the-mechanism-study-repeated",),
     ),
     Study(
@@ -121,7 +121,7 @@ STUDIES: tuple[Study, ...] = (
         None,
         "commands",
         ("docs/data/foresight_today.json", "docs/data/foresight_priors.json", "docs/data/foresight_levers.json"),
-        "tests/test_foresight.py",
+        "tests/studies/test_foresight_data.py",
         ("docs/foresight.md#the-method",),
     ),
     Study(
@@ -144,7 +144,7 @@ STUDIES: tuple[Study, ...] = (
                 "ceiling_probe_range4.json",
             )
         ),
-        "tests/test_ceiling_data.py",
+        "tests/studies/test_ceiling_data.py",
         ("docs/ceiling.md#the-oracle-imagination-privileged",),
     ),
     Study(
@@ -161,7 +161,7 @@ STUDIES: tuple[Study, ...] = (
                 "channels_rooms.tar.xz",
             )
         ),
-        "tests/test_channels_data.py",
+        "tests/studies/test_channels_data.py",
         ("docs/ceiling.md#channels-that-can-carry-it-compasses-first-issue-68-docsplansceiling_channelsmd",),
     ),
     Study(

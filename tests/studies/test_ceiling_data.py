@@ -10,7 +10,7 @@ from experiments import compare
 from experiments import rundir
 from experiments.reporting import report, stats
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def arm_row(results: dict, arm: str, label: str) -> str:

@@ -17,7 +17,7 @@ from experiments import compare, rundir
 from experiments.reporting import report, stats
 from experiments.reporting.tuning import choose, selection_sr
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 A3, A10, F = "a3c@learning_rate=3e-4", "a3c@learning_rate=1e-3", "a3c+foresit@learning_rate=3e-4"
 MARGIN = 3.8  # the paper's gain, the plan's margin for "level"
 EPYC = {"name": "AMD EPYC", "vendor": "AuthenticAMD", "family": "25", "model": "17", "isa": "avx512"}
@@ -128,7 +128,7 @@ def test_results_md_quotes_the_replication_by_the_plans_rule(replication, capsys
 
 def test_results_md_quotes_both_sets_by_the_plans_rule(replication, tmp_path, capsys):
     """Seeds 0-4 (the Xeon, docs/data/fair_3x.tar.xz, where validation chose a3c's 3e-4 too:
-    docs/data/fair_tune_3x.tar.xz, tests/test_fair_study_data.py) and seeds 5-9 (the EPYC),
+    docs/data/fair_tune_3x.tar.xz, tests/studies/test_fair_study_data.py) and seeds 5-9 (the EPYC),
     each by the rule on its own: results.md's table of the two sets and its "In brief" keep
     the exclusion of +3.8 only if both sets' best-against-best intervals exclude it (the
     README's rows are generated: tests/test_regenerate.py)."""

@@ -15,7 +15,7 @@ from experiments import compare
 from experiments.reporting import report, stats
 from experiments import rundir
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 CRITIC = "a3c+critic@learning_rate=3e-4"
 COMPASS = "a3c+compass@learning_rate=3e-4,imagination_input=encoder,sigma2_max=0"
 START = "a3c+startcompass@learning_rate=3e-4,imagination_input=encoder,sigma2_max=0"

@@ -16,7 +16,7 @@ import study_data
 from experiments import compare, rundir
 from experiments.reporting import report, stats
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 METHODS = ("a3c", "a3c+critic", "a3c+foresit")
 
 
