@@ -11,6 +11,7 @@ import numpy as np
 from envs import catalog as C
 from envs import raycast
 from envs.gridnav import EnvState
+from env_reference import bfs_distances, pose_graph
 
 
 BATCH = 64  # every batched jitted call is padded to a multiple of this (one compile each)
@@ -126,6 +127,58 @@ def index_tree(tree, i):
 
 def to_numpy(tree):
     return jax.tree.map(np.asarray, tree)
+
+
+# The oracle by the reference BFS (tests/envs/test_oracle.py; the goal view and houses use it too).
+UNREACHABLE = np.iinfo(np.int16).max
+
+
+def reference_oracle(kit, scene):
+    """For one bank scene: ({slot: {pose: distance}}, free poses [N, 4]) by the reference BFS,
+    with goal poses from a fresh ray cast (target pixel with depth <= radius)."""
+    bank = kit.bank
+    cell_type = bank["cell_type"][scene]
+    free = np.argwhere(cell_type == C.CELL_FLOOR)
+    poses = np.array([(r, c, h, z) for r, c in free for h in range(8) for z in range(2)])
+    n = len(poses)
+    grids = [np.broadcast_to(bank[k][scene], (n,) + cell_type.shape) for k in ("cell_type", "obj_cat", "obj_band")]
+    sem, depth = cast_views(*grids, poses[:, :2], poses[:, 2], poses[:, 3], view_width=kit.env.view_width)
+    in_range = depth <= kit.env.success_radius_m / C.CELL_SIZE_M
+    parents = pose_graph(cell_type)
+    out = {}
+    for slot in range(int(bank["num_targets"][scene])):
+        cat = int(bank["targets"][scene, slot])
+        seen = ((sem == C.NUM_STRUCTURAL + cat) & in_range).any((1, 2))
+        goal = {tuple(int(v) for v in p) for p in poses[seen]}
+        out[slot] = bfs_distances(cell_type, goal, parents), goal
+    return out, poses
+
+
+_ORACLES = {}
+
+
+def oracle_key(kit, scene):
+    return kit.env.setup, kit.env.layout, kit.env.priors, kit.env.view_width, int(kit.bank["numbers"][scene])
+
+
+def cached_reference_oracle(kit, scene):
+    """reference_oracle(kit, scene), computed once per session (keyed by the scene's own
+    number, not its index in the kit's bank, and by the layout family, so that banks of other
+    splits, layouts or of rooms with priors
+    never share an entry)."""
+    key = oracle_key(kit, scene)
+    if key not in _ORACLES:
+        _ORACLES[key] = reference_oracle(kit, scene)
+    return _ORACLES[key]
+
+
+def cached_oracle(kit, scene):
+    """cached_reference_oracle(kit, scene)[0]: {slot: ({pose: distance}, goal poses)}."""
+    return cached_reference_oracle(kit, scene)[0]
+
+
+def bank_pose_index(poses, grid):
+    return ((poses[:, 0] * grid + poses[:, 1]) * 8 + poses[:, 2]) * 2 + poses[:, 3]
 
 
 class Kit:

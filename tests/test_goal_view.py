@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import train_helpers as H
 
-from env_helpers import make_states
+from env_helpers import cached_oracle, make_states
 from env_reference import reference_transition
 from envs.wrappers import GoalViewWrapper
 from foresit_jax import rollout
@@ -21,7 +21,6 @@ from foresit_jax.methods import parse_method
 from foresit_jax.networks import build
 from foresit_jax.probes import shuffled
 from foresit_jax.rollout import ActOptions, AgentParams, BoundEnv
-from test_oracle import cached_oracle
 
 N = 48  # reset keys per kit
 

@@ -3,7 +3,7 @@ observations, gymnax's spaces, one fixed step convention by default, five values
 is installed, cached default params, gymnax 1.x Environment's members), checked against
 GridNav itself; and the registration with gymnax's registry.  The
 tests that need gymnax are skipped with a reason without it (CI installs it on both stacks: the dev extra on Python 3.11, without its jax cap on 3.13).
-The PPO loops over it are tests/test_envs_purejaxrl_ppo.py."""
+The PPO loops over it are tests/envs/test_purejaxrl_ppo.py."""
 
 import contextlib
 import subprocess

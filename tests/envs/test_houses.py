@@ -15,8 +15,7 @@ from envs import houses as H
 from envs import render
 from envs.gridnav import HOUSE_EVAL_TIME_LIMIT, HOUSE_TRAIN_TIME_LIMIT
 from envs.metrics import LONG_PATH_MINS, summarize
-from env_helpers import Kit, cast_views, make_states
-from test_oracle import UNREACHABLE, bank_pose_index, reference_oracle
+from env_helpers import UNREACHABLE, Kit, bank_pose_index, cast_views, make_states, reference_oracle
 
 ALL_HOUSES = [n for split in C.SPLITS for n in C.house_numbers(split)]
 

@@ -2,7 +2,8 @@
 and holding over layouts (checked by an independent reading of the grids), furniture kinds
 in the view (against the reference ray marcher), houses' room pairs, related target
 vectors, the option reaching the env, the evaluator and the bank cache.  The oracle and the
-calibration of the priors kit run in test_oracle.py and test_env_calibration.py."""
+calibration of the priors kit run in test_oracle.py and test_calibration.py (here, in
+tests/envs/); the study's figures in tests/studies/test_priors_data.py."""
 
 import hashlib
 from collections import defaultdict
@@ -216,7 +217,7 @@ def test_docs_relation_table_is_the_code():
     """docs/priors.md's relation table, row for row, is envs.priors.RELATIONS."""
     from pathlib import Path
 
-    doc = (Path(__file__).resolve().parents[1] / "docs" / "priors.md").read_text()
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "priors.md").read_text()
     band = {C.BAND_FLOOR: "on the floor, beside", C.BAND_MID: "on", C.BAND_HIGH: "high on a wall, within 2 cells of"}
     for name, rel in P.RELATIONS.items():
         rooms = sorted(
@@ -247,7 +248,7 @@ def test_the_gpu_script_runs_dry_on_a_cpu(tmp_path):
     import tarfile
     from pathlib import Path
 
-    repo = Path(__file__).resolve().parents[1]
+    repo = Path(__file__).resolve().parents[2]
     env = {
         **os.environ,
         "PRESET": "tiny",
