@@ -1,7 +1,7 @@
 """One update's loss, gradient and actions on fixed inputs, for the methods a redesign of the
 network's routes must not change (issue 70's proof): `python -m benchmarks.fixed_update
 --save tests/data/fixed_update.npz` writes them at the commit before the change, and
-tests/test_fixed_update.py compares the working tree's with that file.
+tests/agent/test_fixed_update.py compares the working tree's with that file.
 
 Fixed inputs: tiny's network (32 units) in bathrooms, 4 lanes, the Trainer's initial
 state from key 0, and its first window's acting key. What is kept per method: the window's

@@ -3,7 +3,7 @@
 "Learning for Visual Navigation by Imagining Success" (arXiv:2103.00446) on GridNav-v0.
 This is what foresit_jax's `Trainer` computes for `a3c+foresit` (packed windows, the
 replay gradient), without its speed machinery (split LSTM, fused layers, the f_w loop over
-full lanes only) and without its other methods. tests/test_example.py checks that its
+full lanes only) and without its other methods. tests/agent/test_example.py checks that its
 loss, gradient and whole update on a window equal the Trainer's.
 
 1. Networks: SAVN's encoder (one LSTM step; s_t is its hidden state), the policy head

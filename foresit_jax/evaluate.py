@@ -583,7 +583,7 @@ def evaluate_policy(
     policy_fn: `(params, carry, obs, first, key) -> (action [B], carry)`, batched over lanes
     (`base_acting(config).policy(nets)` is the agent's; see `policy_episodes` for the keys it gets);
     initial_carry: `num_lanes -> carry`. The agent's own policy gives `Evaluator.evaluate`'s
-    numbers exactly (tests/test_policy.py). The privileged `oracle` reads the goal view: its
+    numbers exactly (tests/agent/test_policy.py). The privileged `oracle` reads the goal view: its
     observations come from the environment wrapped as `rollout.acting_env` wraps it.
 
     The policy is checked on its first call (while it is traced: free at run time): it must

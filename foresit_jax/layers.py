@@ -1,5 +1,5 @@
 """Dense layers written for XLA:CPU's speed, with `nn.Dense`'s parameters (an optimisation
-of their own, tested equal to `nn.Dense` in tests/test_layers.py).
+of their own, tested equal to `nn.Dense` in tests/agent/test_layers.py).
 
 * `Dense`: `nn.Dense` (same parameters, names, initialisation) computed on a 2-D view of
   its input. Flax's Dense contracts the last axis of an input of any rank; for the

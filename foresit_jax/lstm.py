@@ -1,5 +1,5 @@
 """The LSTM cell of the encoder, split in two parts for speed (an optimisation of its own,
-tested equal to flax's `nn.OptimizedLSTMCell` in tests/test_lstm.py).
+tested equal to flax's `nn.OptimizedLSTMCell` in tests/agent/test_lstm.py).
 
 The encoder's LSTM is an `nn.OptimizedLSTMCell` (its parameters are what flax creates:
 `ii, if, ig, io` input kernels without bias, `hi, hf, hg, ho` recurrent kernels with bias).
@@ -8,7 +8,7 @@ window in one large matmul (`lstm_input_gates`), and only the recurrent part
 (`lstm_step`) runs step by step. Together they compute what `nn.OptimizedLSTMCell`
 computes: the same concatenated kernels, the same dots, the same additions in the same
 order. The parameter names are flax's: a flax upgrade that renames or reorders them
-fails `tests/test_lstm.py`, not a run.
+fails `tests/agent/test_lstm.py`, not a run.
 
 `EncoderLSTM` is the encoder's cell with this split path as its methods, which
 `ActorCritic.encode` runs: at one step (acting, on kernels made once per window by

@@ -34,7 +34,7 @@ the parameters adapt inside an episode; `Encoder`: ORG's object graph and its ev
 protocol; `ImaginationVariant`: where i_tau comes from and what f_w learns), turned into code
 in one place, `foresit_jax.networks.build` (the networks) and the functions of
 `foresit_jax.rollout` (acting) that read them; nothing outside this module tests a piece's
-name (tests/test_methods.py checks it). This module imports nothing of foresit_jax, so that
+name (tests/agent/test_methods.py checks it). This module imports nothing of foresit_jax, so that
 `Config` (which imports it alone) sits near the ground of the package.
 """
 

@@ -290,7 +290,7 @@ def make_env(config: Config, split: str = "train", room_types=None, training: bo
 # differentiable function of the parameters, as PureJaxRL's `ppo_rnn.py` does in its
 # `_loss_fn`. The environment's outputs carry no gradient, so this is the same function of
 # the parameters as the acting pass, and its gradient equals differentiating through the
-# acting scan (`gradient='through_rollout'`, the reference; tests/test_replay.py checks
+# acting scan (`gradient='through_rollout'`, the reference; tests/agent/test_train_replay.py checks
 # both agree). It is fast because the encoder up to the LSTM's input gates has no
 # recurrence: it runs once over all T x B steps of the window (a few large matmuls
 # instead of T small ones), and only the LSTM's recurrent step is sequential. Nothing is
@@ -572,7 +572,7 @@ class Trainer:
         update with the state's update count (`jax.debug.callback`; under vmap the condition
         is batched, so it is called after every update, once per seed): for a
         progress display inside a long jitted chunk. It reads a counter only, so the
-        numbers are those of a run without it (tests/test_train.py)."""
+        numbers are those of a run without it (tests/agent/test_train.py)."""
 
         def body(s, _):
             s, metrics = self.update(s, env_params)
@@ -680,7 +680,7 @@ class GridTrainer(Trainer):
         keys, rates = grid_inputs(seeds=[0, 1, 2], learning_rates=[3e-4, 1e-3])
         states, metrics = jax.jit(jax.vmap(grid.train))(keys, rates)    # [6, ...], rate-major
 
-    What it equals (tests/test_train.py, on one machine, XLA's default compile options):
+    What it equals (tests/agent/test_train.py, on one machine, XLA's default compile options):
     unvmapped, seed s at rate v trains as `Trainer(dataclasses.replace(config,
     learning_rate=v))` from `PRNGKey(s)` does, bit for bit (a3c, a3c+foresit, a3c+maml: the
     rate as an array multiplies as the constant does); vmapped over the seeds of one rate,

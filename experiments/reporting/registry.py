@@ -170,7 +170,7 @@ STUDIES: tuple[Study, ...] = (
         "docs/plans/imagination_targets.md",
         "commands",
         ("the pilot's, stage 1's and stage 2's archives, once run",),
-        "tests/test_targets.py",
+        "tests/agent/test_targets.py",
         ("docs/plans/imagination_targets.md#plan-imagination-as-a-training-target-issue-79",),
     ),
 )

@@ -17,7 +17,7 @@ from foresit_jax import rollout, targets
 from foresit_jax.config import Config
 from foresit_jax.imagination import smooth_l1
 from foresit_jax.train import Trainer, loss_and_grad_with_target
-from tests.train_helpers import assert_trees_bitwise_equal, bathroom_env, tiny_config
+from train_helpers import assert_trees_bitwise_equal, bathroom_env, tiny_config
 
 
 def window(rng, T=7, B=3, H=4):

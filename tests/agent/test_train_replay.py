@@ -1,4 +1,4 @@
-"""foresit_jax.replay: the replay gradient (re-running the modules over a window's
+"""foresit_jax.train.replayed: the replay gradient (re-running the modules over a window's
 recorded inputs, the feed-forward part batched over the whole window) against the
 reference, differentiating through the acting scan; on a window that starts in the
 middle of episodes (carried LSTM state and critic memory), holds several episodes and

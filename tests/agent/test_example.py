@@ -20,7 +20,7 @@ from foresit_jax.train import make_trainer
 # Trains the example and the Trainer side by side (about 50 s on a 2-core CPU).
 pytestmark = pytest.mark.slow
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 WARMUP, UPDATES = 20, 30
 
 

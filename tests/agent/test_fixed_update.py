@@ -13,7 +13,7 @@ import pytest
 
 from benchmarks import fixed_update as F
 
-SAVED = Path(__file__).resolve().parent / "data" / "fixed_update.npz"
+SAVED = Path(__file__).resolve().parents[1] / "data" / "fixed_update.npz"
 pytestmark = pytest.mark.slow  # ten programs compiled, about 2 minutes on a 2-core CPU
 
 

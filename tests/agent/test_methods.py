@@ -123,7 +123,7 @@ def test_no_code_outside_the_pieces_tests_a_base_or_encoder_name():
     import re
     from pathlib import Path
 
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     pattern = re.compile(r"""\.(base|encoder)\s*[!=]=|[!=]=\s*["'](maml|org|a3c|plain)["']""")
     offenders = []
     for folder in ("foresit_jax", "experiments", "examples"):  # envs knows no methods (its setups are "org" too)
