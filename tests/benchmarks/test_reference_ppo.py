@@ -1,9 +1,9 @@
 """benchmarks.reference_ppo, the docs' PPO reference row: the policy it tests acts on
 GridNav's own observations exactly as the network it trained on the flat gymnax
-observation, and the program runs end to end at a tiny size."""
+observation, and the program runs end to end at a tiny size.  (The row's figures in
+docs/results.md: tests/studies/test_reference_ppo_data.py.)"""
 
 import json
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -12,8 +12,6 @@ import pytest
 
 import envs
 from benchmarks import reference_ppo as R
-
-REPO = Path(__file__).resolve().parents[1]
 
 
 def test_the_tested_policy_sees_what_the_trained_network_saw():
