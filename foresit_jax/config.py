@@ -27,7 +27,7 @@ ATTENTION_KEY_GRADIENTS: tuple[str, ...] = ("full", "stopped")
 # The auxiliary training targets (`foresit_jax.targets`); "none": no target.
 AUX_TARGETS: tuple[str, ...] = ("none", "compass", "goal_view", "success")
 # The environment's actions (`envs.catalog.ACTIONS`, written again here: importing envs loads
-# jax, and a Config is jax-free; tests/test_user_checks.py holds the two equal).
+# jax, and a Config is jax-free; tests/experiments/test_user_checks.py holds the two equal).
 ACTIONS: tuple[str, ...] = ("MoveAhead", "RotateLeft", "RotateRight", "LookUp", "LookDown", "Done")
 
 

@@ -2,7 +2,7 @@
 a logistic regression fitted on the first views of the train split's layouts predicts the
 first turn and the target's bearing on the test split's; the gain of knowing the target
 over the view alone, with a 95% interval over the test layouts (docs/foresight.md).
-Tested on synthetic data with a planted relation and without one (tests/test_foresight.py)."""
+Tested on synthetic data with a planted relation and without one (tests/experiments/test_foresight.py)."""
 
 from __future__ import annotations
 

@@ -4,7 +4,7 @@ figures and words the docs quote (`Comparison`), each read from its archive and 
 the project's one rule (`experiments.reporting.verdicts.verdict`).
 
 Nothing here writes: `experiments.regenerate` puts what `BLOCKS` makes between the docs'
-markers, and a default-tier test (tests/test_regenerate.py) fails when the docs drift from
+markers, and a default-tier test (tests/experiments/test_regenerate.py) fails when the docs drift from
 the archives. An archive is read in place (`Archives`: the JSON members of a
 docs/data/*.tar.xz, each read once), never unpacked.
 """

@@ -66,7 +66,7 @@ def verdict(pair: dict[str, float], claim_positive: bool = True) -> str:
 # What five seeds can tell (docs/results.md): the interquartile mean and the probability of
 # improvement with stratified-bootstrap intervals, as rliable defines them (Agarwal et al.,
 # "Deep RL at the Edge of the Statistical Precipice", 2021; checked against rliable 1.2.0 in
-# tests/test_robust_stats.py; rliable is not a dependency: it ships as an sdist only and
+# tests/experiments/test_robust_stats.py; rliable is not a dependency: it ships as an sdist only and
 # needs arch < 8, pandas and seaborn, for the three functions re-derived here), Holm's correction over a declared family of comparisons, and
 # the smallest effect a paired t-test over n seeds detects with a given power.
 # Scores are [runs, tasks] arrays (a 1-D array is one task): runs are seeds, tasks are

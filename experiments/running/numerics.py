@@ -21,7 +21,7 @@ another platform says so, and reports list the platforms their methods were trai
 What is recorded (`fingerprint`) is what decides the compiled code: jax and jaxlib, the
 backend and device kind, on a CPU the processor (vendor, family, model and the widest vector
 instruction set it offers) and XLA_FLAGS, without the host device count (spreading a sweep's
-seeds over 2 host devices gives the numbers of 1: tests/test_experiments.py). Two runs with
+seeds over 2 host devices gives the numbers of 1: tests/experiments/test_sweep_cli.py). Two runs with
 equal fingerprints have given equal numbers wherever we checked; unequal ones are not known to
 differ, only not known to agree.
 """

@@ -63,7 +63,7 @@ def test_learned_loss_matches_numpy_and_is_causal_over_features():
 def test_causal_conv_is_flax_conv_with_causal_padding(dilation):
     """The same parameters (names, shapes, init values) and outputs as nn.Conv (which
     cannot be partitioned in a3c+maml's sharded seed sweep: see
-    test_experiments.test_a_sweep_spread_over_two_host_devices_equals_the_one_device_sweep)."""
+    tests/experiments/test_sweep_cli.py::test_a_sweep_spread_over_two_host_devices_equals_the_one_device_sweep)."""
     import flax.linen as nn
 
     init = learned_loss._torch_default_init(12)

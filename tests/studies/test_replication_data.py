@@ -131,7 +131,7 @@ def test_results_md_quotes_both_sets_by_the_plans_rule(replication, tmp_path, ca
     docs/data/fair_tune_3x.tar.xz, tests/studies/test_fair_study_data.py) and seeds 5-9 (the EPYC),
     each by the rule on its own: results.md's table of the two sets and its "In brief" keep
     the exclusion of +3.8 only if both sets' best-against-best intervals exclude it (the
-    README's rows are generated: tests/test_regenerate.py)."""
+    README's rows are generated: tests/experiments/test_regenerate.py)."""
     fair = study_data.unpack("fair_3x.tar.xz", tmp_path, (A3, F, "a3c+critic@learning_rate=3e-4"))
     first = compare.main(compare.Args(run=fair, pairs=(f"{A3}:{F}",)))["pairs"][f"{F} - {A3}"]
     capsys.readouterr()

@@ -35,7 +35,7 @@ from experiments import rundir
 from experiments.running.run import counts_of, initial_states, rewind
 from foresit_jax.config import Config
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 # Cheap in-process CLI calls for every test of this module (tests/conftest.py).

@@ -28,7 +28,7 @@ from experiments.running.presets import normalise_arm, preset, split_arm
 from foresit_jax.methods import parse_method
 from study_data import ARCHIVES, read_archive_json
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def cli_error(cli, argv, capsys) -> str:

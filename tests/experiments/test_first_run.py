@@ -26,7 +26,7 @@ from experiments import train as train_cli
 from experiments.running import presets, progress
 from foresit_jax.methods import IMPLEMENTED_METHODS
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 GYMNAX = gymnax_compat.installed_gymnax_version()
 
 

@@ -3,7 +3,8 @@ of a sweep write, and the one resume, extend and repair path both go through.
 
 Each test runs once on one seed (the unvmapped program train runs) and once on two (the
 vmapped program of a sweep's arm). The programs' own parts of a resume (train's metrics
-rows, a sweep's arguments) are tested in test_experiments.py and test_reliability.py.
+rows, a sweep's arguments) are tested in test_train_cli.py, test_sweep_cli.py and
+test_reliability.py.
 """
 
 from __future__ import annotations

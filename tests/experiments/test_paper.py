@@ -15,7 +15,7 @@ from envs.metrics import LENGTH_BUCKETS, bucket_label, by_length
 from experiments import paper
 from experiments.running import numerics, paper_figures
 from experiments.reporting import paper_tables
-from test_experiments import cli_error
+from cli_helpers import cli_error
 
 # The tiny report trains two methods (compile time dominates): the other rows read "not run".
 RUN = ("a3c", "a3c+foresit")
