@@ -24,7 +24,7 @@ program writes has a `.lock`, held (an OS lock, `claim`) by the one process writ
 
 A leaf: it imports nothing of the project but `experiments.errors`, so the run machinery
 (experiments/running) and the analysis that reads finished folders (experiments/reporting)
-both read the format here (tests/test_layering.py). A program's report (its tables,
+both read the format here (tests/structure/test_layering.py). A program's report (its tables,
 figures, Markdown and the JSON beside them) is named where it is written.
 """
 

@@ -232,7 +232,7 @@ class Config:
         if self.layout not in LAYOUTS:
             raise ValueError(f"layout must be one of {LAYOUTS}, got {self.layout!r}.")
         # The same check as envs.gridnav.check_perception_range, written again here because
-        # importing envs loads jax, and a Config is jax-free (tests/test_structure.py).
+        # importing envs loads jax, and a Config is jax-free (tests/structure/test_structure.py).
         if self.perception_range is not None and (
             isinstance(self.perception_range, bool)
             or not isinstance(self.perception_range, (int, float))

@@ -228,7 +228,7 @@ def patch_for_experiments(mp) -> None:
     per setup (its compiled evaluation rollouts are shared the same way), and jit compiles
     with FAST_COMPILE.
 
-    The programs import `make_trainer` and `Evaluator` at their top (tests/test_layering.py),
+    The programs import `make_trainer` and `Evaluator` at their top (tests/structure/test_layering.py),
     so each module of experiments that holds one is patched too; every such module is
     imported first, so that none imports a patched one while the patch holds and keeps it."""
     import experiments

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-PACKAGE = Path(__file__).resolve().parents[1] / "foresit_jax"
+PACKAGE = Path(__file__).resolve().parents[2] / "foresit_jax"
 MAX_FLOORS = 7  # policy (the step) and maml (the base that builds on it) sit above rollout: docs/design.md
 MAX_METHODS = 12  # the Trainer's 12 (0.3.0 counted 10, leaving out __init__ and run_seeds)
 MAX_ACTING_PARAMETERS = 8
@@ -216,7 +216,7 @@ def test_the_citation_and_the_changelog_name_the_packages_version():
     import re
     import tomllib
 
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     version = tomllib.loads((root / "pyproject.toml").read_text())["project"]["version"]
     if ".dev" in version:
         pytest.skip(f"{version} is a development version")

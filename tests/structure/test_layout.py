@@ -14,10 +14,10 @@ from experiments import errors
 from experiments.running import sweeps
 from experiments import rundir
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 PACKAGE = REPO / "experiments"
 # Every module of experiments/ is a program but the two leaves the programs, the machinery and the reporting
-# all import (tests/test_layering.py): `errors`, which they raise from, and `rundir`, the run-folder format.
+# all import (tests/structure/test_layering.py): `errors`, which they raise from, and `rundir`, the run-folder format.
 LEAVES = ("errors", "rundir")
 PROGRAMS = sorted(p.stem for p in PACKAGE.glob("*.py") if p.stem not in ("__init__", *LEAVES))
 

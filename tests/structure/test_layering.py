@@ -14,7 +14,7 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 PROJECT = ("foresit_jax", "envs", "experiments", "benchmarks")
 
 # The packages whose function-level imports are checked.

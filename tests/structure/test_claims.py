@@ -37,7 +37,7 @@ from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 CLAIM_FILES = (
     "README.md",
     "docs/results.md",
