@@ -137,6 +137,7 @@ def main(args: Args) -> dict:
         raise errors.UserError(f"--resets {args.resets}: give at least 100 starts per split")
     presets.check_seeds(args.seed)
     if args.out is not None:  # before the minutes of measuring
+        rundir.check_path(args.out)  # a name too long, a link that loops or leads nowhere
         if args.out.exists() and not args.out.is_dir():
             raise errors.UserError(f"--out {args.out} is a file, not a folder; choose another --out")
         taken = [name for name in ("foresight.md", "foresight.json") if (args.out / name).exists()]

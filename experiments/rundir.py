@@ -143,6 +143,7 @@ def sweep_results(sweep: Path) -> dict[str, list[dict]]:
     "results"), in name order; a UserError (one line) where it is no sweep folder or no arm
     has finished."""
     if not (Path(sweep) / METHODS).is_dir():
+        check_path(Path(sweep), "run folder")  # a link that loops or leads nowhere, a name too long: said so
         raise UserError(f"{sweep} is not a sweep folder (it has no {METHODS}/): give --run the folder a sweep wrote")
     found = {
         f.name: read_json(f / RESULTS_FILE, ("results",))["results"]
