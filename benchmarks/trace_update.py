@@ -39,6 +39,7 @@ import foresit_jax
 from experiments.running.presets import preset
 from foresit_jax.evaluate import Evaluator
 from foresit_jax.methods import parse_method
+from foresit_jax.rollout import AgentParams
 from foresit_jax.train import collect_subgoal_items, make_trainer
 
 
@@ -221,8 +222,6 @@ def acting_depth(trainer, state, module: str = "rollout.py") -> list[str]:
 
     env = trainer.bind(trainer.env_params)
     window = functools.partial(trainer.act, env=env)
-    from foresit_jax.rollout import AgentParams  # the acting record, only here
-
     sys.settrace(tracer)
     try:
         jax.jit(window).lower(AgentParams(state.params, state.imagination_params), actor=state.actor, key=state.key)
