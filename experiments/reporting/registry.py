@@ -20,7 +20,7 @@ from typing import Callable, Optional, Union
 import numpy as np
 
 from experiments import rundir
-from experiments.reporting import report, tuning
+from experiments.reporting import report, targets_study, tuning
 from experiments.reporting.verdicts import verdict
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -377,8 +377,6 @@ def targets_pilot(archives: Archives, archive: str = "targets_pilot.tar.xz") -> 
     validation SR area, their mean, the share of valid steps its target labels (the mean over
     seeds of each chunk's mean), and the weight the plan's rule chooses per target
     (`targets_study.pilot_choice`)."""
-    from experiments.reporting import targets_study
-
     results = {arm: archives.results(archive, arm) for arm in archives.arms(archive)}
     chosen = set(targets_study.pilot_choice(results).values())
     rows = []
