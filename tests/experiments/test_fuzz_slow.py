@@ -1,4 +1,4 @@
-"""The fuzz's slow half (issue 71; the table is tests/test_fuzz.py): damage to a trained
+"""The fuzz's slow half (issue 71; the table is tests/experiments/test_fuzz.py): damage to a trained
 run's checkpoints and files, which needs a run trained here, and refusals through a real
 subprocess (`python -m experiments.<program>`), as a user meets them.
 
@@ -30,7 +30,7 @@ from experiments import train as train_cli
 from test_fuzz import FLAGS, check_refused, fill, listing, places
 
 pytestmark = [pytest.mark.slow, pytest.mark.usefixtures("cheap_experiments")]
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
