@@ -169,9 +169,9 @@ STUDIES: tuple[Study, ...] = (
         "Which form of imagining success helps as a training target (issue 79)?",
         "docs/plans/imagination_targets.md",
         "commands",
-        ("the pilot's, stage 1's and stage 2's archives, once run",),
-        "tests/agent/test_targets.py",
-        ("docs/plans/imagination_targets.md#plan-imagination-as-a-training-target-issue-79",),
+        ("docs/data/targets_pilot.tar.xz", "stage 1's and stage 2's archives, once run"),
+        "tests/studies/test_targets_data.py",
+        ("docs/targets.md#the-pilot-each-targets-weight-seeds-10-12-1500-updates-2026-12-02",),
     ),
 )
 
@@ -380,7 +380,7 @@ def targets_pilot(archives: Archives, archive: str = "targets_pilot.tar.xz") -> 
     results = {arm: archives.results(archive, arm) for arm in archives.arms(archive)}
     chosen = set(targets_study.pilot_choice(results).values())
     rows = []
-    for arm, per_seed in results.items():
+    for arm, per_seed in sorted(results.items(), key=lambda kv: targets_study.target_of(kv[0])):
         target, weight = targets_study.target_of(arm)
         areas = report.values(per_seed, report.VALIDATION_AREA)
         labelled = [np.mean(r["diagnostics"]["charts/aux_labelled_fraction"]) for r in per_seed]
@@ -398,4 +398,5 @@ def targets_pilot(archives: Archives, archive: str = "targets_pilot.tar.xz") -> 
 BLOCKS: dict[str, tuple[str, Callable[[Archives], str]]] = {
     "studies": ("docs/studies.md", lambda archives: studies_table()),
     "readme-results": ("README.md", readme_results),
+    "targets-pilot": ("docs/targets.md", targets_pilot),
 }

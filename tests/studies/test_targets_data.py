@@ -1,0 +1,66 @@
+"""The targets study (issue 79, docs/plans/imagination_targets.md): its archives' run records
+are what the plan set, and docs/targets.md's words on the pilot follow its table (the table
+itself is a generated block: tests/experiments/test_regenerate.py)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import study_data
+
+from experiments.reporting import registry, targets_study
+
+REPO = Path(__file__).resolve().parents[2]
+PILOT = "targets_pilot.tar.xz"
+EPYC = {"name": "AMD EPYC", "vendor": "AuthenticAMD", "family": "25", "model": "17", "isa": "avx512"}
+PLAN_ARMS = [
+    f"a3c@learning_rate=3e-4,aux_target={t},aux_weight={w}"
+    for t in ("compass", "goal_view", "success")
+    for w in ("0.1", "1.0")
+]
+
+
+@pytest.fixture(scope="module")
+def pilot():
+    if not (study_data.DATA / PILOT).exists():
+        pytest.skip(f"{PILOT}: not run yet")
+    archives = registry.Archives()
+    return archives, {arm: archives.results(PILOT, arm) for arm in archives.arms(PILOT)}
+
+
+def test_the_pilot_ran_as_the_plan_says(pilot):
+    """The plan's six arms, seeds 10-12, quick, 1500 updates, rooms with priors at range 4, 3e-4;
+    every run at the pinned worktree's commit; every stretch of updates on the EPYC."""
+    jsons = study_data.read_archive_json(PILOT)
+    (sweep,) = [v for k, v in jsons.items() if k.endswith("sweep.json")]
+    assert sweep["methods"] == PLAN_ARMS
+    runs = {k.split("/")[-2]: v for k, v in jsons.items() if k.endswith("run.json")}
+    assert sorted(runs) == sorted(PLAN_ARMS)
+    for arm, run in runs.items():
+        assert [c[:7] for c in run["commits"]] == ["332b3b3"]
+        assert run["seeds"] == [10, 11, 12] and run["preset"] == "quick"
+        config = run["config"]
+        assert (config["num_updates"], config["priors"], config["perception_range"]) == (1500, True, 4.0)
+        target, weight = targets_study.target_of(arm)
+        assert (config["aux_target"], config["aux_weight"], config["learning_rate"]) == (target, weight, 3e-4)
+    for per_seed in pilot[1].values():
+        for r in per_seed:
+            assert [n["platform"]["cpu"] for n in r["numerics"]] == [EPYC] * len(r["numerics"])
+            assert [v["update"] for v in r["validation"]] == [500, 1000, 1500]
+
+
+def test_the_page_says_what_the_pilot_chose(pilot):
+    chosen = targets_study.pilot_choice(pilot[1])
+    weights = {t: targets_study.target_of(arm)[1] for t, arm in chosen.items()}
+    assert weights == {"compass": 0.1, "goal_view": 0.1, "success": 0.1}
+    page = " ".join((REPO / "docs" / "targets.md").read_text().split())
+    assert "The weights chosen: 0.1 for each of the three targets." in page
+    success = pilot[1][f"a3c@learning_rate=3e-4,aux_target=success,aux_weight={weights['success']:g}"]
+    by_chunk = np.mean([r["diagnostics"]["charts/aux_labelled_fraction"] for r in success], axis=0)
+    share = 100 * by_chunk.mean()
+    assert share < 10  # the plan's bound: success is exploratory in stage 1
+    assert f"`success` labels {share:.1f}% of the valid steps over the pilot at weight 0.1" in page
+    assert "(by chunk: {:.1f}%, {:.1f}%, {:.1f}%;".format(*(100 * by_chunk)) in page
+    assert "`success` is exploratory in stage 1, reported and outside Holm's family" in page
