@@ -49,13 +49,13 @@ def snapshot(folder: Path) -> dict:
     return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
-def cli_error(cli, argv, capsys) -> str:
-    """Run a CLI that must fail: exit status 2 and exactly one line on stderr, no traceback."""
+def cli_error(cli, argv, capsys, code: int = 2) -> str:
+    """Run a CLI that must fail: exit status `code` and exactly one line on stderr, no traceback."""
     capsys.readouterr()
     with pytest.raises(SystemExit) as exc:
         cli([str(a) for a in argv])
     err = capsys.readouterr().err
-    assert exc.value.code == 2, err
+    assert exc.value.code == code, err
     lines = [line for line in err.splitlines() if line.strip()]
     assert len(lines) == 1 and lines[0].startswith("error: "), err
     assert "Traceback" not in err

@@ -22,6 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from cli_helpers import cli_error
 
 import envs
 import train_helpers as H
@@ -50,15 +51,7 @@ def snapshot(folder: Path) -> dict:
     return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
-def one_line_error(cli, argv, capsys, code: int = 2) -> str:
-    capsys.readouterr()
-    with pytest.raises(SystemExit) as exc:
-        cli([str(a) for a in argv])
-    err = capsys.readouterr().err
-    assert exc.value.code == code, err
-    lines = [line for line in err.splitlines() if line.strip()]
-    assert len(lines) == 1 and lines[0].startswith("error: ") and "Traceback" not in err, err
-    return lines[0]
+one_line_error = cli_error  # tests/cli_helpers.py's
 
 
 @pytest.fixture(scope="module")

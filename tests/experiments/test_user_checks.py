@@ -163,16 +163,7 @@ def test_every_archived_runs_config_still_loads(archived_configs):
 
 
 # ---------------------------------------------------------------------- every check before anything is written
-def cli_error(cli, argv, capsys, code: int = 2) -> str:
-    """Run a CLI that must fail: its exit status, one `error:` line on stderr, no traceback."""
-    capsys.readouterr()
-    with pytest.raises(SystemExit) as exc:
-        cli([str(a) for a in argv])
-    err = capsys.readouterr().err
-    assert exc.value.code == code, err
-    lines = [line for line in err.splitlines() if line.strip()]
-    assert len(lines) == 1 and lines[0].startswith("error: ") and "Traceback" not in err, err
-    return lines[0]
+from cli_helpers import cli_error  # noqa: E402 (the section's helper, shared)
 
 
 @pytest.mark.parametrize("chunks", ["0", "-1"])
