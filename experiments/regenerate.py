@@ -1,10 +1,10 @@
 """Regenerate the docs' generated blocks from the archives: `python -m experiments.regenerate`
-rewrites, between each block's markers, what `experiments.reporting.registry.BLOCKS` makes
+rewrites, between each block's markers, what `experiments.reporting.pages.BLOCKS` makes
 of docs/data's archives (the studies' table, the README's Results, ...); `--check` writes
 nothing and exits 1, naming each block that differs (the drift test runs it). Prose outside
-the markers is the authors'; inside them, the registry's.
+the markers is the authors'; inside them, the pages' (from the registry's data).
 
-    <!-- generated: NAME (python -m experiments.regenerate; edit experiments/reporting/registry.py, not this block) -->
+    <!-- generated: NAME (python -m experiments.regenerate; edit experiments/reporting/pages/, not this block) -->
     ...
     <!-- end generated: NAME -->
 """
@@ -18,11 +18,10 @@ import sys
 from pathlib import Path
 
 from experiments import errors
-from experiments.reporting import registry
+from experiments.reporting import pages, registry
 
 START = (
-    "<!-- generated: {name} (python -m experiments.regenerate; edit experiments/reporting/registry.py, "
-    "not this block) -->"
+    "<!-- generated: {name} (python -m experiments.regenerate; edit experiments/reporting/pages/, not this block) -->"
 )
 END = "<!-- end generated: {name} -->"
 _BLOCK = re.compile(r"<!-- generated: (?P<name>[\w-]+) .*?-->\n(?P<body>.*?)<!-- end generated: (?P=name) -->", re.S)
@@ -49,11 +48,11 @@ def rendered(name: str, body: str) -> str:
 
 def regenerate(root: Path = registry.ROOT, archives: registry.Archives | None = None) -> dict[str, tuple[str, str]]:
     """{file: (its text now, its text with every block regenerated)} for each file that holds
-    a block of `registry.BLOCKS`. A block in the registry whose markers are missing from its
-    file, or markers naming no block of the registry, are a UserError."""
+    a block of `pages.BLOCKS`. A block whose markers are missing from its
+    file, or markers naming no block of the pages, are a UserError."""
     archives = archives or registry.Archives(root / "docs" / "data")
     by_file: dict[str, list[str]] = {}
-    for name, (file, _) in registry.BLOCKS.items():
+    for name, (file, _) in pages.BLOCKS.items():
         by_file.setdefault(file, []).append(name)
     out = {}
     for file, names in by_file.items():
@@ -67,11 +66,11 @@ def regenerate(root: Path = registry.ROOT, archives: registry.Archives | None = 
             )
         new = text
         for name in names:
-            body = registry.BLOCKS[name][1](archives)
+            body = pages.BLOCKS[name][1](archives)
             new = _BLOCK.sub(lambda m: rendered(name, body) if m["name"] == name else m[0], new)
         out[file] = (text, new)
     for path in [root / "README.md", *sorted((root / "docs").rglob("*.md"))]:
-        unknown = set(blocks_of(path.read_text())) - set(registry.BLOCKS)
+        unknown = set(blocks_of(path.read_text())) - set(pages.BLOCKS)
         if unknown:
             raise errors.UserError(f"{path.relative_to(root)}: markers of unknown block(s) {sorted(unknown)}")
     return out

@@ -3,9 +3,10 @@
 figures and words the docs quote (`Comparison`), each read from its archive and judged by
 the project's one rule (`experiments.reporting.verdicts.verdict`).
 
-Nothing here writes: `experiments.regenerate` puts what `BLOCKS` makes between the docs'
-markers, and a default-tier test (tests/experiments/test_regenerate.py) fails when the docs drift from
-the archives. An archive is read in place (`Archives`: the JSON members of a
+Nothing here writes: the pages' blocks (`experiments.reporting.pages`, one module a page)
+are made from these, `experiments.regenerate` puts them between the docs' markers, and a
+default-tier test (tests/experiments/test_regenerate.py) fails when the docs drift from the
+archives. An archive is read in place (`Archives`: the JSON members of a
 docs/data/*.tar.xz, each read once), never unpacked.
 """
 
@@ -15,12 +16,12 @@ import dataclasses
 import json
 import tarfile
 from pathlib import Path
-from typing import Callable, Optional, Union
+from typing import Optional, Union
 
 import numpy as np
 
 from experiments import rundir
-from experiments.reporting import report, targets_study, tuning
+from experiments.reporting import report, tuning
 from experiments.reporting.verdicts import verdict
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -366,37 +367,3 @@ README_COMPARISONS: tuple[Comparison, ...] = (
         section=f"{CEILING}#stage-4-the-best-channel-in-todays-rooms-quick-seeds-0-4-2026-11-29",
     ),
 )
-
-
-def readme_results(archives: Archives) -> str:
-    return comparisons_table(README_COMPARISONS, archives)
-
-
-def targets_pilot(archives: Archives, archive: str = "targets_pilot.tar.xz") -> str:
-    """The targets pilot's table (docs/plans/imagination_targets.md): per arm, each seed's
-    validation SR area, their mean, the share of valid steps its target labels (the mean over
-    seeds of each chunk's mean), and the weight the plan's rule chooses per target
-    (`targets_study.pilot_choice`)."""
-    results = {arm: archives.results(archive, arm) for arm in archives.arms(archive)}
-    chosen = set(targets_study.pilot_choice(results).values())
-    rows = []
-    for arm, per_seed in sorted(results.items(), key=lambda kv: targets_study.target_of(kv[0])):
-        target, weight = targets_study.target_of(arm)
-        areas = report.values(per_seed, report.VALIDATION_AREA)
-        labelled = [np.mean(r["diagnostics"]["charts/aux_labelled_fraction"]) for r in per_seed]
-        rows.append(
-            f"| {target} | {weight:g} | {' / '.join(f'{a:.1f}' for a in areas)} | {np.mean(areas):.1f} | "
-            f"{100 * np.mean(labelled):.1f}% | {'**chosen**' if arm in chosen else ''} |"
-        )
-    header = (
-        "| target | weight | validation SR area per seed | mean | valid steps labelled | |\n|---|---|---|---|---|---|\n"
-    )
-    return header + "\n".join(rows) + "\n"
-
-
-# The generated blocks: name -> (file, a function of the archives giving the block's text).
-BLOCKS: dict[str, tuple[str, Callable[[Archives], str]]] = {
-    "studies": ("docs/studies.md", lambda archives: studies_table()),
-    "readme-results": ("README.md", readme_results),
-    "targets-pilot": ("docs/targets.md", targets_pilot),
-}

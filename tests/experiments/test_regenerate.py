@@ -7,6 +7,7 @@ import pytest
 
 from experiments import errors, regenerate
 from experiments.reporting import registry
+from experiments.reporting.pages import targets_md
 
 ROOT = registry.ROOT
 
@@ -89,7 +90,7 @@ def test_the_targets_pilots_table_from_a_hand_made_archive(tmp_path):
     (tmp_path / "data").mkdir()
     with tarfile.open(tmp_path / "data" / "targets_pilot.tar.xz", "w:xz") as tar:
         tar.add(tmp_path / "pilot", arcname="pilot")
-    rows = registry.targets_pilot(registry.Archives(tmp_path / "data")).splitlines()[2:]
+    rows = targets_md.targets_pilot(registry.Archives(tmp_path / "data")).splitlines()[2:]
     assert rows == [
         "| compass | 0.1 | 20.0 | 20.0 | 100.0% | **chosen** |",
         "| compass | 1 | 15.0 | 15.0 | 100.0% |  |",
