@@ -1,362 +1,168 @@
-"""docs/ceiling.md's numbers are what its archived study computes (docs/data/ceiling_savn.tar.xz:
-the oracle arm and the reused critic and ForeSIT arms, without checkpoints)."""
+"""docs/ceiling.md's ceiling study (docs/data/ceiling_*.tar.xz and ceiling_probe_*.json): what
+its archives' runs record (settings, seeds, the arms each sweep reused from another, the
+selected updates) and the figures that hand prose and docs/results.md quote. Its tables,
+pairs, verdicts, shares and probes are generated blocks
+(experiments/reporting/pages/ceiling_md.py), held by the drift test
+(tests/experiments/test_regenerate.py), not recomputed here."""
 
-from pathlib import Path
+import json
+from pathlib import Path, PurePosixPath
 
 import pytest
 import study_data
 
-from experiments import compare
-from experiments import rundir
-from experiments.reporting import report, stats
+from experiments.reporting import report
+from experiments.reporting.registry import PAPER_MARGIN, STUDIES, Archives
+from experiments.reporting.verdicts import verdict
 
 REPO = Path(__file__).resolve().parents[2]
-
-
-def arm_row(results: dict, arm: str, label: str) -> str:
-    """The docs' row of one arm: SR per seed, SR and SPL as mean ± std."""
-    sr, spl = (report.values(results[arm], c) for c in ("SR", "SPL"))
-    return (
-        f"| {label} | {' / '.join(f'{x:.1f}' for x in sr)} | {sr.mean():.1f} ± {sr.std(ddof=1):.1f} | "
-        f"{spl.mean():.1f} ± {spl.std(ddof=1):.1f} |"
-    )
-
-
 CRITIC, FORESIT, ORACLE = (
     "a3c+critic@learning_rate=3e-4",
     "a3c+foresit@learning_rate=3e-4",
     "a3c+oracle@learning_rate=3e-4",
 )
-
-
-@pytest.mark.parametrize("archive", ["ceiling_savn.tar.xz", "ceiling_priors.tar.xz"])
-def test_ceiling_md_quotes_the_ceiling(tmp_path, capsys, archive):
-    root = study_data.unpack(archive, tmp_path, (CRITIC, FORESIT, ORACLE))
-    out = compare.main(
-        compare.Args(
-            run=root, pairs=(f"{CRITIC}:{ORACLE}", f"{CRITIC}:{FORESIT}"), ceiling=(f"{CRITIC}:{FORESIT}:{ORACLE}",)
-        )
-    )
-    capsys.readouterr()
-    doc = (REPO / "docs" / "ceiling.md").read_text()
-    results = rundir.sweep_results(root)
-    for arm, label in ((CRITIC, "a3c+critic"), (FORESIT, "a3c+foresit"), (ORACLE, "a3c+oracle (privileged)")):
-        assert arm_row(results, arm, label) in doc, arm_row(results, arm, label)
-    for (a, b), label in (
-        ((CRITIC, ORACLE), "the ceiling: a3c+oracle (privileged) - a3c+critic"),
-        ((CRITIC, FORESIT), "a3c+foresit - a3c+critic"),
-    ):
-        pair = out["pairs"][f"{b} - {a}"]
-        row = (
-            f"| {label} | {study_data.interval(pair['SR'])} | {study_data.interval(pair['SPL'])} | "
-            f"{pair['robust']['SR']['mde']:.1f} |"
-        )
-        assert row in doc, row
-    ceiling = out["ceiling"][f"{ORACLE} - {CRITIC}"]
-    sr = stats.paired(report.values(results[CRITIC], "SR"), report.values(results[ORACLE], "SR"))
-    flat = " ".join(doc.split())
-    assert not ceiling["SPL"]["resolved"]
-    if archive == "ceiling_savn.tar.xz":
-        assert not ceiling["SR"]["resolved"] and "ceiling not resolved" in doc
-        assert f"moves test SR by {study_data.interval(sr)} points over the critic alone" in flat
-    else:
-        share = ceiling["SR"]
-        assert share["resolved"]
-        assert f"helps by {study_data.interval(sr)} SR over the critic alone" in flat
-        assert f"{share['share']:.2f} [{share['share_low']:.2f}, {share['share_high']:.2f}]" in flat
-
-
-def test_ceiling_md_quotes_the_probe_of_the_oracle():
-    import json
-
-    seeds = json.loads((study_data.DATA / "ceiling_probe_savn.json").read_text())["methods"][ORACLE]
-    assert [r["seed"] for r in seeds] == [0, 1, 2, 3, 4]
-    trained = [r["sr"]["trained"] for r in seeds]
-    assert set(seeds[0]["sr"]) == {"trained", "noise off", "shuffled", "shuffled, noise off"}  # no f_w conditions
-    doc = (REPO / "docs" / "ceiling.md").read_text()
-    for condition, label in (
-        ("noise off", "noise off"),
-        ("shuffled", "shuffled (another episode's goal view)"),
-        ("shuffled, noise off", "shuffled, noise off"),
-    ):
-        values = [r["sr"][condition] for r in seeds]
-        s = stats.summary(values)
-        row = f"| {label} | {s['mean']:.1f} ± {s['std']:.1f} | {study_data.interval(stats.paired(trained, values))} |"
-        assert row in doc, row
-    s = stats.summary(trained)
-    assert f"| trained | {s['mean']:.1f} ± {s['std']:.1f} | |" in doc
-
-
-def test_ceiling_md_quotes_the_noise_off_oracle(tmp_path, capsys):
-    """The noise-off oracle (docs/data/ceiling_savn_noiseoff.tar.xz): its row, its ceiling over
-    the critic (not resolved) and its pair with the noisy oracle, and results.md's table of
-    why part 3 was not run."""
-    noiseoff = "a3c+oracle@learning_rate=3e-4,sigma2_max=0"
-    root = study_data.unpack("ceiling_savn_noiseoff.tar.xz", tmp_path, (CRITIC, FORESIT, ORACLE, noiseoff))
-    out = compare.main(
-        compare.Args(
-            run=root,
-            pairs=(f"{CRITIC}:{noiseoff}", f"{ORACLE}:{noiseoff}"),
-            ceiling=(f"{CRITIC}:{FORESIT}:{noiseoff}",),
-        )
-    )
-    capsys.readouterr()
-    doc = (REPO / "docs" / "ceiling.md").read_text()
-    results = rundir.sweep_results(root)
-    row = arm_row(results, noiseoff, "a3c+oracle@sigma2_max=0 (privileged)")
-    assert row in doc, row
-    for a, label in (
-        (CRITIC, "the noise-off ceiling: a3c+oracle@sigma2_max=0 - a3c+critic"),
-        (ORACLE, "a3c+oracle@sigma2_max=0 - a3c+oracle (both privileged)"),
-    ):
-        pair = out["pairs"][f"{noiseoff} - {a}"]
-        row = (
-            f"| {label} | {study_data.interval(pair['SR'])} | {study_data.interval(pair['SPL'])} | "
-            f"{pair['robust']['SR']['mde']:.1f} |"
-        )
-        assert row in doc, row
-    ceiling = out["ceiling"][f"{noiseoff} - {CRITIC}"]["SR"]
-    assert not ceiling["resolved"]
-    pair = out["pairs"][f"{noiseoff} - {CRITIC}"]
-    results_md = (REPO / "docs" / "results.md").read_text()
-    assert (
-        f"| today's rooms, the oracle without noise (`sigma2_max=0`) | {study_data.interval(pair['SR'])} | "
-        f"{pair['robust']['SR']['mde']:.1f} |"
-    ) in results_md
-    assert "| today's rooms, the oracle with Eq. 7's noise | +1.4 [-2.0, +4.7] | 4.5 |" in results_md
-    assert "| rooms with priors, the oracle with Eq. 7's noise | +4.1 [+0.2, +8.0] | 5.3 |" in results_md
-
-
 NOISEOFF = "a3c+oracle@learning_rate=3e-4,sigma2_max=0"
 
-
-@pytest.mark.parametrize(
-    "archive, methods, label, rows",
-    [
-        (
-            "ceiling_savn_epyc.tar.xz",
-            (CRITIC, ORACLE, NOISEOFF),
-            "a3c+critic, on the EPYC",
-            (
-                (
-                    ORACLE,
-                    "the ceiling: a3c+oracle (privileged) - a3c+critic",
-                    "today's rooms, machine-matched (the critic retrained on the EPYC), with the noise",
-                ),
-                (
-                    NOISEOFF,
-                    "the noise-off ceiling: a3c+oracle@sigma2_max=0 - a3c+critic",
-                    "today's rooms, machine-matched, without noise",
-                ),
-            ),
-        ),
-        (
-            "ceiling_priors_epyc.tar.xz",
-            (CRITIC, ORACLE),
-            "a3c+critic, on the EPYC, rooms with priors",
-            (
-                (
-                    ORACLE,
-                    "the ceiling in rooms with priors: a3c+oracle (privileged) - a3c+critic",
-                    "rooms with priors, machine-matched (the critic retrained on the EPYC), with the noise",
-                ),
-            ),
-        ),
-        (
-            "ceiling_priors_noiseoff.tar.xz",
-            (CRITIC, ORACLE, NOISEOFF),
-            "a3c+critic, on the EPYC, rooms with priors",
-            (
-                (
-                    NOISEOFF,
-                    "the noise-off ceiling in rooms with priors: a3c+oracle@sigma2_max=0 - a3c+critic",
-                    "rooms with priors, machine-matched, without noise",
-                ),
-            ),
-        ),
-    ],
+# each archive's arms, in its sweep's order, and the family it ran in
+SWEEPS = {
+    "ceiling_savn.tar.xz": ((CRITIC, FORESIT, ORACLE), "today"),
+    "ceiling_savn_noiseoff.tar.xz": ((CRITIC, FORESIT, ORACLE, NOISEOFF), "today"),
+    "ceiling_savn_epyc.tar.xz": ((CRITIC, ORACLE, NOISEOFF), "today"),
+    "ceiling_priors.tar.xz": ((CRITIC, FORESIT, ORACLE), "priors"),
+    "ceiling_priors_epyc.tar.xz": ((CRITIC, ORACLE), "priors"),
+    "ceiling_priors_noiseoff.tar.xz": ((CRITIC, ORACLE, NOISEOFF), "priors"),
+    "ceiling_range4.tar.xz": ((CRITIC, ORACLE), "range4"),
+    "ceiling_range4_noiseoff.tar.xz": ((CRITIC, ORACLE, NOISEOFF), "range4"),
+}
+# (the sweep that reused, the sweep it reused from, the arms copied)
+REUSED = (
+    ("ceiling_savn_noiseoff.tar.xz", "ceiling_savn.tar.xz", (CRITIC, FORESIT, ORACLE)),
+    ("ceiling_savn_epyc.tar.xz", "ceiling_savn_noiseoff.tar.xz", (ORACLE, NOISEOFF)),
+    ("ceiling_priors_epyc.tar.xz", "ceiling_priors.tar.xz", (ORACLE,)),
+    ("ceiling_priors_noiseoff.tar.xz", "ceiling_priors_epyc.tar.xz", (CRITIC, ORACLE)),
+    ("ceiling_range4_noiseoff.tar.xz", "ceiling_range4.tar.xz", (CRITIC, ORACLE)),
 )
-def test_ceiling_md_quotes_the_machine_matched_ceilings(tmp_path, capsys, archive, methods, label, rows):
-    """The critic retrained on the oracles' machine (docs/data/`archive`): its row, each
-    ceiling (none resolved), results.md's rows and the README's sentence."""
-    root = study_data.unpack(archive, tmp_path, methods)
-    out = compare.main(compare.Args(run=root, pairs=tuple(f"{CRITIC}:{arm}" for arm, _, _ in rows)))
-    capsys.readouterr()
-    doc = (REPO / "docs" / "ceiling.md").read_text()
-    results = rundir.sweep_results(root)
-    assert arm_row(results, CRITIC, label) in doc, arm_row(results, CRITIC, label)
-    results_md = (REPO / "docs" / "results.md").read_text()
-    for arm, pair_label, setting in rows:
-        pair = out["pairs"][f"{arm} - {CRITIC}"]
-        assert pair["SR"]["ci_low"] < 0 < pair["SR"]["ci_high"]  # not resolved
-        mde = f"{pair['robust']['SR']['mde']:.1f}"
-        row = f"| {pair_label} | {study_data.interval(pair['SR'])} | {study_data.interval(pair['SPL'])} | {mde} |"
-        assert row in doc, row
-        assert f"| {setting} | {study_data.interval(pair['SR'])} | {mde} |" in results_md
-    ceiling = study_data.interval(stats.paired(*(report.values(results[arm], "SR") for arm in (CRITIC, ORACLE))))
-    flat = " ".join(doc.split())
-    if "priors" in archive:
-        assert f"the ceiling becomes {ceiling}" in flat
 
 
-def test_ceiling_md_quotes_the_ceiling_at_range_4(tmp_path, capsys):
-    """The candidate family (rooms with priors, perception range 4; docs/data/ceiling_range4.tar.xz,
-    trained with the range): both arms' rows, the ceiling resolved below 0 where the docs say
-    the oracle costs, results.md's row and the README's sentence."""
-    root = study_data.unpack("ceiling_range4.tar.xz", tmp_path, (CRITIC, ORACLE))
-    results = rundir.sweep_results(root)
-    for arm in (CRITIC, ORACLE):
-        config = rundir.read_json(root / "methods" / arm / "run.json")["config"]
-        assert config["priors"] is True and config["perception_range"] == 4.0
-    out = compare.main(compare.Args(run=root, pairs=(f"{CRITIC}:{ORACLE}",)))
-    capsys.readouterr()
-    doc = (REPO / "docs" / "ceiling.md").read_text()
-    for arm, label in (
-        (CRITIC, "a3c+critic, on the EPYC, rooms with priors, range 4"),
-        (ORACLE, "a3c+oracle (privileged), on the EPYC, rooms with priors, range 4"),
-    ):
-        assert arm_row(results, arm, label) in doc, arm_row(results, arm, label)
-    pair = out["pairs"][f"{ORACLE} - {CRITIC}"]
-    assert pair["SR"]["ci_high"] < 0  # resolved, below 0: "the oracle costs"
-    mde = f"{pair['robust']['SR']['mde']:.1f}"
-    sr = study_data.interval(pair["SR"])
-    row = f"| the ceiling at range 4: a3c+oracle (privileged) - a3c+critic | {sr} | {study_data.interval(pair['SPL'])} | {mde} |"
-    assert row in doc, row
-    assert f"**Here the oracle costs**: {sr} SR" in doc
-    assert (
-        f"| rooms with priors, range 4, machine-matched, with the noise | {sr} | {mde} |"
-        in (REPO / "docs" / "results.md").read_text()
-    )
+@pytest.fixture(scope="module")
+def archives() -> Archives:
+    return Archives(study_data.DATA)
 
 
-def test_ceiling_md_quotes_the_noise_off_ceiling_at_range_4(tmp_path, capsys):
-    """The noise-off oracle in the candidate family (docs/data/ceiling_range4_noiseoff.tar.xz,
-    the critic and the noisy oracle reused, so machine-matched): its row, both pairs (neither
-    resolved, as the docs say "cannot tell"), results.md's row and the README's clause."""
-    root = study_data.unpack("ceiling_range4_noiseoff.tar.xz", tmp_path, (CRITIC, ORACLE, NOISEOFF))
-    results = rundir.sweep_results(root)
-    for arm in (CRITIC, ORACLE, NOISEOFF):
-        config = rundir.read_json(root / "methods" / arm / "run.json")["config"]
-        assert config["priors"] is True and config["perception_range"] == 4.0
-    # the reused arms are the noisy study's, seed for seed
-    noisy = rundir.sweep_results(study_data.unpack("ceiling_range4.tar.xz", tmp_path / "noisy", (CRITIC, ORACLE)))
-    for arm in (CRITIC, ORACLE):
-        assert list(report.values(results[arm], "SR")) == list(report.values(noisy[arm], "SR"))
-    out = compare.main(compare.Args(run=root, pairs=(f"{CRITIC}:{NOISEOFF}", f"{ORACLE}:{NOISEOFF}")))
-    capsys.readouterr()
-    doc = (REPO / "docs" / "ceiling.md").read_text()
-    label = "a3c+oracle@sigma2_max=0 (privileged), on the EPYC, rooms with priors, range 4"
-    assert arm_row(results, NOISEOFF, label) in doc, arm_row(results, NOISEOFF, label)
-    for a, pair_label in (
-        (CRITIC, "the noise-off ceiling at range 4: a3c+oracle@sigma2_max=0 - a3c+critic"),
-        (ORACLE, "a3c+oracle@sigma2_max=0 - a3c+oracle at range 4 (both privileged)"),
-    ):
-        pair = out["pairs"][f"{NOISEOFF} - {a}"]
-        assert pair["SR"]["ci_low"] < 0 < pair["SR"]["ci_high"]  # not resolved
-        mde = f"{pair['robust']['SR']['mde']:.1f}"
-        row = f"| {pair_label} | {study_data.interval(pair['SR'])} | {study_data.interval(pair['SPL'])} | {mde} |"
-        assert row in doc, row
-    pair = out["pairs"][f"{NOISEOFF} - {CRITIC}"]
-    sr, mde = study_data.interval(pair["SR"]), f"{pair['robust']['SR']['mde']:.1f}"
-    assert (
-        f"| rooms with priors, range 4, machine-matched, without noise | {sr} | {mde} |"
-        in (REPO / "docs" / "results.md").read_text()
-    )
-    assert "**Without the noise we cannot tell the ceiling from 0**, and its point estimate is the" in doc
-    assert f"noisy arm's: {sr} SR over the critic alone (MDE {mde})" in " ".join(doc.split())
-    # the noise's own effect, noise-off - noisy oracle, and its upper end (issue 81: once quoted
-    # as the other pair's +0.7)
-    noise = out["pairs"][f"{NOISEOFF} - {ORACLE}"]
-    quote = (
-        f"Taking Eq. 7's noise away moves the oracle by {study_data.interval(noise['SR'])} SR "
-        f"(MDE {noise['robust']['SR']['mde']:.1f}), an interval whose upper end is {study_data.signed(noise['SR']['ci_high'])}."
-    )
-    assert quote in " ".join(doc.split()), quote
+def flat(name: str = "ceiling.md") -> str:
+    return " ".join((REPO / "docs" / name).read_text().split())
 
 
-def test_ceiling_md_quotes_the_probe_at_range_4():
-    """docs/data/ceiling_probe_range4.json: each oracle arm's probe rows, and the noise-off
-    arm's shuffled condition resolved below 0 where the docs say that policy reads the goal view."""
-    import json
+def test_the_registry_names_every_archive_of_the_study():
+    (ceiling,) = [s for s in STUDIES if s.name == "ceiling"]
+    tars = {PurePosixPath(a).name for a in ceiling.archives if a.endswith(".tar.xz")}
+    assert tars == set(SWEEPS)
 
-    methods = json.loads((study_data.DATA / "ceiling_probe_range4.json").read_text())["methods"]
-    doc = (REPO / "docs" / "ceiling.md").read_text()
-    labels = {
-        "noise off": "noise off",
-        "shuffled": "shuffled (another episode's goal view)",
-        "shuffled, noise off": "shuffled, noise off",
-    }
-    for arm, name, conditions in (
-        (ORACLE, "a3c+oracle (Eq. 7's noise)", ("noise off", "shuffled", "shuffled, noise off")),
-        (NOISEOFF, "a3c+oracle@sigma2_max=0", ("shuffled",)),
-    ):
-        seeds = methods[arm]
+
+@pytest.mark.parametrize("archive", sorted(SWEEPS))
+def test_each_sweep_ran_its_arms_in_its_family_on_seeds_0_to_4(archive, archives):
+    methods, family = SWEEPS[archive]
+    records = study_data.read_archive_json(archive)
+    (sweep,) = [v for k, v in records.items() if k.endswith("/sweep.json")]
+    assert sweep["methods"] == list(methods)
+    runs = {arm: v for arm in methods for k, v in records.items() if k.endswith(f"/methods/{arm}/run.json")}
+    assert runs, f"{archive}: no arm's run record"  # an arm reused from an archive kept without it has none
+    for arm in methods:
+        assert [r["seed"] for r in archives.results(archive, arm)] == [0, 1, 2, 3, 4]
+    for arm, run in runs.items():
+        config = run["config"]
+        assert config["setup"] == "savn" and config["num_updates"] == 3000 and config["learning_rate"] == 3e-4
+        assert config["priors"] is (family != "today")
+        assert config.get("perception_range") == (4.0 if family == "range4" else None)
+        if arm == NOISEOFF:
+            assert config["sigma2_max"] == 0
+
+
+@pytest.mark.parametrize("reused, source, arms", REUSED)
+def test_a_reused_arm_is_its_source_seed_for_seed(reused, source, arms, archives):
+    for arm in arms:
+        for column in ("SR", "SPL"):
+            now, before = (report.values(archives.results(a, arm), column) for a in (reused, source))
+            assert list(now) == list(before), (reused, arm, column)
+
+
+def test_the_selected_updates_the_prose_quotes(archives):
+    """ "Every arm at 3000 updates selected its last or next-to-last checkpoint" (the
+    summary), and every seed of the range-4 arms its last ("Every seed of both arms
+    selected its last model", "Every seed again selected its last model")."""
+    for archive, (methods, _) in SWEEPS.items():
+        for arm in methods:
+            assert {r["selected_update"] for r in archives.results(archive, arm)} <= {2500, 3000}, (archive, arm)
+    for archive in ("ceiling_range4.tar.xz", "ceiling_range4_noiseoff.tar.xz"):
+        for arm in SWEEPS[archive][0]:
+            assert {r["selected_update"] for r in archives.results(archive, arm)} == {3000}
+
+
+def test_the_noise_variance_the_prose_quotes(archives):
+    """Eq. 7's variance at the end of training: "ends near 0.38" in today's rooms, "0.385 at
+    the end of training here" at range 4 (the oracle's last chunk, mean over seeds)."""
+    savn = report.values(archives.results("ceiling_savn.tar.xz", ORACLE), "charts/noise_variance")
+    range4 = report.values(archives.results("ceiling_range4.tar.xz", ORACLE), "charts/noise_variance")
+    doc = flat()
+    assert f"{savn.mean():.2f}" == "0.38" and "whose variance ends near 0.38" in doc
+    assert f"({range4.mean():.3f} at the end of training here)" in doc
+
+
+def probe(name: str) -> dict:
+    return json.loads((study_data.DATA / name).read_text())["methods"]
+
+
+def first_fifth(seeds: list[dict]) -> list[int]:
+    """Each seed's share (%) of successful episodes whose sub-goal t* falls in their first fifth."""
+    return [round(100 * r["items"]["subgoal"]["shares"][0]) for r in seeds]
+
+
+def test_the_probes_ran_their_conditions_on_seeds_0_to_4():
+    savn = probe("ceiling_probe_savn.json")
+    assert list(savn) == [ORACLE]
+    assert [r["seed"] for r in savn[ORACLE]] == [0, 1, 2, 3, 4]
+    assert set(savn[ORACLE][0]["sr"]) == {"trained", "noise off", "shuffled", "shuffled, noise off"}  # no f_w's
+    range4 = probe("ceiling_probe_range4.json")
+    assert list(range4) == [ORACLE, NOISEOFF]
+    for seeds in range4.values():
         assert [r["seed"] for r in seeds] == [0, 1, 2, 3, 4]
-        trained = [r["sr"]["trained"] for r in seeds]
-        s = stats.summary(trained)
-        assert f"| {name} | trained | {s['mean']:.1f} ± {s['std']:.1f} | |" in doc
-        for condition in conditions:
-            values = [r["sr"][condition] for r in seeds]
-            s, pair = stats.summary(values), stats.paired(trained, values)
-            row = f"| {name} | {labels[condition]} | {s['mean']:.1f} ± {s['std']:.1f} | {study_data.interval(pair)} |"
-            assert row in doc, row
-            if arm == NOISEOFF:
-                assert pair["ci_high"] < 0
-                assert f"latent lowers its SR by {study_data.interval(pair)}" in " ".join(doc.split())
     # the noise-off arm has no noise to switch off: its "noise off" condition is its trained one
-    assert [r["sr"]["noise off"] for r in methods[NOISEOFF]] == [r["sr"]["trained"] for r in methods[NOISEOFF]]
+    assert [r["sr"]["noise off"] for r in range4[NOISEOFF]] == [r["sr"]["trained"] for r in range4[NOISEOFF]]
+    # the prose's shares of early sub-goals
+    shares = first_fifth(savn[ORACLE])
+    assert f"in {min(shares)}-{max(shares)}% of episodes (the oracle run's own probe)" in flat()
+    shares = first_fifth(range4[ORACLE]) + first_fifth(range4[NOISEOFF])
+    assert f"in {min(shares)}-{max(shares)}% of episodes (the probe's 40 training windows)" in flat()
 
 
-def test_ceiling_md_quotes_the_range_4_arms_along_training(tmp_path):
-    """The validation table of "Along training" (docs/data/ceiling_range4_noiseoff.tar.xz): the
-    critic's validation SR at each checkpoint and each oracle arm's paired difference, and the
-    last checkpoint unresolved where the docs say validation cannot tell."""
-    import numpy as np
-
-    root = study_data.unpack("ceiling_range4_noiseoff.tar.xz", tmp_path, (CRITIC, ORACLE, NOISEOFF))
-    curves = {}
-    for arm in (CRITIC, ORACLE, NOISEOFF):
-        seeds = rundir.read_json(root / "methods" / arm / "results.json")["results"]
-        assert [r["seed"] for r in seeds] == [0, 1, 2, 3, 4]
-        updates = [[v["update"] for v in r["validation"]] for r in seeds]
-        assert all(u == [500, 1000, 1500, 2000, 2500, 3000] for u in updates)
-        curves[arm] = np.array([[v["SR"] for v in r["validation"]] for r in seeds])
-    doc = (REPO / "docs" / "ceiling.md").read_text()
-    above = {arm: 0 for arm in (ORACLE, NOISEOFF)}
-    for i, update in enumerate(range(500, 3001, 500)):
-        critic = curves[CRITIC][:, i]
-        pairs = [stats.paired(critic, curves[arm][:, i]) for arm in (ORACLE, NOISEOFF)]
-        row = (
-            f"| {update} | {critic.mean():.1f} ± {critic.std(ddof=1):.1f} | "
-            + " | ".join(study_data.interval(p) for p in pairs)
-            + " |"
-        )
-        assert row in doc, row
-        assert all(p["ci_high"] > 0 for p in pairs)  # "no oracle arm is behind the critic at any checkpoint"
-        if update == 3000:
-            assert all(p["ci_low"] < 0 for p in pairs)  # cannot tell at the selected model
-        for arm, p in zip((ORACLE, NOISEOFF), pairs):
-            above[arm] += p["ci_low"] > 0
-    assert above == {ORACLE: 0, NOISEOFF: 2}  # "the noise-off arm's interval lies above 0 at two of the six"
+def sr_row(archives: Archives, archive: str, a: str, b: str) -> str:
+    """B - A's SR interval and MDE as docs/results.md's rows quote them."""
+    d = report.values(archives.results(archive, b), "SR") - report.values(archives.results(archive, a), "SR")
+    v = verdict(d, "SR", PAPER_MARGIN)
+    return f"| {v.figures()} | {v.mde:.1f} |"
 
 
-def test_ceiling_md_quotes_the_machine_shift_of_the_critic():
-    """The critic trained on the EPYC against the Xeon's, the same seeds and program (each
-    family's two archives, read in place): ceiling.md's EPYC - Xeon intervals, judged by
-    experiments.reporting.verdicts (issue 81: once worded "the machine moved each seed, not
-    the mean" with no interval)."""
-    from experiments.reporting.registry import Archives
-    from experiments.reporting.verdicts import verdict
-
-    archives = Archives(study_data.DATA)
-    flat = " ".join((REPO / "docs" / "ceiling.md").read_text().split())
-    for epyc, xeon, words in (
-        ("ceiling_savn_epyc.tar.xz", "ceiling_savn.tar.xz", "EPYC - Xeon is {} SR (MDE {:.1f}), and each seed moved"),
-        ("ceiling_priors_epyc.tar.xz", "ceiling_priors.tar.xz", "EPYC - Xeon is {} SR for the critic (not resolved)"),
+def test_results_md_quotes_the_ceilings(archives):
+    """docs/results.md's table of why part 3 was not run quotes each ceiling's SR interval and MDE."""
+    results_md = (REPO / "docs" / "results.md").read_text()
+    for setting, archive, arm in (
+        ("today's rooms, the oracle with Eq. 7's noise", "ceiling_savn.tar.xz", ORACLE),
+        ("rooms with priors, the oracle with Eq. 7's noise", "ceiling_priors.tar.xz", ORACLE),
+        ("today's rooms, the oracle without noise (`sigma2_max=0`)", "ceiling_savn_noiseoff.tar.xz", NOISEOFF),
+        (
+            "today's rooms, machine-matched (the critic retrained on the EPYC), with the noise",
+            "ceiling_savn_epyc.tar.xz",
+            ORACLE,
+        ),
+        ("today's rooms, machine-matched, without noise", "ceiling_savn_epyc.tar.xz", NOISEOFF),
+        (
+            "rooms with priors, machine-matched (the critic retrained on the EPYC), with the noise",
+            "ceiling_priors_epyc.tar.xz",
+            ORACLE,
+        ),
+        ("rooms with priors, machine-matched, without noise", "ceiling_priors_noiseoff.tar.xz", NOISEOFF),
+        ("rooms with priors, range 4, machine-matched, with the noise", "ceiling_range4.tar.xz", ORACLE),
+        ("rooms with priors, range 4, machine-matched, without noise", "ceiling_range4_noiseoff.tar.xz", NOISEOFF),
     ):
-        a, b = archives.results(xeon, CRITIC), archives.results(epyc, CRITIC)
-        assert [r["seed"] for r in a] == [r["seed"] for r in b] == [0, 1, 2, 3, 4]
-        v = verdict(report.values(b, "SR") - report.values(a, "SR"), "SR", 3.8)
-        assert v.word == "cannot tell"
-        quote = words.format(v.figures(), v.mde)
-        assert quote in flat, quote
+        row = f"| {setting} {sr_row(archives, archive, CRITIC, arm)}"
+        assert row in results_md, row

@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import tarfile
+import weakref
 from typing import Sequence
 
 import numpy as np
@@ -72,22 +73,23 @@ def probe(archives: Archives, name: str) -> dict:
     return json.loads((archives.data / name).read_text())["methods"]
 
 
-_KEPT: dict[tuple[str, str], dict[str, list[dict]]] = {}
+_KEPT: "weakref.WeakKeyDictionary[Archives, dict]" = weakref.WeakKeyDictionary()
 
 
 def results_kept(archives: Archives, archive: str, updates: int) -> dict[str, list[dict]]:
     """{arm: per-seed results} of the results an extended run kept beside its own at
-    `updates` (`rundir.kept_results`), read in place from docs/data/`archive`, once."""
-    key = (str(archives.data / archive), rundir.kept_results(updates))
-    if key not in _KEPT:
+    `updates` (`rundir.kept_results`), read in place from docs/data/`archive`, once per `archives`."""
+    name = rundir.kept_results(updates)
+    kept = _KEPT.setdefault(archives, {})
+    if (archive, name) not in kept:
         arms = {}
         with tarfile.open(archives.data / archive) as tar:
             for member in tar.getmembers():
                 parts = member.name.split("/")
-                if parts[-1] == key[1] and len(parts) >= 3 and parts[-3] == rundir.METHODS:
+                if parts[-1] == name and len(parts) >= 3 and parts[-3] == rundir.METHODS:
                     arms[parts[-2]] = json.load(tar.extractfile(member))["results"]
-        _KEPT[key] = arms
-    return _KEPT[key]
+        kept[(archive, name)] = arms
+    return kept[(archive, name)]
 
 
 # ---------------------------------------------------------------------- pairs and their verdicts
@@ -111,15 +113,23 @@ def pair(label: str, archive: str, a: str, b: str) -> Pair:
     return Pair(label, (archive, a), (archive, b))
 
 
+_JUDGED: "weakref.WeakKeyDictionary[Archives, dict]" = weakref.WeakKeyDictionary()
+
+
 def judged(archives: Archives, pairs: Sequence[Pair], metric: str, family: bool = False) -> list[Verdict]:
     """Each pair's verdict on `metric` with the paper's margin; `family`: the pairs are one
-    declared family, judged with Holm's adjusted p-values."""
-    diffs = [p.differences(archives, metric) for p in pairs]
-    alone = [verdict(d, metric, PAPER_MARGIN) for d in diffs]
-    if not family or len(pairs) < 2:
-        return alone
-    adjusted = stats.holm([v.p for v in alone])
-    return [verdict(d, metric, PAPER_MARGIN, p_adjusted=float(p)) for d, p in zip(diffs, adjusted)]
+    declared family, judged with Holm's adjusted p-values. Judged once per `archives`."""
+    key = (tuple(pairs), metric, family)
+    done = _JUDGED.setdefault(archives, {})
+    if key not in done:
+        diffs = [p.differences(archives, metric) for p in pairs]
+        if not family or len(pairs) < 2:
+            done[key] = [verdict(d, metric, PAPER_MARGIN) for d in diffs]
+        else:
+            raw = [stats.paired(np.zeros(len(d)), d)["p"] for d in diffs]  # as `verdict` computes its p
+            adjusted = stats.holm(raw)
+            done[key] = [verdict(d, metric, PAPER_MARGIN, p_adjusted=float(q)) for d, q in zip(diffs, adjusted)]
+    return done[key]
 
 
 def cells(v: Verdict) -> list[str]:
@@ -159,13 +169,13 @@ def arms_table(archives: Archives, archive: str, arms: Sequence[tuple[str, str]]
     return table(["arm", "SR per seed", "SR (mean ± std)", "SPL (mean ± std)"], rows)
 
 
-def share_line(archives: Archives, archive: str, foresit: str, oracle: str) -> str:
+def share_line(archives: Archives, archive: str, foresit: str, oracle: str, name: str = "a3c+oracle") -> str:
     """The share of the ceiling (oracle - critic) a3c+foresit closes on SR, where the ceiling's
     interval excludes 0 (`stats.share_closed`, as `experiments.compare --ceiling`)."""
     base = report.values(archives.results(archive, CRITIC), "SR")
     gap, top = (report.values(archives.results(archive, arm), "SR") - base for arm in (foresit, oracle))
     share = stats.share_closed(gap, top)
-    name = "The share a3c+foresit closes, (a3c+foresit - a3c+critic) / (a3c+oracle - a3c+critic), on SR"
+    name = f"The share a3c+foresit closes, (a3c+foresit - a3c+critic) / ({name} - a3c+critic), on SR"
     if not share["resolved"]:
         return f'{name}: not defined (the ceiling\'s 95% interval holds 0: "ceiling not resolved").\n'
     return (
@@ -304,7 +314,7 @@ def ceiling_savn_noiseoff(archives: Archives) -> str:
     return joined(
         arms_table(archives, SAVN_NOISEOFF, [(NOISEOFF, "a3c+oracle@sigma2_max=0 (privileged)")]),
         SAVN_NOISEOFF_PAIRS.table(archives),
-        share_line(archives, SAVN_NOISEOFF, FORESIT, NOISEOFF),
+        share_line(archives, SAVN_NOISEOFF, FORESIT, NOISEOFF, "a3c+oracle@sigma2_max=0"),
         diagnostics_table(archives, SAVN_NOISEOFF_PAIRS.pairs[1:]),
     )
 
@@ -736,7 +746,7 @@ def ceiling_summary(archives: Archives) -> str:
     return table(header, rows)
 
 
-CEILING_BLOCKS = {
+BLOCKS = {
     "ceiling-savn": (PAGE, ceiling_savn),
     "ceiling-probe-savn": (PAGE, ceiling_probe_savn),
     "ceiling-priors": (PAGE, ceiling_priors),
@@ -749,8 +759,6 @@ CEILING_BLOCKS = {
     "ceiling-range4-along-training": (PAGE, ceiling_range4_along_training),
     "ceiling-probe-range4": (PAGE, ceiling_probe_range4),
     "ceiling-summary": (PAGE, ceiling_summary),
-}
-BLOCKS = {
     "channels-stage1": (PAGE, channels_stage1),
     "channels-stage1-validation": (PAGE, channels_stage1_validation),
     "channels-stage2": (PAGE, channels_stage2),
