@@ -51,6 +51,10 @@ def regenerate(root: Path = registry.ROOT, archives: registry.Archives | None = 
     a block of `pages.BLOCKS`. A block whose markers are missing from its
     file, or markers naming no block of the pages, are a UserError."""
     archives = archives or registry.Archives(root / "docs" / "data")
+    for path in [root / "README.md", *sorted((root / "docs").rglob("*.md"))]:  # before any block is made
+        unknown = set(blocks_of(path.read_text())) - set(pages.BLOCKS)
+        if unknown:
+            raise errors.UserError(f"{path.relative_to(root)}: markers of unknown block(s) {sorted(unknown)}")
     by_file: dict[str, list[str]] = {}
     for name, (file, _) in pages.BLOCKS.items():
         by_file.setdefault(file, []).append(name)
@@ -69,10 +73,6 @@ def regenerate(root: Path = registry.ROOT, archives: registry.Archives | None = 
             body = pages.BLOCKS[name][1](archives)
             new = _BLOCK.sub(lambda m: rendered(name, body) if m["name"] == name else m[0], new)
         out[file] = (text, new)
-    for path in [root / "README.md", *sorted((root / "docs").rglob("*.md"))]:
-        unknown = set(blocks_of(path.read_text())) - set(pages.BLOCKS)
-        if unknown:
-            raise errors.UserError(f"{path.relative_to(root)}: markers of unknown block(s) {sorted(unknown)}")
     return out
 
 

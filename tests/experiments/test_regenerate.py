@@ -46,17 +46,17 @@ def test_a_figure_changed_by_hand_is_drift_and_is_put_back(tmp_path, capsys, arc
     assert (root / "README.md").read_text() == readme
 
 
-def test_markers_the_registry_cannot_fill_are_refused(tmp_path):
+def test_markers_the_registry_cannot_fill_are_refused(tmp_path, archives):
     root = copy_of_the_docs(tmp_path)
     studies = (root / "docs" / "studies.md").read_text()
     (root / "docs" / "studies.md").write_text(studies.replace("<!-- end generated: studies -->", ""))
     with pytest.raises(errors.UserError, match="docs/studies.md has no markers for block"):
-        regenerate.regenerate(root)
+        regenerate.regenerate(root, archives)
     (root / "docs" / "studies.md").write_text(studies)
     extra = regenerate.rendered("no-such-block", "x\n")
     (root / "docs" / "usage.md").write_text((root / "docs" / "usage.md").read_text() + "\n" + extra + "\n")
     with pytest.raises(errors.UserError, match="unknown block"):
-        regenerate.regenerate(root)
+        regenerate.regenerate(root, archives)
 
 
 def test_a_comparison_reads_its_seeds_in_pairs(archives):
