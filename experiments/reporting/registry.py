@@ -7,7 +7,8 @@ Nothing here writes: the pages' blocks (`experiments.reporting.pages`, one modul
 are made from these, `experiments.regenerate` puts them between the docs' markers, and a
 default-tier test (tests/experiments/test_regenerate.py) fails when the docs drift from the
 archives. An archive is read in place (`Archives`: the JSON members of a
-docs/data/*.tar.xz, each read once), never unpacked.
+docs/data/*.tar.xz, each read once), never unpacked; an arm of it is a `Ref`, and two arms
+paired over their seeds a `Pair`.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import dataclasses
 import json
 import tarfile
 from pathlib import Path
-from typing import Optional, Union
+from typing import Any, Optional, Sequence, Union
 
 import numpy as np
 
@@ -197,34 +198,89 @@ def studies_table() -> str:
 
 # ---------------------------------------------------------------------- reading archives
 class Archives:
-    """The per-seed results of the arms of docs/data's archives, read in place: each
-    archive's arms' results files (`rundir.RESULTS_FILE` under `rundir.METHODS`), once (`results`)."""
+    """docs/data's files, read in place, each once: an archive's JSON members (every one but
+    the arms' progress files: `member`), among them its arms' per-seed results (`results`: an
+    arm's `rundir.RESULTS_FILE` under `rundir.METHODS`, or another results file it keeps
+    there, such as an extended run's `rundir.kept_results`), and docs/data's JSON files
+    (`json`; a probe's `probe`). An archive is decompressed once and a member parsed when
+    first asked for."""
 
     def __init__(self, data: Path = DATA):
         self.data = data
-        self._read: dict[str, dict[str, list[dict]]] = {}
+        self._names: dict[str, list[str]] = {}  # archive -> its JSON members, in the archive's order
+        self._raw: dict[str, dict[str, bytes]] = {}  # archive -> {member: its bytes, until parsed}
+        self._parsed: dict[str, dict[str, Any]] = {}
+        self._files: dict[str, Any] = {}
 
-    def _archive(self, archive: str) -> dict[str, list[dict]]:
-        if archive not in self._read:
-            arms = {}
+    def _members(self, archive: str) -> list[str]:
+        if archive not in self._names:
             with tarfile.open(self.data / archive) as tar:
-                for member in tar.getmembers():
-                    parts = member.name.split("/")
-                    if parts[-1] == rundir.RESULTS_FILE and len(parts) >= 3 and parts[-3] == rundir.METHODS:
-                        arms[parts[-2]] = json.load(tar.extractfile(member))["results"]
-            self._read[archive] = arms
-        return self._read[archive]
+                raw = {
+                    m.name: tar.extractfile(m).read()
+                    for m in tar.getmembers()
+                    if m.isfile() and m.name.endswith(".json") and not m.name.endswith("/progress.json")
+                }
+            self._names[archive], self._raw[archive], self._parsed[archive] = list(raw), raw, {}
+        return self._names[archive]
 
-    def arms(self, archive: str) -> list[str]:
-        """The arms of docs/data/`archive` that hold results, in the archive's order."""
-        return list(self._archive(archive))
+    def member(self, archive: str, name: str) -> Any:
+        """The JSON member `name` (its path inside the archive) of docs/data/`archive`."""
+        if name not in self._members(archive):
+            raise KeyError(f"{archive} holds no {name!r}")
+        parsed = self._parsed[archive]
+        if name not in parsed:
+            parsed[name] = json.loads(self._raw[archive].pop(name))
+        return parsed[name]
 
-    def results(self, archive: str, arm: str) -> list[dict]:
-        """The per-seed results (results.json's "results") of `arm` in docs/data/`archive`."""
-        arms = self._archive(archive)
+    def _arm_files(self, archive: str, file: str) -> dict[str, str]:
+        """{arm: its member} of the arms of `archive` that keep `file`, in the archive's order."""
+        arms: dict[str, str] = {}
+        for name in self._members(archive):
+            parts = name.split("/")
+            if parts[-1] == file and len(parts) >= 3 and parts[-3] == rundir.METHODS:
+                arms[parts[-2]] = name
+        return arms
+
+    def arms(self, archive: str, file: str = rundir.RESULTS_FILE) -> list[str]:
+        """The arms of docs/data/`archive` that hold results (`file`), in the archive's order."""
+        return list(self._arm_files(archive, file))
+
+    def results(self, archive: str, arm: str, file: str = rundir.RESULTS_FILE) -> list[dict]:
+        """The per-seed results (the file's "results") of `arm` in docs/data/`archive`:
+        results.json's, or those of another results `file` the arm keeps."""
+        arms = self._arm_files(archive, file)
         if arm not in arms:
-            raise KeyError(f"{archive} holds no arm {arm!r}; it holds {sorted(arms)}")
-        return arms[arm]
+            raise KeyError(f"{archive} holds no arm {arm!r} with {file}; it holds {sorted(arms)}")
+        return self.member(archive, arms[arm])["results"]
+
+    def sweep(self, archive: str, arms: Optional[Sequence[str]] = None) -> dict[str, list[dict]]:
+        """{arm: per-seed results} of `arms` (default: every arm) of docs/data/`archive`."""
+        return {arm: self.results(archive, arm) for arm in (self.arms(archive) if arms is None else arms)}
+
+    def json(self, name: str) -> Any:
+        """docs/data/`name`, a JSON file (a probe's, the PPO reference's, the foresight tool's)."""
+        if name not in self._files:
+            self._files[name] = json.loads((self.data / name).read_text())
+        return self._files[name]
+
+    def probe(self, name: str) -> dict[str, list[dict]]:
+        """{arm: per-seed probe} of an `experiments.probe` output kept as docs/data/`name`."""
+        return self.json(name)["methods"]
+
+
+def same_seeds(a: list[dict], b: list[dict], what: str) -> None:
+    """Refuse to pair per-seed results `a` and `b` run on other seeds (`what`: the pair, in words)."""
+    if [r["seed"] for r in a] != [r["seed"] for r in b]:
+        raise ValueError(f"{what}: not run on the same seeds")
+
+
+# The validation SR of each seed's selected model (`tuning.selection_sr`), as a metric.
+VALIDATION = "validation SR"
+
+
+def values(per_seed: list[dict], metric: str) -> np.ndarray:
+    """One value a seed: `report.values`'s columns, or the validation SR of the selected model."""
+    return tuning.selection_sr(per_seed) if metric == VALIDATION else report.values(per_seed, metric)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -235,13 +291,61 @@ class Chosen:
     candidates: tuple[str, ...]
 
 
+@dataclasses.dataclass(frozen=True)
+class Unchosen:
+    """Of two candidates, the one validation did not choose (`Chosen`'s other)."""
+
+    candidates: tuple[str, str]
+
+
 Arm = Union[str, Chosen]
 
 
-def resolve(archives: Archives, archive: str, arm: Arm) -> str:
+def resolve(archives: Archives, archive: str, arm: Union[Arm, Unchosen]) -> str:
     if isinstance(arm, str):
         return arm
-    return tuning.choose({c: archives.results(archive, c) for c in arm.candidates})
+    chosen = tuning.choose({c: archives.results(archive, c) for c in arm.candidates})
+    if isinstance(arm, Unchosen):
+        return next(c for c in arm.candidates if c != chosen)
+    return chosen
+
+
+@dataclasses.dataclass(frozen=True)
+class Ref:
+    """An arm of an archive; `file`: its results.json, or another results file it keeps (an
+    extended run's results at its first budget, `rundir.kept_results`)."""
+
+    archive: str
+    arm: Union[Arm, Unchosen]
+    file: str = rundir.RESULTS_FILE
+
+    def name(self, archives: Archives) -> str:
+        return resolve(archives, self.archive, self.arm)
+
+    def results(self, archives: Archives) -> list[dict]:
+        return archives.results(self.archive, self.name(archives), self.file)
+
+
+@dataclasses.dataclass(frozen=True)
+class Pair:
+    """B - A, paired over the seeds the two arms share (they must be the same); the two may
+    be of two archives run on the same seeds."""
+
+    a: Ref
+    b: Ref
+    label: Optional[str] = None  # default: "B - A" with the arms' names
+
+    def name(self, archives: Archives) -> str:
+        return self.label or f"{self.b.name(archives)} - {self.a.name(archives)}"
+
+    def sides(self, archives: Archives, metric: str) -> tuple[np.ndarray, np.ndarray]:
+        ra, rb = self.a.results(archives), self.b.results(archives)
+        same_seeds(ra, rb, f"{self.name(archives)} ({self.a.archive}, {self.b.archive})")
+        return values(ra, metric), values(rb, metric)
+
+    def differences(self, archives: Archives, metric: str) -> np.ndarray:
+        a, b = self.sides(archives, metric)
+        return b - a
 
 
 @dataclasses.dataclass(frozen=True)
@@ -259,11 +363,7 @@ class Comparison:
     section: str = ""  # where the docs report it ("doc.md#anchor")
 
     def differences(self, archives: Archives) -> np.ndarray:
-        a, b = (resolve(archives, self.archive, x) for x in (self.a, self.b))
-        ra, rb = archives.results(self.archive, a), archives.results(self.archive, b)
-        if [r["seed"] for r in ra] != [r["seed"] for r in rb]:
-            raise ValueError(f"{self.label}: {a} and {b} in {self.archive} were not run on the same seeds")
-        return report.values(rb, self.metric) - report.values(ra, self.metric)
+        return Pair(Ref(self.archive, self.a), Ref(self.archive, self.b), self.label).differences(archives, self.metric)
 
     def row(self, archives: Archives) -> str:
         v = verdict(self.differences(archives), self.metric, self.margin)

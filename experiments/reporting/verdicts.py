@@ -43,7 +43,7 @@ class Verdict(NamedTuple):
 
     def figures(self) -> str:
         """The mean difference and its 95% interval, "+2.1 [-1.0, +5.2]"."""
-        return f"{_signed(self.diff)} [{_signed(self.ci95[0])}, {_signed(self.ci95[1])}]"
+        return f"{signed(self.diff)} [{signed(self.ci95[0])}, {signed(self.ci95[1])}]"
 
     def words(self) -> str:
         """The words the rule gives, with what they rest on: "cannot tell (MDE 4.4)",
@@ -60,8 +60,9 @@ class Verdict(NamedTuple):
         return f"{name}, {self.metric}: {self.figures()}: {self.words()}"
 
 
-def _signed(x: float) -> str:
-    return f"{x:+.1f}".replace("+-", "-")
+def signed(x: float, digits: int = 1) -> str:
+    """`x` with its sign, "+2.1", "-0.4"."""
+    return f"{x:+.{digits}f}"
 
 
 def verdict(
