@@ -41,8 +41,8 @@ def test_a_declared_family_is_judged_with_holms_p(archives):
         ceiling_md.pair("b - base", "hand.tar.xz", "base", "b"),
         ceiling_md.pair("c - base", "hand.tar.xz", "base", "c"),
     ]
-    alone = ceiling_md.judged(archives, pairs, "SR")
-    family = ceiling_md.judged(archives, pairs, "SR", family=True)
+    alone = ceiling_md.Family(tuple(pairs)).judged(archives, "SR")
+    family = ceiling_md.Family(tuple(pairs), declared=True).judged(archives, "SR")
     raw = [stats.paired(np.zeros(5), p.differences(archives, "SR"))["p"] for p in pairs]
     assert [v.p for v in alone] == pytest.approx(raw)
     assert [v.p for v in family] == pytest.approx(list(stats.holm(raw)))

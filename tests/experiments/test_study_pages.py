@@ -1,14 +1,15 @@
 """The generated blocks of docs/priors.md, docs/houses.md and docs/foresight.md on made-up data
 (the real archives' blocks are held by tests/experiments/test_regenerate.py): the pages read
 the data folder of the `Archives` they are given, the levers' criterion names a family only
-when a gain reaches it, and a setup's pairs are judged as one Holm family."""
+when a gain reaches it, and a setup's pairs are judged as one Holm family (`pages.common.family`,
+which docs/priors.md's and docs/houses.md's pages judge with)."""
 
 import json
 
 import numpy as np
 
 from experiments.reporting import registry
-from experiments.reporting.pages import foresight_md, priors_md
+from experiments.reporting.pages import common, foresight_md
 
 
 def measurement(gain: float, layout: str = "room", priors: bool = True, perception_range=None) -> dict:
@@ -49,7 +50,7 @@ def data_folder(tmp_path, largest: float):
 
 def test_the_tables_read_the_archives_data_folder(tmp_path):
     archives = data_folder(tmp_path, 0.031)
-    rows = foresight_md.table(archives, "range4").splitlines()
+    rows = foresight_md.measured_table(archives, "range4").splitlines()
     assert (
         rows[2]
         == "| rooms with priors, range 4 | turn | 40 (20 layouts) | 50.0 | 70.0 | 70.0 | 73.1 | +3.1 [+2.1, +4.1] |"
@@ -78,7 +79,7 @@ def test_a_setups_three_pairs_are_one_holm_family():
 
     base = np.array([50, 52, 54, 56, 58])
     results = {"a": arm(base), "b": arm(base + [1, 3, 0, 2, 2.5]), "c": arm(base + [1, -1, 0.5, -0.5, 0.2])}
-    alone = priors_md.alone(np.array([1, 3, 0, 2, 2.5]), "SR")
-    judged = priors_md.family(results, [("a", "b"), ("a", "c"), ("c", "b")], "SR")
+    alone = common.alone(np.array([1, 3, 0, 2, 2.5]), "SR")
+    judged = common.family(results, [("a", "b"), ("a", "c"), ("c", "b")], "SR")
     assert alone.word == "helps" and alone.figures() == judged[0].figures() == "+1.7 [+0.2, +3.2]"
     assert judged[0].word == "level" and judged[0].p > 0.05 > alone.p  # the 90% interval inside ±3.8

@@ -1,7 +1,8 @@
 """The docs' generated blocks, one module a page (docs/ceiling.md's in `ceiling_md`): each module's `BLOCKS` maps a block's name
 to (the file that holds it, a function of `registry.Archives` giving the block's text).
 `experiments.regenerate` writes them between the file's markers; `BLOCKS` here is all of
-them (a name defined twice is refused)."""
+them (a name defined twice is refused). What the pages share, the formats and the Holm
+families, is `common` (no page of its own); what they read, `registry.Archives`."""
 
 from __future__ import annotations
 

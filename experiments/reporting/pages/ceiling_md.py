@@ -10,25 +10,30 @@ A family for Holm's correction is what the section's own `experiments.compare` c
 declares (its `--pairs`; stage 2: the three goal-view ceilings, the plan's family of rule 2);
 every other pair is judged alone.
 
-Two readers the registry lacks live here (they could move there): the probes' JSON files
-(`probe`) and the 3000-update results a stage-3 arm keeps beside its own
-(`results_kept`, `rundir.kept_results`).
+Its formats and the Holm family's verdicts are `pages.common`'s; its pairs `registry.Pair`s.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
-import tarfile
-import weakref
 from typing import Sequence
 
 import numpy as np
 
 from experiments import rundir
 from experiments.reporting import report, stats
-from experiments.reporting.registry import PAPER_MARGIN, Archives
-from experiments.reporting.verdicts import Verdict, verdict
+from experiments.reporting.pages.common import (
+    cells,
+    figures,
+    interval,
+    judged,
+    mean_std,
+    probe_condition,
+    seed_by_seed,
+    table,
+)
+from experiments.reporting.registry import Archives, Pair, Ref
+from experiments.reporting.verdicts import Verdict
 
 PAGE = "docs/ceiling.md"
 
@@ -46,94 +51,10 @@ HEAD = NOISEOFF
 ENTROPY = "losses/entropy"
 
 
-# ---------------------------------------------------------------------- formats
-def signed(x: float) -> str:
-    return f"{x:+.1f}".replace("+-", "-")
-
-
-def figures(d: dict) -> str:
-    """A `stats.paired` (or a Verdict's) mean difference and 95% interval, "+1.4 [-2.0, +4.7]"."""
-    return f"{signed(d['diff'])} [{signed(d['ci_low'])}, {signed(d['ci_high'])}]"
-
-
-def mean_std(x) -> str:
-    x = np.asarray(x, float)
-    return f"{x.mean():.1f} ± {x.std(ddof=1):.1f}"
-
-
-def table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(row) + " |" for row in rows]
-    return "\n".join(lines) + "\n"
-
-
-# ---------------------------------------------------------------------- readers
-def probe(archives: Archives, name: str) -> dict:
-    """The per-seed SR of each condition of an `experiments.probe` output kept as docs/data/`name`."""
-    return json.loads((archives.data / name).read_text())["methods"]
-
-
-_KEPT: "weakref.WeakKeyDictionary[Archives, dict]" = weakref.WeakKeyDictionary()
-
-
-def results_kept(archives: Archives, archive: str, updates: int) -> dict[str, list[dict]]:
-    """{arm: per-seed results} of the results an extended run kept beside its own at
-    `updates` (`rundir.kept_results`), read in place from docs/data/`archive`, once per `archives`."""
-    name = rundir.kept_results(updates)
-    kept = _KEPT.setdefault(archives, {})
-    if (archive, name) not in kept:
-        arms = {}
-        with tarfile.open(archives.data / archive) as tar:
-            for member in tar.getmembers():
-                parts = member.name.split("/")
-                if parts[-1] == name and len(parts) >= 3 and parts[-3] == rundir.METHODS:
-                    arms[parts[-2]] = json.load(tar.extractfile(member))["results"]
-        kept[(archive, name)] = arms
-    return kept[(archive, name)]
-
-
 # ---------------------------------------------------------------------- pairs and their verdicts
-@dataclasses.dataclass(frozen=True)
-class Pair:
-    """B - A paired over seeds; each side an (archive, arm), so that two archives' arms trained
-    on the same seeds can be paired (a stage's arm against an earlier stage's)."""
-
-    label: str
-    a: tuple[str, str]
-    b: tuple[str, str]
-
-    def differences(self, archives: Archives, metric: str) -> np.ndarray:
-        ra, rb = (archives.results(*side) for side in (self.a, self.b))
-        if [r["seed"] for r in ra] != [r["seed"] for r in rb]:
-            raise ValueError(f"{self.label}: {self.a} and {self.b} were not run on the same seeds")
-        return report.values(rb, metric) - report.values(ra, metric)
-
-
 def pair(label: str, archive: str, a: str, b: str) -> Pair:
-    return Pair(label, (archive, a), (archive, b))
-
-
-_JUDGED: "weakref.WeakKeyDictionary[Archives, dict]" = weakref.WeakKeyDictionary()
-
-
-def judged(archives: Archives, pairs: Sequence[Pair], metric: str, family: bool = False) -> list[Verdict]:
-    """Each pair's verdict on `metric` with the paper's margin; `family`: the pairs are one
-    declared family, judged with Holm's adjusted p-values. Judged once per `archives`."""
-    key = (tuple(pairs), metric, family)
-    done = _JUDGED.setdefault(archives, {})
-    if key not in done:
-        diffs = [p.differences(archives, metric) for p in pairs]
-        if not family or len(pairs) < 2:
-            done[key] = [verdict(d, metric, PAPER_MARGIN) for d in diffs]
-        else:
-            raw = [stats.paired(np.zeros(len(d)), d)["p"] for d in diffs]  # as `verdict` computes its p
-            adjusted = stats.holm(raw)
-            done[key] = [verdict(d, metric, PAPER_MARGIN, p_adjusted=float(q)) for d, q in zip(diffs, adjusted)]
-    return done[key]
-
-
-def cells(v: Verdict) -> list[str]:
-    return [v.figures(), v.words()]
+    """B - A of two arms of one archive."""
+    return Pair(Ref(archive, a), Ref(archive, b), label)
 
 
 def rule_1(v: Verdict) -> str:
@@ -160,7 +81,7 @@ def pairs_table(archives: Archives, pairs: Sequence[Pair], family: bool = False,
 
 def arm_row(per_seed: list[dict], label: str) -> list[str]:
     sr, spl = (report.values(per_seed, c) for c in ("SR", "SPL"))
-    return [label, " / ".join(f"{x:.1f}" for x in sr), mean_std(sr), mean_std(spl)]
+    return [label, seed_by_seed(sr), mean_std(sr), mean_std(spl)]
 
 
 def arms_table(archives: Archives, archive: str, arms: Sequence[tuple[str, str]]) -> str:
@@ -192,9 +113,7 @@ def diagnostics_table(archives: Archives, pairs: Sequence[Pair]) -> str:
         row = [p.label]
         for column, digits in ((report.TRAINING, 1), (ENTROPY, 2)):
             d = stats.summary(p.differences(archives, column))
-            row.append(
-                f"{d['mean']:+.{digits}f} [{d['ci_low']:+.{digits}f}, {d['ci_high']:+.{digits}f}]".replace("+-", "-")
-            )
+            row.append(interval(d["mean"], d["ci_low"], d["ci_high"], digits))
         rows.append(row)
     return table(["pair", "training SR, last 250 updates [95% CI]", "policy entropy, last chunk [95% CI]"], rows)
 
@@ -221,7 +140,7 @@ class Family:
     declared: bool = False
 
     def judged(self, archives: Archives, metric: str) -> list[Verdict]:
-        return judged(archives, self.pairs, metric, self.declared)
+        return judged(archives, self.pairs, metric, holm=self.declared)
 
     def table(self, archives: Archives, head: str = "pair") -> str:
         return pairs_table(archives, self.pairs, self.declared, head)
@@ -276,7 +195,7 @@ def ceiling_savn(archives: Archives) -> str:
 
 
 def ceiling_priors(archives: Archives) -> str:
-    holm = judged(archives, PRIORS_PAIRS.pairs, "SR", family=True)[0].p
+    holm = judged(archives, PRIORS_PAIRS.pairs, "SR")[0].p
     return joined(
         arms_table(archives, PRIORS, THREE),
         PRIORS_PAIRS.table(archives),
@@ -295,18 +214,18 @@ def _probe_table(methods: dict, arms: Sequence[tuple[str, str, Sequence[str]]], 
     rows = []
     for arm, name, conditions in arms:
         seeds = methods[arm]
-        trained = np.array([r["sr"]["trained"] for r in seeds])
+        trained = [r["sr"]["trained"] for r in seeds]
         rows.append(([name] if with_arm else []) + ["trained", mean_std(trained), "", ""])
         for condition in conditions:
-            values = np.array([r["sr"][condition] for r in seeds])
-            v = verdict(values - trained, "SR", PAPER_MARGIN)
-            rows.append(([name] if with_arm else []) + [labels[condition], mean_std(values), *cells(v)])
+            sr = [r["sr"][condition] for r in seeds]
+            v = probe_condition(seeds, condition)
+            rows.append(([name] if with_arm else []) + [labels[condition], mean_std(sr), *cells(v)])
     header = ["condition", "SR (mean ± std)", "minus trained [95% CI]", "verdict"]
     return table((["arm"] if with_arm else []) + header, rows)
 
 
 def ceiling_probe_savn(archives: Archives) -> str:
-    methods = probe(archives, "ceiling_probe_savn.json")
+    methods = archives.probe("ceiling_probe_savn.json")
     return _probe_table(methods, [(ORACLE, "", ("noise off", "shuffled", "shuffled, noise off"))], with_arm=False)
 
 
@@ -320,7 +239,7 @@ def ceiling_savn_noiseoff(archives: Archives) -> str:
 
 
 def _machine_shift(archives: Archives, epyc: str, xeon: str, label: str) -> str:
-    shift = Pair(label, (xeon, CRITIC), (epyc, CRITIC))
+    shift = Pair(Ref(xeon, CRITIC), Ref(epyc, CRITIC), label)
     return pairs_table(archives, [shift], head="the same program and seeds on two machines")
 
 
@@ -404,7 +323,7 @@ def ceiling_range4_along_training(archives: Archives) -> str:
 
 
 def ceiling_probe_range4(archives: Archives) -> str:
-    methods = probe(archives, "ceiling_probe_range4.json")
+    methods = archives.probe("ceiling_probe_range4.json")
     arms = [
         (ORACLE, "a3c+oracle (Eq. 7's noise)", ("noise off", "shuffled", "shuffled, noise off")),
         (NOISEOFF, "a3c+oracle@sigma2_max=0", ("shuffled",)),
@@ -449,7 +368,7 @@ def channels_stage1(archives: Archives) -> str:
         ],
     )
     pairs = stage_1_pairs()
-    sr, spl = (judged(archives, pairs, m, family=True) for m in ("SR", "SPL"))
+    sr, spl = (judged(archives, pairs, m) for m in ("SR", "SPL"))
     rows = [
         [p.label, *cells(a), *cells(b), f"{a.mde:.1f}", f"{a.p:.3f}", f"{b.p:.3f}", rule_1(a)]
         for p, a, b in zip(pairs, sr, spl)
@@ -525,7 +444,7 @@ def channels_stage2(archives: Archives) -> str:
         pair("the critic: `mlp` - `head`", STAGE2, CRITIC, MLP_CRITIC),
     ]
     against_start = [
-        Pair(f"the goal view through {name} - the start compass (stage 1)", (STAGE1, START), (STAGE2, arm))
+        Pair(Ref(STAGE1, START), Ref(STAGE2, arm), f"the goal view through {name} - the start compass (stage 1)")
         for arm, name in ((ENC, "`encoder`"), (MLP, "`mlp`"), (HEAD, "`head`"))
     ]
     resolved = sum(rule_2(v) == "resolved" for v in STAGE2_CEILINGS.judged(archives, "SR"))
@@ -572,17 +491,12 @@ def channels_stage3(archives: Archives) -> str:
         (CRITIC, "a3c+critic, 9000 updates"),
         (HEAD, "a3c+oracle through `head` (privileged), no noise, 9000 updates"),
     )
-    before = results_kept(archives, STAGE3, 3000)
     rows = []
     for arm, label in arms:
-        after = archives.results(STAGE3, arm)
-        if [r["seed"] for r in after] != [r["seed"] for r in before[arm]]:
-            raise ValueError(f"{arm}: its 3000-update results hold other seeds")
+        change = Pair(Ref(STAGE3, arm, rundir.kept_results(3000)), Ref(STAGE3, arm))
         row = [f"{label.split(',')[0]}: 9000 - 3000 updates"]
         for metric in ("SR", "SPL"):
-            row += cells(
-                verdict(report.values(after, metric) - report.values(before[arm], metric), metric, PAPER_MARGIN)
-            )
+            row += cells(judged(archives, [change], metric)[0])
         rows.append(row)
     budget = table(
         [
@@ -651,76 +565,27 @@ SECTIONS = {
     "stage 3": "stage-3-three-times-the-budget-rooms-with-priors-range-4-seeds-0-4-2026-11-29",
     "stage 4": "stage-4-the-best-channel-in-todays-rooms-quick-seeds-0-4-2026-11-29",
 }
+# The rows' words: the rooms, i_tau's noise, how the pair's machines were matched.
+IN_TODAY, IN_PRIORS, IN_RANGE4 = "today's rooms", "rooms with priors", "priors, range 4"
+EQ7 = "Eq. 7's"
+SEEDS_XEON = "seed-matched (the critic on the Xeon)"
+AT_2498418, AT_79DCE9C, AT_431BBF4 = (f"machine-matched ({c})" for c in ("2498418", "79dce9c", "431bbf4"))
 # (family, channel, i_tau's noise, updates, machines, the section's pairs, which of them, the section)
 CEILINGS = (
-    (
-        "today's rooms",
-        "`head`",
-        "Eq. 7's",
-        3000,
-        "seed-matched (the critic on the Xeon)",
-        SAVN_PAIRS,
-        0,
-        "today's rooms",
-    ),
-    (
-        "today's rooms",
-        "`head`",
-        "none",
-        3000,
-        "seed-matched (the critic on the Xeon)",
-        SAVN_NOISEOFF_PAIRS,
-        0,
-        "without the noise",
-    ),
-    ("today's rooms", "`head`", "Eq. 7's", 3000, "machine-matched (2498418)", SAVN_EPYC_PAIRS, 0, "machine-matched"),
-    ("today's rooms", "`head`", "none", 3000, "machine-matched (2498418)", SAVN_EPYC_PAIRS, 1, "machine-matched"),
-    ("today's rooms", "`head`", "none", 3000, "machine-matched (431bbf4)", ROOMS_CEILING, 0, "stage 4"),
-    (
-        "rooms with priors",
-        "`head`",
-        "Eq. 7's",
-        3000,
-        "seed-matched (the critic on the Xeon)",
-        PRIORS_PAIRS,
-        0,
-        "rooms with priors",
-    ),
-    (
-        "rooms with priors",
-        "`head`",
-        "Eq. 7's",
-        3000,
-        "machine-matched (2498418)",
-        PRIORS_EPYC_PAIRS,
-        0,
-        "priors, machine-matched",
-    ),
-    (
-        "rooms with priors",
-        "`head`",
-        "none",
-        3000,
-        "machine-matched (2498418)",
-        PRIORS_NOISEOFF_PAIRS,
-        0,
-        "priors, without the noise",
-    ),
-    ("priors, range 4", "`head`", "Eq. 7's", 3000, "machine-matched (79dce9c)", RANGE4_PAIRS, 0, "range 4"),
-    (
-        "priors, range 4",
-        "`head`",
-        "none",
-        3000,
-        "machine-matched (79dce9c)",
-        RANGE4_NOISEOFF_PAIRS,
-        0,
-        "range 4, without the noise",
-    ),
-    ("priors, range 4", "`encoder`", "none", 3000, "machine-matched (431bbf4)", STAGE2_CEILINGS, 0, "stage 2"),
-    ("priors, range 4", "`mlp`", "none", 3000, "machine-matched (431bbf4)", STAGE2_CEILINGS, 1, "stage 2"),
-    ("priors, range 4", "`head`", "none", 3000, "machine-matched (431bbf4)", STAGE2_CEILINGS, 2, "stage 2"),
-    ("priors, range 4", "`head`", "none", 9000, "machine-matched (431bbf4)", STAGE3_CEILING, 0, "stage 3"),
+    (IN_TODAY, "`head`", EQ7, 3000, SEEDS_XEON, SAVN_PAIRS, 0, "today's rooms"),
+    (IN_TODAY, "`head`", "none", 3000, SEEDS_XEON, SAVN_NOISEOFF_PAIRS, 0, "without the noise"),
+    (IN_TODAY, "`head`", EQ7, 3000, AT_2498418, SAVN_EPYC_PAIRS, 0, "machine-matched"),
+    (IN_TODAY, "`head`", "none", 3000, AT_2498418, SAVN_EPYC_PAIRS, 1, "machine-matched"),
+    (IN_TODAY, "`head`", "none", 3000, AT_431BBF4, ROOMS_CEILING, 0, "stage 4"),
+    (IN_PRIORS, "`head`", EQ7, 3000, SEEDS_XEON, PRIORS_PAIRS, 0, "rooms with priors"),
+    (IN_PRIORS, "`head`", EQ7, 3000, AT_2498418, PRIORS_EPYC_PAIRS, 0, "priors, machine-matched"),
+    (IN_PRIORS, "`head`", "none", 3000, AT_2498418, PRIORS_NOISEOFF_PAIRS, 0, "priors, without the noise"),
+    (IN_RANGE4, "`head`", EQ7, 3000, AT_79DCE9C, RANGE4_PAIRS, 0, "range 4"),
+    (IN_RANGE4, "`head`", "none", 3000, AT_79DCE9C, RANGE4_NOISEOFF_PAIRS, 0, "range 4, without the noise"),
+    (IN_RANGE4, "`encoder`", "none", 3000, AT_431BBF4, STAGE2_CEILINGS, 0, "stage 2"),
+    (IN_RANGE4, "`mlp`", "none", 3000, AT_431BBF4, STAGE2_CEILINGS, 1, "stage 2"),
+    (IN_RANGE4, "`head`", "none", 3000, AT_431BBF4, STAGE2_CEILINGS, 2, "stage 2"),
+    (IN_RANGE4, "`head`", "none", 9000, AT_431BBF4, STAGE3_CEILING, 0, "stage 3"),
 )
 
 

@@ -11,7 +11,7 @@ is stated with the largest gain measured; the ceiling's words are `verdicts.verd
 
 from __future__ import annotations
 
-from experiments.reporting.pages.priors_md import data_json, interval, said
+from experiments.reporting.pages.common import gain, said, table
 from experiments.reporting.registry import Archives, Comparison
 from experiments.reporting.verdicts import Verdict, verdict
 
@@ -61,16 +61,10 @@ CEILINGS = (
 
 
 def results(archives: Archives, file: str, key: str) -> dict:
-    return data_json(archives, file)[key]["results"]
+    return archives.json(file)[key]["results"]
 
 
-def gain(r: dict) -> str:
-    """The target's gain (view + target - view, points) with its bootstrap interval."""
-    lo, hi = r["gain_ci"]
-    return interval(100 * r["gain"], 100 * lo, 100 * hi)
-
-
-def table(archives: Archives, which: str) -> str:
+def measured_table(archives: Archives, which: str) -> str:
     """The tool's table: per layout family and thing predicted, the test starts, the majority
     class's and each feature set's accuracy, and the target's gain; under priors, the same
     fitted models on the starts with the target's anchor in view and without."""
@@ -79,22 +73,14 @@ def table(archives: Archives, which: str) -> str:
     for key, label in layouts:
         for what in WHATS:
             r = results(archives, file, key)[what]
-            rows.append(
-                f"| {label} | {what} | {r['test_samples']} ({r['test_groups']} layouts) | "
-                + " | ".join(f"{100 * r[k]:.1f}" for k in ("majority", *FEATURE_SETS))
-                + f" | {gain(r)} |"
-            )
+            starts = f"{r['test_samples']} ({r['test_groups']} layouts)"
+            rows.append([label, what, starts, *(f"{100 * r[k]:.1f}" for k in ("majority", *FEATURE_SETS)), gain(r)])
             for subset, part in r.get("subsets", {}).items():
-                rows.append(
-                    f"| {label} | {what}, {subset} | {part['samples']} ({100 * part['share']:.0f}%) | | "
-                    + " | ".join(f"{100 * part[k]:.1f}" for k in FEATURE_SETS)
-                    + f" | {gain(part)} |"
-                )
-    header = (
-        "| layouts | predicts | test starts | majority | geometry | view | view + target | gain from the target [95%] |\n"
-        "|---|---|---|---|---|---|---|---|\n"
-    )
-    return header + "\n".join(rows) + "\n"
+                starts = f"{part['samples']} ({100 * part['share']:.0f}%)"
+                accuracies = (f"{100 * part[k]:.1f}" for k in FEATURE_SETS)
+                rows.append([label, f"{what}, {subset}", starts, "", *accuracies, gain(part)])
+    header = ["layouts", "predicts", "test starts", "majority", *FEATURE_SETS, "gain from the target [95%]"]
+    return table(header, rows, tight=True)
 
 
 def pct(x: float) -> str:
@@ -190,7 +176,7 @@ def levers_readings(archives: Archives, which: str) -> str:
             + [(four[w]["subsets"][s], three[w]["subsets"][s]) for s in four[w]["subsets"]]
             for k in (*FEATURE_SETS, "gain")
         ]
-        resets = data_json(archives, file)["room-priors-range4"]["args"]["resets"]
+        resets = archives.json(file)["room-priors-range4"]["args"]["resets"]
         out += (
             f"- **R = 4 and R = 3**: the bearing's test starts at R = 4 are {four['bearing']['test_samples']} of "
             f"{resets:,} (the turn's {four['turn']['test_samples']}, ties left out); the two ranges' accuracies and "
@@ -246,9 +232,9 @@ def ceiling(archives: Archives) -> list[tuple[str, Verdict]]:
 def candidate(archives: Archives) -> str:
     """The lever with the largest gain: a candidate family (its kwargs line) when its gain
     reaches the criterion, and the ceiling measured in it (`CEILINGS`), in the rule's words."""
-    keys = list(data_json(archives, LEVERS))
+    keys = list(archives.json(LEVERS))
     k, w, r = largest(archives, LEVERS, keys)
-    args = data_json(archives, LEVERS)[k]["args"]
+    args = archives.json(LEVERS)[k]["args"]
     label = dict(lay for _, layouts in TABLES.values() for lay in layouts)[k]
     if 100 * r["gain"] < CRITERION:
         return f"No lever reaches {CRITERION:g} points; the largest gain is {criterion(label, w, r)}.\n"
@@ -262,14 +248,14 @@ def candidate(archives: Archives) -> str:
 
 
 BLOCKS = {
-    "foresight-today": ("docs/foresight.md", lambda a: table(a, "today")),
+    "foresight-today": ("docs/foresight.md", lambda a: measured_table(a, "today")),
     "foresight-today-readings": ("docs/foresight.md", today_readings),
-    "foresight-priors": ("docs/foresight.md", lambda a: table(a, "priors")),
+    "foresight-priors": ("docs/foresight.md", lambda a: measured_table(a, "priors")),
     "foresight-priors-readings": ("docs/foresight.md", priors_readings),
     "foresight-hard": ("docs/foresight.md", hard),
-    "foresight-range6": ("docs/foresight.md", lambda a: table(a, "range6")),
+    "foresight-range6": ("docs/foresight.md", lambda a: measured_table(a, "range6")),
     "foresight-range6-readings": ("docs/foresight.md", lambda a: levers_readings(a, "range6")),
-    "foresight-range4": ("docs/foresight.md", lambda a: table(a, "range4")),
+    "foresight-range4": ("docs/foresight.md", lambda a: measured_table(a, "range4")),
     "foresight-range4-readings": ("docs/foresight.md", lambda a: levers_readings(a, "range4")),
     "foresight-candidate": ("docs/foresight.md", candidate),
 }

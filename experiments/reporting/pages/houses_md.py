@@ -17,15 +17,19 @@ from collections import Counter
 import numpy as np
 
 from experiments.reporting import report, stats
-from experiments.reporting.pages.priors_md import (
+from experiments.reporting.pages.common import (
     alone,
-    archive_json,
+    bootstrap,
+    by_pair,
+    cells,
     differences,
-    family,
+    figures,
     mean_std,
+    probe_condition,
     said,
+    seed_by_seed,
     span,
-    study,
+    table,
 )
 from experiments.reporting.registry import Archives
 from experiments.reporting.verdicts import Verdict
@@ -43,7 +47,7 @@ EXPLAINED_VARIANCE = "losses/explained_variance"
 
 
 def results(archives: Archives) -> dict[str, list[dict]]:
-    return study(archives, ARCHIVE, ARMS)
+    return archives.sweep(ARCHIVE, ARMS)
 
 
 def overall(per_seed: list[dict], column: str) -> np.ndarray:
@@ -52,27 +56,21 @@ def overall(per_seed: list[dict], column: str) -> np.ndarray:
 
 def judged(archives: Archives) -> dict[str, dict[tuple[str, str], Verdict]]:
     """{metric: {pair: the rule's verdict}}, Holm over the three pairs of each metric."""
-    res = results(archives)
-    return {m: dict(zip(PAIRS, family(res, PAIRS, m))) for m in ("SR", "SPL")}
+    return by_pair(results(archives), PAIRS)
 
 
 def study_table(archives: Archives) -> str:
     """Each arm's SR, SPL and SR on the long paths (mean ± sample std over seeds), then the
     three pairs' SR and SPL with the rule's words; each arm's SR per seed below."""
     res, words = results(archives), judged(archives)
-    rows = [
-        f"| {arm} | " + " | ".join(mean_std(overall(res[arm], c)) for c in ("SR", "SPL", "SR>=10", "SR>=20")) + " | | |"
-        for arm in ARMS
-    ]
+    rows = [[arm, *(mean_std(overall(res[arm], c)) for c in ("SR", "SPL", "SR>=10", "SR>=20")), "", ""] for arm in ARMS]
     for pair in PAIRS:
         sr, spl = words["SR"][pair], words["SPL"][pair]
-        rows.append(f"| {NAMES[pair]} | {sr.figures()} | {spl.figures()} | | | {sr.words()} | {spl.words()} |")
-    per_seed = ", ".join(f"{arm} {' / '.join(f'{x:.1f}' for x in overall(res[arm], 'SR'))}" for arm in ARMS)
-    return (
-        "| paired over seeds 0-4 | SR | SPL | SR on L^g >= 10 | SR on L^g >= 20 | verdict, SR | verdict, SPL |\n"
-        "|---|---|---|---|---|---|---|\n"
-        + "\n".join(rows)
-        + "\n\n(mean ± sample std over seeds; differences with their 95% paired t interval; each verdict is the "
+        rows.append([NAMES[pair], sr.figures(), spl.figures(), "", "", sr.words(), spl.words()])
+    per_seed = ", ".join(f"{arm} {seed_by_seed(overall(res[arm], 'SR'))}" for arm in ARMS)
+    header = ["paired over seeds 0-4", "SR", "SPL", "SR on L^g >= 10", "SR on L^g >= 20", "verdict, SR", "verdict, SPL"]
+    return table(header, rows, tight=True) + (
+        "\n(mean ± sample std over seeds; differences with their 95% paired t interval; each verdict is the "
         f"rule's on its metric, Holm over the three pairs.) Per seed, test SR: {per_seed}.\n"
     )
 
@@ -106,14 +104,10 @@ def by_length_table(archives: Archives) -> str:
     critic, a3c = by_length(archives, CRITIC, FORESIT), by_length(archives, A3C, FORESIT)
     rows = []
     for (bucket, episodes, vc), (_, _, va) in zip(critic, a3c):
-        means = " | ".join(bucket_mean_std(res[arm], bucket) for arm in ARMS)
-        rows.append(
-            f"| {bucket} | {episodes} | {means} | {vc.figures()} | {vc.words()} | {va.figures()} | {va.words()} |"
-        )
-    return (
-        "| L^g | test episodes (5 seeds) | a3c | a3c+critic | a3c+foresit | a3c+foresit - a3c+critic | verdict | "
-        "a3c+foresit - a3c | verdict |\n|---|---|---|---|---|---|---|---|---|\n" + "\n".join(rows) + "\n"
-    )
+        means = [bucket_mean_std(res[arm], bucket) for arm in ARMS]
+        rows.append([bucket, str(episodes), *means, *cells(vc), *cells(va)])
+    header = ["L^g", "test episodes (5 seeds)", *ARMS, "a3c+foresit - a3c+critic", "verdict", "a3c+foresit - a3c"]
+    return table(header + ["verdict"], rows)
 
 
 def _word_counts(verdicts) -> str:
@@ -132,17 +126,13 @@ def readings(archives: Archives) -> str:
     ev_diff = differences(res, A3C, CRITIC, EXPLAINED_VARIANCE)
     ev_pair = stats.paired(np.zeros_like(ev_diff), ev_diff)
     failed = {
-        arm: [
-            100 * r["all"]["failed Done"]
-            for r in archive_json(archives, ARCHIVE, f"house_study/{name}")["methods"][arm]
-        ]
+        arm: [100 * r["all"]["failed Done"] for r in archives.member(ARCHIVE, f"house_study/{name}")["methods"][arm]]
         for arm, name in FAILURES.items()
     }
-    probe = archive_json(archives, ARCHIVE, "house_study/probe.json")["methods"][FORESIT]
-    trained = np.array([r["sr"]["trained"] for r in probe])
+    probe = archives.member(ARCHIVE, "house_study/probe.json")["methods"][FORESIT]
 
     def condition(name):
-        return alone(np.array([r["sr"][name] for r in probe]) - trained, "SR")
+        return probe_condition(probe, name)
 
     over = [r["items"]["fit"]["r2_over_category"] for r in probe]
     signal = [100 * r["items"]["signal"]["signal_share"] for r in probe]
@@ -158,7 +148,7 @@ def readings(archives: Archives) -> str:
         "per bucket of L^g: " + ", ".join(f"{b} {v.words()}" for b, _, v in cost) + ".\n"
         f"- **The value baseline**: the last chunk's explained variance, mean over seeds, a3c+critic "
         f"{np.mean(ev[CRITIC]):.2f} and a3c {np.mean(ev[A3C]):.2f}; a3c+critic - a3c "
-        f"{ev_pair['diff']:+.2f} [{ev_pair['ci_low']:+.2f}, {ev_pair['ci_high']:+.2f}] (no margin is declared for it: "
+        f"{figures(ev_pair, 2)} (no margin is declared for it: "
         "no verdict word).\n"
         f"- **Wrong Dones** (`experiments.failures`, the archive's `failures_*.json`): a failed Done ends "
         + ", ".join(f"{span(failed[arm], 0, False)}% of {arm}'s test episodes" for arm in (A3C, CRITIC, FORESIT))
@@ -187,9 +177,8 @@ def validation_table(archives: Archives) -> str:
             for v in r["validation"]:
                 if v["update"] in at:
                     at[v["update"]].append(report.rate(v["SR"]))
-        rows.append(f"| {arm} | " + " | ".join(mean_std(at[u]) for u in CURVE_UPDATES) + " |")
-    header = "| validation SR at update | " + " | ".join(f"{u:,}" for u in CURVE_UPDATES) + " |\n"
-    return header + "|---" * (len(CURVE_UPDATES) + 1) + "|\n" + "\n".join(rows) + "\n"
+        rows.append([arm, *(mean_std(at[u]) for u in CURVE_UPDATES)])
+    return table(["validation SR at update", *(f"{u:,}" for u in CURVE_UPDATES)], rows)
 
 
 def robust_table(archives: Archives) -> str:
@@ -200,19 +189,15 @@ def robust_table(archives: Archives) -> str:
     rows = []
     for a, b in PAIRS:
         r = out[f"{b} - {a}"]["robust"]["SR"]
-        iqm = [f"{x[0]:.1f} [{x[1]:.1f}, {x[2]:.1f}]" for x in (r["iqm_a"], r["iqm_b"])]
         poi = r["probability_of_improvement"]
         rows.append(
-            f"| {b} - {a} | {iqm[0]} | {iqm[1]} | {poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | "
-            f"{r['p_holm']:.3f} | {r['mde']:.1f} |"
+            [f"{b} - {a}", bootstrap(r["iqm_a"]), bootstrap(r["iqm_b"]), bootstrap(poi, 2)]
+            + [f"{r['p_holm']:.3f}", f"{r['mde']:.1f}"]
         )
     words = judged(archives)["SR"]
     sentences = "; ".join(f"{NAMES[p]}, {said(words[p], holm=True)}" for p in PAIRS)
-    return (
-        "| B - A (SR) | IQM of A | IQM of B | P(B > A) | p (Holm) | MDE |\n|---|---|---|---|---|---|\n"
-        + "\n".join(rows)
-        + f"\n\nThe rule's words on SR, Holm over the three pairs: {sentences}.\n"
-    )
+    header = ["B - A (SR)", "IQM of A", "IQM of B", "P(B > A)", "p (Holm)", "MDE"]
+    return table(header, rows) + f"\nThe rule's words on SR, Holm over the three pairs: {sentences}.\n"
 
 
 BLOCKS = {

@@ -8,24 +8,33 @@ today's rooms, fair_tune.tar.xz, fair_tune_org.tar.xz and fair_probe_lr3e-4.json
 verdict word is `verdicts.verdict`'s: the three pairs of a setup are one family on each
 metric (Holm, as the tables' p column says); everything else is judged alone.
 
-`archive_json` and `data_json` read what `registry.Archives` does not (a JSON member of an
-archive other than an arm's results, a JSON file of docs/data), once per `Archives`; with
-`family` they could move to the registry (docs/houses.md's page uses them too).
+The archives' members and docs/data's JSON files are read by `registry.Archives`; the
+formats and the Holm family's verdicts are `pages.common`'s.
 """
 
 from __future__ import annotations
 
-import json
-import tarfile
-import weakref
 from typing import NamedTuple
 
 import numpy as np
 from scipy import stats as scipy_stats
 
-from experiments.reporting import report, stats
-from experiments.reporting.registry import PAPER_MARGIN, Archives
-from experiments.reporting.verdicts import Verdict, verdict
+from experiments.reporting import report
+from experiments.reporting.pages.common import (
+    alone,
+    bootstrap,
+    by_pair,
+    differences,
+    gain,
+    interval,
+    mean_std,
+    probe_condition,
+    said,
+    signed,
+    span,
+    table,
+)
+from experiments.reporting.registry import Archives, values
 
 SAVN = "priors_savn.tar.xz"
 ORG = "priors_org.tar.xz"
@@ -40,88 +49,6 @@ ORG_ARMS = ("a3c+org", "a3c+org+critic", "a3c+org+foresit")
 # The same arm in today's rooms' tune archive: quick's rate, 1e-3, where the name gives none.
 QUICK_RATE = "@learning_rate=1e-3"
 LONG = "SR>=5"
-
-
-# ---------------------------------------------------------------------- reading
-_JSON: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-
-
-def _cache(archives: Archives) -> dict:
-    return _JSON.setdefault(archives, {})
-
-
-def archive_json(archives: Archives, archive: str, member: str):
-    """The JSON member `member` (its path inside the archive) of docs/data/`archive`
-    (`archives.data`), read in place; an archive's members are read once per `archives`
-    (every JSON member but the arms' progress files)."""
-    cache = _cache(archives)
-    if archive not in cache:
-        with tarfile.open(archives.data / archive) as tar:
-            cache[archive] = {
-                m.name: json.load(tar.extractfile(m))
-                for m in tar.getmembers()
-                if m.isfile() and m.name.endswith(".json") and not m.name.endswith("/progress.json")
-            }
-    members = cache[archive]
-    if member not in members:
-        raise KeyError(f"{archive} holds no {member!r}")
-    return members[member]
-
-
-def data_json(archives: Archives, name: str):
-    """docs/data/`name` (`archives.data`), a JSON file, read once per `archives`."""
-    cache = _cache(archives)
-    if name not in cache:
-        cache[name] = json.loads((archives.data / name).read_text())
-    return cache[name]
-
-
-def study(archives: Archives, archive: str, arms) -> dict[str, list[dict]]:
-    return {arm: archives.results(archive, arm) for arm in arms}
-
-
-# ---------------------------------------------------------------------- judging
-def signed(x: float) -> str:
-    return f"{x:+.1f}".replace("+-", "-")
-
-
-def interval(diff: float, low: float, high: float) -> str:
-    return f"{signed(diff)} [{signed(low)}, {signed(high)}]"
-
-
-def differences(results: dict, a: str, b: str, metric: str) -> np.ndarray:
-    ra, rb = results[a], results[b]
-    if [r["seed"] for r in ra] != [r["seed"] for r in rb]:
-        raise ValueError(f"{a} and {b} were not run on the same seeds")
-    return report.values(rb, metric) - report.values(ra, metric)
-
-
-def family(results: dict, pairs, metric: str, margin: float = PAPER_MARGIN) -> list[Verdict]:
-    """The rule's verdicts on B - A of each (A, B) of `pairs`, one family: Holm over the
-    pairs' paired p-values (as `experiments.compare` adjusts them)."""
-    diffs = [differences(results, a, b, metric) for a, b in pairs]
-    adjusted = stats.holm([stats.paired(np.zeros_like(d), d)["p"] for d in diffs])
-    return [verdict(d, metric, margin, p_adjusted=float(p)) for d, p in zip(diffs, adjusted)]
-
-
-def alone(diffs, metric: str, margin: float = PAPER_MARGIN) -> Verdict:
-    return verdict(diffs, metric, margin)
-
-
-def said(v: Verdict, metric: str = "", holm: bool = False) -> str:
-    """ "SR +2.7 [-2.1, +7.5]: cannot tell (MDE 6.4)", with Holm's p where a family was judged."""
-    return f"{metric or v.metric} {v.figures()}: {v.words()}" + (f", Holm p {v.p:.3f}" if holm else "")
-
-
-def mean_std(x) -> str:
-    s = stats.summary(x)
-    return f"{s['mean']:.1f} ± {s['std']:.1f}"
-
-
-def span(x, digits: int = 2, signs: bool = True) -> str:
-    """ "+0.19 to +0.24": the smallest and the largest of `x`."""
-    fmt = f"{{:{'+' if signs else ''}.{digits}f}}"
-    return f"{fmt.format(min(x))} to {fmt.format(max(x))}"
 
 
 # ---------------------------------------------------------------------- the paper's question there
@@ -144,32 +71,26 @@ def pairs_table(archives: Archives, setup: str) -> str:
     """Each pair of the setup's three arms: B's SR, the SR and SPL intervals, P(B > A), Holm's
     p and the MDE of SR (`experiments.compare`'s), and the rule's words on SR and on SPL."""
     s = SETUPS[setup]
-    results = study(archives, s.archive, s.arms)
+    results = archives.sweep(s.archive, s.arms)
     pairs = pairs_of(s.arms)
     _, out = report.paired_report(results, pairs, ["SR", "SPL"])
-    words = {m: family(results, pairs, m) for m in ("SR", "SPL")}
+    words = by_pair(results, pairs)
     rows = []
-    for i, (a, b) in enumerate(pairs):
+    for a, b in pairs:
         r = out[f"{b} - {a}"]["robust"]["SR"]
         poi = r["probability_of_improvement"]
-        sr, spl = words["SR"][i], words["SPL"][i]
+        sr, spl = words["SR"][a, b], words["SPL"][a, b]
         rows.append(
-            f"| {b} - {a} | {mean_std(report.values(results[b], 'SR'))} | {sr.figures()} | {spl.figures()} | "
-            f"{poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | {r['p_holm']:.3f} | {r['mde']:.1f} | "
-            f"{sr.words()} | {spl.words()} |"
+            [f"{b} - {a}", mean_std(values(results[b], "SR")), sr.figures(), spl.figures(), bootstrap(poi, 2)]
+            + [f"{r['p_holm']:.3f}", f"{r['mde']:.1f}", sr.words(), spl.words()]
         )
-    header = (
-        "| B - A (seeds 0-4) | B's SR | SR [95% CI] | SPL [95% CI] | P(B > A) | p (Holm, 3 pairs) | MDE | "
-        "verdict, SR | verdict, SPL |\n|---|---|---|---|---|---|---|---|---|\n"
-    )
+    header = ["B - A (seeds 0-4)", "B's SR", "SR [95% CI]", "SPL [95% CI]", "P(B > A)", "p (Holm, 3 pairs)", "MDE"]
     base = results[s.arms[0]]
-    note = f"{s.arms[0]}: {mean_std(report.values(base, 'SR'))} SR"
+    note = f"{s.arms[0]}: {mean_std(values(base, 'SR'))} SR"
     if setup == "org":
-        note += f", {np.mean(report.values(base, 'SPL')):.1f} SPL"
-    return (
-        header
-        + "\n".join(rows)
-        + f"\n\n({note}. P(B > A), p and the MDE are SR's; each verdict is the rule's on its metric, Holm over "
+        note += f", {np.mean(values(base, 'SPL')):.1f} SPL"
+    return table(header + ["verdict, SR", "verdict, SPL"], rows) + (
+        f"\n({note}. P(B > A), p and the MDE are SR's; each verdict is the rule's on its metric, Holm over "
         "the three pairs of that metric.)\n"
     )
 
@@ -183,10 +104,9 @@ def readings(archives: Archives, setup: str) -> str:
     paths (L^g >= 5), the same pairs in today's rooms (each arm at the rate today's tune
     chose), and each arm's SR here and there."""
     s = SETUPS[setup]
-    results = study(archives, s.archive, s.arms)
+    results = archives.sweep(s.archive, s.arms)
     base, critic, foresit = s.arms
-    pairs = pairs_of(s.arms)
-    sr, spl = (dict(zip(pairs, family(results, pairs, m))) for m in ("SR", "SPL"))
+    sr, spl = by_pair(results, pairs_of(s.arms)).values()
     today_results = {a: archives.results(s.today, today_arm(a)) for a in s.arms}
 
     def today_pair(a, b, metric):
@@ -215,8 +135,7 @@ def readings(archives: Archives, setup: str) -> str:
         f"{said(spl[base, critic], holm=True)}.",
     ]
     here_there = ", ".join(
-        f"{arm} {np.mean(report.values(results[arm], 'SR')):.1f} here, "
-        f"{np.mean(report.values(today_results[arm], 'SR')):.1f} there"
+        f"{arm} {np.mean(values(results[arm], 'SR')):.1f} here, {np.mean(values(today_results[arm], 'SR')):.1f} there"
         for arm in s.arms
     )
     lines.append(
@@ -230,10 +149,10 @@ def readings(archives: Archives, setup: str) -> str:
 def control(archives: Archives) -> dict:
     """a3c (sampled) and a3c+org's selected models played with sampled actions, per layout
     ("today", "priors"): {layout: {"a3c": [overall per seed], "a3c+org": [...]}} by seed."""
-    sampled = archive_json(archives, CONTROL, "priors_org_control/org_sampled.json")
+    sampled = archives.member(CONTROL, "priors_org_control/org_sampled.json")
     out = {}
     for layout, folder in (("today", "org_control"), ("priors", "org_control_priors")):
-        base = archive_json(archives, CONTROL, f"priors_org_control/{folder}/methods/a3c/results.json")["results"]
+        base = archives.member(CONTROL, f"priors_org_control/{folder}/methods/a3c/results.json")["results"]
         by_seed = {r["seed"]: r["selected"]["overall"] for r in base}
         graph = {r["seed"]: r["overall"] for r in sampled[layout]}
         if sorted(by_seed) != sorted(graph):
@@ -263,22 +182,13 @@ def control_table(archives: Archives) -> str:
     rows = []
     for layout, name in (("today", "today's rooms"), ("priors", "rooms with priors")):
         data = layouts[layout]
-        means = " | ".join(mean_std([o["SR"] for o in data[arm]]) for arm in ("a3c", "a3c+org"))
+        means = [mean_std([o["SR"] for o in data[arm]]) for arm in ("a3c", "a3c+org")]
         judged = [alone(_gains(data, c), c) for c in CONTROL_COLUMNS]
-        rows.append(
-            f"| {name} | {means} | "
-            + " | ".join(v.figures() for v in judged)
-            + " | "
-            + " / ".join(v.words() for v in judged)
-            + " |"
-        )
+        rows.append([name, *means, *(v.figures() for v in judged), " / ".join(v.words() for v in judged)])
     across = [welch(*(_gains(layouts[x], c) for x in ("today", "priors"))) for c in CONTROL_COLUMNS]
-    rows.append("| priors - today (Welch) | | | " + " | ".join(across) + " | unpaired: none |")
-    header = (
-        "| layouts (org setup, sampled) | a3c SR | a3c+org SR | graph's gain, SR | SPL | SR on L^g >= 5 | "
-        "verdict (SR / SPL / SR on L^g >= 5) |\n|---|---|---|---|---|---|---|\n"
-    )
-    return header + "\n".join(rows) + "\n"
+    rows.append(["priors - today (Welch)", "", "", *across, "unpaired: none"])
+    header = ["layouts (org setup, sampled)", "a3c SR", "a3c+org SR", "graph's gain, SR", "SPL", "SR on L^g >= 5"]
+    return table(header + ["verdict (SR / SPL / SR on L^g >= 5)"], rows, tight=True)
 
 
 def control_readings(archives: Archives) -> str:
@@ -302,7 +212,8 @@ def control_readings(archives: Archives) -> str:
 
 # ---------------------------------------------------------------------- the probes
 def probe(archives: Archives, name: str) -> list[dict]:
-    (per_seed,) = data_json(archives, name)["methods"].values()
+    """The per-seed probe of the one arm `experiments.probe` probed in docs/data/`name`."""
+    (per_seed,) = archives.probe(name).values()
     return per_seed
 
 
@@ -316,13 +227,9 @@ def probe_table(archives: Archives, setup: str) -> str:
     rows = []
     for r in probe(archives, SETUPS[setup].probe):
         f, sub = r["items"]["fit"], r["items"]["subgoal"]
-        cells = [f"{100 * sub['shares'][0]:.0f}%"] + [f"{f[k]:.2f}" for k in FIT]
-        rows.append(f"| {r['seed']} | " + " | ".join(cells) + " |")
-    header = (
-        "| seed | t*/T < 0.2 | R^2 online f_w | category mean | s_0 | ridge on [s_0 : g] | offline f_w |\n"
-        "|---|---|---|---|---|---|---|\n"
-    )
-    return header + "\n".join(rows) + "\n"
+        rows.append([str(r["seed"]), f"{100 * sub['shares'][0]:.0f}%", *(f"{f[k]:.2f}" for k in FIT)])
+    header = ["seed", "t*/T < 0.2", "R^2 online f_w", "category mean", "s_0", "ridge on [s_0 : g]", "offline f_w"]
+    return table(header, rows)
 
 
 def over_category(per_seed: list[dict], key: str) -> list[float]:
@@ -331,12 +238,6 @@ def over_category(per_seed: list[dict], key: str) -> list[float]:
 
 def above(x) -> str:
     return f"above 0 on {sum(v > 0 for v in x)} of {len(x)} seeds"
-
-
-def condition(per_seed: list[dict], name: str) -> Verdict:
-    """SR with i_tau's `name` condition minus SR as trained, paired over seeds."""
-    trained = np.array([r["sr"]["trained"] for r in per_seed])
-    return alone(np.array([r["sr"][name] for r in per_seed]) - trained, "SR")
 
 
 def probe_readings(archives: Archives, setup: str) -> str:
@@ -373,7 +274,7 @@ def probe_readings(archives: Archives, setup: str) -> str:
         conditions.append(("sampled actions", "sampled actions instead of greedy"))
     lines.append(
         "- **SR against the trained condition**, paired over seeds: "
-        + "; ".join(f"{words}, {said(condition(per_seed, c))}" for c, words in conditions)
+        + "; ".join(f"{words}, {said(probe_condition(per_seed, c))}" for c, words in conditions)
         + "."
     )
     if setup == "savn":
@@ -387,10 +288,9 @@ def answers(archives: Archives) -> str:
     """The study's comparisons side by side, savn and org, each in the rule's words."""
     cells: dict[str, list[str]] = {}
     for setup, s in SETUPS.items():
-        results = study(archives, s.archive, s.arms)
+        results = archives.sweep(s.archive, s.arms)
         base, critic, foresit = s.arms
-        pairs = pairs_of(s.arms)
-        sr, spl = (dict(zip(pairs, family(results, pairs, m))) for m in ("SR", "SPL"))
+        sr, spl = by_pair(results, pairs_of(s.arms)).values()
         per_seed = probe(archives, s.probe)
         ridge, online = (over_category(per_seed, k) for k in ("ridge_r2_over_mean", "r2_over_mean"))
         for name, v in (
@@ -401,7 +301,7 @@ def answers(archives: Archives) -> str:
             ("the critic alone - its base, SR", sr[base, critic]),
             (
                 "i_tau shuffled with the noise off - as trained (the probe), SR",
-                condition(per_seed, "shuffled, noise off"),
+                probe_condition(per_seed, "shuffled, noise off"),
             ),
         ):
             cells.setdefault(name, []).append(f"{v.figures()}: {v.words()}")
@@ -410,24 +310,15 @@ def answers(archives: Archives) -> str:
             ("the online f_w - the category mean, held-out R^2", online),
         ):
             cells.setdefault(name, []).append(above(x))
-    rows = [f"| {name} | {' | '.join(values)} |" for name, values in cells.items()]
-    return (
-        "| B - A (seeds 0-4; Holm over each setup's three pairs) | savn | org |\n|---|---|---|\n"
-        + "\n".join(rows)
-        + "\n"
-    )
+    rows = [[name, *both] for name, both in cells.items()]
+    return table(["B - A (seeds 0-4; Holm over each setup's three pairs)", "savn", "org"], rows)
 
 
 # ---------------------------------------------------------------------- the foresight bound there
-def gain(r: dict) -> str:
-    lo, hi = r["gain_ci"]
-    return interval(100 * r["gain"], 100 * lo, 100 * hi)
-
-
 def foresight(archives: Archives) -> str:
     """What docs/foresight.md measured with `experiments.foresight --priors`: the target's
     gain to the first view's prediction in rooms and houses with priors (savn)."""
-    priors, today = data_json(archives, FORESIGHT_PRIORS), data_json(archives, FORESIGHT_TODAY)
+    priors, today = archives.json(FORESIGHT_PRIORS), archives.json(FORESIGHT_TODAY)
     rooms, houses = priors["room-savn"]["results"], priors["house-savn"]["results"]
     anchor = rooms["bearing"]["subsets"]["anchor in view"]
     return (

@@ -6,29 +6,44 @@ that "The paper's question with power" quotes (docs/ceiling.md is their page).
 Every pair is B - A paired over the seeds of its arms (`Pair`), judged by the project's one
 rule (`verdicts.verdict`), with Holm's correction over a family (a tuple of `Pair`s) where the
 section's table declares one ("p (Holm, 3 pairs)"). Arms are read from the archives in place
-(`registry.Archives`); what the registry does not read (an extended run's
-results_3000_updates.json, the probes' and the PPO reference's JSON files) is read here,
-once a process (`_member_results`, `_json`): both could move to the registry.
+(`registry.Archives`: an extended run's results_3000_updates.json and the probes' and the PPO
+reference's JSON files too); the formats and the Holm family's verdicts are `pages.common`'s.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import functools
 import json
-import tarfile
-from pathlib import Path
-from typing import Optional, Union
 
 import numpy as np
 
 from experiments import rundir
 from experiments.reporting import report, stats, tuning
-from experiments.reporting.registry import PAPER_MARGIN, Archives, Arm, Chosen, resolve
+from experiments.reporting.pages.common import (
+    bootstrap,
+    judged,
+    mean_std,
+    paired_figures,
+    probe_condition,
+    seed_by_seed,
+    signed,
+    span,
+    table,
+)
+from experiments.reporting.registry import (
+    PAPER_MARGIN,
+    VALIDATION,
+    Archives,
+    Chosen,
+    Pair,
+    Ref,
+    Unchosen,
+    same_seeds,
+    values,
+)
 from experiments.reporting.verdicts import Verdict, verdict
 
 RESULTS = "docs/results.md"
-VALIDATION = "validation SR"  # the validation SR of each seed's selected model (`tuning.selection_sr`)
 AT_3000 = rundir.kept_results(3000)  # an extended run's results at its first budget
 
 A3, A10 = "a3c@learning_rate=3e-4", "a3c@learning_rate=1e-3"
@@ -38,6 +53,7 @@ FW = "a3c+foresit@imagination_lr=3e-4"
 NOISE = "a3c+foresit@learning_rate=3e-4,imagination_noise=input"
 ORG = "a3c+org", "a3c+org+critic", "a3c+org+foresit"
 RATES = ("3e-4", "1e-3")
+SR_SPL = ("SR", "SPL")
 
 TUNE, TUNE_3X, TUNE_ORG = "fair_tune.tar.xz", "fair_tune_3x.tar.xz", "fair_tune_org.tar.xz"
 FIRST, THREE_X, BASES = "fair_lr3e-4.tar.xz", "fair_3x.tar.xz", "fair_bases.tar.xz"
@@ -47,98 +63,9 @@ PPO_GPU, PPO_CPU = "reference_ppo_h200.json", "reference_ppo_epyc.json"
 HOUSES = "house_study.tar.xz"
 
 
-# ---------------------------------------------------------------------- reading
-@functools.lru_cache(maxsize=None)
-def _read_json(path: str) -> dict:
-    return json.loads(Path(path).read_text())
-
-
-def _json(archives: Archives, name: str) -> dict:
-    """docs/data/`name`, a JSON file (a probe's or the PPO reference's), read once."""
-    return _read_json(str(archives.data / name))
-
-
-@functools.lru_cache(maxsize=None)
-def _member_results(path: str, filename: str) -> dict[str, list[dict]]:
-    """{arm: per-seed results} of the `filename` files (methods/<arm>/`filename`) of the archive at `path`."""
-    arms = {}
-    with tarfile.open(path) as tar:
-        for member in tar.getmembers():
-            parts = member.name.split("/")
-            if parts[-1] == filename and len(parts) >= 3 and parts[-3] == rundir.METHODS:
-                arms[parts[-2]] = json.load(tar.extractfile(member))["results"]
-    return arms
-
-
-@dataclasses.dataclass(frozen=True)
-class Unchosen:
-    """Of two candidates, the one validation did not choose (`Chosen`'s other)."""
-
-    candidates: tuple[str, str]
-
-
-@dataclasses.dataclass(frozen=True)
-class Ref:
-    """An arm of an archive; `file`: its results.json, or an extended run's results at its
-    first budget (`AT_3000`)."""
-
-    archive: str
-    arm: Union[Arm, Unchosen]
-    file: str = rundir.RESULTS_FILE
-
-    def name(self, archives: Archives) -> str:
-        if isinstance(self.arm, Unchosen):
-            chosen = resolve(archives, self.archive, Chosen(self.arm.candidates))
-            return next(c for c in self.arm.candidates if c != chosen)
-        return resolve(archives, self.archive, self.arm)
-
-    def results(self, archives: Archives) -> list[dict]:
-        arm = self.name(archives)
-        if self.file == rundir.RESULTS_FILE:
-            return archives.results(self.archive, arm)
-        return _member_results(str(archives.data / self.archive), self.file)[arm]
-
-
-def values(per_seed: list[dict], metric: str) -> np.ndarray:
-    """One value a seed: `report.values`'s columns, or the validation SR of the selected model."""
-    return tuning.selection_sr(per_seed) if metric == VALIDATION else report.values(per_seed, metric)
-
-
 def seeds(per_seed: list[dict]) -> str:
     s = [r["seed"] for r in per_seed]
     return f"{s[0]}-{s[-1]}" if s == list(range(s[0], s[-1] + 1)) else ", ".join(map(str, s))
-
-
-@dataclasses.dataclass(frozen=True)
-class Pair:
-    """B - A, paired over the seeds the two arms share (they must be the same)."""
-
-    a: Ref
-    b: Ref
-    label: Optional[str] = None  # default: "B - A" with the arms' names
-
-    def name(self, archives: Archives) -> str:
-        return self.label or f"{self.b.name(archives)} - {self.a.name(archives)}"
-
-    def sides(self, archives: Archives, metric: str) -> tuple[np.ndarray, np.ndarray]:
-        ra, rb = self.a.results(archives), self.b.results(archives)
-        if [r["seed"] for r in ra] != [r["seed"] for r in rb]:
-            raise ValueError(f"{self.name(archives)}: the arms were not run on the same seeds")
-        return values(ra, metric), values(rb, metric)
-
-    def differences(self, archives: Archives, metric: str) -> np.ndarray:
-        a, b = self.sides(archives, metric)
-        return b - a
-
-
-def judged(archives: Archives, family, metric: str, margin: float = PAPER_MARGIN) -> list[Verdict]:
-    """The rule's verdict on each pair of `family` (a tuple of `Pair`s) on `metric`, with
-    Holm's correction over the family when it holds more than one pair."""
-    diffs = [p.differences(archives, metric) for p in family]
-    if len(family) == 1:
-        return [verdict(diffs[0], metric, margin)]
-    adjusted = stats.holm([stats.paired(np.zeros(len(d)), d)["p"] for d in diffs])
-    return [verdict(d, metric, margin, p_adjusted=float(p)) for d, p in zip(diffs, adjusted)]
 
 
 # ---------------------------------------------------------------------- formats
@@ -149,32 +76,6 @@ def words(v: Verdict) -> str:
     if v.word == "level" and not (-v.margin < v.ci95[0] and v.ci95[1] < v.margin):
         out += f" (90% CI [{signed(v.ci90[0])}, {signed(v.ci90[1])}])"
     return out
-
-
-def mean_std(x) -> str:
-    x = np.asarray(x, float)
-    return f"{x.mean():.1f} ± {x.std(ddof=1):.1f}"
-
-
-def interval3(t, digits: int = 1) -> str:
-    """A bootstrap's (point, low, high) as "62.7 [55.8, 67.3]"."""
-    return f"{t[0]:.{digits}f} [{t[1]:.{digits}f}, {t[2]:.{digits}f}]"
-
-
-def signed(x: float, digits: int = 1) -> str:
-    return f"{x:+.{digits}f}".replace("+-", "-")
-
-
-def paired_figures(a, b) -> str:
-    """B - A paired over seeds, "+d.d [+lo, +hi]" (as `Verdict.figures`)."""
-    p = stats.paired(a, b)
-    return f"{signed(p['diff'])} [{signed(p['ci_low'])}, {signed(p['ci_high'])}]"
-
-
-def table(header: list[str], rows: list[list[str]]) -> str:
-    out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    out += ["| " + " | ".join(r) + " |" for r in rows]
-    return "\n".join(out) + "\n"
 
 
 def rate_of(arm: str) -> str:
@@ -204,7 +105,7 @@ def grid_table(archives: Archives, archive: str, arms: tuple[str, ...], updates:
     by_method: dict[str, dict[str, list[dict]]] = {}
     for arm in arms:
         by_method.setdefault(method_of(arm), {})[arm] = archives.results(archive, arm)
-    chosen = {tuning.choose(by_arm) for by_arm in by_method.values() if len(by_arm) > 1}
+    picked = {tuning.choose(by_arm) for by_arm in by_method.values() if len(by_arm) > 1}
     header = ["method", "learning rate", "validation SR (chooses)", "test SR", "test SPL"]
     header += ["selected updates"] * updates + [""]
     rows = []
@@ -214,9 +115,9 @@ def grid_table(archives: Archives, archive: str, arms: tuple[str, ...], updates:
         row += [mean_std(values(per_seed, m)) for m in ("SR", "SPL")]
         if updates:
             row.append(" / ".join(str(r["selected_update"]) for r in per_seed))
-        row.append("**chosen**" if arm in chosen else "")
+        row.append("**chosen**" if arm in picked else "")
         rows.append(row)
-    return table(header, rows).replace("|  |\n", "| |\n")
+    return table(header, rows, tight=True)
 
 
 def family_table(archives: Archives, family, first: str = "B - A", style: str = "pairs", b_sr: bool = True) -> str:
@@ -237,10 +138,10 @@ def family_table(archives: Archives, family, first: str = "B - A", style: str = 
         poi = stats.stratified_bootstrap_ci(stats.probability_of_improvement, b, a)
         row = [pair.name(archives)]
         if style == "best":
-            row += [v.figures(), w.figures(), interval3(stats.stratified_bootstrap_ci(stats.iqm, b))]
+            row += [v.figures(), w.figures(), bootstrap(stats.stratified_bootstrap_ci(stats.iqm, b))]
         else:
             row += [mean_std(b)] * b_sr + [v.figures(), w.figures()]
-        row += [interval3(poi, 2), f"{v.p:.3f} / {w.p:.3f}", f"{v.mde:.1f}", f"{words(v)} / {words(w)}"]
+        row += [bootstrap(poi, 2), f"{v.p:.3f} / {w.p:.3f}", f"{v.mde:.1f}", f"{words(v)} / {words(w)}"]
         rows.append(row)
     return table(header, rows)
 
@@ -254,6 +155,14 @@ def verdict_table(archives: Archives, rows, first: str = "B - A") -> str:
         v = judged(archives, family, metric)[family.index(pair)]
         out.append([label or pair.name(archives), metric, v.figures(), words(v)])
     return table([first, "metric", "mean [95% CI]", "verdict"], out)
+
+
+def upper_end(archives: Archives, family, what: str) -> str:
+    """Where the upper end of the SR interval of `family`'s first pair (Holm over the family)
+    lies against the paper's gain: "The upper end of `what`, +2.6, lies below the paper's +3.8"."""
+    hi = judged(archives, family, "SR")[0].ci95[1]
+    side = "below" if hi < PAPER_MARGIN else "at or above"
+    return f"The upper end of {what}, {signed(hi)}, lies {side} the paper's +{PAPER_MARGIN}"
 
 
 def pairs_of(archive: str, arms: tuple[str, ...], pairs) -> tuple[Pair, ...]:
@@ -273,11 +182,11 @@ def label(lr: float) -> str:
 
 def ppo_rates(archives: Archives) -> str:
     """The PPO reference's learning rates (the H200's five) and their mean validation SR over seeds; the chosen in bold."""
-    gpu = _json(archives, PPO_GPU)
+    gpu = archives.json(PPO_GPU)
     by_lr = sorted((float(lr), float(np.mean(v["val_sr"]))) for lr, v in gpu["by_lr"].items())
     best = max(by_lr, key=lambda x: x[1])[0]
     cells = [f"**{v:.1f}**" if lr == best else f"{v:.1f}" for lr, v in by_lr]
-    cpu = _json(archives, PPO_CPU)
+    cpu = archives.json(PPO_CPU)
     cpu_val = {float(lr): float(np.mean(v["val_sr"])) for lr, v in cpu["by_lr"].items()}
     cpu_best = max(cpu_val, key=cpu_val.get)
     out = table(["learning rate", *(label(lr) for lr, _ in by_lr)], [["validation SR (chooses)", *cells]])
@@ -291,7 +200,7 @@ def ppo_rates(archives: Archives) -> str:
 def ppo_row(archives: Archives) -> str:
     """The PPO reference row's test SR and SPL beside a3c at its validated rate (the tuned
     fairness study), and the pair sampled PPO - a3c on the same test episodes of the same seeds."""
-    gpu = _json(archives, PPO_GPU)
+    gpu = archives.json(PPO_GPU)
     lr = label(gpu["learning_rate"])
     a3c = Ref(TUNE, Chosen((A3, A10)))
     base = a3c.results(archives)
@@ -396,67 +305,31 @@ def power_channels(archives: Archives) -> str:
 def power_more(archives: Archives) -> str:
     """The channels study's other pairs this section quotes (rooms with priors, range 4 unless
     named; each alone), and the goal view shuffled across episodes in the noise-off oracle's policy."""
-    rows = [
-        (
-            "a compass renewed every step, through `encoder` (privileged) - critic, stage 1",
-            Pair(Ref(S1, C3), Ref(S1, COMPASS)),
-            "SR",
-            None,
+    renewed = "a compass renewed every step, through `encoder` (privileged) - critic, stage 1"
+    held = "the compass of the start, held, through `encoder` (privileged) - critic, stage 1"
+    through = "the goal view through `{}` (stage 2) - the start compass (stage 1)"
+    stage3 = "the goal view through `head` - critic, 9000 updates (stage 3)"
+    budget = "the critic at 9000 updates - the same runs at 3000 (stage 3, extended from stage 2)"
+    stage4 = "the goal view through `head` - critic, today's rooms (stage 4)"
+    earlier = "ceiling_savn_epyc.tar.xz"
+    quoted = [
+        (renewed, Ref(S1, C3), Ref(S1, COMPASS), "SR"),
+        (held, Ref(S1, C3), Ref(S1, START), "SR"),
+        (held, Ref(S1, C3), Ref(S1, START), "SPL"),
+        *(
+            (through.format(c), Ref(S1, START), Ref(S2, oracle), m)
+            for c, (_, oracle) in THROUGH.items()
+            for m in SR_SPL
         ),
-        (
-            "the compass of the start, held, through `encoder` (privileged) - critic, stage 1",
-            Pair(Ref(S1, C3), Ref(S1, START)),
-            "SR",
-            None,
-        ),
-        (
-            "the compass of the start, held, through `encoder` (privileged) - critic, stage 1",
-            Pair(Ref(S1, C3), Ref(S1, START)),
-            "SPL",
-            None,
-        ),
+        (stage3, Ref(S3, C3), Ref(S3, ORACLE_0), "SR"),
+        (budget, Ref(S3, C3, AT_3000), Ref(S3, C3), "SR"),
+        (stage4, Ref(S4, C3), Ref(S4, ORACLE_0), "SR"),
+        (stage4, Ref(S4, C3), Ref(S4, ORACLE_0), "SPL"),
+        (f"the same pair, an earlier run (docs/data/{earlier})", Ref(earlier, C3), Ref(earlier, ORACLE_0), "SPL"),
     ]
-    for channel, (_, oracle) in THROUGH.items():
-        pair = Pair(Ref(S1, START), Ref(S2, oracle))
-        for metric in ("SR", "SPL"):
-            rows.append(
-                (f"the goal view through `{channel}` (stage 2) - the start compass (stage 1)", pair, metric, None)
-            )
-    rows += [
-        (
-            "the goal view through `head` - critic, 9000 updates (stage 3)",
-            Pair(Ref(S3, C3), Ref(S3, ORACLE_0)),
-            "SR",
-            None,
-        ),
-        (
-            "the critic at 9000 updates - the same runs at 3000 (stage 3, extended from stage 2)",
-            Pair(Ref(S3, C3, AT_3000), Ref(S3, C3)),
-            "SR",
-            None,
-        ),
-        (
-            "the goal view through `head` - critic, today's rooms (stage 4)",
-            Pair(Ref(S4, C3), Ref(S4, ORACLE_0)),
-            "SR",
-            None,
-        ),
-        (
-            "the goal view through `head` - critic, today's rooms (stage 4)",
-            Pair(Ref(S4, C3), Ref(S4, ORACLE_0)),
-            "SPL",
-            None,
-        ),
-        (
-            "the same pair, an earlier run (docs/data/ceiling_savn_epyc.tar.xz)",
-            Pair(Ref("ceiling_savn_epyc.tar.xz", C3), Ref("ceiling_savn_epyc.tar.xz", ORACLE_0)),
-            "SPL",
-            None,
-        ),
-    ]
+    rows = [(label, Pair(a, b), metric, None) for label, a, b, metric in quoted]
     out = verdict_table(archives, rows)
-    probed = _json(archives, "ceiling_probe_range4.json")["methods"][ORACLE_0]
-    shuffled = verdict(np.array([r["sr"]["shuffled"] - r["sr"]["trained"] for r in probed]), "SR", PAPER_MARGIN)
+    shuffled = probe_condition(archives.probe("ceiling_probe_range4.json")[ORACLE_0], "shuffled")
     return out + (
         f"\nIn the range-4 noise-off oracle's policy, the goal view shuffled across episodes - as trained "
         f"(docs/data/ceiling_probe_range4.json), SR: {shuffled.figures()}: {words(shuffled)}.\n"
@@ -465,14 +338,17 @@ def power_more(archives: Archives) -> str:
 
 # ---------------------------------------------------------------------- each arm at its own rate (savn)
 TUNE_ARMS = (A3, A10, C3, C10, F3, F10)
-BEST = {m: Chosen((f"{m}@learning_rate=3e-4", f"{m}@learning_rate=1e-3")) for m in ("a3c", "a3c+critic", "a3c+foresit")}
+
+
+def chosen(archive: str, method: str) -> Ref:
+    """`method` at the rate of `RATES` its validation chose (`tuning.choose`)."""
+    return Ref(archive, Chosen(tuple(f"{method}@learning_rate={r}" for r in RATES)))
 
 
 def best_family(archive: str, methods: tuple[str, ...]) -> tuple[Pair, ...]:
     """Each method at the rate its validation chose, every pair of them in order (B - A, A first)."""
-    chosen = {m: Chosen((f"{m}@learning_rate=3e-4", f"{m}@learning_rate=1e-3")) for m in methods}
     return tuple(
-        Pair(Ref(archive, chosen[a]), Ref(archive, chosen[b]), f"{b} - {a}")
+        Pair(chosen(archive, a), chosen(archive, b), f"{b} - {a}")
         for i, a in enumerate(methods)
         for b in methods[i + 1 :]
     )
@@ -496,7 +372,7 @@ def rate_family(archive: str, methods: tuple[str, ...]) -> tuple[Pair, ...]:
 
 
 def iqm_of(archives: Archives, ref: Ref) -> str:
-    return interval3(stats.stratified_bootstrap_ci(stats.iqm, values(ref.results(archives), "SR")))
+    return bootstrap(stats.stratified_bootstrap_ci(stats.iqm, values(ref.results(archives), "SR")))
 
 
 SAVN = ("a3c", "a3c+critic", "a3c+foresit")
@@ -506,16 +382,19 @@ def tune_grid(archives: Archives) -> str:
     return grid_table(archives, TUNE, TUNE_ARMS)
 
 
-def tune_best(archives: Archives) -> str:
-    family = best_family(TUNE, SAVN)
-    a3c = Ref(TUNE, BEST["a3c"])
-    chosen = ", ".join(f"{m} {rate_of(Ref(TUNE, BEST[m]).name(archives))}" for m in SAVN)
+def best_table(archives: Archives, archive: str, methods: tuple[str, ...], which: str) -> str:
+    """Best against best (`best_family`), with the base's IQM at its chosen rate; `which`:
+    the rates chosen, in words."""
+    base = chosen(archive, methods[0])
     return (
-        f"Best vs best, each arm at its chosen rate ({chosen}), paired over seeds "
-        f"{seeds(a3c.results(archives))}:\n\n"
-        + family_table(archives, family, style="best")
-        + f"\n(a3c's IQM at {rate_of(a3c.name(archives))}: {iqm_of(archives, a3c)}.)\n"
+        f"Best vs best, each arm at its chosen rate ({which}), paired over seeds {seeds(base.results(archives))}:\n\n"
+        + family_table(archives, best_family(archive, methods), style="best")
+        + f"\n({methods[0]}'s IQM at {rate_of(base.name(archives))}: {iqm_of(archives, base)}.)\n"
     )
+
+
+def tune_best(archives: Archives) -> str:
+    return best_table(archives, TUNE, SAVN, ", ".join(f"{m} {rate_of(chosen(TUNE, m).name(archives))}" for m in SAVN))
 
 
 def rates_table(archives: Archives, archive: str, methods: tuple[str, ...]) -> str:
@@ -548,8 +427,7 @@ def three_x_arms(archives: Archives) -> str:
     rows = []
     for arm in THREE_X_ARMS:
         before, after = Ref(THREE_X, arm, AT_3000).results(archives), Ref(THREE_X, arm).results(archives)
-        if [r["seed"] for r in before] != [r["seed"] for r in after]:
-            raise ValueError(f"{arm}: 3000 and 9000 updates on other seeds")
+        same_seeds(before, after, f"{arm} at 3000 and at 9000 updates")
         cells = [method_of(arm)]
         for m in ("SR", "SPL"):
             x, y = values(before, m), values(after, m)
@@ -608,12 +486,10 @@ def three_x_verdicts(archives: Archives) -> str:
         (None, other, "SR", None),
     ]
     out = verdict_table(archives, rows)
-    hi = judged(archives, THREE_X_PAIRS, "SR")[0].ci95[1]
     at_3000 = judged(archives, tuple(_at_3000(p) for p in THREE_X_PAIRS), "SR")[0]
-    side = "below" if hi < PAPER_MARGIN else "at or above"
+    upper = upper_end(archives, THREE_X_PAIRS, "a3c+foresit - a3c's SR interval at 9000 updates")
     return out + (
-        f"\nThe upper end of a3c+foresit - a3c's SR interval at 9000 updates, {signed(hi)}, lies {side} the "
-        f"paper's +{PAPER_MARGIN}. At 3000 updates, with Holm over the three pairs there, the same pair was "
+        f"\n{upper}. At 3000 updates, with Holm over the three pairs there, the same pair was "
         f"{at_3000.figures()} SR: {words(at_3000)}.\n"
     )
 
@@ -708,11 +584,9 @@ def replication_words(archives: Archives) -> str:
     rows.append(("a3c+foresit - a3c, the last 250 updates", best, report.TRAINING, None))
     rows.append((f"a3c+foresit at 3e-4 - a3c at {rate_of(other.a.name(archives))}", other, "SR", family))
     out = verdict_table(archives, rows)
-    hi = judged(archives, family, "SR")[0].ci95[1]
-    side = "below" if hi < PAPER_MARGIN else "at or above"
     return out + (
-        f"\nThe upper end of the best-against-best SR interval, {signed(hi)}, lies {side} the paper's "
-        f"+{PAPER_MARGIN} (Holm over the {len(family)} pairs for the words).\n"
+        f"\n{upper_end(archives, family, 'the best-against-best SR interval')} (Holm over the {len(family)} pairs "
+        "for the words).\n"
     )
 
 
@@ -753,15 +627,8 @@ def org_grid(archives: Archives) -> str:
 
 
 def org_best(archives: Archives) -> str:
-    family = best_family(TUNE_ORG, ORG)
-    base = Ref(TUNE_ORG, Chosen(tuple(f"a3c+org@learning_rate={r}" for r in RATES)))
-    chosen = {rate_of(p.b.name(archives)) for p in family} | {rate_of(base.name(archives))}
-    which = f"all three {chosen.pop()}" if len(chosen) == 1 else "each its own"
-    return (
-        f"Best vs best, each arm at its chosen rate ({which}), paired over seeds {seeds(base.results(archives))}:\n\n"
-        + family_table(archives, family, style="best")
-        + f"\n(a3c+org's IQM at {rate_of(base.name(archives))}: {iqm_of(archives, base)}.)\n"
-    )
+    rates = {rate_of(chosen(TUNE_ORG, m).name(archives)) for m in ORG}
+    return best_table(archives, TUNE_ORG, ORG, f"all three {rates.pop()}" if len(rates) == 1 else "each its own")
 
 
 def org_rates(archives: Archives) -> str:
@@ -773,7 +640,7 @@ def org_seeds(archives: Archives) -> str:
     rows = []
     for m in ORG:
         per_seed = archives.results(TUNE_ORG, f"{m}@learning_rate=1e-3")
-        rows.append([m, " / ".join(f"{x:.1f}" for x in values(per_seed, "SR")), cpu_of(per_seed)])
+        rows.append([m, seed_by_seed(values(per_seed, "SR")), cpu_of(per_seed)])
     return table(["arm, at 1e-3", "test SR per seed (seeds 0-4)", "machine"], rows)
 
 
@@ -794,7 +661,7 @@ def first_arms(archives: Archives) -> str:
         per_seed = archives.results(FIRST, arm)
         sr, spl = values(per_seed, "SR"), values(per_seed, "SPL")
         iqm = stats.stratified_bootstrap_ci(stats.iqm, sr)
-        rows.append([method_of(arm), " / ".join(f"{x:.1f}" for x in sr), mean_std(sr), mean_std(spl), interval3(iqm)])
+        rows.append([method_of(arm), seed_by_seed(sr), mean_std(sr), mean_std(spl), bootstrap(iqm)])
     header = ["arm (quick, Adam 3e-4, seeds 0-4)", "test SR per seed", "SR (mean ± std)", "SPL"]
     return table(header + ["IQM of SR [95% bootstrap]"], rows)
 
@@ -810,12 +677,10 @@ def first_verdicts(archives: Archives) -> str:
     out = verdict_table(archives, [(FIRST_LABELS[0] + ", the last 250 updates", pair, report.TRAINING, None)])
     a, b = pair.sides(archives, "SR")
     gaps = a - b
-    hi = judged(archives, FIRST_PAIRS, "SR")[0].ci95[1]
-    side = "below" if hi < PAPER_MARGIN else "at or above"
+    upper = upper_end(archives, FIRST_PAIRS, "a3c+foresit - a3c's SR interval")
     return out + (
         f"\nSeed by seed, a3c's test SR is above a3c+foresit's in {int((gaps > 0).sum())} of {len(gaps)} seeds "
-        f"(a3c - a3c+foresit from {gaps.min():.1f} to {gaps.max():.1f} points). The upper end of "
-        f"a3c+foresit - a3c's SR interval, {signed(hi)}, lies {side} the paper's +{PAPER_MARGIN}.\n"
+        f"(a3c - a3c+foresit from {gaps.min():.1f} to {gaps.max():.1f} points). {upper}.\n"
     )
 
 
@@ -852,17 +717,13 @@ FIT_COLUMNS = (
 )
 
 
-def _probed(archives: Archives, name: str, arm: str) -> list[dict]:
-    return _json(archives, name)["methods"][arm]
-
-
 def probe_fit(archives: Archives) -> str:
     rows = []
-    for r in _probed(archives, PROBE, F3):
+    for r in archives.probe(PROBE)[F3]:
         f = r["items"]["fit"]
         shares = r["items"]["subgoal"]["shares"]
         rows.append([str(r["seed"]), f"{100 * shares[0]:.0f}%", *(f"{f[k]:.2f}" for _, k in FIT_COLUMNS)])
-    episodes = [r["items"]["subgoal"]["episodes"] for r in _probed(archives, PROBE, F3)]
+    episodes = [r["items"]["subgoal"]["episodes"] for r in archives.probe(PROBE)[F3]]
     return table(["seed", "t*/T < 0.2", *(c for c, _ in FIT_COLUMNS)], rows) + (
         f"\n(R^2 over the fit items' mean, on the held-out items; {min(episodes)} to {max(episodes)} successful "
         "episodes per seed.)\n"
@@ -877,27 +738,25 @@ def _option_label(option: str) -> str:
 
 
 def probe_options(archives: Archives) -> str:
-    per_seed = _probed(archives, PROBE, F3)
+    per_seed = archives.probe(PROBE)[F3]
     options = list(per_seed[0]["items"]["fit_options"])
     rows = [[str(r["seed"]), *(f"{r['items']['fit_options'][o]:.2f}" for o in options)] for r in per_seed]
     return table(["seed", *map(_option_label, options)], rows)
-
-
-def _range(x, digits: int = 3) -> str:
-    return f"{signed(float(np.min(x)), digits)} to {signed(float(np.max(x)), digits)}"
 
 
 def probe_summary(archives: Archives) -> str:
     """What the two tables above give, seed by seed: each R^2 against the category mean's,
     each replayed option against the procedure as trained, and the kept optimiser state
     against a fresh one at each flush."""
-    per_seed = _probed(archives, PROBE, F3)
+    per_seed = archives.probe(PROBE)[F3]
     fit = [r["items"]["fit"] for r in per_seed]
     n = len(per_seed)
     rows = []
     for label, key in (FIT_COLUMNS[3], FIT_COLUMNS[4], FIT_COLUMNS[0], FIT_COLUMNS[2]):
         d = np.array([f[key] - f["category_r2_over_mean"] for f in fit])
-        rows.append([f"{label} - category mean", f"{int((d > 0).sum())} of {n}", _range(d), signed(float(d.mean()), 3)])
+        rows.append(
+            [f"{label} - category mean", f"{int((d > 0).sum())} of {n}", span(d, 3), signed(float(d.mean()), 3)]
+        )
     options = [r["items"]["fit_options"] for r in per_seed]
     offline = np.array([f["offline_r2_over_mean"] for f in fit])
     trained = np.array([o["as trained"] for o in options])
@@ -905,7 +764,7 @@ def probe_summary(archives: Archives) -> str:
         [
             "offline f_w - as trained",
             f"{int((offline > trained).sum())} of {n}",
-            _range(offline - trained),
+            span(offline - trained, 3),
             signed(float((offline - trained).mean()), 3),
         ]
     )
@@ -916,7 +775,7 @@ def probe_summary(archives: Archives) -> str:
             [
                 f"{_option_label(option)} - {fresh}",
                 f"{int((d > 0).sum())} of {n}",
-                _range(d),
+                span(d, 3),
                 signed(float(d.mean()), 3),
             ]
         )
@@ -940,17 +799,16 @@ ITAU = (
 
 
 def _itau_rows(archives: Archives, name: str, arm: str, where: str) -> list[list[str]]:
-    per_seed = _probed(archives, name, arm)
-    trained = np.array([r["sr"]["trained"] for r in per_seed])
+    per_seed = archives.probe(name)[arm]
     rows = []
     for label, key in ITAU:
-        v = verdict(np.array([r["sr"][key] for r in per_seed]) - trained, "SR", PAPER_MARGIN)
+        v = probe_condition(per_seed, key)
         rows.append([f"{label} - as trained", where, v.figures(), words(v)])
     return rows
 
 
 def _signal(archives: Archives, name: str, arm: str) -> str:
-    share = [100 * r["items"]["signal"]["signal_share"] for r in _probed(archives, name, arm)]
+    share = [100 * r["items"]["signal"]["signal_share"] for r in archives.probe(name)[arm]]
     return f"{min(share):.0f}-{max(share):.0f}%"
 
 
@@ -968,13 +826,13 @@ def noise_probe(archives: Archives) -> str:
         archives, PROBE, F3, "Eq. 6's placement"
     )
     out = table(["B - A (test SR, seeds 0-4)", "arm", "mean [95% CI]", "verdict"], rows)
-    fit = [r["items"]["fit"] for r in _probed(archives, PROBE_NOISE, NOISE)]
+    fit = [r["items"]["fit"] for r in archives.probe(PROBE_NOISE)[NOISE]]
     over = np.array([f["r2_over_category"] for f in fit])
     ridge = np.array([f["ridge_r2_over_mean"] - f["category_r2_over_mean"] for f in fit])
     return out + (
         f"\nWith the noise inside f_w's input: the online f_w's R^2 over the target category's mean is "
-        f"{_range(over)} ({int((over < 0).sum())} of {len(over)} seeds below 0); ridge on [s_0 : g] - the "
-        f"category mean is {_range(ridge)} ({int((ridge > 0).sum())} of {len(ridge)} seeds above 0).\n"
+        f"{span(over, 3)} ({int((over < 0).sum())} of {len(over)} seeds below 0); ridge on [s_0 : g] - the "
+        f"category mean is {span(ridge, 3)} ({int((ridge > 0).sum())} of {len(ridge)} seeds above 0).\n"
     )
 
 

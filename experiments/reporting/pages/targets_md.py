@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from experiments.reporting import report, targets_study
+from experiments.reporting.pages.common import seed_by_seed
 from experiments.reporting.registry import Archives
 
 
@@ -13,7 +14,7 @@ def targets_pilot(archives: Archives, archive: str = "targets_pilot.tar.xz") -> 
     validation SR area, their mean, the share of valid steps its target labels (the mean over
     seeds of each chunk's mean), and the weight the plan's rule chooses per target
     (`targets_study.pilot_choice`)."""
-    results = {arm: archives.results(archive, arm) for arm in archives.arms(archive)}
+    results = archives.sweep(archive)
     chosen = set(targets_study.pilot_choice(results).values())
     rows = []
     for arm, per_seed in sorted(results.items(), key=lambda kv: targets_study.target_of(kv[0])):
@@ -21,7 +22,7 @@ def targets_pilot(archives: Archives, archive: str = "targets_pilot.tar.xz") -> 
         areas = report.values(per_seed, report.VALIDATION_AREA)
         labelled = [np.mean(r["diagnostics"]["charts/aux_labelled_fraction"]) for r in per_seed]
         rows.append(
-            f"| {target} | {weight:g} | {' / '.join(f'{a:.1f}' for a in areas)} | {np.mean(areas):.1f} | "
+            f"| {target} | {weight:g} | {seed_by_seed(areas)} | {np.mean(areas):.1f} | "
             f"{100 * np.mean(labelled):.1f}% | {'**chosen**' if arm in chosen else ''} |"
         )
     header = (
