@@ -41,35 +41,12 @@ def unpack(archive: str, folder: Path, methods) -> Path:
     return root
 
 
-def signed(x: float) -> str:
-    return f"{x:+.1f}".replace("+-", "-")
-
-
-def interval(p: dict) -> str:
-    """A `stats.paired` result as the docs write it: "+d.d [+lo, +hi]"."""
-    return f"{signed(p['diff'])} [{signed(p['ci_low'])}, {signed(p['ci_high'])}]"
-
-
-def pair_row(out: dict, results: dict, a: str, b: str) -> str:
-    """The docs' row of the pair B - A of `experiments.compare.main`'s `out`: B's SR (mean ±
-    std), the SR and SPL intervals, P(B > A), Holm's p and the MDE on SR."""
-    from experiments.reporting import report, stats
-
-    pair = out["pairs"][f"{b} - {a}"]
-    r = pair["robust"]["SR"]
-    poi, sr = r["probability_of_improvement"], stats.summary(report.values(results[b], "SR"))
-    return (
-        f"| {b} - {a} | {sr['mean']:.1f} ± {sr['std']:.1f} | {interval(pair['SR'])} | {interval(pair['SPL'])} | "
-        f"{poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | {r['p_holm']:.3f} | {r['mde']:.1f} |"
-    )
-
-
 def tune_report(archive: str, folder: Path) -> dict:
-    """What `experiments.tune`'s report computes from a tune folder kept as docs/data/`archive`
-    (no checkpoints): each method's chosen point, the grid's rows, and the arms paired each
-    at its own chosen point ("best vs best")."""
+    """What `experiments.tune`'s report chooses from a tune folder kept as docs/data/`archive`
+    (no checkpoints): each method's chosen point, with the grid and its arms' results (the
+    grid's and the pairs' figures are generated blocks: tests/experiments/test_regenerate.py)."""
     from experiments import tune
-    from experiments.reporting import report, tuning
+    from experiments.reporting import tuning
 
     extract(archive, folder)
     root = folder / "tune"
@@ -81,48 +58,4 @@ def tune_report(archive: str, folder: Path) -> dict:
         for a in by_point.values()
     }
     chosen = {m: tuning.choose({p: results[a] for p, a in by_point.items()}) for m, by_point in table.items()}
-    _, grid_rows = tuning.grid_table(table, results, chosen)
-    best = {m: results[table[m][chosen[m]]] for m in args.methods}  # as tuning.tune_report pairs them
-    _, best_vs_best = report.paired_report(best, tuning.pairs_of(args.methods), ["SR", "SPL"])
-    return {"chosen": chosen, "grid_rows": grid_rows, "best_vs_best": best_vs_best, "table": table, "results": results}
-
-
-def grid_line(row: dict) -> str:
-    """The docs' row of one method at one grid point (validation SR, test SR and SPL)."""
-    from experiments.reporting import stats
-
-    val, sr, spl = (stats.summary(row[k]) for k in ("val_SR", "SR", "SPL"))
-    return (
-        f"| {row['method']} | {row['point'].split('=')[1]} | {val['mean']:.1f} ± {val['std']:.1f} | "
-        f"{sr['mean']:.1f} ± {sr['std']:.1f} | {spl['mean']:.1f} ± {spl['std']:.1f} | "
-        + ("**chosen** |" if row["chosen"] else "|")
-    )
-
-
-def best_vs_best_line(name: str, pair: dict) -> str:
-    """The docs' row of one best-vs-best pair: SR and SPL intervals, IQM of B, P(B > A),
-    Holm's p of SR / SPL, the MDE of SR."""
-    r, spl_r = pair["robust"]["SR"], pair["robust"]["SPL"]
-    poi, iqm = r["probability_of_improvement"], r["iqm_b"]
-    return (
-        f"| {name} | {interval(pair['SR'])} | {interval(pair['SPL'])} | {iqm[0]:.1f} [{iqm[1]:.1f}, {iqm[2]:.1f}] | "
-        f"{poi[0]:.2f} [{poi[1]:.2f}, {poi[2]:.2f}] | {r['p_holm']:.3f} / {spl_r['p_holm']:.3f} | {r['mde']:.1f} |"
-    )
-
-
-def probe_fit_row(r: dict) -> str:
-    """The docs' row of one seed of `experiments.probe`'s data: the share of sub-goals in the
-    first fifth of the episode, then R^2 of the online f_w, the category mean, s_0, ridge on
-    [s_0 : g] and the offline f_w."""
-    f, sub = r["items"]["fit"], r["items"]["subgoal"]
-    cells = [f"{100 * sub['shares'][0]:.0f}%"] + [
-        f"{f[k]:.2f}"
-        for k in (
-            "r2_over_mean",
-            "category_r2_over_mean",
-            "identity_r2_over_mean",
-            "ridge_r2_over_mean",
-            "offline_r2_over_mean",
-        )
-    ]
-    return f"| {r['seed']} | " + " | ".join(cells) + " |"
+    return {"chosen": chosen, "table": table, "results": results}

@@ -1,8 +1,8 @@
 """docs/ceiling.md's ceiling study (docs/data/ceiling_*.tar.xz and ceiling_probe_*.json): what
 its archives' runs record (settings, seeds, the arms each sweep reused from another, the
-selected updates) and the figures that hand prose and docs/results.md quote. Its tables,
-pairs, verdicts, shares and probes are generated blocks
-(experiments/reporting/pages/ceiling_md.py), held by the drift test
+selected updates) and the figures its hand prose quotes. Its tables, pairs, verdicts,
+shares and probes, and docs/results.md's rows of its ceilings, are generated blocks
+(experiments/reporting/pages/ceiling_md.py, results_md.py), held by the drift test
 (tests/experiments/test_regenerate.py), not recomputed here."""
 
 import json
@@ -12,8 +12,7 @@ import pytest
 import study_data
 
 from experiments.reporting import report
-from experiments.reporting.registry import PAPER_MARGIN, STUDIES, Archives
-from experiments.reporting.verdicts import verdict
+from experiments.reporting.registry import STUDIES, Archives
 
 REPO = Path(__file__).resolve().parents[2]
 CRITIC, FORESIT, ORACLE = (
@@ -133,36 +132,3 @@ def test_the_probes_ran_their_conditions_on_seeds_0_to_4():
     assert f"in {min(shares)}-{max(shares)}% of episodes (the oracle run's own probe)" in flat()
     shares = first_fifth(range4[ORACLE]) + first_fifth(range4[NOISEOFF])
     assert f"in {min(shares)}-{max(shares)}% of episodes (the probe's 40 training windows)" in flat()
-
-
-def sr_row(archives: Archives, archive: str, a: str, b: str) -> str:
-    """B - A's SR interval and MDE as docs/results.md's rows quote them."""
-    d = report.values(archives.results(archive, b), "SR") - report.values(archives.results(archive, a), "SR")
-    v = verdict(d, "SR", PAPER_MARGIN)
-    return f"| {v.figures()} | {v.mde:.1f} |"
-
-
-def test_results_md_quotes_the_ceilings(archives):
-    """docs/results.md's table of why part 3 was not run quotes each ceiling's SR interval and MDE."""
-    results_md = (REPO / "docs" / "results.md").read_text()
-    for setting, archive, arm in (
-        ("today's rooms, the oracle with Eq. 7's noise", "ceiling_savn.tar.xz", ORACLE),
-        ("rooms with priors, the oracle with Eq. 7's noise", "ceiling_priors.tar.xz", ORACLE),
-        ("today's rooms, the oracle without noise (`sigma2_max=0`)", "ceiling_savn_noiseoff.tar.xz", NOISEOFF),
-        (
-            "today's rooms, machine-matched (the critic retrained on the EPYC), with the noise",
-            "ceiling_savn_epyc.tar.xz",
-            ORACLE,
-        ),
-        ("today's rooms, machine-matched, without noise", "ceiling_savn_epyc.tar.xz", NOISEOFF),
-        (
-            "rooms with priors, machine-matched (the critic retrained on the EPYC), with the noise",
-            "ceiling_priors_epyc.tar.xz",
-            ORACLE,
-        ),
-        ("rooms with priors, machine-matched, without noise", "ceiling_priors_noiseoff.tar.xz", NOISEOFF),
-        ("rooms with priors, range 4, machine-matched, with the noise", "ceiling_range4.tar.xz", ORACLE),
-        ("rooms with priors, range 4, machine-matched, without noise", "ceiling_range4_noiseoff.tar.xz", NOISEOFF),
-    ):
-        row = f"| {setting} {sr_row(archives, archive, CRITIC, arm)}"
-        assert row in results_md, row

@@ -27,7 +27,7 @@ def pilot():
     if not (study_data.DATA / PILOT).exists():
         pytest.skip(f"{PILOT}: not run yet")
     archives = registry.Archives()
-    return archives, {arm: archives.results(PILOT, arm) for arm in archives.arms(PILOT)}
+    return archives, archives.sweep(PILOT)
 
 
 def test_the_pilot_ran_as_the_plan_says(pilot):
