@@ -223,6 +223,10 @@ class Archives:
             self._names[archive], self._raw[archive], self._parsed[archive] = list(raw), raw, {}
         return self._names[archive]
 
+    def names(self, archive: str) -> list[str]:
+        """The JSON members of docs/data/`archive` (their paths inside it; progress files left out)."""
+        return list(self._members(archive))
+
     def member(self, archive: str, name: str) -> Any:
         """The JSON member `name` (its path inside the archive) of docs/data/`archive`."""
         if name not in self._members(archive):

@@ -1,11 +1,12 @@
-"""docs/targets.md's generated blocks: the pilot's table (stage 1's and 2's join it once archived)."""
+"""docs/targets.md's generated blocks: the pilot's table; stage 1's (primary, secondary, the heads),
+written before it ran and registered in `BLOCKS` once its archive exists."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from experiments.reporting import report, targets_study
-from experiments.reporting.pages.common import seed_by_seed
+from experiments.reporting.pages.common import alone, cells, differences, seed_by_seed, table
 from experiments.reporting.registry import Archives
 
 
@@ -32,3 +33,82 @@ def targets_pilot(archives: Archives, archive: str = "targets_pilot.tar.xz") -> 
 
 
 BLOCKS = {"targets-pilot": ("docs/targets.md", targets_pilot)}
+
+
+# ---------------------------------------------------------------------- stage 1 (registered once archived)
+STAGE1 = "targets_stage1.tar.xz"
+BASE = "a3c@learning_rate=3e-4"
+TARGETS = ("compass", "goal_view", "success")
+# Holm's family of the primary measure: `success` labelled 9.4% of valid steps in the pilot,
+# under the plan's 10%, so it is exploratory (reported, judged alone).
+FAMILY = ("compass", "goal_view")
+REFERENCES = {
+    "a3c at its validated rate (1e-3; a reference)": "a3c@learning_rate=1e-3",
+    "the compass as an input, per step (privileged at test)": (
+        "a3c+compass+plaincritic@learning_rate=3e-4,imagination_input=encoder,sigma2_max=0"
+    ),
+}
+PROBE_FILE = "targets_probe.json"
+
+
+def target_arm(target: str, weight: str = "0.1") -> str:
+    """Stage 1's arm of `target`, exactly as the plan's status writes it."""
+    return f"{BASE},aux_target={target},aux_weight={weight}"
+
+
+def _rows(results) -> list[tuple[str, str, str]]:
+    """(label, arm, how it is judged) of every arm stage 1 compares with the base."""
+    rows = [(f"`{t}` as a target", target_arm(t), "Holm over 2" if t in FAMILY else "alone (exploratory)") for t in TARGETS]
+    rows += [(label, arm, "alone") for label, arm in REFERENCES.items()]
+    return [r for r in rows if r[1] in results]
+
+
+def stage1_primary(archives: Archives, archive: str = STAGE1) -> str:
+    """The plan's primary measure: each arm's area under the validation SR curve (500 to
+    3000 updates, in %) minus the base's, paired over the seeds; `compass` and `goal_view`
+    one Holm family, the rest judged alone."""
+    results = archives.sweep(archive)
+    holm = targets_study.stage1_verdicts(results, BASE, [target_arm(t) for t in FAMILY if target_arm(t) in results])
+    base = report.values(results[BASE], report.VALIDATION_AREA)
+    rows = [[f"the base, `{BASE}`", seed_by_seed(base), f"{np.mean(base):.1f}", "", "", ""]]
+    for label, arm, how in _rows(results):
+        areas = report.values(results[arm], report.VALIDATION_AREA)
+        v = holm.get(arm) or alone(differences(results, BASE, arm, report.VALIDATION_AREA), report.VALIDATION_AREA)
+        rows.append([label, seed_by_seed(areas), f"{np.mean(areas):.1f}", *cells(v), how])
+    header = ["arm", "validation SR area per seed", "mean", "minus the base [95% CI]", "verdict", "judged"]
+    return table(header, rows)
+
+
+def stage1_secondary(archives: Archives, archive: str = STAGE1) -> str:
+    """The secondary measures: test SR and SPL of the selected model minus the base's (each
+    judged alone), and the first update at which validation SR reaches 50% (linear between
+    evaluations; the seeds that never reach it counted)."""
+    results = archives.sweep(archive)
+    rows = []
+    for label, arm, _ in [(f"the base, `{BASE}`", BASE, "")] + _rows(results):
+        firsts = np.array([targets_study.first_reaching(r["validation"]) for r in results[arm]])
+        reached = firsts[np.isfinite(firsts)]
+        first = f"{reached.mean():.0f} ({len(reached)} of {len(firsts)} seeds)" if len(reached) else "never"
+        if arm == BASE:
+            pairs = ["", "", "", ""]
+        else:
+            pairs = [c for m in ("SR", "SPL") for c in cells(alone(differences(results, BASE, arm, m), m))]
+        rows.append([label, *pairs, first])
+    header = ["arm", "test SR minus the base", "verdict", "test SPL minus the base", "verdict", "validation SR 50% at"]
+    return table(header, rows)
+
+
+def stage1_heads(archives: Archives, archive: str = STAGE1) -> str:
+    """Did each head learn (`experiments.target_probe`'s file in the archive): per target, the
+    seeds whose head beats a predictor of the mean label, and each measure's mean over the
+    seeds (the compass's angular error beside the mean's, the R² of its distance; a latent's
+    R², and the spread of its labels across episodes beside the states')."""
+    name = next(n for n in archives.names(archive) if n.endswith("/" + PROBE_FILE))
+    probe = archives.member(archive, name)
+    rows = []
+    for arm, seeds in probe["arms"].items():
+        target, _ = targets_study.target_of(arm)
+        measures = [k for k in seeds[0] if k not in ("seed", "learned")]
+        means = ", ".join(f"{k} {np.nanmean([s[k] for s in seeds]):.3g}" for k in measures)
+        rows.append([f"`{target}`", f"{sum(bool(s['learned']) for s in seeds)} of {len(seeds)}", means])
+    return table(["target", "heads that beat the mean label", "means over the seeds"], rows)
