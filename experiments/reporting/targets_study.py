@@ -10,8 +10,8 @@ import math
 
 import numpy as np
 
-from experiments.reporting import report, stats
-from experiments.reporting.verdicts import Verdict, verdict
+from experiments.reporting import report
+from experiments.reporting.verdicts import Verdict, family_verdicts
 
 # A tie in the pilot's rule (validation areas within this many points) keeps the larger weight.
 TIE = 0.1
@@ -61,10 +61,5 @@ def stage1_verdicts(
 ) -> dict[str, Verdict]:
     """{arm: Verdict of arm - base on `metric`}, paired over the seeds, for the arms of
     `family` with Holm's correction over them (the primary measure's family)."""
-    diffs = {arm: report.values(results[arm], metric) - report.values(results[base], metric) for arm in family}
-    p = [stats.paired(np.zeros(len(d)), d)["p"] for d in diffs.values()]
-    adjusted = stats.holm(p)
-    return {
-        arm: verdict(d, metric, 3.8, p_adjusted=float(q) if math.isfinite(q) else None)
-        for (arm, d), q in zip(diffs.items(), adjusted)
-    }
+    diffs = [report.values(results[arm], metric) - report.values(results[base], metric) for arm in family]
+    return dict(zip(family, family_verdicts(diffs, metric, 3.8)))

@@ -19,7 +19,9 @@ with `within_margin` set: the sentence says both.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple, Optional
+from typing import NamedTuple, Optional, Sequence
+
+import numpy as np
 
 from experiments.reporting import stats
 
@@ -97,6 +99,18 @@ def verdict(
         word = "cannot tell"
     mde = stats.minimum_detectable_effect(d95["std"], n) if spread else math.nan
     return Verdict(word, metric, n, diff, (lo, hi), (lo90, hi90), float(margin), mde, within, p)
+
+
+def family_verdicts(diffs: Sequence, metric: str, margin: float, holm: bool = True) -> list[Verdict]:
+    """The rule's verdict on each comparison of a family (`diffs`: one comparison's per-seed
+    differences each): with `holm` and more than one, Holm's adjusted p of each one's paired
+    t-test (as `experiments.compare` adjusts them) decides "helps" and "costs"; else each alone."""
+    if not holm or len(diffs) < 2:
+        return [verdict(d, metric, margin) for d in diffs]
+    adjusted = stats.holm([stats.paired(np.zeros(len(d)), d)["p"] for d in diffs])
+    return [
+        verdict(d, metric, margin, p_adjusted=float(p) if math.isfinite(p) else None) for d, p in zip(diffs, adjusted)
+    ]
 
 
 def _finite(values):

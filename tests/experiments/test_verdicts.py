@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from experiments.reporting import verdicts
 from experiments.reporting.verdicts import WORDS, verdict
 
 
@@ -58,3 +59,17 @@ def test_cannot_tell_carries_the_mde():
 def test_a_margin_must_be_declared_positive(margin):
     with pytest.raises(ValueError, match="margin must be a positive number"):
         verdict([1.0, 2.0], "SR", margin)
+
+
+def test_a_family_is_judged_with_holm_and_a_family_of_one_alone():
+    """`family_verdicts`: two gains each clear of 0 alone (p 0.030 and 0.027 on five seeds) lose
+    their word in one Holm family (both adjusted to 0.054, twice the smaller); one comparison, or holm=False, is
+    judged alone; a comparison without spread (a NaN p) is judged as alone, not refused."""
+    a, b = [12, 1, 9, 4, 14], [3, 0.5, 4, 1, 2.5]
+    assert [v.word for v in verdicts.family_verdicts([a, b], "SR", 3.8, holm=False)] == ["helps", "helps"]
+    together = verdicts.family_verdicts([a, b], "SR", 3.8)
+    assert [v.word for v in together] == ["cannot tell", "level"]
+    assert [v.p for v in together] == pytest.approx([2 * 0.02690, 2 * 0.02690], abs=1e-4)
+    assert verdicts.family_verdicts([a], "SR", 3.8)[0].word == "helps"
+    flat = verdicts.family_verdicts([a, [2.0] * 5], "SR", 3.8)
+    assert flat[1].word == "cannot tell" and flat[1].words() == "cannot tell (no spread)"

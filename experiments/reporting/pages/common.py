@@ -17,8 +17,9 @@ from typing import Sequence
 import numpy as np
 
 from experiments.reporting import stats
+from experiments.reporting.tables import markdown_table
 from experiments.reporting.registry import PAPER_MARGIN, Archives, Pair, same_seeds, values
-from experiments.reporting.verdicts import Verdict, signed, verdict
+from experiments.reporting.verdicts import Verdict, family_verdicts, signed, verdict
 
 
 # ---------------------------------------------------------------------- formats
@@ -67,12 +68,13 @@ def span(x, digits: int = 2, signs: bool = True) -> str:
 
 
 def table(header: Sequence[str], rows: Sequence[Sequence[str]], tight: bool = False) -> str:
-    """A markdown table, one line a row; an empty cell is "|  |", or "| |" when `tight`."""
+    """A markdown table (`tables.markdown_table`) with its last newline; an empty cell is
+    "|  |", or "| |" when `tight`."""
+    if not tight:
+        return markdown_table(rows, header) + "\n"
 
     def line(cells: Sequence[str]) -> str:
-        if tight:
-            return "|" + "|".join(f" {c} " if c else " " for c in cells) + "|"
-        return "| " + " | ".join(cells) + " |"
+        return "|" + "|".join(f" {c} " if c else " " for c in cells) + "|"
 
     return "\n".join([line(header), "|" + "---|" * len(header), *map(line, rows)]) + "\n"
 
@@ -94,13 +96,9 @@ def alone(diffs, metric: str, margin: float = PAPER_MARGIN) -> Verdict:
 
 
 def verdicts_of(diffs: Sequence, metric: str, margin: float = PAPER_MARGIN, holm: bool = True) -> list[Verdict]:
-    """The rule's verdict on each comparison's per-seed differences (`diffs`, one a comparison):
-    with `holm` and more than one, as one family (Holm's adjusted p of each one's paired t-test,
-    as `experiments.compare` adjusts them); else each alone."""
-    if not holm or len(diffs) < 2:
-        return [verdict(d, metric, margin) for d in diffs]
-    adjusted = stats.holm([stats.paired(np.zeros(len(d)), d)["p"] for d in diffs])
-    return [verdict(d, metric, margin, p_adjusted=float(p)) for d, p in zip(diffs, adjusted)]
+    """`verdicts.family_verdicts` at the paper's margin by default: with `holm` and more than one
+    comparison, one Holm family; else each alone."""
+    return family_verdicts(diffs, metric, margin, holm)
 
 
 def differences(results: dict[str, list[dict]], a: str, b: str, metric: str) -> np.ndarray:

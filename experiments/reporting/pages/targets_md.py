@@ -58,9 +58,9 @@ def target_arm(target: str, weight: str = "0.1") -> str:
 
 def _rows(results) -> list[tuple[str, str, str]]:
     """(label, arm, how it is judged) of every arm stage 1 compares with the base."""
-    rows = [
-        (f"`{t}` as a target", target_arm(t), "Holm over 2" if t in FAMILY else "alone (exploratory)") for t in TARGETS
-    ]
+    family = [t for t in FAMILY if target_arm(t) in results]
+    holm = f"Holm over {len(family)}" if len(family) > 1 else "alone"
+    rows = [(f"`{t}` as a target", target_arm(t), holm if t in family else "alone (exploratory)") for t in TARGETS]
     rows += [(label, arm, "alone") for label, arm in REFERENCES.items()]
     return [r for r in rows if r[1] in results]
 
