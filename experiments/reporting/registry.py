@@ -171,9 +171,12 @@ STUDIES: tuple[Study, ...] = (
         "Which form of imagining success helps as a training target (issue 79)?",
         "docs/plans/imagination_targets.md",
         "commands",
-        ("docs/data/targets_pilot.tar.xz", "stage 1's and stage 2's archives, once run"),
+        ("docs/data/targets_pilot.tar.xz", "docs/data/targets_stage1.tar.xz", "stage 2's archive, once run"),
         "tests/studies/test_targets_data.py",
-        ("docs/targets.md#the-pilot-each-targets-weight-seeds-10-12-1500-updates-2026-12-02",),
+        (
+            "docs/targets.md#the-pilot-each-targets-weight-seeds-10-12-1500-updates-2026-12-02",
+            "docs/targets.md#stage-1-the-three-targets-beside-the-base-seeds-0-4-3000-updates-2026-12-02",
+        ),
     ),
 )
 
@@ -386,6 +389,7 @@ CRITIC = "a3c+critic@learning_rate=3e-4"
 HEAD_ORACLE = "a3c+oracle@learning_rate=3e-4,sigma2_max=0"
 RESULTS = "docs/results.md"
 CEILING = "docs/ceiling.md"
+TARGETS_STAGE1 = "docs/targets.md#stage-1-the-three-targets-beside-the-base-seeds-0-4-3000-updates-2026-12-02"
 
 # The comparisons the README's Results quote, in the order a reader asks them.
 README_COMPARISONS: tuple[Comparison, ...] = (
@@ -469,5 +473,24 @@ README_COMPARISONS: tuple[Comparison, ...] = (
         CRITIC,
         HEAD_ORACLE,
         section=f"{CEILING}#stage-4-the-best-channel-in-todays-rooms-quick-seeds-0-4-2026-11-29",
+    ),
+    *(
+        Comparison(
+            f"{what} as a training target - a3c, both at 3e-4",
+            "priors, range 4, 3000, 0-4",
+            "targets_stage1.tar.xz",
+            A3,
+            f"{A3},aux_target={target},aux_weight=0.1",
+            section=TARGETS_STAGE1,
+        )
+        for what, target in (("compass", "compass"), ("goal view", "goal_view"))
+    ),
+    Comparison(
+        "a3c at its validated 1e-3 - a3c at 3e-4 (the targets' reference)",
+        "priors, range 4, 3000, 0-4",
+        "targets_stage1.tar.xz",
+        A3,
+        "a3c@learning_rate=1e-3",
+        section=TARGETS_STAGE1,
     ),
 )

@@ -64,3 +64,53 @@ def test_the_page_says_what_the_pilot_chose(pilot):
     assert f"`success` labels {share:.1f}% of the valid steps over the pilot at weight 0.1" in page
     assert "(by chunk: {:.1f}%, {:.1f}%, {:.1f}%;".format(*(100 * by_chunk)) in page
     assert "`success` is exploratory in stage 1, reported and outside Holm's family" in page
+
+
+STAGE1 = "targets_stage1.tar.xz"
+STAGE1_ARMS = [
+    "a3c@learning_rate=3e-4",
+    "a3c@learning_rate=3e-4,aux_target=compass,aux_weight=0.1",
+    "a3c@learning_rate=3e-4,aux_target=goal_view,aux_weight=0.1",
+    "a3c@learning_rate=3e-4,aux_target=success,aux_weight=0.1",
+    "a3c@learning_rate=1e-3",
+    "a3c+compass+plaincritic@learning_rate=3e-4,imagination_input=encoder,sigma2_max=0",
+]
+
+
+@pytest.fixture(scope="module")
+def stage1():
+    if not (study_data.DATA / STAGE1).exists():
+        pytest.skip(f"{STAGE1}: not run yet")
+    return study_data.read_archive_json(STAGE1)
+
+
+def test_stage1_ran_as_the_plan_says(stage1):
+    """The plan status's six arms, exactly as written there, seeds 0-4, quick, 3000 updates,
+    rooms with priors at range 4; every run at the pinned worktree's commit, every stretch of
+    updates (it was paused and resumed across sessions) on the family-25 EPYC; evaluations
+    every 500 updates; the heads' probe ran on the three target arms."""
+    (sweep,) = [v for k, v in stage1.items() if k.endswith("sweep.json")]
+    assert sweep["methods"] == STAGE1_ARMS
+    runs = {k.split("/")[-2]: v for k, v in stage1.items() if k.endswith("run.json")}
+    assert sorted(runs) == sorted(STAGE1_ARMS)
+    for arm, run in runs.items():
+        assert [c[:7] for c in run["commits"]] == ["332b3b3"], arm
+        assert run["seeds"] == [0, 1, 2, 3, 4] and run["preset"] == "quick"
+        config = run["config"]
+        assert (config["num_updates"], config["priors"], config["perception_range"]) == (3000, True, 4.0)
+        target, _ = targets_study.target_of(arm)
+        assert config["aux_target"] == target, arm
+        if target != "none":
+            assert (config["aux_weight"], config["learning_rate"]) == (0.1, 3e-4), arm
+    archives = registry.Archives()
+    results = archives.sweep(STAGE1)
+    assert sorted(results) == sorted(STAGE1_ARMS)
+    for per_seed in results.values():
+        assert len(per_seed) == 5
+        for r in per_seed:
+            assert [n["platform"]["cpu"] for n in r["numerics"]] == [EPYC] * len(r["numerics"])
+            assert [v["update"] for v in r["validation"]] == list(range(500, 3001, 500))
+    (name,) = [n for n in archives.names(STAGE1) if n.endswith("/targets_probe.json")]
+    probe = archives.member(STAGE1, name)
+    assert sorted(probe["arms"]) == sorted(a for a in STAGE1_ARMS if "aux_target=" in a)
+    assert all(len(seeds) == 5 for seeds in probe["arms"].values())
