@@ -1,13 +1,26 @@
-"""Learning to imagine (Section 4.3, Eq. 5-7, Algorithm 1): per-lane replay buffers,
-the f_w update, per-lane success rates and the imagination noise.
+"""ForeSIT's imagination in one module, in the paper's order: what i_tau is at each step of
+acting (Eq. 6-7, and every variant beside the paper's), the sub-goal its critic selects
+(Section 4.2), the buffers and f_w's training (Eq. 5, Algorithm 1), and imagination as a
+training target (the auxiliary heads, issue 79).
 
 Everything is a pure function over explicit pytrees. Per-lane structures are written
 unbatched (one env lane = one A3C agent) and stacked over lanes with `jax.vmap`
 (`jax.vmap(buffer_add)(buffers, ...)`), except `train_full_buffers`, which takes the
 stacked buffers `[B, M, ...]` because lanes update the shared f_w one after another.
 
-How the f_w update is wired (the Trainer calls this at every step of a window, in time
-order, `Trainer.store_and_train`):
+What the rest of the package calls (nothing here imports the modules that call it:
+`networks.build` hands this module an `Imagination` record, the variant, f_w's apply, the
+noise settings and an encode function for the goal view):
+
+* acting, at every step (`rollout.agent_step`, after the encoder gave s_t): `at_step(...) ->
+  (i_tau, ImaginationCarry)`; the encoder's i_tau before that (`encoder_input`); after the
+  environment's step, `record_outcomes` (each ended episode's outcome, rho of Eq. 7);
+* training, once per update, after the gradient step (`Trainer.update`): `learn(...)`, the
+  sub-goals of the window's successful episodes into the buffers and full buffers into f_w;
+* training's loss, for an auxiliary target (`train.loss_and_grad_with_target`):
+  `target_labels`, `target_window_loss`.
+
+How the f_w update is wired (`learn`, at every step of a window, in time order):
   1. each lane whose episode ended successfully at that step adds (s_0, g_tau, ŝ_tau) to its buffer
      (`buffer_add`, a no-op for failed episodes);
   2. `train_full_buffers(w_params, buffers, ...)` visits the lanes whose buffer is
@@ -25,12 +38,19 @@ order, `Trainer.store_and_train`):
 
 from __future__ import annotations
 
-from typing import Any, Callable, Mapping, NamedTuple
+import dataclasses
+from typing import Any, Callable, Mapping, NamedTuple, Optional
 
 import chex
+import flax.linen as nn
 import jax
 import jax.numpy as jnp
 import optax
+
+from envs.wrappers import CUES, CueWrapper, GoalViewWrapper
+from foresit_jax.config import AUX_TARGETS, Config
+from foresit_jax.layers import Dense
+from foresit_jax.methods import ImaginationVariant
 
 
 # apply_fn(params, s_0 [..., H], goal [..., D]) -> imagined state [..., H]
@@ -337,3 +357,401 @@ def add_input_noise(
 def random_imagination(key: chex.PRNGKey, shape: tuple[int, ...], variance: float = 0.5) -> chex.Array:
     """The `rnd` ablation: i_tau = tanh(z), z ~ N(0, variance I) (variance 0.5)."""
     return jnp.tanh(jnp.sqrt(variance) * jax.random.normal(key, shape, jnp.float32))
+
+
+# ---------------------------------------------------------------------- i_tau at each step (Eq. 6-7)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Imagination:
+    """What acting and training need of a Config's imagination, handed over by
+    `networks.build` (`Networks.imagination`), so that this module calls into no module
+    above it. Compared by identity (a jitted function built on one is compiled for it alone).
+
+    goal_latent: `(params, kernels, obs) -> [B, H]`, the agent's own latent of its episodes'
+    goal views (the encoder and one LSTM step from a fresh carry on
+    `GoalViewWrapper.goal_of(obs)`; `Networks.goal_latent`), called only where i_tau is
+    renewed from the goal view; permute: a reordering of the lanes applied to i_tau's inputs
+    (the probe's shuffle, `experiments.analysis.probes.shuffled`; None: none)."""
+
+    variant: ImaginationVariant
+    imagine: ImagineFn  # f_w's apply, (w, s, goal) -> [..., H]
+    goal_latent: Callable
+    optimizer: optax.GradientTransformation  # f_w's lane-local optimiser (`make_imagination_optimizer`)
+    hidden_size: int
+    sigma2_max: float  # Eq. 7
+    noise: str  # where Eq. 6's noise is added: 'output' (the paper's) or 'input' (Algorithm 1's)
+    rnd_variance: float  # the `rnd` ablation's
+    int_interval: int  # the `int` ablation's K
+    in_encoder: bool  # i_tau enters the encoder (`Config.imagination_input='encoder'`)
+    epochs: int  # f_w's epochs over a full buffer
+    batch: int  # items per f_w step
+    permute: Optional[Callable] = None
+
+
+class ImaginationCarry(NamedTuple):
+    """What imagination carries per lane from one step to the next (leaves `[B, ...]`)."""
+
+    imagined: chex.Array  # [B, H] the running episode's i_tau
+    s_0: chex.Array  # [B, H] the running episode's first state
+    tracker: "SuccessTracker"  # [B, window] outcomes of each lane's last episodes (rho of Eq. 7)
+
+
+def carry_init(num_lanes: int, hidden_size: int, success_window: int, tracker=None) -> ImaginationCarry:
+    """Zeros, and fresh success trackers unless `tracker` (`[B, window]`) is kept."""
+    zeros = jnp.zeros((num_lanes, hidden_size), jnp.float32)
+    if tracker is None:
+        one = tracker_init(success_window)
+        tracker = jax.tree.map(lambda x: jnp.broadcast_to(x, (num_lanes,) + x.shape), one)
+    return ImaginationCarry(zeros, zeros, tracker)
+
+
+def acting_env(spec: Imagination, env):
+    """The environment an imagination acts in: `env` itself, or, for one that reads the goal
+    view (the privileged `oracle`) or a cue (`optaction`, `compass`, `startcompass`), `env`
+    wrapped to carry it (`envs.wrappers.GoalViewWrapper`, `envs.wrappers.CueWrapper`;
+    built for those methods alone, so no other program changes)."""
+    variant = spec.variant
+    if variant.reads_cue and not isinstance(env, CueWrapper):
+        return CueWrapper(env, variant.cue)
+    if not variant.reads_goal_view or isinstance(env, GoalViewWrapper):
+        return env
+    return GoalViewWrapper(env)
+
+
+def cue_latent(spec: Imagination, obs) -> chex.Array:
+    """A privileged cue as i_tau `[B, H]`: `obs["cue"]` `[B, K]` zero-padded to H, exact
+    (no noise; `Config` requires sigma2_max=0), lanes reordered by `spec.permute`."""
+    cue = obs["cue"]
+    cue = (spec.permute or (lambda x: x))(cue)
+    return jnp.pad(cue, [(0, 0)] * (cue.ndim - 1) + [(0, spec.hidden_size - cue.shape[-1])])
+
+
+def encoder_input(spec: Imagination, carry: ImaginationCarry, episode_step: chex.Array, obs) -> Optional[chex.Array]:
+    """The i_tau the encoder sees at the lanes' next step `[B, H]`: the running episode's,
+    zeros at an episode's first step (i_tau is imagined from that step's output); None
+    unless i_tau enters the encoder. A cue is read from the observation, which exists
+    before the step's state: the encoder sees the step's own cue, at the first step too."""
+    if not spec.in_encoder:
+        return None
+    if spec.variant.reads_cue:
+        return cue_latent(spec, obs)
+    return jnp.where((episode_step == 0)[:, None], 0.0, carry.imagined)
+
+
+def imagine(spec: Imagination, w_params, s_t, goal, key, noise_variance, goal_latent_fn) -> chex.Array:
+    """i_tau `[B, H]` from its source (the ImaginationVariant piece), stop-gradient (the
+    policy loss never trains f_w or, through it, s_0). learned: f_w([s_t : g]) +
+    N(0, sigma2) (Eq. 6), or with `noise='input'` f_w([s_t : g] + N(0, sigma2))
+    (Algorithm 1); random: tanh(N(0, v)); goal_view: the goal view's latent + N(0, sigma2).
+    `spec.permute` reorders the lanes of i_tau's inputs (the probe's shuffle)."""
+    source = spec.variant.source
+    permute = spec.permute or (lambda x: x)
+    if source == "random":
+        return random_imagination(key, s_t.shape, spec.rnd_variance)
+    if source == "goal_view":
+        return jax.lax.stop_gradient(add_imagination_noise(key, permute(goal_latent_fn()), noise_variance))
+    s_t, goal = permute(s_t), permute(goal)
+    if spec.noise == "input":
+        s_in, goal_in = add_input_noise(key, jax.lax.stop_gradient(s_t), goal, noise_variance)
+        return jax.lax.stop_gradient(spec.imagine(w_params, s_in, goal_in))
+    imagined = spec.imagine(w_params, jax.lax.stop_gradient(s_t), goal)
+    return jax.lax.stop_gradient(add_imagination_noise(key, imagined, noise_variance))
+
+
+def renews(variant: ImaginationVariant, episode_step: chex.Array, interval: int) -> chex.Array:
+    """Whether i_tau is (re)imagined at this step of the episode, `[...]` bool: at every
+    `interval`-th step with the `int` ablation's `renew_every_k`, else at the first."""
+    if variant.renew_every_k:
+        return episode_step % interval == 0
+    return episode_step == 0
+
+
+def at_step(
+    spec: Imagination,
+    acting,
+    kernels,
+    carry: ImaginationCarry,
+    s_t: chex.Array,
+    episode_step: chex.Array,
+    obs,
+    key: chex.PRNGKey,
+) -> tuple[chex.Array, ImaginationCarry]:
+    """i_tau for a step `[B, H]` (Eq. 6-7) and the carry after it (s_0 set at an episode's
+    first step). i_tau is renewed where the ImaginationVariant piece says (an episode's first
+    step; every K steps for `int`) from s_t (= s_0 at the first step) by f_w
+    (`acting.imagination_params`), with noise of each lane's variance
+    (`acting.noise_variance` `[B]`, or Eq. 7 from its success tracker), else the running
+    episode's; unchanged without imagination; a cue is the step's own, every step.
+
+    acting: the step's `rollout.AgentParams` (params, f_w's w, the noise variance); kernels:
+    the encoder LSTM's, for the goal view's latent (called only where i_tau is renewed from
+    it); episode_step `[B]`: the step's position in its episode; obs: the step's observations
+    (the target g_tau, and the goal view or the cue where the variant reads them)."""
+    s_0 = jnp.where((episode_step == 0)[:, None], s_t, carry.s_0)
+    imagined = _imagined(spec, acting, kernels, carry, s_t, episode_step, obs, key)
+    return imagined, carry._replace(imagined=imagined, s_0=s_0)
+
+
+def _imagined(spec: Imagination, acting, kernels, carry, s_t, episode_step, obs, key) -> chex.Array:
+    variant = spec.variant
+    if not variant.uses_imagination:
+        return carry.imagined
+    if variant.reads_cue:  # the step's own cue, every step
+        return cue_latent(spec, obs)
+    variance = acting.noise_variance
+    if variance is None:
+        variance = noise_variance(jax.vmap(success_rate)(carry.tracker), spec.sigma2_max)
+    renew = renews(variant, episode_step, spec.int_interval)  # [B]
+    goal = obs["target"]
+    goal_latent_fn = None  # the oracle's: computed only where i_tau is renewed
+    if variant.reads_goal_view:
+        goal_latent_fn = lambda: spec.goal_latent(acting.params, kernels, obs)  # noqa: E731
+
+    def renewed():
+        mask = renew[:, None]  # [B, 1], before the imagination (the order of the lowered program's ops)
+        imagined = imagine(spec, acting.imagination_params, s_t, goal, key, variance, goal_latent_fn)
+        return jnp.where(mask, imagined, carry.imagined)
+
+    return jax.lax.cond(jnp.any(renew), renewed, lambda: carry.imagined)
+
+
+def record_outcomes(carry: ImaginationCarry, success: chex.Array, finished: chex.Array) -> ImaginationCarry:
+    """The carry after a step of the environment: each lane's episode that `finished`
+    `[B]` there adds its outcome `success` `[B]` to the lane's tracker (rho, Eq. 7)."""
+    return carry._replace(tracker=jax.vmap(tracker_update)(carry.tracker, success, finished))
+
+
+# ---------------------------------------------------------------------- the sub-goal (Section 4.2)
+
+
+def subgoals_of_rows(keys: chex.Array, alpha: chex.Array, mode: str = "argmax") -> chex.Array:
+    """The sub-goal each attention row would select: `keys [..., K, H]`, `alpha [..., R, K]`
+    -> `[..., R, H]` (stop-gradient, targets for f_w): the key with the largest weight
+    ('argmax', ForeSIT's s_{t*}, first on ties) or the weighted average
+    ('attention_average', the `att` ablation). Masked keys carry alpha = 0."""
+    chex.assert_equal_shape_prefix([keys, alpha], keys.ndim - 2)
+    keys, alpha = jax.lax.stop_gradient((keys, alpha))
+    if mode == "argmax":
+        index = jnp.argmax(alpha, axis=-1)  # [..., R]
+        return jnp.take_along_axis(keys, index[..., None], axis=-2)  # [..., R, H]
+    if mode == "attention_average":
+        return jnp.einsum("...rk,...kh->...rh", alpha, keys)
+    raise ValueError(f"Unknown sub-goal mode {mode!r}; use 'argmax' or 'attention_average'.")
+
+
+def subgoal_items(subgoal_mode: str, traj, alpha, key_states, success):
+    """What each step of a window (`traj`, a `rollout.Trajectory` recorded with its inputs)
+    offers the buffers: (s_0 `[T, B, H]`, g_tau `[T, B, D]`, the sub-goal ŝ_tau `[T, B, H]`,
+    add `[T, B]`: an episode ended there successfully). ŝ_tau is what the step's attention
+    row selects (Section 4.2: at the Done step, s_{t*}, t* = argmax alpha, over all the
+    episode's states); the plain critic has no attention (alpha None), and ŝ_tau is then
+    the step's own state, the goal state. subgoal_mode: the ImaginationVariant's ('argmax'
+    or 'attention_average')."""
+    if alpha is None:
+        subgoals = jax.lax.stop_gradient(traj.states)
+    else:
+        subgoals = jnp.swapaxes(subgoals_of_rows(key_states, alpha[:, :-1], subgoal_mode), 0, 1)
+    return traj.s_0, traj.inputs.obs["target"], subgoals, success
+
+
+def subgoal_steps(episode_step: chex.Array, end_episode_step: chex.Array, alpha) -> chex.Array:
+    """Where each step's sub-goal lies in its episode, `[T, B]` int32: t* (the position
+    of the key its attention row weighs most; the step's own position with the plain
+    critic, whose sub-goal is the step's state). episode_step `[T, B]`: the window's steps'
+    positions; end_episode_step `[B]`: the position after it. The keys are the memory,
+    positions 0..M-1 of the running episode, then the window's states (`train.window_critic`)."""
+    if alpha is None:
+        return episode_step
+    steps = jnp.concatenate([episode_step, end_episode_step[None]], axis=0).T  # [B, T + 1]
+    memory_size = alpha.shape[-1] - steps.shape[-1]
+    memory = jnp.broadcast_to(jnp.arange(memory_size, dtype=steps.dtype), (steps.shape[0], memory_size))
+    key_steps = jnp.concatenate([memory, steps], axis=1)  # [B, M + T + 1]
+    index = jnp.argmax(alpha[:, :-1], axis=-1)  # [B, T]
+    return jnp.take_along_axis(key_steps, index, axis=1).T  # [T, B]
+
+
+# ---------------------------------------------------------------------- f_w's training, once per update
+
+
+def store_and_train(spec: Imagination, w_params, buffers: ReplayBuffer, items):
+    """Algorithm 1 for each step of the window in time order: lanes whose episode
+    ended successfully there add (s_0, g_tau, ŝ_tau) to their buffer; full buffers
+    train the shared f_w and are emptied. items: (s_0 `[T, B, H]`, goal `[T, B, D]`,
+    subgoal `[T, B, H]`, add `[T, B]` bool). Returns (w, buffers, metrics)."""
+
+    def step(carry, item):
+        w_params, buffers, losses = carry
+        buffers = jax.vmap(buffer_add)(buffers, *item)
+        w_params, buffers, trained, _ = train_on_full_buffers(
+            w_params, buffers, spec.imagine, spec.optimizer, spec.epochs, spec.batch
+        )
+        return (w_params, buffers, losses.plus(trained)), None
+
+    carry = (w_params, buffers, ImaginationLosses.zeros())
+    (w_params, buffers, losses), _ = jax.lax.scan(step, carry, items)
+    return w_params, buffers, losses.metrics()
+
+
+def learn(spec: Imagination, w_params, buffers: ReplayBuffer, traj, alpha, key_states, success):
+    """f_w's part of one update, after the agent's gradient step (Algorithm 1): the sub-goals
+    of the window's successful episodes (`subgoal_items`) into the buffers, and full buffers
+    into f_w (`store_and_train`). traj: the window (a `rollout.Trajectory`); alpha, key_states:
+    the critic's attention rows and keys over it (`train.window_critic`); success `[T, B]`:
+    a successful episode ended at the step. Returns (w, buffers, metrics); without a learned
+    imagination, the same w and buffers and no metrics."""
+    if not spec.variant.trains_imagination:
+        return w_params, buffers, {}
+    items = subgoal_items(spec.variant.subgoal_mode, traj, alpha, key_states, success)
+    return store_and_train(spec, w_params, buffers, items)
+
+
+# ---------------------------------------------------------------------- imagination as a training target (issue 79)
+# A linear head on the recurrent state s_t learns to
+# predict a target y_t at every valid step of a window, with weight lambda beside the
+# actor-critic loss (`Config.aux_target`, `Config.aux_weight`); nothing of it acts.
+#
+#     L = L_A3C + lambda * mean over labelled steps of loss(W s_t + b, stop_gradient(y_t))
+#
+# The head's parameters are a tree of their own (`RunnerState.targets`, beside f_w's), with
+# an optimiser of their own (the base's: gradient clipping and Adam at the base's rate), so
+# the programs that act and evaluate (`foresit_jax.evaluate`, `foresit_jax.policy`) are the
+# base's, and nothing privileged is read at test time. The target reaches the agent only
+# through the gradient its loss sends into the encoder, through s_t.
+#
+# The targets (`AUX_TARGETS`), each a documented option:
+#
+# * ``compass`` (a privileged label in training): the bearing and distance of the nearest
+#   target cell from the step's pose, ``(cos b, sin b, d / G)``, as the ``compass`` cue
+#   computes them (`envs.wrappers.CueWrapper`, which wraps the training environment alone);
+#   squared error, summed over the three components.
+# * ``goal_view`` (a privileged label in training): the agent's own latent of the episode's
+#   goal view (the `oracle` imagination's i_tau before noise: the encoder and one LSTM step
+#   from a fresh carry on the goal view, `envs.wrappers.GoalViewWrapper`), computed in the
+#   loss from the parameters of this update (without gradient) at every step: the label
+#   follows the encoder as it learns, where a latent computed at the episode's start in
+#   acting would be that of the parameters of an earlier update for an episode that began
+#   in an earlier window. Smooth-L1 (the paper's f_w loss, `smooth_l1`).
+# * ``success`` (not privileged): the agent's own state at the step where its episode
+#   succeeded, for the earlier steps of that episode that share the success step's window
+#   (the success step itself excluded; steps whose episode failed, or ends after the
+#   window, are not labelled). Smooth-L1. `labelled_fraction` is logged every update.
+#
+# Each is a pure function of a window (`Trajectory`-shaped arrays `[T, B, ...]`); the
+# Trainer (`foresit_jax.train.loss_and_grad_with_target`) calls `target_window_loss` from
+# its replay loss.
+
+# Whether a target's labels read what the agent cannot see (its wrapper reads the scene).
+PRIVILEGED_LABELS: dict[str, bool] = {"compass": True, "goal_view": True, "success": False}
+
+
+class TargetHead(nn.Module):
+    """The linear head: s_t `[..., H]` -> the predicted target `[..., width]`."""
+
+    width: int
+
+    @nn.compact
+    def __call__(self, s_t: chex.Array) -> chex.Array:
+        return Dense(self.width, name="out")(s_t)
+
+
+class TargetState(NamedTuple):
+    """The head's parameters and their optimiser's state (`RunnerState.targets`)."""
+
+    params: chex.ArrayTree
+    opt_state: chex.ArrayTree
+
+
+class TargetLabels(NamedTuple):
+    """What the head learns on one window: `y` `[T, B, width]` (without gradient) and
+    `mask` `[T, B]` bool, the steps labelled."""
+
+    y: chex.Array
+    mask: chex.Array
+
+
+def target_width(config: Config) -> int:
+    """The target's width: the compass's 3 floats, or a latent's `hidden_size`."""
+    return CUES["compass"] if config.aux_target == "compass" else config.hidden_size
+
+
+def target_head(config: Config) -> TargetHead:
+    return TargetHead(target_width(config))
+
+
+def label_env(config: Config, env):
+    """The training environment wrapped to carry the target's labels (`obs["cue"]` for
+    ``compass``, `obs["goal_view"]` for ``goal_view``); `env` itself otherwise. Training
+    alone acts in it: evaluation builds its own environment, the base's."""
+    if config.aux_target == "compass":
+        return CueWrapper(env, "compass")
+    if config.aux_target == "goal_view":
+        return GoalViewWrapper(env)
+    return env
+
+
+def success_labels(states, terminated, truncated, success, valid) -> TargetLabels:
+    """`success`'s labels: for each valid step t of a window, the state s_e of the step e
+    where its episode ended, where e > t lies in the window and the episode succeeded there.
+
+    A reverse scan over time carries, per lane, the state and outcome of the next episode
+    end at or after each step; steps of one episode are contiguous in a lane, so the next
+    end is the step's own episode's. states `[T, B, H]`; the rest `[T, B]` bool."""
+    ended = (terminated | truncated) & valid
+
+    def step(carry, x):
+        next_state, next_success = carry
+        s, end, succ, ok = x
+        label, labelled = next_state, next_success & ok & ~end  # the end step itself excluded
+        carry = (jnp.where(end[:, None], s, next_state), jnp.where(end, succ, next_success))
+        return carry, (label, labelled)
+
+    init = (jnp.zeros_like(states[0]), jnp.zeros(states.shape[1], bool))
+    _, (y, mask) = jax.lax.scan(step, init, (states, ended, success & ended, valid), reverse=True)
+    return TargetLabels(jax.lax.stop_gradient(y), mask)
+
+
+def target_labels(config: Config, obs: dict, states, traj, goal_latent: Optional[Callable] = None) -> TargetLabels:
+    """The labels of one window for `config.aux_target`. obs: the window's recorded
+    observations (leaves `[T, B, ...]`, from the label environment); states: s_t `[T, B, H]`;
+    traj: the window's `Trajectory` (terminated, truncated, success, valid);
+    goal_latent: `obs -> [N, H]`, the goal view's latent under this update's parameters
+    (``goal_view`` only)."""
+    target, valid = config.aux_target, traj.valid
+    if target == "compass":
+        return TargetLabels(obs["cue"], valid)
+    if target == "goal_view":
+        lead = valid.shape
+        flat = jax.tree.map(lambda x: jnp.reshape(x, (-1, *x.shape[len(lead) :])), obs)
+        latent = jnp.reshape(goal_latent(flat), (*lead, -1))
+        return TargetLabels(jax.lax.stop_gradient(latent), valid)
+    if target == "success":
+        return success_labels(states, traj.terminated, traj.truncated, traj.success, valid)
+    raise ValueError(f"aux_target must be one of {AUX_TARGETS[1:]}, got {target!r}")
+
+
+def target_step_loss(target: str, prediction: chex.Array, y: chex.Array) -> chex.Array:
+    """`[T, B]`: the compass's squared error summed over its components, a latent's smooth-L1
+    (averaged over its dimensions, as f_w's loss)."""
+    y = jax.lax.stop_gradient(y)
+    if target == "compass":
+        return jnp.sum((prediction - y) ** 2, axis=-1)
+    return smooth_l1(prediction, y)
+
+
+def target_window_loss(config: Config, head_params, states: chex.Array, labels: TargetLabels) -> tuple[chex.Array, dict]:
+    """(the mean loss over the labelled steps (0 where none), its metrics). states: s_t
+    `[T, B, H]`, differentiable (the gradient reaches the encoder through them)."""
+    prediction = target_head(config).apply(head_params, states)
+    mask = labels.mask.astype(jnp.float32)
+    count = jnp.sum(mask)
+    loss = jnp.sum(target_step_loss(config.aux_target, prediction, labels.y) * mask) / jnp.maximum(count, 1.0)
+    return loss, {"losses/aux_loss": loss, "charts/aux_labelled": count}
+
+
+def target_init(config: Config, key: chex.PRNGKey, optimizer) -> Optional[TargetState]:
+    """The head's initial TargetState (None without a target)."""
+    if config.aux_target == "none":
+        return None
+    params = target_head(config).init(key, jnp.zeros((config.hidden_size,), jnp.float32))
+    return TargetState(params, optimizer.init(params))

@@ -85,17 +85,20 @@ from foresit_jax.lstm import (
     split_encoder_lstm_kernels,
     with_encoder_lstm_kernels,
 )
-from foresit_jax.networks import Networks
-from foresit_jax.policy import PolicyCarry, StepPolicy, as_actor, policy_step, reset, with_noise, zero_carry
+from foresit_jax.networks import ActorCritic, Networks
+from foresit_jax.policy import StepPolicy, policy_step, reset, with_noise
 from foresit_jax.rollout import (
     ActOptions,
     ActorState,
     Adaptation,
+    AgentCarry,
     AgentParams,
     BoundEnv,
     StepInputs,
     Trajectory,
     WindowEnd,
+    advance,
+    agent_carry,
     agent_step,
 )
 
@@ -186,7 +189,7 @@ def act(
     if not options.whole_episodes or options.step_keys is not None:
         raise ValueError("the maml base acts in whole episodes (rollout='episodes'), without step_keys")
     if acting.noise_variance is None:
-        rho = jax.vmap(imagination.success_rate)(actor.tracker)
+        rho = jax.vmap(imagination.success_rate)(actor.agent.imagination.tracker)
         acting = acting._replace(noise_variance=imagination.noise_variance(rho, nets.config.sigma2_max))
     actor, traj, end, _ = adaptive_act(nets, acting, env, actor, key, num_steps, options)
     return actor, traj, end
@@ -211,7 +214,7 @@ def adaptive_act(
     theta_0 first, then theta_i after each update slot (unchanged in lanes whose episode
     had ended))."""
     loop = InnerLoop.of(nets.config)
-    num_lanes = actor.episode_step.shape[0]
+    num_lanes = actor.agent.episode_step.shape[0]
     variance = jnp.broadcast_to(jnp.asarray(acting.noise_variance, jnp.float32), (num_lanes,))[:, None]  # [B, 1]
     shared, lanes = split_encoder_lstm_kernels(acting.params)
     lanes = lane_copies(lanes, num_lanes)
@@ -232,7 +235,9 @@ def adaptive_act(
             )
             return traj, (next_actor, end)
 
-        grads, rows, traj, (next_actor, end) = segment_update(nets, loop, shared, lanes, lane_actor.lstm[1], run)
+        grads, rows, traj, (next_actor, end) = segment_update(
+            nets, loop, shared, lanes, lane_actor.agent.lstm[1], run
+        )
         still_alive = traj.valid[-1] & ~(
             traj.terminated[-1] | traj.truncated[-1]
         )  # [1] the episode runs on (alive next)
@@ -280,7 +285,7 @@ def segment_update(nets: Networks, loop: InnerLoop, shared, lanes, h_before: che
     def loss(lanes, gate_offsets):
         segment, aux = run(lanes, gate_offsets)
         inputs = interaction_inputs(segment.states[:, 0], segment.logits[:, 0])  # [segment, H + A]
-        loss = nets.model.apply(join_partial_trees(shared, lanes), inputs, method="interaction_loss")
+        loss = nets.model.apply(join_partial_trees(shared, lanes), inputs, method=ActorCritic.interaction_loss)
         return loss, (segment, aux)
 
     kernel_dtype = jax.tree.leaves(shared)[0].dtype
@@ -301,7 +306,7 @@ def _kernel_update(nets: Networks, loop: InnerLoop, params, h_before, traj, gate
     seen = traj.inputs
     return LowRankUpdate(
         inputs=nets.model.apply(
-            params, seen.obs, seen.prev_action_probs, seen.encoder_imagined, method="encoder_features"
+            params, seen.obs, seen.prev_action_probs, seen.encoder_imagined, method=ActorCritic.encoder_features
         )[:, 0],
         hiddens=jnp.concatenate([h_before, traj.states[:-1, 0]]),
         deltas=-loop.lr * gate_grads[:, 0],
@@ -325,10 +330,10 @@ class AdaptiveCarry(NamedTuple):
     parameter but the LSTM kernels, and the kernels' low-rank change, zero rows beyond the
     updates made so far), and the running segment, which the next inner step learns from."""
 
-    policy: PolicyCarry
+    policy: AgentCarry
     lanes: Any  # theta_i but the encoder LSTM's kernels, leaves [B, ...]
     update: LowRankUpdate  # [B, segment * updates, ...] the kernels' change so far
-    segment_start: PolicyCarry  # the carry that entered the running segment's first step
+    segment_start: AgentCarry  # the carry that entered the running segment's first step
     seen_obs: Any  # [B, segment, ...] the running segment's observations
     seen_keys: chex.Array  # [B, segment, 2] its steps' keys
 
@@ -361,9 +366,9 @@ def policy_carry(nets: Networks, num_lanes: int, acting: Optional[AgentParams] =
             "obs=one observation) (experiments.load's initial_carry does)"
         )
     loop, hidden = InnerLoop.of(nets.config), nets.config.hidden_size
-    carry = zero_carry(nets, num_lanes)
+    carry = agent_carry(nets, num_lanes)
     _, lanes = split_encoder_lstm_kernels(acting.params)
-    kernels = lstm_kernels(encoder_lstm_params(acting.params))
+    kernels = nets.lstm_kernels(acting.params)
     rows, dtype = loop.segment * loop.updates, kernels.input_kernel.dtype
     update = LowRankUpdate(
         jnp.zeros((num_lanes, rows, kernels.input_kernel.shape[0]), dtype),
@@ -389,29 +394,21 @@ class _Replayed(NamedTuple):
 
 
 def _replayed_segment(
-    nets: Networks, acting: AgentParams, kernels, start: PolicyCarry, seen_obs, seen_keys, gate_offsets
+    nets: Networks, acting: AgentParams, kernels, start: AgentCarry, seen_obs, seen_keys, gate_offsets
 ) -> _Replayed:
     """`act_window`'s agent half over one lane's recorded segment (`[1, ...]` leaves; obs
     `[segment, 1, ...]`, keys `[segment, 2]`), the episode running throughout: the same
     states and logits, as functions of `acting.params`, without the environment."""
-    carries_gradient = nets.method.action_probs_carry_gradient
 
-    def step(actor, xs):
+    def step(agent, xs):
         obs, key, gate_offset = xs
-        actor = actor._replace(obs=obs)
         k_imag = jax.random.split(key, 3)[0]
-        lstm, s_t, logits, imagined, s_0, seen_imagined = agent_step(nets, acting, kernels, actor, k_imag, gate_offset)
-        seen = StepInputs(obs, actor.prev_probs, imagined if nets.imagination_in_head else None, seen_imagined)
-        probs = distributions.probs(logits)
-        if not carries_gradient:
-            probs = jax.lax.stop_gradient(probs)
-        actor = actor._replace(
-            lstm=lstm, prev_probs=probs, imagined=imagined, s_0=s_0, episode_step=actor.episode_step + 1
-        )
-        return actor, _Replayed(s_t, logits, seen)
+        out = agent_step(nets, acting, kernels, agent, obs, k_imag, gate_offset)
+        policy_input = out.imagined if nets.imagination_in_head else None
+        seen = StepInputs(obs, agent.prev_probs, policy_input, out.encoder_imagined)
+        return advance(nets, agent, out), _Replayed(out.state, out.logits, seen)
 
-    first_obs = jax.tree.map(lambda x: x[0], seen_obs)
-    _, out = jax.lax.scan(step, as_actor(start, first_obs), (seen_obs, seen_keys, gate_offsets))
+    _, out = jax.lax.scan(step, start, (seen_obs, seen_keys, gate_offsets))
     return out
 
 
@@ -444,7 +441,7 @@ def policy(nets: Networks, greedy: bool = False) -> StepPolicy:
 
         def lane_params(lanes, update):
             params = join_partial_trees(shared, lanes)
-            return params, nets.model.apply(params, update, method="lstm_kernels")
+            return params, nets.lstm_kernels(params, update)
 
         def lane_update(lanes, update, start, seen_obs, seen_keys, variance, slot):  # one lane: theta_i -> theta_i+1
             def run(lanes, gate_offsets):

@@ -8,17 +8,20 @@
 * `ActorCritic`: Encoder + PolicyHead + Critic under one parameter tree (theta, omega),
   reached through two time-major methods that acting and the loss both call, as in
   PureJaxRL's `ppo_rnn.py`: `encode` (the encoder over T steps: the input gates of all
-  steps in one matmul, then the LSTM's recurrence) and `heads` (the policy's logits on
-  [s_t : i_tau]); acting calls them at T = 1 and imagines i_tau between the two calls, the
-  loss at T = the window on the recorded i_tau. Plus `critic` (values over a window).
+  steps in one matmul, then the LSTM's recurrence) and `policy_logits` (the policy's logits
+  on [s_t : i_tau]); acting calls them at T = 1 and imagines i_tau between the two calls,
+  the loss at T = the window on the recorded i_tau. Plus `critic` (values over a window).
+  Every call names the method itself (`apply(params, ..., method=ActorCritic.encode)`), so
+  a reader or a tool can follow it.
 * `build(config) -> Networks`: the one place where a method's pieces (flags,
   `foresit_jax.methods`) become modules: ORG's object graph, SAVN's learned loss, the
-  attention critic, where i_tau enters. `Networks` is a record (the modules and the
-  Config), what `foresit_jax.rollout` acts with.
+  attention critic, where i_tau enters. `Networks` is a record (the modules, the Config
+  and the `foresit_jax.imagination.Imagination` record it hands to imagination), what
+  `foresit_jax.rollout` acts with.
 * Pure helpers: `causal_episode_mask`, `window_attention_mask` (which states each step
-  attends to), `masked_softmax`, `subgoals_of_rows` (the sub-goal each attention row
-  selects). The LSTM cell's split form (used by acting and the replay gradient) is in
-  `foresit_jax.lstm`.
+  attends to), `masked_softmax`. The sub-goal each attention row selects is imagination's
+  (`foresit_jax.imagination.subgoals_of_rows`). The LSTM cell's split form (used by acting
+  and the replay gradient) is in `foresit_jax.lstm`.
 
 Every module works unbatched or with any leading batch dims (Dense acts on the last
 axis); the critic's time axis is the second to last of `states`.
@@ -34,6 +37,7 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
+from foresit_jax import imagination
 from foresit_jax.config import Config
 from foresit_jax.layers import Dense, GridDense, orthogonal
 from foresit_jax.lstm import (  # noqa: F401 (initial_carry, reset_carry: re-exported)
@@ -44,6 +48,7 @@ from foresit_jax.lstm import (  # noqa: F401 (initial_carry, reset_carry: re-exp
     initial_carry,
     reset_carry,
 )
+from envs.wrappers import GoalViewWrapper
 from foresit_jax.learned_loss import LearnedLoss
 from foresit_jax.methods import Method, ImaginationVariant
 from foresit_jax.org import ObjectGraph
@@ -299,14 +304,20 @@ class EncoderInputs(NamedTuple):
     imagined: Optional[chex.Array] = None  # [T, ..., H] i_tau for the encoder (imagination_input='encoder'), else None
 
 
+def one_step(obs, prev_action_probs, encoder_imagined) -> EncoderInputs:
+    """The encoder's inputs of one step of every lane (leaves `[B, ...]`) as a window of
+    one, `[1, B, ...]` (`ActorCritic.encode` at T = 1)."""
+    return EncoderInputs(*jax.tree.map(lambda x: x[None], (obs, prev_action_probs, encoder_imagined)))
+
+
 class ActorCritic(nn.Module):
     """theta (encoder + policy) and omega (critic) under one parameter tree.
 
-    Methods (use with `apply(params, ..., method="encode")` etc.):
+    Methods (use with `apply(params, ..., method=ActorCritic.encode)` etc.):
       encode(carry, inputs: EncoderInputs [T, ...], first [T, ...], kernels, gate_offsets)
         -> (carry, states [T, ..., H]): acting at T = 1, the loss over a window, the
         bootstrap and the goal view's latent at T = 1
-      heads(states, imagined) -> logits [..., A]: the policy on [s_t : i_tau]
+      policy_logits(states, imagined) -> logits [..., A]: the policy on [s_t : i_tau]
       critic(states [..., T, H], valid [..., T]) -> CriticOutput
       lstm_kernels(update) -> the encoder LSTM's kernels (foresit_jax.lstm), made once per
         acting window, outside its loop, and adapted by the maml base
@@ -320,7 +331,7 @@ class ActorCritic(nn.Module):
     `imagination_input` (`Config.imagination_input`): where i_tau enters: 'head' and 'mlp'
     give it to the policy head (linear, or a two-layer MLP of `value_hidden` units, which
     the bases get too), 'encoder' to the encoder (`imagination_features` = the target's
-    embedding width). `EncoderInputs.imagined` is the encoder's i_tau; `heads` drops its
+    embedding width). `EncoderInputs.imagined` is the encoder's i_tau; `policy_logits` drops its
     `imagined` where the head takes none; `__call__` routes its one `imagined` to
     whichever takes it.
     """
@@ -391,7 +402,7 @@ class ActorCritic(nn.Module):
             return carry, s_t[None]
         return self.encoder.lstm.unroll(kernels, carry, gates, first)
 
-    def heads(self, states: chex.Array, imagined: Optional[chex.Array] = None) -> chex.Array:
+    def policy_logits(self, states: chex.Array, imagined: Optional[chex.Array] = None) -> chex.Array:
         """pi(. | s_t, i_tau) logits `[..., A]` of states `[..., H]`; `imagined` (the i_tau
         of each state) is dropped where the head takes none (no imagination, or i_tau in
         the encoder)."""
@@ -424,27 +435,12 @@ class ActorCritic(nn.Module):
         """One step through flax's own cell -> (carry, s_t, logits, value); `imagined` goes to
         the encoder or to the head, by `imagination_input`."""
         carry, s_t = self.encoder(carry, obs, prev_action_probs, imagined if self.imagination_in_encoder else None)
-        logits = self.heads(s_t, imagined)
+        logits = self.policy_logits(s_t, imagined)
         out = self.critic(s_t[..., None, :], jnp.ones(s_t.shape[:-1] + (1,), bool))
         if self.learned_loss is not None:  # create phi at init
             segment = jnp.zeros((self.learned_loss.segment, s_t.shape[-1] + logits.shape[-1]), s_t.dtype)
             self.interaction_loss(segment)
         return carry, s_t, logits, out.value
-
-
-def subgoals_of_rows(keys: chex.Array, alpha: chex.Array, mode: str = "argmax") -> chex.Array:
-    """The sub-goal each attention row would select: `keys [..., K, H]`, `alpha [..., R, K]`
-    -> `[..., R, H]` (stop-gradient, targets for f_w): the key with the largest weight
-    ('argmax', ForeSIT's s_{t*}, first on ties) or the weighted average
-    ('attention_average', the `att` ablation). Masked keys carry alpha = 0."""
-    chex.assert_equal_shape_prefix([keys, alpha], keys.ndim - 2)
-    keys, alpha = jax.lax.stop_gradient((keys, alpha))
-    if mode == "argmax":
-        index = jnp.argmax(alpha, axis=-1)  # [..., R]
-        return jnp.take_along_axis(keys, index[..., None], axis=-2)  # [..., R, H]
-    if mode == "attention_average":
-        return jnp.einsum("...rk,...kh->...rh", alpha, keys)
-    raise ValueError(f"Unknown sub-goal mode {mode!r}; use 'argmax' or 'attention_average'.")
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -454,8 +450,9 @@ class Networks:
 
     imagine: f_w, `(w, s, goal) -> [..., H]` (`imagination_net.apply`); permute: a
     reordering of the lanes applied to i_tau's inputs when acting (the probe's shuffle of
-    i_tau across episodes, `foresit_jax.probes.shuffled`; None: none). Compared by identity
-    (a jitted function built on one is compiled for it alone)."""
+    i_tau across episodes, `experiments.analysis.probes.shuffled`; None: none);
+    imagination: what `foresit_jax.imagination` needs of them (made when the record is).
+    Compared by identity (a jitted function built on one is compiled for it alone)."""
 
     config: Config
     model: ActorCritic
@@ -465,10 +462,28 @@ class Networks:
     # The Config's parsed method and its imagination piece, held when the record is made:
     method: Method = dataclasses.field(init=False)
     imagination_variant: ImaginationVariant = dataclasses.field(init=False)
+    imagination: imagination.Imagination = dataclasses.field(init=False)
 
     def __post_init__(self):
-        object.__setattr__(self, "method", self.config.pieces)
-        object.__setattr__(self, "imagination_variant", self.config.pieces.imagination_variant)
+        cfg = self.config
+        object.__setattr__(self, "method", cfg.pieces)
+        object.__setattr__(self, "imagination_variant", cfg.pieces.imagination_variant)
+        spec = imagination.Imagination(
+            variant=cfg.pieces.imagination_variant,
+            imagine=self.imagine,
+            goal_latent=self.goal_latent,
+            optimizer=imagination.make_imagination_optimizer(cfg.imagination_optimizer, cfg.imagination_lr),
+            hidden_size=cfg.hidden_size,
+            sigma2_max=cfg.sigma2_max,
+            noise=cfg.imagination_noise,
+            rnd_variance=cfg.rnd_variance,
+            int_interval=cfg.int_interval,
+            in_encoder=self.model.imagination_in_encoder,
+            epochs=cfg.imagination_epochs,
+            batch=cfg.imagination_batch,
+            permute=self.permute,
+        )
+        object.__setattr__(self, "imagination", spec)
 
     @property
     def imagination_in_encoder(self) -> bool:
@@ -479,6 +494,27 @@ class Networks:
     def imagination_in_head(self) -> bool:
         """Whether i_tau enters the policy head (and is recorded for the replay)."""
         return self.imagination_variant.uses_imagination and not self.model.imagination_in_encoder
+
+    def lstm_kernels(self, params, update: Optional[LowRankUpdate] = None) -> LSTMKernels:
+        """The encoder LSTM's kernels of `params` (`ActorCritic.lstm_kernels`), with the maml
+        base's low-rank `update` or None: the one route to them, for acting (made once per
+        window, outside its loop) and for the maml base's adapted lanes."""
+        return self.model.apply(params, update, method=ActorCritic.lstm_kernels)
+
+    def goal_latent(self, params, kernels, obs) -> chex.Array:
+        """The agent's own latent of its episodes' goal views `[B, H]` (privileged; the
+        `oracle` imagination's i_tau before noise, the `goal_view` target's label): the
+        encoder and one LSTM step from a fresh carry (zero carry and previous action
+        probabilities, as at an episode's first step) on `obs`'s goal view
+        (`envs.wrappers.GoalViewWrapper.goal_of`), under `kernels` (None: `params`')."""
+        lanes = obs["target"].shape[:-1]
+        hidden = self.config.hidden_size
+        probs = jnp.zeros(lanes + (self.config.num_actions,), jnp.float32)
+        encoder_imagined = jnp.zeros(lanes + (hidden,), jnp.float32) if self.imagination_in_encoder else None
+        inputs = one_step(GoalViewWrapper.goal_of(obs), probs, encoder_imagined)
+        first = jnp.ones((1,) + lanes, bool)
+        carry = initial_carry(lanes, hidden)
+        return self.model.apply(params, carry, inputs, first, kernels, method=ActorCritic.encode)[1][0]
 
     def init(self, key: chex.PRNGKey, obs: dict) -> tuple[Any, Any]:
         """(theta/omega params, f_w params) from one unbatched observation."""

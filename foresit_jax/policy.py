@@ -3,37 +3,27 @@
 `policy(nets)` is `(acting, carry, obs, first, key) -> (action [B], carry)`, the agent of
 `nets` (the a3c base; the maml base's, which adapts inside an episode, is
 `foresit_jax.maml.policy`) computing what `foresit_jax.rollout.act_window` computes at
-each step (`rollout.agent_step`), one step per call. Its `step_keys` give the keys that
+each step (`rollout.agent_step`, then `rollout.advance`), one step per call. Its `step_keys` give the keys that
 replay `rollout.rollout`'s episodes exactly (`foresit_jax.evaluate.policy_episodes`).
 
     step = policy(nets)
-    carry = policy_carry(nets, num_lanes)
+    carry = policy_carry(nets, num_lanes)      # a `rollout.AgentCarry`
     action, carry = step(AgentParams(params, w, variance), carry, obs, first, key)
 """
 
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable, NamedTuple, Optional
+from typing import Callable, Optional
 
 import chex
 import jax
 import jax.numpy as jnp
 
 from foresit_jax import distributions
-from foresit_jax.lstm import LSTMCarry, initial_carry, reset_carry
+from foresit_jax.lstm import reset_carry
 from foresit_jax.networks import Networks
-from foresit_jax.rollout import ActorState, AgentParams, agent_step
-
-
-class PolicyCarry(NamedTuple):
-    """What `policy` carries from one step to the next, per lane (leaves `[B, ...]`)."""
-
-    lstm: LSTMCarry  # (c, h) [B, H] each
-    prev_probs: chex.Array  # [B, A] the previous step's action probabilities
-    imagined: chex.Array  # [B, H] the running episode's i_tau
-    s_0: chex.Array  # [B, H] the running episode's first state
-    episode_step: chex.Array  # [B] int32 the step's position in its episode
+from foresit_jax.rollout import AgentCarry, AgentParams, advance, agent_carry, agent_step
 
 
 def lockstep_keys(key: chex.PRNGKey, num_steps: int, num_lanes: int) -> tuple[chex.Array, chex.Array]:
@@ -58,19 +48,13 @@ class StepPolicy:
         return self.act(acting, carry, obs, first, key)
 
 
-def policy_carry(nets: Networks, num_lanes: int, acting: Optional[AgentParams] = None, obs=None) -> PolicyCarry:
-    """The carry before any step (`first` at the first step resets it anyway): zeros.
-    (`acting` and `obs` are the maml base's, `foresit_jax.maml.policy_carry`; unused here.)"""
+def policy_carry(nets: Networks, num_lanes: int, acting: Optional[AgentParams] = None, obs=None) -> AgentCarry:
+    """The carry before any step (`first` at the first step resets it anyway): the agent's
+    carry of acting (`rollout.agent_carry`: zeros, and success trackers the policy never
+    reads, since its noise variance is given). (`acting` and `obs` are the maml base's,
+    `foresit_jax.maml.policy_carry`; unused here.)"""
     _check_base(nets, "policy_carry")
-    return zero_carry(nets, num_lanes)
-
-
-def zero_carry(nets: Networks, num_lanes: int) -> PolicyCarry:
-    """A `PolicyCarry` of zeros for `num_lanes` lanes."""
-    hidden = nets.config.hidden_size
-    zeros = jnp.zeros((num_lanes, hidden), jnp.float32)
-    probs = jnp.zeros((num_lanes, nets.config.num_actions), jnp.float32)
-    return PolicyCarry(initial_carry((num_lanes,), hidden), probs, zeros, zeros, jnp.zeros((num_lanes,), jnp.int32))
+    return agent_carry(nets, num_lanes)
 
 
 def _check_base(nets: Networks, name: str) -> None:
@@ -89,7 +73,7 @@ def with_noise(acting: AgentParams, lanes: int) -> AgentParams:
     return acting._replace(noise_variance=variance)
 
 
-def reset(carry: PolicyCarry, first: chex.Array) -> PolicyCarry:
+def reset(carry: AgentCarry, first: chex.Array) -> AgentCarry:
     """The carry as a step sees it: zeroed where `first` begins an episode."""
     probs = jnp.where(first[:, None], 0.0, carry.prev_probs)
     return carry._replace(
@@ -97,29 +81,13 @@ def reset(carry: PolicyCarry, first: chex.Array) -> PolicyCarry:
     )
 
 
-def as_actor(carry: PolicyCarry, obs) -> ActorState:
-    """The carry and the step's observations as the `ActorState` `rollout.agent_step` reads."""
-    return ActorState(
-        env_state=None,
-        obs=obs,
-        lstm=carry.lstm,
-        prev_probs=carry.prev_probs,
-        imagined=carry.imagined,
-        s_0=carry.s_0,
-        episode_step=carry.episode_step,
-        memory=None,
-        tracker=None,
-    )
-
-
-def policy_step(nets: Networks, acting: AgentParams, kernels, carry: PolicyCarry, obs, key, greedy: bool):
+def policy_step(nets: Networks, acting: AgentParams, kernels, carry: AgentCarry, obs, key, greedy: bool):
     """One step of the agent on a reset carry: (action [B], the next carry). `key` is split
     in 3 as acting splits it: i_tau's noise, the action's sample, the environment's."""
     k_imag, k_act, _ = jax.random.split(key, 3)
-    lstm, _, logits, imagined, s_0, _ = agent_step(nets, acting, kernels, as_actor(carry, obs), k_imag, None)
-    action = distributions.greedy(logits) if greedy else distributions.sample(k_act, logits)
-    probs = jax.lax.stop_gradient(distributions.probs(logits))
-    return action, PolicyCarry(lstm, probs, imagined, s_0, carry.episode_step + 1)
+    out = agent_step(nets, acting, kernels, carry, obs, k_imag, None)
+    action = distributions.greedy(out.logits) if greedy else distributions.sample(k_act, out.logits)
+    return action, advance(nets, carry, out)
 
 
 def policy(nets: Networks, greedy: bool = False) -> StepPolicy:
@@ -134,9 +102,9 @@ def policy(nets: Networks, greedy: bool = False) -> StepPolicy:
     action's sample, and (unused here) the environment's."""
     _check_base(nets, "policy")
 
-    def act(acting: AgentParams, carry: PolicyCarry, obs, first: chex.Array, key: chex.PRNGKey):
+    def act(acting: AgentParams, carry: AgentCarry, obs, first: chex.Array, key: chex.PRNGKey):
         acting = with_noise(acting, first.shape[0])
-        kernels = nets.model.apply(acting.params, None, method="lstm_kernels")
+        kernels = nets.lstm_kernels(acting.params)
         return policy_step(nets, acting, kernels, reset(carry, first), obs, key, greedy)
 
     return StepPolicy(act)

@@ -35,7 +35,6 @@ The same agent step by step, for a user's own loop, is `foresit_jax.policy`.
 
 from __future__ import annotations
 
-import functools
 from typing import Any, Callable, NamedTuple, Optional
 
 import chex
@@ -44,11 +43,9 @@ import jax.numpy as jnp
 from flax import struct
 
 import envs.metrics
-from envs.wrappers import CueWrapper, GoalViewWrapper
 from foresit_jax import distributions, imagination
-from foresit_jax.lstm import LowRankUpdate, LSTMCarry, initial_carry, lane_copies, reset_carry
-from foresit_jax.methods import ImaginationVariant
-from foresit_jax.networks import EncoderInputs, Networks
+from foresit_jax.lstm import LowRankUpdate, LSTMCarry, initial_carry, reset_carry
+from foresit_jax.networks import ActorCritic, Networks, one_step
 
 
 class AgentParams(NamedTuple):
@@ -103,18 +100,25 @@ class Adaptation(NamedTuple):
     gate_offsets: Optional[chex.Array] = None
 
 
+class AgentCarry(NamedTuple):
+    """What the agent carries per lane from one step to the next (leaves `[B, ...]`): what
+    acting's window, the step-by-step policy (`foresit_jax.policy`) and the maml base carry
+    alike. `advance` writes it after a step."""
+
+    lstm: LSTMCarry  # (c, h) [B, H] each; zeros when a new episode begins
+    prev_probs: chex.Array  # [B, A] previous action probabilities (zeros at an episode start)
+    episode_step: chex.Array  # [B] int32 index of the next state in its episode (0: new episode)
+    imagination: imagination.ImaginationCarry  # i_tau, s_0 and the success tracker (rho)
+
+
 class ActorState(NamedTuple):
-    """What each lane carries from one window to the next; leaves `[B, ...]`."""
+    """What each lane carries from one window to the next: the environment's state and
+    observation, the agent's carry, and the attention critic's memory; leaves `[B, ...]`."""
 
     env_state: Any  # the environment's state (opaque to the agent)
     obs: Any  # observation dict to act on next, leaves [B, ...]
-    lstm: LSTMCarry  # (c, h) [B, H] each; zeros when a new episode begins
-    prev_probs: chex.Array  # [B, A] previous action probabilities (zeros at an episode start)
-    imagined: chex.Array  # [B, H] the running episode's i_tau
-    s_0: chex.Array  # [B, H] the running episode's first state
-    episode_step: chex.Array  # [B] int32 index of the next state in its episode (0: new episode)
+    agent: AgentCarry
     memory: Optional[chex.Array]  # [B, M, H] the running episode's states so far (attention critic; else None)
-    tracker: imagination.SuccessTracker  # [B, window] outcomes of each lane's last episodes (rho)
 
 
 class StepInputs(NamedTuple):
@@ -208,164 +212,85 @@ def start(
     env = acting_env(nets, env)
     reset_keys = jax.random.split(key, num_lanes) if reset_keys is None else reset_keys
     obs, env_state = env.reset(reset_keys)
-    hidden = cfg.hidden_size
-    zeros = jnp.zeros((num_lanes, hidden), jnp.float32)
-    if tracker is None:
-        one = imagination.tracker_init(cfg.success_window)
-        tracker = lane_copies(one, num_lanes)
-    return ActorState(
-        env_state=env_state,
-        obs=obs,
-        lstm=initial_carry((num_lanes,), hidden),
+    memory = jnp.zeros((num_lanes, memory_size, cfg.hidden_size), jnp.float32) if memory_size else None
+    return ActorState(env_state, obs, agent_carry(nets, num_lanes, tracker), memory)
+
+
+def agent_carry(nets: Networks, num_lanes: int, tracker=None) -> AgentCarry:
+    """The agent's carry before any step of `num_lanes` lanes: zeros, and fresh success
+    trackers unless `tracker` (`[B, window]`) is kept."""
+    cfg = nets.config
+    return AgentCarry(
+        lstm=initial_carry((num_lanes,), cfg.hidden_size),
         prev_probs=jnp.zeros((num_lanes, cfg.num_actions), jnp.float32),
-        imagined=zeros,
-        s_0=zeros,
         episode_step=jnp.zeros((num_lanes,), jnp.int32),
-        memory=jnp.zeros((num_lanes, memory_size, hidden), jnp.float32) if memory_size else None,
-        tracker=tracker,
+        imagination=imagination.carry_init(num_lanes, cfg.hidden_size, cfg.success_window, tracker),
     )
 
 
 def acting_env(nets: Networks, env: BoundEnv) -> BoundEnv:
-    """The environment `nets` acts in: `env` itself, or, for an imagination that reads the
-    goal view (the privileged `oracle`) or a cue (`optaction`, `compass`, `startcompass`),
-    `env` wrapped to carry it (`envs.wrappers.GoalViewWrapper`, `envs.wrappers.CueWrapper`;
-    built for those methods alone, so no other program changes)."""
-    variant = nets.imagination_variant
-    if variant.reads_cue and not isinstance(env.env, CueWrapper):
-        return BoundEnv(CueWrapper(env.env, variant.cue), env.params)
-    if not variant.reads_goal_view or isinstance(env.env, GoalViewWrapper):
-        return env
-    return BoundEnv(GoalViewWrapper(env.env), env.params)
+    """The environment `nets` acts in: `env` itself, or `env` wrapped to carry what its
+    imagination reads (the goal view, a cue: `imagination.acting_env`)."""
+    wrapped = imagination.acting_env(nets.imagination, env.env)
+    return env if wrapped is env.env else BoundEnv(wrapped, env.params)
 
 
-def goal_latent(nets: Networks, params, kernels, obs) -> chex.Array:
-    """The agent's own latent of its episodes' goal views `[B, H]` (privileged; the
-    `oracle` imagination's i_tau before noise): the encoder and one LSTM step from a fresh
-    carry (zero carry and previous action probabilities, as at an episode's first step)
-    on `obs`'s goal view (`GoalViewWrapper.goal_of`), under `kernels`."""
-    lanes = obs["target"].shape[:-1]
-    hidden = nets.config.hidden_size
-    probs = jnp.zeros(lanes + (nets.config.num_actions,), jnp.float32)
-    encoder_imagined = jnp.zeros(lanes + (hidden,), jnp.float32) if nets.imagination_in_encoder else None
-    inputs = one_step(GoalViewWrapper.goal_of(obs), probs, encoder_imagined)
-    first = jnp.ones((1,) + lanes, bool)
-    return nets.model.apply(params, initial_carry(lanes, hidden), inputs, first, kernels, method="encode")[1][0]
+class StepOut(NamedTuple):
+    """The agent's half of one step (`agent_step`), leaves `[B, ...]`."""
+
+    lstm: LSTMCarry  # the LSTM's carry after the step
+    state: chex.Array  # [B, H] s_t
+    logits: chex.Array  # [B, A]
+    imagined: chex.Array  # [B, H] i_tau given to the policy (the step's)
+    imagination: imagination.ImaginationCarry  # imagination's carry after the step
+    encoder_imagined: Optional[chex.Array]  # [B, H] the i_tau the encoder saw; None unless it reads one
 
 
-def one_step(obs, prev_action_probs, encoder_imagined) -> EncoderInputs:
-    """The encoder's inputs of one step of every lane (leaves `[B, ...]`) as a window of
-    one, `[1, B, ...]` (`ActorCritic.encode` at T = 1)."""
-    return EncoderInputs(*jax.tree.map(lambda x: x[None], (obs, prev_action_probs, encoder_imagined)))
-
-
-def cue_latent(nets: Networks, obs) -> chex.Array:
-    """A privileged cue as i_tau `[B, H]`: `obs["cue"]` `[B, K]` zero-padded to H, exact
-    (no noise; `Config` requires sigma2_max=0), lanes reordered by `nets.permute`."""
-    cue = obs["cue"]
-    cue = (nets.permute or (lambda x: x))(cue)
-    return jnp.pad(cue, [(0, 0)] * (cue.ndim - 1) + [(0, nets.config.hidden_size - cue.shape[-1])])
-
-
-def encoder_imagined(nets: Networks, actor: ActorState) -> Optional[chex.Array]:
-    """The i_tau the encoder sees at the lanes' next step `[B, H]`: the running episode's,
-    zeros at an episode's first step (i_tau is imagined from that step's output); None
-    unless i_tau enters the encoder. A cue is read from the observation, which exists
-    before the step's state: the encoder sees the step's own cue, at the first step too."""
-    if not nets.imagination_in_encoder:
-        return None
-    if nets.imagination_variant.reads_cue:
-        return cue_latent(nets, actor.obs)
-    return jnp.where((actor.episode_step == 0)[:, None], 0.0, actor.imagined)
-
-
-def _imagine(nets: Networks, w_params, s_t, goal, key, noise_variance, goal_latent_fn) -> chex.Array:
-    """i_tau `[B, H]` from its source (the ImaginationVariant piece), stop-gradient (the
-    policy loss never trains f_w or, through it, s_0). learned: f_w([s_t : g]) +
-    N(0, sigma2) (Eq. 6), or with `imagination_noise='input'` f_w([s_t : g] + N(0, sigma2))
-    (Algorithm 1); random: tanh(N(0, v)); goal_view: the goal view's latent + N(0, sigma2).
-    `nets.permute` reorders the lanes of i_tau's inputs (the probe's shuffle)."""
-    cfg, source = nets.config, nets.imagination_variant.source
-    permute = nets.permute or (lambda x: x)
-    if source == "random":
-        return imagination.random_imagination(key, s_t.shape, cfg.rnd_variance)
-    if source == "goal_view":
-        return jax.lax.stop_gradient(imagination.add_imagination_noise(key, permute(goal_latent_fn()), noise_variance))
-    s_t, goal = permute(s_t), permute(goal)
-    if cfg.imagination_noise == "input":
-        s_in, goal_in = imagination.add_input_noise(key, jax.lax.stop_gradient(s_t), goal, noise_variance)
-        return jax.lax.stop_gradient(nets.imagine(w_params, s_in, goal_in))
-    imagined = nets.imagine(w_params, jax.lax.stop_gradient(s_t), goal)
-    return jax.lax.stop_gradient(imagination.add_imagination_noise(key, imagined, noise_variance))
-
-
-def renews(variant: ImaginationVariant, episode_step: chex.Array, interval: int) -> chex.Array:
-    """Whether i_tau is (re)imagined at this step of the episode, `[...]` bool: at every
-    `interval`-th step with the `int` ablation's `renew_every_k`, else at the first."""
-    if variant.renew_every_k:
-        return episode_step % interval == 0
-    return episode_step == 0
-
-
-def imagined_at_step(
-    nets: Networks,
-    acting: AgentParams,
-    actor: ActorState,
-    s_t: chex.Array,
-    key: chex.PRNGKey,
-    goal_latent_fn: Optional[Callable[[], chex.Array]] = None,
-) -> chex.Array:
-    """i_tau for a step `[B, H]` (Eq. 6-7): renewed where the ImaginationVariant piece says
-    (an episode's first step; every K steps for `int`) from s_t (= s_0 at the first step)
-    by f_w (`acting.imagination_params`), with noise of each lane's variance
-    (`acting.noise_variance` `[B]`, or Eq. 7 from its success tracker), else the running
-    episode's. Unchanged without imagination. goal_latent_fn: `() -> [B, H]`, the goal
-    view's latent (`goal_latent`), for an imagination that reads it (called only where
-    i_tau is renewed)."""
-    cfg, variant = nets.config, nets.imagination_variant
-    if not variant.uses_imagination:
-        return actor.imagined
-    if variant.reads_cue:  # the step's own cue, every step
-        return cue_latent(nets, actor.obs)
-    noise_variance = acting.noise_variance
-    if noise_variance is None:
-        noise_variance = imagination.noise_variance(jax.vmap(imagination.success_rate)(actor.tracker), cfg.sigma2_max)
-    renew = renews(variant, actor.episode_step, cfg.int_interval)  # [B]
-    goal = actor.obs["target"]
-
-    def renewed():
-        mask = renew[:, None]  # [B, 1], before the imagination (the order of the lowered program's ops)
-        imagined = _imagine(nets, acting.imagination_params, s_t, goal, key, noise_variance, goal_latent_fn)
-        return jnp.where(mask, imagined, actor.imagined)
-
-    return jax.lax.cond(jnp.any(renew), renewed, lambda: actor.imagined)
-
-
-def agent_step(nets: Networks, acting: AgentParams, kernels, actor: ActorState, key: chex.PRNGKey, gate_offset):
-    """The agent's half of a step: `encode` at T = 1, i_tau imagined from its s_t, then
-    `heads` -> (LSTM carry, s_t, logits, i_tau, s_0, the encoder's i_tau). `key`: i_tau's
-    noise. Acting's window (`act_window`) and the step-by-step policy (`foresit_jax.policy`) both run
-    it, so they compute alike."""
-    first = actor.episode_step == 0  # [B]
-    seen_imagined = encoder_imagined(nets, actor)  # [B, H] or None
+def agent_step(
+    nets: Networks, acting: AgentParams, kernels, agent: AgentCarry, obs, key: chex.PRNGKey, gate_offset
+) -> StepOut:
+    """The agent's half of a step: encode at T = 1, i_tau (`imagination.at_step`), then the
+    policy's logits. `key`: i_tau's noise. Acting's window (`act_window`), the step-by-step
+    policy (`foresit_jax.policy`) and the maml base's replayed segment run it, so they compute
+    alike."""
+    first = agent.episode_step == 0  # [B]
+    seen_imagined = imagination.encoder_input(nets.imagination, agent.imagination, agent.episode_step, obs)
     offsets = None if gate_offset is None else gate_offset[None]
     lstm, states = nets.model.apply(
         acting.params,
-        actor.lstm,
-        one_step(actor.obs, actor.prev_probs, seen_imagined),
+        agent.lstm,
+        one_step(obs, agent.prev_probs, seen_imagined),
         first[None],
         kernels,
         offsets,
-        method="encode",
+        method=ActorCritic.encode,
     )
     s_t = states[0]
-    s_0 = jnp.where(first[:, None], s_t, actor.s_0)
-    goal_latent_fn = None  # the oracle's: computed only where i_tau is renewed
-    if nets.imagination_variant.reads_goal_view:
-        goal_latent_fn = functools.partial(goal_latent, nets, acting.params, kernels, actor.obs)
-    imagined = imagined_at_step(nets, acting, actor, s_t, key, goal_latent_fn)  # [B, H]
-    logits = nets.model.apply(acting.params, s_t, imagined, method="heads")
-    return lstm, s_t, logits, imagined, s_0, seen_imagined
+    imagined, carry = imagination.at_step(
+        nets.imagination, acting, kernels, agent.imagination, s_t, agent.episode_step, obs, key
+    )
+    logits = nets.model.apply(acting.params, s_t, imagined, method=ActorCritic.policy_logits)
+    return StepOut(lstm, s_t, logits, imagined, carry, seen_imagined)
+
+
+def advance(nets: Networks, agent: AgentCarry, out: StepOut, done: Optional[chex.Array] = None) -> AgentCarry:
+    """The agent's carry after a step (the bookkeeping written once, for acting, the
+    step-by-step policy and the maml base): the step's LSTM carry and imagination, its
+    action probabilities (without gradient unless the method carries it), the next
+    position. `done` `[B]`: the lanes whose episode ended at the step start afresh (LSTM
+    carry, previous action probabilities and step count zeroed); None: no episode ended
+    (the step-by-step policy resets at the next step's `first` instead)."""
+    probs = distributions.probs(out.logits)
+    if not nets.method.action_probs_carry_gradient:
+        probs = jax.lax.stop_gradient(probs)
+    if done is None:
+        return AgentCarry(out.lstm, probs, agent.episode_step + 1, out.imagination)
+    return AgentCarry(
+        lstm=reset_carry(done, out.lstm),
+        prev_probs=jnp.where(done[:, None], 0.0, probs),
+        episode_step=jnp.where(done, 0, agent.episode_step + 1),
+        imagination=out.imagination,
+    )
 
 
 def act_window(
@@ -381,7 +306,7 @@ def act_window(
     """Run every lane `num_steps` steps from `actor` under one parameter set (see the module
     docstring; the a3c base's window, and each segment of the maml base's): returns (the
     actor state after the window, the window's Trajectory, what follows it). Each step
-    is the agent's (`agent_step`: `ActorCritic.encode` at T = 1, i_tau, `ActorCritic.heads`),
+    is the agent's (`agent_step`: `ActorCritic.encode` at T = 1, i_tau, `ActorCritic.policy_logits`),
     then the environment's. `adapt`: what the maml base's inner loop gives a window
     (`Adaptation`; the default: nothing)."""
     if adapt.alive is None and nets.method.base_piece.adapts_in_episode:
@@ -390,69 +315,58 @@ def act_window(
             "inside each episode (the maml base): use foresit_jax.maml.act (Trainer.act_window, "
             "foresit_jax.evaluate.base_acting(config).act)"
         )
-    params, lanes = acting.params, jnp.arange(actor.episode_step.shape[0])
+    params, lanes = acting.params, jnp.arange(actor.agent.episode_step.shape[0])
     env = acting_env(nets, env)
-    kernels = nets.model.apply(params, adapt.lstm_update, method="lstm_kernels")  # once, outside the loop
-    in_head, carries_gradient = nets.imagination_in_head, nets.method.action_probs_carry_gradient
+    kernels = nets.lstm_kernels(params, adapt.lstm_update)  # once, outside the loop
+    in_head = nets.imagination_in_head
 
     def step(carry, xs):
         actor, alive = carry
         key, gate_offset = xs
         k_imag, k_act, k_env = jax.random.split(key, 3)
-        lstm, s_t, logits, imagined, s_0, seen_imagined = agent_step(nets, acting, kernels, actor, k_imag, gate_offset)
-        policy_input = imagined if in_head else None
-        action = distributions.greedy(logits) if options.greedy else distributions.sample(k_act, logits)
-        memory = remember(actor, s_t, lanes)
+        agent = actor.agent
+        out = agent_step(nets, acting, kernels, agent, actor.obs, k_imag, gate_offset)
+        action = distributions.greedy(out.logits) if options.greedy else distributions.sample(k_act, out.logits)
+        memory = remember(actor, out.state, lanes)
         obs, env_state, reward, term, trunc, info = env.step(
             jax.random.split(k_env, lanes.shape[0]), actor.env_state, action
         )
         done = term | trunc
-        tracker = jax.vmap(imagination.tracker_update)(actor.tracker, info["success"], done & alive)
-        seen = StepInputs(actor.obs, actor.prev_probs, policy_input, seen_imagined) if options.record_inputs else None
-        out = Trajectory(
-            states=s_t,
-            logits=logits,
+        out = out._replace(imagination=imagination.record_outcomes(out.imagination, info["success"], done & alive))
+        seen = None
+        if options.record_inputs:
+            policy_input = out.imagined if in_head else None
+            seen = StepInputs(actor.obs, agent.prev_probs, policy_input, out.encoder_imagined)
+        record = Trajectory(
+            states=out.state,
+            logits=out.logits,
             actions=action,
             rewards=reward,
             terminated=term,
             truncated=trunc,
             valid=alive,
             success=info["success"] & alive,
-            episode_step=actor.episode_step,
-            s_0=s_0,
+            episode_step=agent.episode_step,
+            s_0=out.imagination.s_0,
             optimal_length=info["optimal_length"],
             room_type=info["room_type"],
             inputs=seen,
         )
-        # The lanes after the step: an episode that ended starts afresh (its LSTM carry,
-        # previous action probabilities and step count zeroed).
-        probs = distributions.probs(logits)
-        if not carries_gradient:
-            probs = jax.lax.stop_gradient(probs)
-        next_actor = ActorState(
-            env_state=env_state,
-            obs=obs,
-            lstm=reset_carry(done, lstm),
-            prev_probs=jnp.where(done[:, None], 0.0, probs),
-            imagined=imagined,
-            s_0=s_0,
-            episode_step=jnp.where(done, 0, actor.episode_step + 1),
-            memory=memory,
-            tracker=tracker,
-        )
-        return (next_actor, alive & ~done if options.whole_episodes else alive), out
+        next_actor = ActorState(env_state, obs, advance(nets, agent, out, done), memory)
+        return (next_actor, alive & ~done if options.whole_episodes else alive), record
 
     step_keys = jax.random.split(key, num_steps) if options.step_keys is None else options.step_keys
     alive = jnp.ones(lanes.shape, bool) if adapt.alive is None else adapt.alive
     (actor, _), out = jax.lax.scan(step, (actor, alive), (step_keys, adapt.gate_offsets))
+    agent = actor.agent
     if options.whole_episodes:  # nothing is bootstrapped: every counted episode ended (or is cut by design)
-        next_state = jnp.zeros_like(actor.s_0)
+        next_state = jnp.zeros_like(agent.imagination.s_0)
     else:  # s_T, for V(s*_T) at the cut (Eq. 8); the next window computes it again
-        inputs = one_step(actor.obs, actor.prev_probs, encoder_imagined(nets, actor))
-        next_state = nets.model.apply(
-            params, actor.lstm, inputs, (actor.episode_step == 0)[None], kernels, method="encode"
-        )[1][0]
-    return actor, out, WindowEnd(jax.lax.stop_gradient(next_state), actor.episode_step)
+        seen = imagination.encoder_input(nets.imagination, agent.imagination, agent.episode_step, actor.obs)
+        first = (agent.episode_step == 0)[None]
+        inputs = one_step(actor.obs, agent.prev_probs, seen)
+        next_state = nets.model.apply(params, agent.lstm, inputs, first, kernels, method=ActorCritic.encode)[1][0]
+    return actor, out, WindowEnd(jax.lax.stop_gradient(next_state), agent.episode_step)
 
 
 def remember(actor: ActorState, s_t: chex.Array, lanes: chex.Array) -> Optional[chex.Array]:
@@ -462,7 +376,7 @@ def remember(actor: ActorState, s_t: chex.Array, lanes: chex.Array) -> Optional[
     if actor.memory is None or not actor.memory.shape[1]:
         return actor.memory
     last = actor.memory.shape[1] - 1
-    return actor.memory.at[lanes, jnp.minimum(actor.episode_step, last)].set(jax.lax.stop_gradient(s_t))
+    return actor.memory.at[lanes, jnp.minimum(actor.agent.episode_step, last)].set(jax.lax.stop_gradient(s_t))
 
 
 def rollout(

@@ -37,10 +37,10 @@ import jax.numpy as jnp
 import optax
 
 import envs
-from foresit_jax import distributions, imagination, maml, rollout, targets
+from foresit_jax import distributions, imagination, maml, rollout
 from foresit_jax.config import Config
 from foresit_jax.lstm import LSTMCarry
-from foresit_jax.networks import CriticOutput, EncoderInputs, Networks, build, subgoals_of_rows, window_attention_mask
+from foresit_jax.networks import ActorCritic, CriticOutput, EncoderInputs, Networks, build, window_attention_mask
 from foresit_jax.rollout import ActOptions, ActorState, AgentParams, BoundEnv, Trajectory, WindowEnd, ended_episodes
 
 
@@ -60,7 +60,7 @@ class RunnerState(NamedTuple):
     actor: ActorState  # per lane: env, LSTM carry, running episode (tracker included)
     key: chex.PRNGKey
     update: chex.Array  # int32 [] updates done
-    targets: Any = None  # the auxiliary target's head and its optimiser (`targets.TargetState`); None: no target
+    targets: Any = None  # the auxiliary target's head and its optimiser (`imagination.TargetState`); None: no target
 
 
 class WindowResult(NamedTuple):
@@ -313,10 +313,10 @@ def replayed(nets: Networks, params, traj: Trajectory, initial_carry: LSTMCarry,
         raise ValueError("replay needs a trajectory recorded with record_inputs=True")
     seen = jax.lax.stop_gradient(traj.inputs)
     inputs = EncoderInputs(seen.obs, seen.prev_action_probs, seen.encoder_imagined)
-    _, states = nets.model.apply(params, initial_carry, inputs, traj.episode_step == 0, method="encode")
+    _, states = nets.model.apply(params, initial_carry, inputs, traj.episode_step == 0, method=ActorCritic.encode)
     if offset is not None:  # zeros whose gradient is the loss's at s_t (`Trainer.loss_and_grad_with_target`)
         states = states + offset
-    logits = nets.model.apply(params, states, seen.imagined, method="heads")
+    logits = nets.model.apply(params, states, seen.imagined, method=ActorCritic.policy_logits)
     return traj._replace(states=states, logits=logits)
 
 
@@ -337,37 +337,8 @@ def window_critic(
     states, steps = jnp.swapaxes(states, 0, 1), jnp.swapaxes(steps, 0, 1)  # [B, T + 1, ...]
     keys = jnp.concatenate([jax.lax.stop_gradient(memory), states], axis=1)  # [B, M + T + 1, H]
     mask = window_attention_mask(steps, memory.shape[1])
-    out = nets.model.apply(params, states, jnp.ones(steps.shape, bool), keys, mask, steps, method="critic")
+    out = nets.model.apply(params, states, jnp.ones(steps.shape, bool), keys, mask, steps, method=ActorCritic.critic)
     return out._replace(value=jnp.swapaxes(out.value, 0, 1)), keys
-
-
-def subgoal_items(subgoal_mode: str, traj: Trajectory, alpha, key_states, success):
-    """What each step offers the buffers: (s_0 `[T, B, H]`, g_tau `[T, B, D]`, the
-    sub-goal ŝ_tau `[T, B, H]`, add `[T, B]`: an episode ended there successfully).
-    ŝ_tau is what the step's attention row selects (Section 4.2: at the Done step,
-    s_{t*}, t* = argmax alpha, over all the episode's states); the plain critic has no
-    attention (alpha None), and ŝ_tau is then the step's own state, the goal state.
-    subgoal_mode: the ImaginationVariant's ('argmax' or 'attention_average')."""
-    if alpha is None:
-        subgoals = jax.lax.stop_gradient(traj.states)
-    else:
-        subgoals = jnp.swapaxes(subgoals_of_rows(key_states, alpha[:, :-1], subgoal_mode), 0, 1)
-    return traj.s_0, traj.inputs.obs["target"], subgoals, success
-
-
-def subgoal_steps(traj: Trajectory, end: WindowEnd, alpha) -> chex.Array:
-    """Where each step's sub-goal lies in its episode, `[T, B]` int32: t* (the position
-    of the key its attention row weighs most; the step's own position with the plain
-    critic, whose sub-goal is the step's state). The keys are the memory, positions
-    0..M-1 of the running episode, then the window's states (`window_critic`)."""
-    if alpha is None:
-        return traj.episode_step
-    steps = jnp.concatenate([traj.episode_step, end.episode_step[None]], axis=0).T  # [B, T + 1]
-    memory_size = alpha.shape[-1] - steps.shape[-1]
-    memory = jnp.broadcast_to(jnp.arange(memory_size, dtype=steps.dtype), (steps.shape[0], memory_size))
-    key_steps = jnp.concatenate([memory, steps], axis=1)  # [B, M + T + 1]
-    index = jnp.argmax(alpha[:, :-1], axis=-1)  # [B, T]
-    return jnp.take_along_axis(key_steps, index, axis=1).T  # [T, B]
 
 
 class Trainer:
@@ -376,7 +347,7 @@ class Trainer:
     def __init__(self, config: Config, env=None, env_params=None):
         if env is None:
             env, env_params = make_env(config)
-        env = targets.label_env(config, env)  # the training labels' wrapper (none without a target)
+        env = imagination.label_env(config, env)  # the training labels' wrapper (none without a target)
         limit = int(jnp.max(env_params.max_steps))
         self.packed = config.rollout == "packed"
         if not self.packed and config.num_steps < limit:
@@ -396,9 +367,7 @@ class Trainer:
         # the time limit's worth. Whole-episode updates carry nothing across updates.
         self.memory_size = limit if self.packed and config.pieces.attention_critic else 0
         self.optimizer = optax.chain(optax.clip_by_global_norm(config.max_grad_norm), optax.adam(config.learning_rate))
-        self.imagination_optimizer = imagination.make_imagination_optimizer(
-            config.imagination_optimizer, config.imagination_lr
-        )
+        self.imagination_optimizer = self.networks.imagination.optimizer  # f_w's (the probes read it)
 
     def bind(self, env_params) -> BoundEnv:
         """The trainer's environment bound to `env_params` (those `run` was given), once
@@ -416,7 +385,7 @@ class Trainer:
         buffers = jax.tree.map(lanes, imagination.buffer_init(cfg.buffer_size, cfg.hidden_size, goal_size))
         actor = rollout.start(self.networks, k_actor, self.bind(self.env_params), cfg.num_lanes, self.memory_size)
         # The target's head from a key of its own, folded from the model's: the keys above are the base's.
-        head = targets.init(cfg, jax.random.fold_in(k_params, 1), self.optimizer)
+        head = imagination.target_init(cfg, jax.random.fold_in(k_params, 1), self.optimizer)
         return RunnerState(
             params, self.optimizer.init(params), w_params, buffers, actor, key, jnp.zeros((), jnp.int32), head
         )
@@ -468,7 +437,7 @@ class Trainer:
             next_actor, traj, end = self.act(AgentParams(params, w_params), env, actor, key)
 
             def loss_fn(p):
-                replay_traj = replayed(self.networks, p, traj, actor.lstm)
+                replay_traj = replayed(self.networks, p, traj, actor.agent.lstm)
                 loss, aux = self.window_loss(p, replay_traj, end, actor.memory)
                 return loss, WindowResult(next_actor, replay_traj, *aux)
 
@@ -486,13 +455,14 @@ class Trainer:
         """(the lanes at the window's start, the next key, the window's acting key)."""
         key, k_act, k_start = jax.random.split(key, 3)
         if not self.packed:  # SAVN's layout: every lane starts a fresh episode
-            actor = rollout.start(self.networks, k_start, env, self.config.num_lanes, 0, tracker=actor.tracker)
+            tracker = actor.agent.imagination.tracker
+            actor = rollout.start(self.networks, k_start, env, self.config.num_lanes, 0, tracker=tracker)
         return actor, key, k_act
 
     def update(self, state: RunnerState, env_params) -> tuple[RunnerState, dict]:
-        cfg, variant, env = self.config, self.networks.imagination_variant, self.bind(env_params)
+        cfg, env = self.config, self.bind(env_params)
         actor, key, k_act = self.begin_window(state.actor, state.key, env)
-        rho = jax.vmap(imagination.success_rate)(actor.tracker)  # [B] at the window's start
+        rho = jax.vmap(imagination.success_rate)(actor.agent.imagination.tracker)  # [B] at the window's start
         head = state.targets
         if head is None:
             (loss, window), grads = self.loss_and_grad(state.params, state.imagination_params, env, actor, k_act)
@@ -501,18 +471,13 @@ class Trainer:
                 self, state.params, state.imagination_params, env, actor, k_act, head.params
             )
             head_updates, head_opt_state = self.optimizer.update(head_grads, head.opt_state, head.params)
-            head = targets.TargetState(optax.apply_updates(head.params, head_updates), head_opt_state)
+            head = imagination.TargetState(optax.apply_updates(head.params, head_updates), head_opt_state)
         next_actor, traj, alpha, key_states, metrics = window
         updates, opt_state = self.optimizer.update(grads, state.opt_state, state.params)
         params = optax.apply_updates(state.params, updates)
 
-        buffers, w_params = state.buffers, state.imagination_params
         metrics = dict(metrics)
         ended, stats = ended_episodes(traj)
-        if variant.trains_imagination:
-            items = subgoal_items(variant.subgoal_mode, traj, alpha, key_states, stats.success)
-            w_params, buffers, imag_metrics = self.store_and_train(w_params, buffers, items)
-            metrics.update(imag_metrics)
         num_ended = jnp.sum(ended.astype(jnp.float32))
 
         def per_episode(x):  # mean over the episodes that ended in this window
@@ -536,32 +501,13 @@ class Trainer:
                 "losses/grad_norm": optax.tree.norm(grads),
             }
         )
+        # f_w's part (Algorithm 1): the window's sub-goals into the buffers, full buffers into f_w.
+        w_params, buffers, imag_metrics = imagination.learn(
+            self.networks.imagination, state.imagination_params, state.buffers, traj, alpha, key_states, stats.success
+        )
+        metrics.update(imag_metrics)
         new_state = RunnerState(params, opt_state, w_params, buffers, next_actor, key, state.update + 1, head)
         return new_state, metrics
-
-    def store_and_train(self, w_params, buffers, items):
-        """Algorithm 1 for each step of the window in time order: lanes whose episode
-        ended successfully there add (s_0, g_tau, ŝ_tau) to their buffer; full buffers
-        train the shared f_w and are emptied. items: (s_0 `[T, B, H]`, goal `[T, B, D]`,
-        subgoal `[T, B, H]`, add `[T, B]` bool)."""
-        cfg = self.config
-
-        def step(carry, item):
-            w_params, buffers, losses = carry
-            buffers = jax.vmap(imagination.buffer_add)(buffers, *item)
-            w_params, buffers, trained, _ = imagination.train_on_full_buffers(
-                w_params,
-                buffers,
-                self.networks.imagine,
-                self.imagination_optimizer,
-                cfg.imagination_epochs,
-                cfg.imagination_batch,
-            )
-            return (w_params, buffers, losses.plus(trained)), None
-
-        carry = (w_params, buffers, imagination.ImaginationLosses.zeros())
-        (w_params, buffers, losses), _ = jax.lax.scan(step, carry, items)
-        return w_params, buffers, losses.metrics()
 
     def run(
         self, state: RunnerState, env_params, num_updates: int, on_update: Callable | None = None
@@ -599,7 +545,7 @@ class Trainer:
 
 def loss_and_grad_with_target(trainer: Trainer, params, w_params, env: BoundEnv, actor: ActorState, key, head_params):
     """`trainer`'s ((loss, WindowResult), grads of `params`, grads of the target's head) of one window:
-    the A3C loss plus `aux_weight` times the target's (`foresit_jax.targets`), by the
+    the A3C loss plus `aux_weight` times the target's (`imagination.target_window_loss`), by the
     replay (`Config` refuses a target elsewhere). The head learns its own loss at full
     weight; lambda scales only the gradient that reaches the encoder through s_t:
 
@@ -615,15 +561,15 @@ def loss_and_grad_with_target(trainer: Trainer, params, w_params, env: BoundEnv,
     obs = jax.lax.stop_gradient(traj.inputs.obs)
 
     def goal_latent(flat_obs):  # the goal view's latent under this update's parameters
-        return rollout.goal_latent(trainer.networks, jax.lax.stop_gradient(params), None, flat_obs)
+        return trainer.networks.goal_latent(jax.lax.stop_gradient(params), None, flat_obs)
 
     def loss_fn(p, head, offset_ac, offset_aux):
-        replay_traj = replayed(trainer.networks, p, traj, actor.lstm, offset_ac)
+        replay_traj = replayed(trainer.networks, p, traj, actor.agent.lstm, offset_ac)
         loss, aux = trainer.window_loss(p, replay_traj, end, actor.memory)
         states = replay_traj.states - offset_ac + offset_aux  # s_t, seen by the target through its own offset
-        labels = targets.labels(cfg, obs, jax.lax.stop_gradient(states), traj, goal_latent)
-        to_encoder, _ = targets.window_loss(cfg, jax.lax.stop_gradient(head), states, labels)
-        aux_loss, aux_metrics = targets.window_loss(cfg, head, jax.lax.stop_gradient(states), labels)
+        labels = imagination.target_labels(cfg, obs, jax.lax.stop_gradient(states), traj, goal_latent)
+        to_encoder, _ = imagination.target_window_loss(cfg, jax.lax.stop_gradient(head), states, labels)
+        aux_loss, aux_metrics = imagination.target_window_loss(cfg, head, jax.lax.stop_gradient(states), labels)
         alpha, key_states, metrics = aux
         valid = jnp.maximum(jnp.sum(traj.valid.astype(jnp.float32)), 1.0)
         metrics = {
@@ -663,8 +609,11 @@ def collect_subgoal_items(trainer: Trainer, state: RunnerState, env_params, num_
         next_actor, traj, end = trainer.act(AgentParams(state.params, state.imagination_params), env, actor, k_act)
         _, (alpha, key_states, _) = trainer.window_loss(state.params, traj, end, actor.memory)  # the critic's alpha
         _, stats = ended_episodes(traj)
-        items = subgoal_items(trainer.networks.imagination_variant.subgoal_mode, traj, alpha, key_states, stats.success)
-        return (next_actor, key), (items, (subgoal_steps(traj, end, alpha), traj.episode_step))
+        items = imagination.subgoal_items(
+            trainer.networks.imagination_variant.subgoal_mode, traj, alpha, key_states, stats.success
+        )
+        steps = imagination.subgoal_steps(traj.episode_step, end.episode_step, alpha)
+        return (next_actor, key), (items, (steps, traj.episode_step))
 
     _, items = jax.lax.scan(window, (state.actor, state.key), None, length=num_windows)
     return items
