@@ -454,7 +454,7 @@ class Networks:
 
     imagine: f_w, `(w, s, goal) -> [..., H]` (`imagination_net.apply`); permute: a
     reordering of the lanes applied to i_tau's inputs when acting (the probe's shuffle of
-    i_tau across episodes, `foresit_jax.probes.shuffled`; None: none). Compared by identity
+    i_tau across episodes, `experiments.analysis.probes.shuffled`; None: none). Compared by identity
     (a jitted function built on one is compiled for it alone)."""
 
     config: Config
