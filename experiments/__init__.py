@@ -10,6 +10,8 @@ experiments/running/    the run machinery: presets, the run flags, sweeps (a swe
                         the probes run over them and the paper report
 experiments/reporting/  statistics, tables, figures, the probes' and the C-VAE's reports:
                         below running/, which imports it, never the other way
+experiments/analysis/   the studies' pure functions over the library (the probes of i_tau,
+                        the C-VAE comparison): below both, importing nothing of experiments
 
 `experiments.load(run_dir, seed=0, which="best")` gives a trained policy to act with in a
 user's own code (docs/extending.md).

@@ -6,7 +6,7 @@ successful episode gives the item ForeSIT's buffers would get, (s_0, g_tau, ŝ_t
 the critic's sub-goal.  On 80% of the items a C-VAE of ŝ_tau given [s_0 : g_tau] is fitted,
 and two f_w of the run's shape are trained: one imagining ŝ_tau (ForeSIT), one imagining
 the C-VAE's latent mean; their smooth-L1 losses on the other 20% are compared (the paper:
-0.012 vs 0.018), beside the variance of each target (foresit_jax.cvae says why).
+0.012 vs 0.018), beside the variance of each target (experiments.analysis.cvae says why).
 Writes `cvae_comparison.json` and `.md` into the run folder.
 """
 

@@ -4,7 +4,7 @@
 (every finished method, or `--methods`; every seed). Each seed's validation-selected model
 plays the episodes of its test evaluation (the same keys and actions rule, so its success
 share is its test SR) and every episode is replayed through the environment's oracle
-(`foresit_jax.probes.replay_oracle`). Printed and written to `failures.md` /
+(`experiments.analysis.probes.replay_oracle`). Printed and written to `failures.md` /
 `failures.json` in the run folder (or `--out`):
 
 * how the episodes end: success, a Done that failed, or the time limit;
@@ -32,6 +32,7 @@ import numpy as np
 
 from envs.catalog import ROOM_TYPES
 from experiments import errors
+from experiments.analysis.probes import EARLY_STEPS, episode_endings, replay_oracle
 from experiments.reporting.tables import markdown_table
 from experiments.running import selection, sweeps
 from experiments import rundir
@@ -40,7 +41,6 @@ from foresit_jax import rollout as rollout_lib
 from foresit_jax.networks import build
 from foresit_jax.rollout import ActOptions, BoundEnv
 from foresit_jax.evaluate import Evaluator, base_acting
-from foresit_jax.probes import EARLY_STEPS, episode_endings, replay_oracle
 
 
 @dataclasses.dataclass(frozen=True)

@@ -2,7 +2,7 @@
 
 `--run` is a run folder of `experiments.train` or a sweep folder of `experiments.sweep`
 (every finished method with imagination or the attention critic, or `--methods`; every
-seed). For each seed's selected model (`foresit_jax.probes` has the functions):
+seed). For each seed's selected model (`experiments.analysis.probes` has the functions):
 
 * test SR on the same test episodes (the run's test key, `--episodes-per-room` per room
   type) with i_tau as the default evaluation gives it (the trained f_w, the noise at the
@@ -12,7 +12,7 @@ seed). For each seed's selected model (`foresit_jax.probes` has the functions):
 * f_w against its targets on `--windows` fresh training windows of the agent (held out:
   f_w never trained on them): smooth-L1, R^2 over the targets' mean, and over each target
   category's mean; what f_w's inputs tell, fit on half the items: s_0 itself, ridge on
-  [s_0 : g], f_w's architecture trained offline (`foresit_jax.probes.imagination_fit`);
+  [s_0 : g], f_w's architecture trained offline (`experiments.analysis.probes.imagination_fit`);
   the variance of f_w's outputs beside the noise's;
 * where the sub-goal falls in its successful episode: t*/T and the share at the Done step.
 

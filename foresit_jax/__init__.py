@@ -15,8 +15,8 @@ imagination, as flags), `config` (Config), `lstm` (the encoder LSTM and its spli
 records and plain functions), `policy` (the agent step by step), `maml` (SAVN's inner loop
 and the maml base's acting), `train` (the learner: returns, advantages and the A3C loss, the
 update, Algorithm 1's imagination step, Trainer), `evaluate` (SR/SPL on held-out scenes; a
-module: its function is `foresit_jax.evaluate.evaluate`), `probes`, `cvae` (the paper's C-VAE
-comparison).
+module: its function is `foresit_jax.evaluate.evaluate`). The studies' own functions over
+the agent (the probes of i_tau, the paper's C-VAE comparison) are `experiments.analysis`.
 """
 
 import importlib as _importlib

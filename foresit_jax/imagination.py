@@ -228,7 +228,7 @@ def train_on_full_buffers(
     (`train_on_buffer` with `batch` items a step). With `opt_state` None (training's
     procedure) each lane's buffer starts a fresh optimiser state; given, one state is
     carried from lane to lane and returned, for an optimiser kept across flushes
-    (`foresit_jax.probes.replay_online_fit` measures it; training does not offer it).
+    (`experiments.analysis.probes.replay_online_fit` measures it; training does not offer it).
 
     Args:
       w_params: the shared f_w parameters.

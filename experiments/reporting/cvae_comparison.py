@@ -1,6 +1,6 @@
 """The paper's C-VAE comparison on a trained agent (`experiments.cvae_compare` runs it on a
 run folder, `experiments.paper` on its sweeps): collect the successful episodes' items,
-fit a C-VAE and two f_w, compare their held-out losses; `foresit_jax.cvae` has the fits."""
+fit a C-VAE and two f_w, compare their held-out losses; `experiments.analysis.cvae` has the fits."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import functools
 import jax
 import numpy as np
 
+from experiments.analysis import cvae
 from experiments.reporting.tables import markdown_table
-from foresit_jax import cvae
 from foresit_jax.train import collect_subgoal_items
 
 MIN_ITEMS = 10
@@ -29,7 +29,7 @@ def collect_items(trainer, state, windows: int, seed: int) -> tuple[np.ndarray, 
 
 def compare(config, items: tuple[np.ndarray, ...], epochs: int, seed: int) -> dict:
     """The comparison on `collect_items`'s items: 80% to fit and 20% held out
-    (`foresit_jax.cvae.compare_imagination_targets`); with fewer than MIN_ITEMS items,
+    (`experiments.analysis.cvae.compare_imagination_targets`); with fewer than MIN_ITEMS items,
     only {"items": n}."""
     n = len(items[0])
     if n < MIN_ITEMS:

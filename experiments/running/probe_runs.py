@@ -2,7 +2,7 @@
 `experiments.paper` on its sweeps): test SR under each condition of i_tau
 (`experiments.reporting.probing.CONDITIONS`), f_w against its targets on held-out items,
 f_w's training options replayed (`FIT_OPTIONS`), where the sub-goal falls.
-`foresit_jax.probes` has the functions; `experiments.reporting.probing` writes the Markdown
+`experiments.analysis.probes` has the functions; `experiments.reporting.probing` writes the Markdown
 of what `probe` returns."""
 
 from __future__ import annotations
@@ -15,14 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from experiments.reporting.probing import FIT_OPTIONS, KEEP_STATE  # noqa: F401 (probes.FIT_OPTIONS too)
-from experiments.running import selection
-from experiments.running.models import Model
-from foresit_jax.evaluate import Evaluator, agent_params
-from foresit_jax.imagination import make_imagination_optimizer
-from foresit_jax.networks import build
-from foresit_jax.train import collect_subgoal_items
-from foresit_jax.probes import (
+from experiments.analysis.probes import (
     fit_imagination_offline,
     halves,
     imagination_fit,
@@ -33,11 +26,18 @@ from foresit_jax.probes import (
     signal_to_noise,
     subgoal_position_histogram,
 )
+from experiments.reporting.probing import FIT_OPTIONS, KEEP_STATE  # noqa: F401 (probes.FIT_OPTIONS too)
+from experiments.running import selection
+from experiments.running.models import Model
+from foresit_jax.evaluate import Evaluator, agent_params
+from foresit_jax.imagination import make_imagination_optimizer
+from foresit_jax.networks import build
+from foresit_jax.train import collect_subgoal_items
 
 
 def sr_conditions(model: Model, evaluator, episodes: int, shuffled) -> dict[str, float]:
     """Test SR (%) of one model under each applicable condition (`probing.CONDITIONS`); `shuffled`:
-    the config's networks with i_tau shuffled across episodes (`foresit_jax.probes.shuffled`; one per
+    the config's networks with i_tau shuffled across episodes (`experiments.analysis.probes.shuffled`; one per
     config: its rollout compiles once)."""
     config = model.config
     key = selection.test_key(model.seed)

@@ -14,12 +14,12 @@ import train_helpers as H
 from env_helpers import cached_oracle, make_states
 from env_reference import reference_transition
 from envs.wrappers import GoalViewWrapper
+from experiments.analysis.probes import shuffled
 from foresit_jax import rollout
 from foresit_jax.config import Config
 from foresit_jax.lstm import initial_carry
 from foresit_jax.methods import parse_method
 from foresit_jax.networks import build
-from foresit_jax.probes import shuffled
 from foresit_jax.rollout import ActOptions, AgentParams, BoundEnv
 
 N = 48  # reset keys per kit

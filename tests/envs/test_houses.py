@@ -251,7 +251,7 @@ def test_replay_oracle_follows_the_reference_bfs_and_rooms(house_kit):
     and actions gives, before each action, the reference BFS's actions to success and
     whether the agent stands in the target's room (the layout's own room map)."""
     from env_reference import reference_transition
-    from foresit_jax.probes import replay_oracle
+    from experiments.analysis.probes import replay_oracle
 
     kit, rng = house_kit, np.random.default_rng(5)
     keys = jax.random.split(jax.random.key(11), 64)

@@ -1,9 +1,13 @@
 """How the project's modules import each other, read from their source (ast; nothing of the project is
 imported but `experiments.rundir`, for the format's names):
 
+* The library (foresit_jax) and the environment (envs) import nothing of experiments or
+  benchmarks: the agent is whole without the programs and the studies.
 * experiments/reporting (statistics, tables, figures, reports: pure functions of results)
   is the lower layer and imports nothing of experiments/running (the run machinery), which
   imports it: one way only. Both raise `experiments.errors.UserError`, a leaf.
+* experiments/analysis (the studies' pure functions over the library: the probes, the C-VAE
+  comparison) imports nothing else of experiments, and does no CLI, files or logging.
 * An import of the project's own modules sits at the top of its module, where the reader
   sees what a module depends on, unless it defers an optional or heavy dependency or
   breaks an import cycle: those are listed in `ALLOWED`, each with its reason.
@@ -110,6 +114,97 @@ def test_reporting_is_below_running():
     """reporting imports nothing of running (and so they do not import each other both ways)."""
     assert layer_imports("reporting", "running") == []
     assert layer_imports("running", "reporting"), "running uses reporting: the layers are as documented"
+
+
+def project_imports(package: str, root: Path = ROOT) -> list[tuple[str, str]]:
+    """(file, module) for each project module (`PROJECT`) that a module of `package` (a
+    folder under `root`, e.g. experiments/analysis) may import, at the top or in a function."""
+    return [
+        (str(path.relative_to(root)), name)
+        for path in modules(package, root)
+        for _, _, names in imports(path, root)
+        for name in names
+        if name.split(".")[0] in PROJECT
+    ]
+
+
+def test_the_library_and_the_environment_import_nothing_of_the_programs():
+    """foresit_jax and envs import no module of experiments or benchmarks (at the top or in
+    a function): the studies' code over the agent lives in experiments/analysis."""
+    for package in ("foresit_jax", "envs"):
+        found = [(f, m) for f, m in project_imports(package) if m.split(".")[0] in ("experiments", "benchmarks")]
+        assert found == [], found
+
+
+def test_analysis_imports_nothing_else_of_experiments():
+    """experiments/analysis is below the programs, running/ and reporting/ (which import it)
+    and imports only the library, the environment and itself."""
+    found = [
+        (f, m)
+        for f, m in project_imports("experiments/analysis")
+        if m.split(".")[0] not in ("foresit_jax", "envs") and not m.startswith("experiments.analysis")
+    ]
+    assert found == [], found
+    for package in ("experiments/running", "experiments/reporting"):
+        assert any(m.startswith("experiments.analysis") for _, m in project_imports(package)), package
+
+
+# What parses a command line, reads or writes files, logs or prints: none of it in experiments/analysis.
+IO_MODULES = ("argparse", "tyro", "logging", "os", "sys", "pathlib", "shutil", "json", "pickle", "csv", "tqdm")
+IO_MODULES += ("matplotlib", "orbax")
+IO_FUNCTIONS = ("open", "print", "input")
+IO_METHODS = ("write_text", "read_text", "write_bytes", "read_bytes", "save", "savez", "load", "savefig")
+
+
+def io_uses(package: str, root: Path = ROOT) -> list[str]:
+    """'file imports module' for each import of `IO_MODULES` (or their submodules) and
+    'file:line name' for each call of `IO_FUNCTIONS` or of a method named in `IO_METHODS`
+    (`np.save`, `path.write_text`) by a module of `package`."""
+    found = []
+    for path in modules(package, root):
+        where = path.relative_to(root)
+        found += [
+            f"{where} imports {name}"
+            for _, _, names in imports(path, root)
+            for name in names
+            if name.split(".")[0] in IO_MODULES
+        ]
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Call) and (
+                (isinstance(node.func, ast.Name) and node.func.id in IO_FUNCTIONS)
+                or (isinstance(node.func, ast.Attribute) and node.func.attr in IO_METHODS)
+            ):
+                found.append(f"{where}:{node.lineno} {getattr(node.func, 'id', None) or node.func.attr}")
+    return found
+
+
+def test_analysis_does_no_cli_files_or_logging():
+    assert io_uses("experiments/analysis") == []
+
+
+def test_the_analysis_checks_see_what_they_look_for(tmp_path):
+    package = tmp_path / "experiments" / "analysis"
+    package.mkdir(parents=True)
+    (package / "x.py").write_text(
+        "import logging\nfrom pathlib import Path\nfrom experiments.running import models\n"
+        "import foresit_jax.train\nfrom experiments.analysis import y\n"
+        "def f(p):\n    print(1)\n    Path(p).write_text('x')\n"
+    )
+    assert sorted(io_uses("experiments/analysis", tmp_path)) == [
+        "experiments/analysis/x.py imports logging",
+        "experiments/analysis/x.py imports pathlib",
+        "experiments/analysis/x.py imports pathlib.Path",
+        "experiments/analysis/x.py:7 print",
+        "experiments/analysis/x.py:8 write_text",
+    ]
+    x = "experiments/analysis/x.py"
+    assert project_imports("experiments/analysis", tmp_path) == [
+        (x, "experiments.running"),
+        (x, "experiments.running.models"),
+        (x, "foresit_jax.train"),
+        (x, "experiments.analysis"),
+        (x, "experiments.analysis.y"),
+    ]
 
 
 def test_errors_is_a_leaf():

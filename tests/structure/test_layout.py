@@ -1,7 +1,7 @@
 """experiments/ by role (docs/design.md's layout): the programs are thin and none imports
-another; the machinery (running/) and the reporting (reporting/) import no program; the
-console scripts are programs; a sweep resumed as another sweep is refused before anything
-runs."""
+another; the machinery (running/), the reporting (reporting/) and the studies' functions
+(analysis/) import no program; the console scripts are programs; a sweep resumed as another
+sweep is refused before anything runs."""
 
 import ast
 import dataclasses
@@ -57,7 +57,7 @@ def test_no_program_imports_another(program):
     assert not imported_modules(PACKAGE / f"{program}.py") & others
 
 
-@pytest.mark.parametrize("package", ["running", "reporting"])
+@pytest.mark.parametrize("package", ["running", "reporting", "analysis"])
 def test_the_machinery_and_the_reporting_import_no_program(package):
     programs = {f"experiments.{p}" for p in PROGRAMS}
     for path in (PACKAGE / package).glob("*.py"):

@@ -7,7 +7,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from foresit_jax import cvae, imagination
+from experiments.analysis import cvae
+from foresit_jax import imagination
 
 
 def synthetic_items(key, n, state=12, goal_size=4):
