@@ -200,20 +200,21 @@ def files_from_cli(method: str, preset: str = "tiny") -> CliPath:
     return CliPath(entered, reader, [f for f in config if f not in reader])
 
 
-def acting_depth(trainer, state, module: str = "rollout.py") -> list[str]:
-    """The deepest chain of `module`'s functions below `act_window` while one training
-    window is lowered, outermost first (`act_window`'s scan body first): what a reader
-    follows down one acting step. Tracing runs every branch of `lax.cond` and
+def acting_depth(trainer, state, modules: tuple[str, ...] = ("rollout.py", "imagination.py")) -> list[str]:
+    """The deepest chain of `modules`' functions (acting's: rollout.py, and imagination.py,
+    where i_tau is made since 0.4.0) below `act_window` while one training window is
+    lowered, outermost first (`act_window`'s scan body first): what a reader follows down
+    one acting step. Tracing runs every branch of `lax.cond` and
     `lax.switch`, so a branch's calls count; lambdas and comprehensions do not (a reader
     does not leave the line for them)."""
     deepest: list[str] = []
 
     def tracer(frame, event, arg):
-        if event != "call" or not frame.f_code.co_filename.endswith(module) or frame.f_code.co_name.startswith("<"):
+        if event != "call" or not frame.f_code.co_filename.endswith(modules) or frame.f_code.co_name.startswith("<"):
             return None
         chain, f = [], frame
         while f is not None and f.f_code.co_name != "act_window":
-            if f.f_code.co_filename.endswith(module) and not f.f_code.co_name.startswith("<"):
+            if f.f_code.co_filename.endswith(modules) and not f.f_code.co_name.startswith("<"):
                 chain.append(f.f_code.co_name)
             f = f.f_back
         if f is not None and len(chain) > len(deepest):
@@ -265,7 +266,9 @@ def main(args: Args) -> dict:
         for name, (f, n) in crossed.items():
             print(f"  {name:18s} {f:3d} functions {n:5d} lines")
         depth = report[method]["acting_depth"]
-        print(f"  one acting step: {len(depth)} rollout.py calls deep below act_window ({' -> '.join(depth)})")
+        print(
+            f"  one acting step: {len(depth)} calls of rollout.py and imagination.py deep below act_window ({' -> '.join(depth)})"
+        )
         print("  lowered programs: " + ", ".join(f"{k} {v}" for k, v in report[method]["hashes"].items()))
         if args.cli_path:
             path = files_from_cli(method, args.preset)

@@ -38,7 +38,7 @@ def agent_params(state, sigma2_max: float, evaluation_noise: str = "training_end
     policy was trained with); 'off', zero."""
     if evaluation_noise not in ("training_end", "off"):
         raise ValueError(f"evaluation_noise must be 'training_end' or 'off', got {evaluation_noise!r}")
-    rho = jax.vmap(imagination.success_rate)(state.actor.tracker)  # [B]
+    rho = jax.vmap(imagination.success_rate)(state.actor.agent.imagination.tracker)  # [B]
     variance = jnp.mean(imagination.noise_variance(rho, sigma2_max))
     if evaluation_noise == "off":
         variance = jnp.zeros_like(variance)

@@ -39,7 +39,7 @@ How the f_w update is wired (`learn`, at every step of a window, in time order):
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Callable, Mapping, NamedTuple, Optional
+from typing import TYPE_CHECKING, Any, Callable, Mapping, NamedTuple, Optional
 
 import chex
 import flax.linen as nn
@@ -48,9 +48,11 @@ import jax.numpy as jnp
 import optax
 
 from envs.wrappers import CUES, CueWrapper, GoalViewWrapper
-from foresit_jax.config import AUX_TARGETS, Config
 from foresit_jax.layers import Dense
 from foresit_jax.methods import ImaginationVariant
+
+if TYPE_CHECKING:  # the targets read a Config's fields; importing config would put this module a floor higher
+    from foresit_jax.config import Config
 
 
 # apply_fn(params, s_0 [..., H], goal [..., D]) -> imagined state [..., H]
@@ -489,16 +491,15 @@ def at_step(
     it); episode_step `[B]`: the step's position in its episode; obs: the step's observations
     (the target g_tau, and the goal view or the cue where the variant reads them)."""
     s_0 = jnp.where((episode_step == 0)[:, None], s_t, carry.s_0)
-    imagined = _imagined(spec, acting, kernels, carry, s_t, episode_step, obs, key)
-    return imagined, carry._replace(imagined=imagined, s_0=s_0)
 
+    def kept(imagined):
+        return imagined, carry._replace(imagined=imagined, s_0=s_0)
 
-def _imagined(spec: Imagination, acting, kernels, carry, s_t, episode_step, obs, key) -> chex.Array:
     variant = spec.variant
     if not variant.uses_imagination:
-        return carry.imagined
+        return kept(carry.imagined)
     if variant.reads_cue:  # the step's own cue, every step
-        return cue_latent(spec, obs)
+        return kept(cue_latent(spec, obs))
     variance = acting.noise_variance
     if variance is None:
         variance = noise_variance(jax.vmap(success_rate)(carry.tracker), spec.sigma2_max)
@@ -513,7 +514,7 @@ def _imagined(spec: Imagination, acting, kernels, carry, s_t, episode_step, obs,
         imagined = imagine(spec, acting.imagination_params, s_t, goal, key, variance, goal_latent_fn)
         return jnp.where(mask, imagined, carry.imagined)
 
-    return jax.lax.cond(jnp.any(renew), renewed, lambda: carry.imagined)
+    return kept(jax.lax.cond(jnp.any(renew), renewed, lambda: carry.imagined))
 
 
 def record_outcomes(carry: ImaginationCarry, success: chex.Array, finished: chex.Array) -> ImaginationCarry:
@@ -619,7 +620,7 @@ def learn(spec: Imagination, w_params, buffers: ReplayBuffer, traj, alpha, key_s
 # base's, and nothing privileged is read at test time. The target reaches the agent only
 # through the gradient its loss sends into the encoder, through s_t.
 #
-# The targets (`AUX_TARGETS`), each a documented option:
+# The targets (`config.AUX_TARGETS`), each a documented option:
 #
 # * ``compass`` (a privileged label in training): the bearing and distance of the nearest
 #   target cell from the step's pose, ``(cos b, sin b, d / G)``, as the ``compass`` cue
@@ -727,7 +728,7 @@ def target_labels(config: Config, obs: dict, states, traj, goal_latent: Optional
         return TargetLabels(jax.lax.stop_gradient(latent), valid)
     if target == "success":
         return success_labels(states, traj.terminated, traj.truncated, traj.success, valid)
-    raise ValueError(f"aux_target must be one of {AUX_TARGETS[1:]}, got {target!r}")
+    raise ValueError(f"aux_target must be one of {tuple(PRIVILEGED_LABELS)}, got {target!r}")
 
 
 def target_step_loss(target: str, prediction: chex.Array, y: chex.Array) -> chex.Array:
@@ -739,7 +740,9 @@ def target_step_loss(target: str, prediction: chex.Array, y: chex.Array) -> chex
     return smooth_l1(prediction, y)
 
 
-def target_window_loss(config: Config, head_params, states: chex.Array, labels: TargetLabels) -> tuple[chex.Array, dict]:
+def target_window_loss(
+    config: Config, head_params, states: chex.Array, labels: TargetLabels
+) -> tuple[chex.Array, dict]:
     """(the mean loss over the labelled steps (0 where none), its metrics). states: s_t
     `[T, B, H]`, differentiable (the gradient reaches the encoder through them)."""
     prediction = target_head(config).apply(head_params, states)

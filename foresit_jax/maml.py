@@ -235,9 +235,7 @@ def adaptive_act(
             )
             return traj, (next_actor, end)
 
-        grads, rows, traj, (next_actor, end) = segment_update(
-            nets, loop, shared, lanes, lane_actor.agent.lstm[1], run
-        )
+        grads, rows, traj, (next_actor, end) = segment_update(nets, loop, shared, lanes, lane_actor.agent.lstm[1], run)
         still_alive = traj.valid[-1] & ~(
             traj.terminated[-1] | traj.truncated[-1]
         )  # [1] the episode runs on (alive next)

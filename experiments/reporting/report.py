@@ -27,7 +27,7 @@ DIAGNOSTICS = (
     "imagination/loss",
 )
 
-# An auxiliary target's (`foresit_jax.targets`), recorded and shown where an arm has one:
+# An auxiliary target's (`foresit_jax.imagination`'s targets), recorded and shown where an arm has one:
 # its loss, the share of valid steps it labels, and its gradient's norm at s_t over the
 # actor-critic's.
 TARGET_DIAGNOSTICS = ("losses/aux_loss", "charts/aux_labelled_fraction", "losses/aux_grad_ratio")

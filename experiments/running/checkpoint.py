@@ -120,11 +120,53 @@ def drop_steps_after(manager, step: int) -> None:
             manager.delete(s)
 
 
+# The lanes' state before 0.4.0: ActorState's fields flat (issue 82 nested the agent's carry
+# and imagination's); a checkpoint written then restores into today's records.
+FLAT_ACTOR_FIELDS = ("env_state", "obs", "lstm", "prev_probs", "imagined", "s_0", "episode_step", "memory", "tracker")
+
+
+def _is_flat_actor(like, saved) -> bool:
+    """`like` is today's ActorState and `saved` a checkpoint's lanes written before 0.4.0."""
+    return hasattr(like, "agent") and hasattr(like, "env_state") and isinstance(saved, dict) and "lstm" in saved
+
+
+def _flat_actor(actor) -> dict:
+    """Today's ActorState as the flat fields of the one before 0.4.0."""
+    agent, imag = actor.agent, actor.agent.imagination
+    return dict(
+        env_state=actor.env_state,
+        obs=actor.obs,
+        lstm=agent.lstm,
+        prev_probs=agent.prev_probs,
+        imagined=imag.imagined,
+        s_0=imag.s_0,
+        episode_step=agent.episode_step,
+        memory=actor.memory,
+        tracker=imag.tracker,
+    )
+
+
+def _nested_actor(like, flat: dict):
+    """The flat fields (`_flat_actor`'s) in today's ActorState, shaped as `like`."""
+    agent, imag = like.agent, like.agent.imagination
+    imagination = imag._replace(imagined=flat["imagined"], s_0=flat["s_0"], tracker=flat["tracker"])
+    agent = agent._replace(
+        lstm=flat["lstm"],
+        prev_probs=flat["prev_probs"],
+        episode_step=flat["episode_step"],
+        imagination=imagination,
+    )
+    return like._replace(env_state=flat["env_state"], obs=flat["obs"], agent=agent, memory=flat["memory"])
+
+
 def _fields_added_since(like, saved) -> object:
     """`like` as the checkpoint holds it: a NamedTuple field that is None in `like` and absent
     from the checkpoint (`saved`, its metadata tree: dicts by field name), a field added to
     a record after the checkpoint was written (`RunnerState.targets`, 0.4.0), is dropped, and
-    the record becomes a dict of its other fields; `_rebuild` puts it back."""
+    the record becomes a dict of its other fields; the lanes' state of a checkpoint written
+    before 0.4.0 is read as its flat fields (`FLAT_ACTOR_FIELDS`); `_rebuild` puts both back."""
+    if _is_flat_actor(like, saved):
+        return {f: _fields_added_since(v, saved.get(f)) for f, v in _flat_actor(like).items()}
     if isinstance(like, tuple) and hasattr(like, "_fields") and isinstance(saved, dict):
         kept = [f for f in like._fields if f in saved or getattr(like, f) is not None]
         inner = {f: _fields_added_since(getattr(like, f), saved.get(f)) for f in kept}
@@ -136,6 +178,9 @@ def _fields_added_since(like, saved) -> object:
 
 def _rebuild(like, restored) -> object:
     """The restored tree in `like`'s records (the inverse of `_fields_added_since`)."""
+    if hasattr(like, "agent") and hasattr(like, "env_state") and isinstance(restored, dict) and "lstm" in restored:
+        flat = _flat_actor(like)
+        return _nested_actor(like, {f: _rebuild(v, restored.get(f)) for f, v in flat.items()})
     if isinstance(like, tuple) and hasattr(like, "_fields"):
         get = restored.get if isinstance(restored, dict) else lambda f, d=None: getattr(restored, f)
         return type(like)(**{f: _rebuild(getattr(like, f), get(f, None)) for f in like._fields})

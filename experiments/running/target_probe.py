@@ -2,7 +2,7 @@
 
 For each seed of a run folder whose arm has an auxiliary target (`Config.aux_target`), the
 final training state's agent plays whole test episodes in the environment wrapped with the
-target's labels (`foresit_jax.targets.label_env`), and its head (`RunnerState.targets`)
+target's labels (`foresit_jax.imagination.label_env`), and its head (`RunnerState.targets`)
 predicts each labelled step's target from s_t. Against a predictor of the mean label:
 
 * ``compass``: the mean angular error of the predicted bearing (degrees), beside the mean
@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from foresit_jax import rollout, targets
+from foresit_jax import imagination, rollout
 from foresit_jax.train import make_env
 
 
@@ -71,7 +71,7 @@ def probe_seed(trainer, state, key, episodes: int) -> dict:
     `episodes` test episodes (every room type of the config, in turn)."""
     config, nets = trainer.config, trainer.networks
     env, env_params = make_env(config, split="test", training=False)
-    labelled = rollout.BoundEnv(targets.label_env(config, env), env_params)
+    labelled = rollout.BoundEnv(imagination.label_env(config, env), env_params)
     steps = int(jnp.max(env_params.max_steps))
     acting = rollout.AgentParams(state.params, state.imagination_params, jnp.zeros(episodes))
 
@@ -81,10 +81,10 @@ def probe_seed(trainer, state, key, episodes: int) -> dict:
         traj = rollout.rollout(nets, acting, labelled, key, steps, options)
 
         def goal_latent(obs):
-            return rollout.goal_latent(nets, state.params, None, obs)
+            return nets.goal_latent(state.params, None, obs)
 
-        labels = targets.labels(config, traj.inputs.obs, traj.states, traj, goal_latent)
-        prediction = targets.head(config).apply(state.targets.params, traj.states)
+        labels = imagination.target_labels(config, traj.inputs.obs, traj.states, traj, goal_latent)
+        prediction = imagination.target_head(config).apply(state.targets.params, traj.states)
         return traj.states, labels.y, labels.mask, prediction
 
     states, y, mask, prediction = (np.asarray(x) for x in play(key))

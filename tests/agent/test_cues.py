@@ -15,7 +15,7 @@ import train_helpers as H
 
 from envs import catalog as C
 from envs.wrappers import CUES, CueWrapper
-from foresit_jax import rollout
+from foresit_jax import imagination, rollout
 from foresit_jax.methods import parse_method
 from foresit_jax.networks import build
 from foresit_jax.rollout import ActOptions, AgentParams, BoundEnv
@@ -147,21 +147,14 @@ def test_the_agent_sees_the_steps_own_cue_from_the_first_step(imagination_input)
     nets = build(config)
     cue = jax.random.normal(jax.random.PRNGKey(0), (3, CUES["compass"]))
     hidden = config.hidden_size
-    actor = rollout.ActorState(
-        env_state=None,
-        obs={"cue": cue},
-        lstm=None,
-        prev_probs=None,
-        imagined=jnp.ones((3, hidden)),
-        s_0=None,
-        episode_step=jnp.array([0, 1, 7]),
-        memory=None,
-        tracker=None,
-    )
+    obs = {"cue": cue}
+    carry = imagination.ImaginationCarry(imagined=jnp.ones((3, hidden)), s_0=jnp.zeros((3, hidden)), tracker=None)
+    steps = jnp.array([0, 1, 7])
     expected = np.concatenate([np.asarray(cue), np.zeros((3, hidden - cue.shape[1]))], 1)
-    imagined = rollout.imagined_at_step(nets, AgentParams(None, None, jnp.zeros(3)), actor, None, None)
+    acting = AgentParams(None, None, jnp.zeros(3))
+    imagined, _ = imagination.at_step(nets.imagination, acting, None, carry, jnp.zeros((3, hidden)), steps, obs, None)
     np.testing.assert_array_equal(imagined, expected)
-    seen = rollout.encoder_imagined(nets, actor)
+    seen = imagination.encoder_input(nets.imagination, carry, steps, obs)
     if imagination_input == "encoder":
         np.testing.assert_array_equal(seen, expected)
     else:

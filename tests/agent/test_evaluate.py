@@ -66,7 +66,9 @@ def test_agent_params_noise_variance_is_the_lanes_mean_of_eq7():
             t = imagination.tracker_update(t, jnp.asarray(i < 4 * rho))
         lanes.append(t)
     trackers = jax.tree.map(lambda *x: jnp.stack(x), *lanes)
-    got = agent_params(state._replace(actor=state.actor._replace(tracker=trackers)), sigma2_max=0.9)
+    agent = state.actor.agent
+    agent = agent._replace(imagination=agent.imagination._replace(tracker=trackers))
+    got = agent_params(state._replace(actor=state.actor._replace(agent=agent)), sigma2_max=0.9)
     np.testing.assert_allclose(float(got.noise_variance), np.mean([0.9, 0.65, 0.0, 0.4]), rtol=1e-6)
     assert got.params is state.params and got.imagination_params is state.imagination_params
 

@@ -79,7 +79,18 @@ def pair():
 
 def as_example_state(ex, state):
     """The Trainer's RunnerState as the example's (the same fields, the example's types)."""
-    lanes = ex.Lanes(*state.actor[:-1], ex.Tracker(*state.actor.tracker))
+    actor, agent = state.actor, state.actor.agent
+    lanes = ex.Lanes(
+        actor.env_state,
+        actor.obs,
+        agent.lstm,
+        agent.prev_probs,
+        agent.imagination.imagined,
+        agent.imagination.s_0,
+        agent.episode_step,
+        actor.memory,
+        ex.Tracker(*agent.imagination.tracker),
+    )
     return ex.RunnerState(
         state.params, state.opt_state, state.imagination_params, ex.Buffers(*state.buffers), lanes, state.key
     )
@@ -145,6 +156,6 @@ def test_the_examples_updates_end_where_the_trainers_do(pair):
     assert_trees_close(without_key_bias(ours.params), without_key_bias(theirs.params), rtol=1e-3, scale=1e-4)
     assert_trees_close(ours.w_params, theirs.imagination_params, rtol=1e-3, scale=1e-4)
     assert_trees_close(tuple(ours.buffers), tuple(theirs.buffers), rtol=1e-3, scale=1e-4)
-    for a, b in zip(ours.lanes.tracker, theirs.actor.tracker):
+    for a, b in zip(ours.lanes.tracker, theirs.actor.agent.imagination.tracker):
         np.testing.assert_array_equal(a, b)
-    np.testing.assert_array_equal(ours.lanes.episode_step, theirs.actor.episode_step)
+    np.testing.assert_array_equal(ours.lanes.episode_step, theirs.actor.agent.episode_step)

@@ -15,7 +15,7 @@ from env_helpers import cached_oracle, make_states
 from env_reference import reference_transition
 from envs.wrappers import GoalViewWrapper
 from experiments.analysis.probes import shuffled
-from foresit_jax import rollout
+from foresit_jax import imagination, rollout
 from foresit_jax.config import Config
 from foresit_jax.lstm import initial_carry
 from foresit_jax.methods import parse_method
@@ -177,21 +177,21 @@ def test_oracle_i_tau_with_the_noise_off_is_one_network_step_on_the_goal_view(sa
 @pytest.mark.slow  # 8.3 s cold (docs/testing.md)
 def test_shuffled_probe_shuffles_the_oracles_i_tau_across_episodes(savn_kit):
     """The probe's shuffle (`probes.shuffled`) applies to the oracle's goal latent where
-    i_tau is made (`rollout._imagine`, noise off): lane b gets lane b - 1's."""
+    i_tau is made (`imagination.imagine`, noise off): lane b gets lane b - 1's."""
     config = small_config()
     nets = build(config)
     env = BoundEnv(savn_kit.env, savn_kit.params)
     obs, _ = savn_kit.env.reset(jax.random.PRNGKey(0), savn_kit.params)
     params, w_params = jax.jit(nets.init, compiler_options=H.FAST_COMPILE)(jax.random.PRNGKey(1), obs)
     actor = rollout.start(nets, jax.random.PRNGKey(2), env, config.num_lanes)
-    kernels = nets.model.apply(params, None, method="lstm_kernels")
-    own = rollout.goal_latent(nets, params, kernels, actor.obs)
+    kernels = nets.lstm_kernels(params)
+    own = nets.goal_latent(params, kernels, actor.obs)
 
     def i_tau(n):  # with the noise off
-        return rollout._imagine(
-            n,
+        return imagination.imagine(
+            n.imagination,
             w_params,
-            actor.s_0,
+            actor.agent.imagination.s_0,
             actor.obs["target"],
             jax.random.PRNGKey(3),
             jnp.zeros((config.num_lanes,)),

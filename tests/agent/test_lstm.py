@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from foresit_jax import lstm
+from foresit_jax.networks import ActorCritic
 
 F, H, B, T = 7, 5, 3, 4
 
@@ -190,7 +191,7 @@ def small_agent():
 
 def kernels_of(nets, params, update=None):
     """The encoder LSTM's kernels under `params` (`ActorCritic.lstm_kernels`)."""
-    return nets.model.apply(params, update, method="lstm_kernels")
+    return nets.model.apply(params, update, method=ActorCritic.lstm_kernels)
 
 
 def test_the_agents_lstm_kernels_come_from_its_encoder_cell(small_agent):

@@ -24,7 +24,7 @@ WHOLE = ActOptions(whole_episodes=True)  # the maml base acts in whole episodes
 def _adaptive_act(nets, params, w_params, env, actor, key, num_steps, options=WHOLE):
     """`maml.adaptive_act` acting as training does: each lane's noise variance Eq. 7's
     from its success tracker (what `maml.act` fills in)."""
-    rho = jax.vmap(imagination.success_rate)(actor.tracker)
+    rho = jax.vmap(imagination.success_rate)(actor.agent.imagination.tracker)
     acting = AgentParams(params, w_params, imagination.noise_variance(rho, nets.config.sigma2_max))
     return maml.adaptive_act(nets, acting, env, actor, key, num_steps, options)
 
@@ -246,12 +246,10 @@ def _meta_objective(first_order: bool):
     params = jax.tree.map(lambda x: x.astype(jnp.float64) + 0.05 * rng.standard_normal(x.shape), params)
     actor = rollout.start(nets, jax.random.PRNGKey(3), BoundEnv(env, env_params), config.num_lanes)
     f64 = lambda x: x.astype(jnp.float64)  # noqa: E731  the agent's own carries, in float64
-    actor = actor._replace(
-        lstm=jax.tree.map(f64, actor.lstm),
-        prev_probs=f64(actor.prev_probs),
-        imagined=f64(actor.imagined),
-        s_0=f64(actor.s_0),
-    )
+    agent = actor.agent
+    carry = agent.imagination._replace(imagined=f64(agent.imagination.imagined), s_0=f64(agent.imagination.s_0))
+    agent = agent._replace(lstm=jax.tree.map(f64, agent.lstm), prev_probs=f64(agent.prev_probs), imagination=carry)
+    actor = actor._replace(agent=agent)
     steps = 13
     w_logits = jnp.asarray(rng.standard_normal((steps, 3, 6)))
     w_states = jnp.asarray(rng.standard_normal((steps, 3, config.hidden_size)))

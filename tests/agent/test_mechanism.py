@@ -14,9 +14,10 @@ import train_helpers as H
 from foresit_jax import rollout
 from foresit_jax.config import Config
 from foresit_jax.evaluate import agent_params
+from foresit_jax.imagination import subgoal_items, subgoal_steps
 from foresit_jax.networks import build
 from foresit_jax.rollout import AgentParams, BoundEnv
-from foresit_jax.train import subgoal_items, subgoal_steps
+from foresit_jax.networks import ActorCritic
 from test_networks import np_attention_critic, np_dense
 
 relu = lambda x: np.maximum(x, 0.0)  # noqa: E731
@@ -47,7 +48,7 @@ def test_the_encoder_reading_feeds_i_tau_beside_the_target():
     params, _ = nets.init(jax.random.PRNGKey(0), jax.tree.map(lambda x: x[0], obs))
 
     def lstm_inputs(params, obs, probs, imagined=None):
-        return nets.model.apply(params, obs, probs, imagined, method="encoder_features")
+        return nets.model.apply(params, obs, probs, imagined, method=ActorCritic.encoder_features)
 
     params = scrambled(params)
     rng = np.random.default_rng(0)
@@ -91,7 +92,9 @@ def test_the_mlp_reading_is_a_two_layer_head(method):
     rng = np.random.default_rng(1)
     s_t, i_tau = (np.tanh(rng.normal(size=(3, config.hidden_size))).astype(np.float32) for _ in range(2))
     uses = config.pieces.imagination_variant.uses_imagination
-    got = nets.model.apply(params, s_t, i_tau, method="heads")  # i_tau dropped where the head takes none
+    got = nets.model.apply(
+        params, s_t, i_tau, method=ActorCritic.policy_logits
+    )  # i_tau dropped where the head takes none
     p = jax.tree.map(np.asarray, params["params"]["policy"])
     x = np.concatenate([s_t, i_tau], -1) if uses else s_t
     np.testing.assert_allclose(got, np_dense(p["actor"], relu(np_dense(p["hidden"], x))), rtol=1e-4, atol=1e-5)
@@ -167,7 +170,7 @@ def _two_windows(method, seed=0):
         next_actor, traj, end = trainer.act(AgentParams(state.params, state.imagination_params), env, actor, k_act)
         _, (alpha, keys, _) = trainer.window_loss(state.params, traj, end, memory)
         items = subgoal_items(trainer.networks.imagination_variant.subgoal_mode, traj, alpha, keys, traj.success)
-        return next_actor, key, (traj, items, subgoal_steps(traj, end, alpha))
+        return next_actor, key, (traj, items, subgoal_steps(traj.episode_step, end.episode_step, alpha))
 
     for _ in range(3):
         actor, key, got = window(actor, key)

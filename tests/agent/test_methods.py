@@ -9,7 +9,7 @@ import pytest
 
 from foresit_jax.config import Config
 from foresit_jax.methods import IMAGINATION_VARIANTS, IMPLEMENTED_METHODS, PAPER_METHODS, Method, parse_method
-from foresit_jax.rollout import renews
+from foresit_jax.imagination import renews
 
 
 @pytest.mark.parametrize(
@@ -191,7 +191,7 @@ def test_the_trainer_and_the_evaluator_choose_the_bases_window_once(monkeypatch)
 
 
 def test_noise_on_the_input_is_algorithm_1s_and_on_the_output_eq_6s():
-    """The learned imagination's i_tau (`rollout._imagine`): f_w([s : g]) + eta by default
+    """The learned imagination's i_tau (`imagination.imagine`): f_w([s : g]) + eta by default
     (Eq. 6); with the noise on the input (`Config.imagination_noise='input'`),
     f_w([s : g] + eta) (Algorithm 1), eta from the same key and variance."""
     import jax
@@ -199,7 +199,7 @@ def test_noise_on_the_input_is_algorithm_1s_and_on_the_output_eq_6s():
     import numpy as np
 
     import train_helpers as H
-    from foresit_jax import imagination, rollout
+    from foresit_jax import imagination
     from foresit_jax.networks import build
 
     def imagine_fn(w, s, g):  # a nonlinear stand-in for f_w: where the noise enters matters
@@ -210,9 +210,9 @@ def test_noise_on_the_input_is_algorithm_1s_and_on_the_output_eq_6s():
 
     key, s_t, goal = jax.random.key(1), jnp.full((2, 4), 0.5), jnp.ones((2, 3))
     variance = jnp.array([0.3, 1.0])
-    out = rollout._imagine(nets_of("output"), 2.0, s_t, goal, key, variance, None)
+    out = imagination.imagine(nets_of("output").imagination, 2.0, s_t, goal, key, variance, None)
     np.testing.assert_allclose(out, imagination.add_imagination_noise(key, imagine_fn(2.0, s_t, goal), variance))
-    inside = rollout._imagine(nets_of("input"), 2.0, s_t, goal, key, variance, None)
+    inside = imagination.imagine(nets_of("input").imagination, 2.0, s_t, goal, key, variance, None)
     np.testing.assert_allclose(inside, imagine_fn(2.0, *imagination.add_input_noise(key, s_t, goal, variance)))
     assert not np.allclose(inside, out)
 

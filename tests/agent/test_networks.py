@@ -10,6 +10,8 @@ import numpy as np
 from absl.testing import parameterized
 
 from foresit_jax import networks
+from foresit_jax.networks import ActorCritic
+from foresit_jax import imagination
 
 H = 16  # small LSTM in tests (512 in the paper)
 W, CV, D, A = 4, 5, 7, 6
@@ -307,14 +309,14 @@ class SubgoalTest(chex.TestCase):
         expected = np.exp(np.array([0.0, 6.0, 0.0, 4.0]) / 2.0)
         np.testing.assert_allclose(alpha_last[:4], expected / expected.sum(), rtol=1e-5)
         self.assertEqual(float(alpha_last[4]), 0.0)
-        subgoal = networks.subgoals_of_rows(self.states, alpha[3:4])
+        subgoal = imagination.subgoals_of_rows(self.states, alpha[3:4])
         np.testing.assert_array_equal(subgoal, [[0.0, 3.0, 0.0]])
 
     @chex.variants(with_jit=True, without_jit=True)
     def test_select_modes(self):
         alpha = jnp.array([[0.1, 0.2, 0.4, 0.3, 0.0]])
-        argmax = self.variant(lambda s, a: networks.subgoals_of_rows(s, a, "argmax"))
-        average = self.variant(lambda s, a: networks.subgoals_of_rows(s, a, "attention_average"))
+        argmax = self.variant(lambda s, a: imagination.subgoals_of_rows(s, a, "argmax"))
+        average = self.variant(lambda s, a: imagination.subgoals_of_rows(s, a, "attention_average"))
         np.testing.assert_array_equal(argmax(self.states, alpha), [[0.0, 0.0, 1.0]])
         np.testing.assert_allclose(
             average(self.states, alpha), [[0.1 * 3.0, 0.2 * 3.0 + 0.3 * 2.0, 0.4 * 1.0]], rtol=1e-6
@@ -326,14 +328,14 @@ class SubgoalTest(chex.TestCase):
     def test_rows_batched_and_stop_gradient(self):
         states = jnp.stack([self.states, 2 * self.states])  # [2, K, 3]
         alpha = jnp.array([[[0, 0, 1.0, 0, 0], [1.0, 0, 0, 0, 0]], [[1.0, 0, 0, 0, 0], [0, 0, 0, 1.0, 0]]])
-        out = networks.subgoals_of_rows(states, alpha)  # [2, R=2, 3]
+        out = imagination.subgoals_of_rows(states, alpha)  # [2, R=2, 3]
         chex.assert_shape(out, (2, 2, 3))
         np.testing.assert_array_equal(out, [[[0, 0, 1.0], [3.0, 0, 0]], [[6.0, 0, 0], [0, 4.0, 0]]])
         for mode in ("argmax", "attention_average"):
-            grad = jax.grad(lambda s: networks.subgoals_of_rows(s, alpha, mode).sum())(states)
+            grad = jax.grad(lambda s: imagination.subgoals_of_rows(s, alpha, mode).sum())(states)
             np.testing.assert_array_equal(grad, 0.0)
         with self.assertRaisesRegex(ValueError, "mode"):
-            networks.subgoals_of_rows(states, alpha, "median")
+            imagination.subgoals_of_rows(states, alpha, "median")
 
 
 class ImaginationNetTest(chex.TestCase):
@@ -435,7 +437,7 @@ class ActorCriticTest(chex.TestCase):
 
     def test_encode_then_heads_equal_the_flax_cells_steps(self):
         """The one route (`encode` over a window, time-major, the carry zeroed where an
-        episode begins, then `heads`) against flax's own cell step by step (`__call__`),
+        episode begins, then `policy_logits`) against flax's own cell step by step (`__call__`),
         over two episodes in each lane; and `encode` at T = 1, step by step, as acting
         calls it, gives the same states."""
         steps, lanes = 6, 2
@@ -446,8 +448,8 @@ class ActorCriticTest(chex.TestCase):
         carry = jax.tree.map(lambda x: x + 0.3, networks.initial_carry((lanes,), H))  # zeroed at step 0
         apply = jax.jit(self.model.apply, static_argnames="method")
         inputs = networks.EncoderInputs(obs, probs)
-        carry_a, states = apply(self.params, carry, inputs, jnp.asarray(first), method="encode")
-        logits = apply(self.params, states, imagined, method="heads")
+        carry_a, states = apply(self.params, carry, inputs, jnp.asarray(first), method=ActorCritic.encode)
+        logits = apply(self.params, states, imagined, method=ActorCritic.policy_logits)
         c, c_one = carry, carry
         for t in range(steps):
             c = jax.tree.map(lambda x: jnp.where(first[t][:, None], 0.0, x), c)
@@ -455,7 +457,7 @@ class ActorCriticTest(chex.TestCase):
             np.testing.assert_allclose(states[t], s_t, rtol=1e-5, atol=1e-6)
             np.testing.assert_allclose(logits[t], l_t, rtol=1e-5, atol=1e-6)
             one = jax.tree.map(lambda x: x[t : t + 1], inputs)
-            c_one, s_one = apply(self.params, c_one, one, jnp.asarray(first[t : t + 1]), method="encode")
+            c_one, s_one = apply(self.params, c_one, one, jnp.asarray(first[t : t + 1]), method=ActorCritic.encode)
             np.testing.assert_allclose(s_one[0], states[t], rtol=1e-5, atol=1e-6)
         chex.assert_trees_all_close(carry_a, c, rtol=1e-5, atol=1e-6)
         chex.assert_trees_all_close(c_one, c, rtol=1e-5, atol=1e-6)

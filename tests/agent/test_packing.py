@@ -190,7 +190,7 @@ def test_packing_changes_nothing_but_speed(windows):
     def packed_loss(p):
         traj = long._replace(valid=jnp.asarray(complete))
         return packed.window_loss(
-            p, replayed(packed.networks, p, traj, state.actor.lstm), long_end, state.actor.memory
+            p, replayed(packed.networks, p, traj, state.actor.agent.lstm), long_end, state.actor.memory
         )[0]
 
     def whole_loss(p):
@@ -255,8 +255,8 @@ def test_foresit_bookkeeping_fires_once_per_ended_episode_never_for_a_cut_one():
     ended_per_lane, successes_per_lane = done.sum(0), (success & done).sum(0)
     assert successes_per_lane.sum() >= 2, "precondition: some successes"
     assert (~done[-1]).any(), "precondition: some episode is cut at the window's end"
-    np.testing.assert_array_equal(new.actor.tracker.count, ended_per_lane)
-    np.testing.assert_array_equal(new.actor.tracker.outcomes.sum(-1), successes_per_lane)
+    np.testing.assert_array_equal(new.actor.agent.imagination.tracker.count, ended_per_lane)
+    np.testing.assert_array_equal(new.actor.agent.imagination.tracker.outcomes.sum(-1), successes_per_lane)
     np.testing.assert_array_equal(new.buffers.count, successes_per_lane)
     assert float(metrics["charts/episodes"]) == ended_per_lane.sum()
     np.testing.assert_allclose(
@@ -281,5 +281,5 @@ def test_foresit_bookkeeping_fires_once_per_ended_episode_never_for_a_cut_one():
     )
     ended_2 = np.asarray(traj2.terminated | traj2.truncated).sum(0)
     np.testing.assert_array_equal(
-        newer.actor.tracker.count, np.minimum(ended_per_lane + ended_2, config.success_window)
+        newer.actor.agent.imagination.tracker.count, np.minimum(ended_per_lane + ended_2, config.success_window)
     )

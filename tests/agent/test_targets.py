@@ -1,4 +1,4 @@
-"""foresit_jax.targets, imagination as a training target: the labels against independent
+"""foresit_jax.imagination's targets, imagination as a training target: the labels against independent
 references (numpy loops, a bearing computed from the pose and the scene's cells, the
 oracle's own i_tau), the loss against numpy, where the gradients go, and that a target
 leaves the agent that acts the base's (aux_weight 0 reproduces the base bit for bit; the
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from benchmarks import trace_update
-from foresit_jax import rollout, targets
+from foresit_jax import imagination, rollout
 from foresit_jax.config import Config
 from foresit_jax.imagination import smooth_l1
 from foresit_jax.train import Trainer, loss_and_grad_with_target
@@ -52,7 +52,7 @@ def success_labels_loop(states, terminated, truncated, success, valid):
 @pytest.mark.parametrize("seed", range(6))
 def test_success_labels_are_the_state_where_the_episode_succeeded(seed):
     states, terminated, truncated, success, valid = window(np.random.default_rng(seed))
-    got = targets.success_labels(*map(jnp.asarray, (states, terminated, truncated, success, valid)))
+    got = imagination.success_labels(*map(jnp.asarray, (states, terminated, truncated, success, valid)))
     y, mask = success_labels_loop(states, terminated, truncated, success, valid)
     np.testing.assert_array_equal(np.asarray(got.mask), mask)
     np.testing.assert_array_equal(np.asarray(got.y)[mask], y[mask])
@@ -65,7 +65,7 @@ def test_success_labels_on_a_window_written_by_hand():
     term = jnp.array([[0, 0], [0, 0], [1, 0], [0, 0], [0, 1]], bool)
     trunc = jnp.array([[0, 0], [0, 1], [0, 0], [0, 0], [0, 0]], bool)
     succ = jnp.array([[0, 0], [0, 0], [1, 0], [0, 0], [0, 1]], bool)
-    got = targets.success_labels(states, term, trunc, succ, jnp.ones((5, 2), bool))
+    got = imagination.success_labels(states, term, trunc, succ, jnp.ones((5, 2), bool))
     np.testing.assert_array_equal(got.mask, [[1, 0], [1, 0], [0, 1], [0, 1], [0, 0]])
     np.testing.assert_array_equal(got.y[:2, 0, 0], [4.0, 4.0])  # s_2 of lane 0
     np.testing.assert_array_equal(got.y[2:4, 1, 0], [9.0, 9.0])  # s_4 of lane 1
@@ -75,14 +75,16 @@ def test_success_labels_on_a_window_written_by_hand():
 def test_the_loss_against_numpy(target):
     rng = np.random.default_rng(3)
     config = tiny_config("a3c", aux_target=target)
-    K = targets.width(config)
+    K = imagination.target_width(config)
     T, B, H = 5, 3, config.hidden_size
     states = rng.normal(size=(T, B, H)).astype(np.float32)
     y = rng.normal(size=(T, B, K)).astype(np.float32)
     mask = rng.random((T, B)) < 0.6
-    params = targets.head(config).init(jax.random.PRNGKey(0), jnp.zeros(H))
+    params = imagination.target_head(config).init(jax.random.PRNGKey(0), jnp.zeros(H))
     kernel, bias = (np.asarray(params["params"]["out"][k]) for k in ("kernel", "bias"))
-    loss, metrics = targets.window_loss(config, params, jnp.asarray(states), targets.Labels(y, mask))
+    loss, metrics = imagination.target_window_loss(
+        config, params, jnp.asarray(states), imagination.TargetLabels(y, mask)
+    )
     x = states @ kernel + bias - y
     if target == "compass":
         per_step = np.sum(x**2, axis=-1)
@@ -91,14 +93,16 @@ def test_the_loss_against_numpy(target):
         per_step = np.mean(np.where(a < 1, 0.5 * a**2, a - 0.5), axis=-1)
     np.testing.assert_allclose(loss, per_step[mask].mean(), rtol=1e-5)
     assert float(metrics["charts/aux_labelled"]) == mask.sum()
-    empty, _ = targets.window_loss(config, params, jnp.asarray(states), targets.Labels(y, np.zeros((T, B), bool)))
+    empty, _ = imagination.target_window_loss(
+        config, params, jnp.asarray(states), imagination.TargetLabels(y, np.zeros((T, B), bool))
+    )
     assert float(empty) == 0.0
 
 
 def test_smooth_l1_is_the_latents_loss():
     config = tiny_config("a3c", aux_target="goal_view")
     p, y = jnp.array([[0.2, -3.0]]), jnp.array([[0.0, 0.0]])
-    np.testing.assert_allclose(targets.per_step_loss(config.aux_target, p, y), smooth_l1(p, y))
+    np.testing.assert_allclose(imagination.target_step_loss(config.aux_target, p, y), smooth_l1(p, y))
 
 
 def compass_reference(pos, heading, cells, grid):
@@ -125,7 +129,7 @@ def compass_reference(pos, heading, cells, grid):
 def test_compass_labels_against_an_independent_bearing_across_auto_resets():
     config = tiny_config("a3c", aux_target="compass")
     env, params = bathroom_env()
-    labelled = targets.label_env(config, env)
+    labelled = imagination.label_env(config, env)
 
     def step(carry, key):
         state, obs = carry
@@ -151,7 +155,7 @@ def test_compass_labels_against_an_independent_bearing_across_auto_resets():
         valid=jnp.ones(60, bool),
         **dict.fromkeys(["success", "episode_step", "s_0", "optimal_length", "room_type"]),
     )
-    got = np.asarray(targets.labels(config, {"cue": cue}, None, fake_traj).y)
+    got = np.asarray(imagination.target_labels(config, {"cue": cue}, None, fake_traj).y)
     obj = np.asarray(params.bank.obj_cat)
     for t in range(60):
         cells = obj[int(scene[t])] == int(target[t])
@@ -175,9 +179,9 @@ def test_the_goal_view_target_is_the_oracles_i_tau():
     config = tiny_config("a3c", aux_target="goal_view")
 
     def goal_latent(obs):
-        return rollout.goal_latent(trainer.networks, state.params, None, obs)
+        return trainer.networks.goal_latent(state.params, None, obs)
 
-    got = targets.labels(config, traj.inputs.obs, traj.states, traj, goal_latent).y
+    got = imagination.target_labels(config, traj.inputs.obs, traj.states, traj, goal_latent).y
     began = np.maximum.accumulate(np.asarray(traj.episode_step) == 0, axis=0)  # [T, B]: its start is in the window
     assert began.sum() > 20
     np.testing.assert_allclose(np.asarray(got)[began], np.asarray(traj.inputs.imagined)[began], atol=1e-5)
@@ -187,7 +191,7 @@ def test_no_gradient_reaches_a_label():
     states, terminated, truncated, success, valid = window(np.random.default_rng(0))
 
     def label_sum(s):
-        return targets.success_labels(s, *map(jnp.asarray, (terminated, truncated, success, valid))).y.sum()
+        return imagination.success_labels(s, *map(jnp.asarray, (terminated, truncated, success, valid))).y.sum()
 
     assert not np.any(np.asarray(jax.grad(label_sum)(jnp.asarray(states))))
 
@@ -365,3 +369,11 @@ def test_target_probe_scores_each_arms_head_from_a_sweep(tmp_path, capsys):
     assert {"r2", "label_spread", "state_spread"} <= set(saved["arms"][arms[1]][0])
     with pytest.raises(ValueError, match="--overwrite"):
         target_probe.main(target_probe.Args(run=tmp_path / "s", episodes=8))
+
+
+def test_every_target_says_whether_its_labels_are_privileged():
+    """`imagination.PRIVILEGED_LABELS` names the Config's targets, no more, no fewer (its
+    keys also spell the refusal of an unknown target)."""
+    from foresit_jax.config import AUX_TARGETS
+
+    assert tuple(imagination.PRIVILEGED_LABELS) == AUX_TARGETS[1:]

@@ -18,6 +18,7 @@ from foresit_jax import imagination
 from foresit_jax import train as train_module
 from foresit_jax.rollout import AgentParams
 from foresit_jax.train import Trainer
+from foresit_jax.networks import ActorCritic
 
 FORESIT = H.tiny_config("a3c+foresit")
 
@@ -173,8 +174,8 @@ def test_buffer_of_one_trains_fw_on_every_success(foresit_run):
     assert successes > 0, "seed 0 should see a success in 12 windows"
     H.assert_trees_bitwise_equal(state, foresit_run[0])
     # Every ended episode was recorded in its lane's moving success rate (window 100).
-    assert int(np.sum(state.actor.tracker.count)) == episodes
-    assert float(jnp.sum(state.actor.tracker.outcomes)) == successes
+    assert int(np.sum(state.actor.agent.imagination.tracker.count)) == episodes
+    assert float(jnp.sum(state.actor.agent.imagination.tracker.outcomes)) == successes
 
 
 # ---------------------------------------------------------------------- every method
@@ -229,9 +230,9 @@ def test_the_encoder_really_uses_the_detections():
 
         inputs = EncoderInputs(*jax.tree.map(lambda x: x[None], (seen, probs)))
         _, states = nets.model.apply(
-            state.params, initial_carry((), config.hidden_size), inputs, jnp.ones((1,), bool), method="encode"
+            state.params, initial_carry((), config.hidden_size), inputs, jnp.ones((1,), bool), method=ActorCritic.encode
         )
-        return nets.model.apply(state.params, states[0], method="heads")
+        return nets.model.apply(state.params, states[0], method=ActorCritic.policy_logits)
 
     detections = obs["detections"]
     grad = jax.grad(lambda d: jnp.sum(logits(d) * jnp.arange(1.0, 7.0)))(detections)
@@ -279,7 +280,7 @@ def test_vmapped_sweep_matches_seeds_run_one_by_one():
         alone, alone_metrics = H.init_and_run(FORESIT, seed, 3)
         mine = jax.tree.map(lambda x: x[i], swept)
         # Discrete parts (episode outcomes, buffer fills, keys) are identical.
-        H.assert_trees_bitwise_equal(mine.actor.tracker, alone.actor.tracker)
+        H.assert_trees_bitwise_equal(mine.actor.agent.imagination.tracker, alone.actor.agent.imagination.tracker)
         H.assert_trees_bitwise_equal(mine.buffers.count, alone.buffers.count)
         H.assert_trees_bitwise_equal((mine.key, mine.update), (alone.key, alone.update))
         jax.tree.map(lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-4, atol=1e-5), mine, alone)
@@ -340,8 +341,8 @@ def test_a_vmapped_grid_is_the_per_rate_sweeps_to_float_rounding():
         H.assert_trees_bitwise_equal(one_rate._replace(opt_state=()), alone._replace(opt_state=()))
         part = jax.tree.map(lambda x: x[v * len(seeds) : (v + 1) * len(seeds)], together)
         H.assert_trees_bitwise_equal(
-            (part.actor.tracker, part.buffers.count, part.key, part.update),
-            (alone.actor.tracker, alone.buffers.count, alone.key, alone.update),
+            (part.actor.agent.imagination.tracker, part.buffers.count, part.key, part.update),
+            (alone.actor.agent.imagination.tracker, alone.buffers.count, alone.key, alone.update),
         )
         jax.tree.map(lambda a, b: np.testing.assert_allclose(a, b, rtol=1e-3, atol=2e-4), part.params, alone.params)
         for name, values_ in alone_metrics.items():

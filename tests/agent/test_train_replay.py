@@ -38,7 +38,7 @@ def mid_episode_state():
     """The tiny state after one update: lanes are in the middle of episodes."""
     state = H.jitted_init(REPLAY)(jax.random.PRNGKey(0))
     state, _ = H.jitted_update(REPLAY)(state, H.trainer(REPLAY).env_params)
-    assert (np.asarray(state.actor.episode_step) > 0).any(), "precondition: a window starting mid-episode"
+    assert (np.asarray(state.actor.agent.episode_step) > 0).any(), "precondition: a window starting mid-episode"
     return state
 
 
@@ -79,7 +79,7 @@ def test_replay_recomputes_the_acting_values(mid_episode_state):
         AgentParams(state.params, state.imagination_params), trainer.bind(trainer.env_params), state.actor, state.key
     )
     again = jax.jit(functools.partial(replayed, trainer.networks), compiler_options=H.FAST_COMPILE)(
-        state.params, traj, state.actor.lstm
+        state.params, traj, state.actor.agent.lstm
     )
     np.testing.assert_allclose(again.states, traj.states, rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(again.logits, traj.logits, rtol=1e-5, atol=1e-6)
@@ -92,7 +92,7 @@ def test_replay_needs_recorded_inputs(mid_episode_state):
         AgentParams(state.params, state.imagination_params), trainer.bind(trainer.env_params), state.actor, state.key
     )
     with pytest.raises(ValueError, match="record_inputs"):
-        replayed(trainer.networks, state.params, traj._replace(inputs=None), state.actor.lstm)
+        replayed(trainer.networks, state.params, traj._replace(inputs=None), state.actor.agent.lstm)
 
 
 def test_whole_episode_rollout_needs_room_for_an_episode():

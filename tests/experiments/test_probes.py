@@ -6,6 +6,7 @@ how episodes end, and the training options replayed over a model
 (`experiments.running.probe_runs.fit_options`)."""
 
 import dataclasses
+import functools
 
 import jax
 import jax.numpy as jnp
@@ -16,7 +17,7 @@ import pytest
 import train_helpers as H
 from experiments.analysis import probes
 from experiments.running import models, probe_runs
-from foresit_jax import imagination, rollout
+from foresit_jax import imagination
 from foresit_jax.networks import ImaginationNet, build
 
 
@@ -30,7 +31,7 @@ def first_observations(batch=4, seed=0):
 @pytest.mark.slow
 def test_shuffled_imagination_imagines_from_another_episode():
     """The probe's networks (`probes.shuffled`) make each lane's i_tau where
-    acting makes it (`rollout._imagine`, noise off) from the previous lane's s_0 and target;
+    acting makes it (`imagination.imagine`, noise off) from the previous lane's s_0 and target;
     the unshuffled networks from the lane's own."""
     config = H.tiny_config("a3c+foresit")
     nets = build(config)
@@ -40,7 +41,7 @@ def test_shuffled_imagination_imagines_from_another_episode():
     _, w = nets.init(jax.random.PRNGKey(0), jax.tree.map(lambda x: x[0], first_observations()))
 
     def i_tau(n):  # with the noise off
-        return np.asarray(rollout._imagine(n, w, s_0, goal, jax.random.PRNGKey(1), jnp.zeros(5), None))
+        return np.asarray(imagination.imagine(n.imagination, w, s_0, goal, jax.random.PRNGKey(1), jnp.zeros(5), None))
 
     got, own = i_tau(shuffled), i_tau(nets)
     for b in range(5):
@@ -162,7 +163,7 @@ def replay_stream(config, steps: int, seed: int, offered: float):
 
 
 def test_replayed_online_fit_is_the_training_procedure():
-    """`replay_online_fit` streaming items twice gives the f_w `Trainer.store_and_train`
+    """`replay_online_fit` streaming items twice gives the f_w `imagination.store_and_train`
     gives from the same start on the stream written twice (the procedure training runs,
     here two items a step), bit for bit."""
     config = H.tiny_config("a3c+foresit", buffer_size=4, imagination_epochs=2, imagination_batch=2)
@@ -172,7 +173,9 @@ def test_replayed_online_fit_is_the_training_procedure():
         imagination.buffer_init(config.buffer_size, config.hidden_size, GOAL_SIZE),
     )
     doubled = tuple(jnp.asarray(np.concatenate([x, x])) for x in items)
-    want, _, _ = jax.jit(trainer.store_and_train)(w0, buffers, doubled)
+    want, _, _ = jax.jit(functools.partial(imagination.store_and_train, trainer.networks.imagination))(
+        w0, buffers, doubled
+    )
     got = probes.replay_online_fit(
         trainer.networks.imagine,
         w0,

@@ -9,7 +9,10 @@ from a fresh interpreter (issue 60; docs/design.md):
 * no class has more than 12 methods (`MAX_METHODS`, every function its body defines:
   `__init__`, properties, cached properties and static methods count), and no acting entry
   point takes more than 8 parameters (`MAX_ACTING_PARAMETERS`);
-* a method's pieces become modules in one place (`networks.build`).
+* a method's pieces become modules in one place (`networks.build`);
+* imagination.py, ForeSIT's one home, imports of the package only the leaves below it
+  (`IMAGINATION_IMPORTS`: layers, methods), never a module that calls into it
+  (networks hands it an `Imagination` record instead).
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ PACKAGE = Path(__file__).resolve().parents[2] / "foresit_jax"
 MAX_FLOORS = 7  # policy (the step) and maml (the base that builds on it) sit above rollout: docs/design.md
 MAX_METHODS = 12  # the Trainer's 12 (0.3.0 counted 10, leaving out __init__ and run_seeds)
 MAX_ACTING_PARAMETERS = 8
+IMAGINATION_IMPORTS = {"layers", "methods"}  # and envs.wrappers, outside the package
 
 
 def _tree(name: str) -> ast.Module:
@@ -77,6 +81,15 @@ def test_the_package_is_at_most_seven_floors_deep():
     found = floors(graph)
     assert max(found.values()) <= MAX_FLOORS, sorted(found.items(), key=lambda kv: kv[1])
     assert package_imports(_tree("__init__")) == set(), "the package face imports its modules lazily"
+
+
+def test_imagination_imports_only_the_leaves_below_it():
+    graph = {m: package_imports(_tree(m)) for m in _modules()}
+    assert graph["imagination"] <= IMAGINATION_IMPORTS, graph["imagination"]
+    below = set().union(*(graph[m] for m in IMAGINATION_IMPORTS)) | IMAGINATION_IMPORTS
+    assert "imagination" not in below, "a module imagination imports imports it back"
+    callers = {m for m, deps in graph.items() if "imagination" in deps}
+    assert {"networks", "rollout", "train"} <= callers  # what calls into it (the check sees imports)
 
 
 def test_methods_import_nothing_of_the_package_and_config_only_methods():
