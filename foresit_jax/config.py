@@ -179,7 +179,7 @@ class Config:
     variance when training stopped: the imagination the policy was trained with) or
     'off' (i_tau = f_w([s_0 : g_tau]) exactly). The paper does not say."""
 
-    # Imagination as a training target (`foresit_jax.targets`): nothing of it acts.
+    # Imagination as a training target (`foresit_jax.imagination`'s targets): nothing of it acts.
     aux_target: str = "none"
     """An auxiliary target that a linear head on s_t learns to predict at every valid step,
     in training only (its parameters are a tree of their own; the agent that acts and is
@@ -191,6 +191,11 @@ class Config:
     aux_weight: float = 1.0
     """lambda: the auxiliary loss's weight beside the actor-critic loss (ignored without a
     target; 0 trains the head and leaves the agent the base's)."""
+    aux_permute: bool = False
+    """The target's content control (docs/plans/imagination_targets.md, stage 2): each lane
+    learns the labels of the lane before it (the window's labels and their mask rolled by
+    one lane), so the labels keep their distribution and lose their relation to the lane's
+    own states. Needs a target and at least 2 lanes."""
 
     # The maml base (SAVN, `foresit_jax.maml`): SAVN's values.
     maml_segment: int = 6
@@ -292,6 +297,11 @@ class Config:
                     f"aux_target {self.aux_target!r} with method {self.method!r}: a method that reads a "
                     "privileged input takes no training target (their wrappers would stack); choose one."
                 )
+        if self.aux_permute is True and (self.aux_target == "none" or self.num_lanes < 2):
+            raise ValueError(
+                f"aux_permute=True permutes a target's labels across lanes: it needs aux_target (got "
+                f"{self.aux_target!r}) and at least 2 lanes (got num_lanes={self.num_lanes})."
+            )
         if self.imagination_optimizer not in IMAGINATION_OPTIMIZERS:
             raise ValueError(
                 f"imagination_optimizer must be one of {IMAGINATION_OPTIMIZERS}, got {self.imagination_optimizer!r}."

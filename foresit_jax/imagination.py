@@ -713,11 +713,20 @@ def success_labels(states, terminated, truncated, success, valid) -> TargetLabel
 
 
 def target_labels(config: Config, obs: dict, states, traj, goal_latent: Optional[Callable] = None) -> TargetLabels:
-    """The labels of one window for `config.aux_target`. obs: the window's recorded
-    observations (leaves `[T, B, ...]`, from the label environment); states: s_t `[T, B, H]`;
-    traj: the window's `Trajectory` (terminated, truncated, success, valid);
-    goal_latent: `obs -> [N, H]`, the goal view's latent under this update's parameters
-    (``goal_view`` only)."""
+    """The labels of one window for `config.aux_target`; with `config.aux_permute` (the
+    content control), lane b learns lane b - 1's labels (labels and mask rolled by one lane).
+    obs: the window's recorded observations (leaves `[T, B, ...]`, from the label
+    environment); states: s_t `[T, B, H]`; traj: the window's `Trajectory` (terminated,
+    truncated, success, valid); goal_latent: `obs -> [N, H]`, the goal view's latent under
+    this update's parameters (``goal_view`` only)."""
+    labels = _own_labels(config, obs, states, traj, goal_latent)
+    if not config.aux_permute:
+        return labels
+    return TargetLabels(*(jnp.roll(x, 1, axis=1) for x in labels))
+
+
+def _own_labels(config: Config, obs: dict, states, traj, goal_latent: Optional[Callable]) -> TargetLabels:
+    """Each lane's own labels of one window (`target_labels` without the permutation)."""
     target, valid = config.aux_target, traj.valid
     if target == "compass":
         return TargetLabels(obs["cue"], valid)

@@ -17,6 +17,10 @@ attention critic) the states it has seen so far (`ActorState.memory`). At each e
 start the LSTM carry and the previous action probabilities are zeroed and i_tau is
 imagined from s_0 with the lane's current noise variance (Eq. 6-7; every K steps for the
 `int` ablation); each ended episode's outcome updates the lane's success tracker (rho).
+What i_tau is, and the tracker, are imagination's (`foresit_jax.imagination.at_step`,
+`record_outcomes`, on the `ImaginationCarry` inside the agent's carry, `AgentCarry`); a
+step here is `agent_step` (encode, `imagination.at_step`, the policy's logits), the
+environment's step, then `advance` (the agent's carry after it).
 
 `ActOptions(whole_episodes=True)` is SAVN's layout: every lane starts a fresh episode and only its
 first episode counts (`valid`); what follows it in the window is padding. Evaluation uses

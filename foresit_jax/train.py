@@ -5,8 +5,8 @@ One update = every lane acts for a window of `num_steps` steps (the base's windo
 `Config.rollout='packed'` lanes never idle: episodes follow one another and an episode
 cut at the window's edge continues in the next update, its cut bootstrapped with
 V(s*_T), Eq. 8), then one gradient step on the mean A3C loss over the window (Eq. 8-9),
-then the ForeSIT bookkeeping of Algorithm 1 for every episode that ended in the window,
-in time order: a successful one adds (s_0, g_tau, ŝ_tau) to its lane's buffer (ŝ_tau:
+then the ForeSIT bookkeeping of Algorithm 1 (`imagination.learn`, the update's last call)
+for every episode that ended in the window, in time order: a successful one adds (s_0, g_tau, ŝ_tau) to its lane's buffer (ŝ_tau:
 the argmax of its last step's attention over all its states, earlier windows' included),
 and full buffers train the shared f_w and are emptied. Each lane's success tracker
 (rho, which sets the imagination noise of Eq. 7) is updated while acting.

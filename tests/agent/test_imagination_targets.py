@@ -6,6 +6,7 @@ evaluation program hashes as the base's)."""
 
 import dataclasses
 import functools
+from types import SimpleNamespace
 
 import jax
 import jax.numpy as jnp
@@ -377,3 +378,33 @@ def test_every_target_says_whether_its_labels_are_privileged():
     from foresit_jax.config import AUX_TARGETS
 
     assert tuple(imagination.PRIVILEGED_LABELS) == AUX_TARGETS[1:]
+
+
+def test_the_content_control_gives_each_lane_the_labels_of_the_lane_before_it():
+    """`aux_permute` (the plan's content control): the labels and their mask, rolled by one
+    lane, so lane b learns lane b - 1's; refused without a target or with one lane."""
+    from foresit_jax.config import Config
+
+    T, B = 4, 3
+    rng = np.random.default_rng(0)
+    states = jnp.asarray(rng.normal(size=(T, B, 5)), jnp.float32)
+    terminated = np.zeros((T, B), bool)
+    terminated[2, 0] = terminated[1, 2] = True
+    fake = SimpleNamespace(
+        valid=jnp.ones((T, B), bool),
+        terminated=jnp.asarray(terminated),
+        truncated=jnp.zeros((T, B), bool),
+        success=jnp.asarray(terminated),
+    )
+    for target in ("compass", "success"):
+        obs = {"cue": jnp.asarray(rng.normal(size=(T, B, 3)), jnp.float32)}
+        own = imagination.target_labels(Config(method="a3c", aux_target=target), obs, states, fake)
+        moved = imagination.target_labels(Config(method="a3c", aux_target=target, aux_permute=True), obs, states, fake)
+        for b in range(B):
+            np.testing.assert_array_equal(moved.y[:, b], own.y[:, b - 1])
+            np.testing.assert_array_equal(moved.mask[:, b], own.mask[:, b - 1])
+        assert np.asarray(own.mask).any()
+    with pytest.raises(ValueError, match="aux_permute=True .* needs aux_target"):
+        Config(method="a3c", aux_permute=True)
+    with pytest.raises(ValueError, match="at least 2 lanes"):
+        Config(method="a3c", aux_target="compass", aux_permute=True, num_lanes=1)
