@@ -171,11 +171,12 @@ STUDIES: tuple[Study, ...] = (
         "Which form of imagining success helps as a training target (issue 79)?",
         "docs/plans/imagination_targets.md",
         "commands",
-        ("docs/data/targets_pilot.tar.xz", "docs/data/targets_stage1.tar.xz", "stage 2's archive, once run"),
+        ("docs/data/targets_pilot.tar.xz", "docs/data/targets_stage1.tar.xz", "docs/data/targets_stage2.tar.xz"),
         "tests/studies/test_targets_data.py",
         (
             "docs/targets.md#the-pilot-each-targets-weight-seeds-10-12-1500-updates-2026-12-02",
             "docs/targets.md#stage-1-the-three-targets-beside-the-base-seeds-0-4-3000-updates-2026-12-02",
+            "docs/targets.md#stage-2-the-compass-target-on-fresh-seeds-5-9-3000-updates-2026-12-02",
         ),
     ),
 )
@@ -390,6 +391,7 @@ HEAD_ORACLE = "a3c+oracle@learning_rate=3e-4,sigma2_max=0"
 RESULTS = "docs/results.md"
 CEILING = "docs/ceiling.md"
 TARGETS_STAGE1 = "docs/targets.md#stage-1-the-three-targets-beside-the-base-seeds-0-4-3000-updates-2026-12-02"
+TARGETS_STAGE2 = "docs/targets.md#stage-2-the-compass-target-on-fresh-seeds-5-9-3000-updates-2026-12-02"
 
 # The comparisons the README's Results quote, in the order a reader asks them.
 README_COMPARISONS: tuple[Comparison, ...] = (
@@ -484,6 +486,14 @@ README_COMPARISONS: tuple[Comparison, ...] = (
             section=TARGETS_STAGE1,
         )
         for what, target in (("compass", "compass"), ("goal view", "goal_view"))
+    ),
+    Comparison(
+        "the same, on fresh seeds",
+        "priors, range 4, 3000, 5-9",
+        "targets_stage2.tar.xz",
+        A3,
+        f"{A3},aux_target=compass,aux_weight=0.1",
+        section=TARGETS_STAGE2,
     ),
     Comparison(
         "a3c at its validated 1e-3 - a3c at 3e-4 (the targets' reference)",

@@ -114,3 +114,39 @@ def test_stage1_ran_as_the_plan_says(stage1):
     probe = archives.member(STAGE1, name)
     assert sorted(probe["arms"]) == sorted(a for a in STAGE1_ARMS if "aux_target=" in a)
     assert all(len(seeds) == 5 for seeds in probe["arms"].values())
+
+
+STAGE2 = "targets_stage2.tar.xz"
+STAGE2_ARMS = STAGE1_ARMS[:2]  # the base and the compass target, stage 1's only target past Holm
+
+
+@pytest.fixture(scope="module")
+def stage2():
+    if not (study_data.DATA / STAGE2).exists():
+        pytest.skip(f"{STAGE2}: not run yet")
+    return study_data.read_archive_json(STAGE2)
+
+
+def test_stage2_ran_as_the_plan_says(stage2):
+    """Stage 2's first step, as the plan's status writes its command: the base and the
+    `compass` target on fresh seeds 5-9, quick, 3000 updates, rooms with priors at range 4,
+    from the pinned worktree's commit (made again on a new machine), on the family-25 EPYC;
+    evaluations every 500 updates. The tables of docs/targets.md are the drift test's."""
+    (sweep,) = [v for k, v in stage2.items() if k.endswith("sweep.json")]
+    assert sweep["methods"] == STAGE2_ARMS
+    runs = {k.split("/")[-2]: v for k, v in stage2.items() if k.endswith("run.json")}
+    assert sorted(runs) == sorted(STAGE2_ARMS)
+    for arm, run in runs.items():
+        assert [c[:7] for c in run["commits"]] == ["332b3b3"], arm
+        assert run["seeds"] == [5, 6, 7, 8, 9] and run["preset"] == "quick"
+        config = run["config"]
+        assert (config["num_updates"], config["priors"], config["perception_range"]) == (3000, True, 4.0)
+        assert config["learning_rate"] == 3e-4
+        assert config["aux_target"] == targets_study.target_of(arm)[0], arm
+    results = registry.Archives().sweep(STAGE2)
+    assert sorted(results) == sorted(STAGE2_ARMS)
+    for per_seed in results.values():
+        assert len(per_seed) == 5
+        for r in per_seed:
+            assert [n["platform"]["cpu"] for n in r["numerics"]] == [EPYC] * len(r["numerics"])
+            assert [v["update"] for v in r["validation"]] == list(range(500, 3001, 500))

@@ -1,7 +1,10 @@
 """docs/targets.md's generated blocks: the pilot's table; stage 1's (primary, secondary, the heads),
-written before it ran and registered in `BLOCKS` once its archive existed."""
+written before it ran and registered in `BLOCKS` once its archive existed; stage 2's first step
+(the `compass` pair on fresh seeds), the same primary and secondary tables of its archive."""
 
 from __future__ import annotations
+
+import functools
 
 import numpy as np
 
@@ -113,9 +116,17 @@ def stage1_heads(archives: Archives, archive: str = STAGE1) -> str:
     return table(["target", "heads that beat the mean label", "means over the seeds"], rows)
 
 
+# ---------------------------------------------------------------------- stage 2
+# The plan's stage 2 for the one target whose primary interval excluded 0 after Holm in stage 1
+# (`compass`): first the same pair on fresh seeds 5-9, same family and machine. One pair, judged
+# alone; the tables are stage 1's, of this archive.
+STAGE2 = "targets_stage2.tar.xz"
+
 BLOCKS = {
     "targets-pilot": ("docs/targets.md", targets_pilot),
     "targets-stage1-primary": ("docs/targets.md", stage1_primary),
     "targets-stage1-secondary": ("docs/targets.md", stage1_secondary),
     "targets-stage1-heads": ("docs/targets.md", stage1_heads),
+    "targets-stage2-primary": ("docs/targets.md", functools.partial(stage1_primary, archive=STAGE2)),
+    "targets-stage2-secondary": ("docs/targets.md", functools.partial(stage1_secondary, archive=STAGE2)),
 }
