@@ -418,6 +418,9 @@ CHOICES = {
 # The ints the tiny preset takes where not any count does: the environment's 6 actions, f_w's
 # last width (32), a divisor of its buffer of 2; maml_inner_updates may be 0.
 INTS = {"num_actions": (6,), "hidden_size": (32,), "imagination_batch": (1, 2)}
+# Bools that need another field beside them (aux_permute, a target's content control, needs a
+# target): set alone, only their default is valid.
+NEEDS_ANOTHER = ("aux_permute",)
 
 
 def _arm_can_set(field: str) -> bool:
@@ -441,7 +444,7 @@ def spelt_values(draw, field: str):
     one of the ways `split_arm` reads as it (1e-3 or 0.001, +5 or 05, TRUE or true)."""
     kind = type(getattr(Config(), field))
     if kind is bool:
-        value = draw(st.booleans())
+        value = draw(st.booleans()) if field not in NEEDS_ANOTHER else getattr(Config(), field)
         return value, draw(st.sampled_from((str(value).lower(), str(value), str(value).upper())))
     if kind is str:
         value = draw(st.sampled_from(CHOICES[field]))
@@ -868,7 +871,7 @@ def acceptably_typed(draw):
     field = draw(st.sampled_from(tuple(FIELD_TYPES)))
     kind = _kind(field)
     if kind is bool:
-        value = draw(st.booleans())
+        value = draw(st.booleans()) if field not in NEEDS_ANOTHER else getattr(Config(), field)
         return field, draw(st.sampled_from((np.bool_(value), np.array(value), value))), value
     if kind is int:
         low = 0 if field == "maml_inner_updates" else 1
