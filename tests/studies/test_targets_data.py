@@ -84,32 +84,40 @@ def stage1():
     return study_data.read_archive_json(STAGE1)
 
 
-def test_stage1_ran_as_the_plan_says(stage1):
-    """The plan status's six arms, exactly as written there, seeds 0-4, quick, 3000 updates,
-    rooms with priors at range 4; every run at the pinned worktree's commit, every stretch of
-    updates (it was paused and resumed across sessions) on the family-25 EPYC; evaluations
-    every 500 updates; the heads' probe ran on the three target arms."""
-    (sweep,) = [v for k, v in stage1.items() if k.endswith("sweep.json")]
-    assert sweep["methods"] == STAGE1_ARMS
-    runs = {k.split("/")[-2]: v for k, v in stage1.items() if k.endswith("run.json")}
-    assert sorted(runs) == sorted(STAGE1_ARMS)
+def check_stage(files: dict, archive: str, arms: list[str], seeds: list[int]) -> None:
+    """A targets stage's run records: the arms exactly as the plan writes them, `seeds`, quick,
+    3000 updates, rooms with priors at range 4, every run at the pinned worktree's commit
+    (332b3b3) and every stretch of updates on the family-25 EPYC; evaluations every 500
+    updates; each arm's target as its label says."""
+    (sweep,) = [v for k, v in files.items() if k.endswith("sweep.json")]
+    assert sweep["methods"] == arms
+    runs = {k.split("/")[-2]: v for k, v in files.items() if k.endswith("run.json")}
+    assert sorted(runs) == sorted(arms)
     for arm, run in runs.items():
         assert [c[:7] for c in run["commits"]] == ["332b3b3"], arm
-        assert run["seeds"] == [0, 1, 2, 3, 4] and run["preset"] == "quick"
+        assert run["seeds"] == seeds and run["preset"] == "quick"
         config = run["config"]
         assert (config["num_updates"], config["priors"], config["perception_range"]) == (3000, True, 4.0)
-        target, _ = targets_study.target_of(arm)
-        assert config["aux_target"] == target, arm
-        if target != "none":
-            assert (config["aux_weight"], config["learning_rate"]) == (0.1, 3e-4), arm
-    archives = registry.Archives()
-    results = archives.sweep(STAGE1)
-    assert sorted(results) == sorted(STAGE1_ARMS)
+        assert config["aux_target"] == targets_study.target_of(arm)[0], arm
+    results = registry.Archives().sweep(archive)
+    assert sorted(results) == sorted(arms)
     for per_seed in results.values():
-        assert len(per_seed) == 5
+        assert len(per_seed) == len(seeds)
         for r in per_seed:
             assert [n["platform"]["cpu"] for n in r["numerics"]] == [EPYC] * len(r["numerics"])
             assert [v["update"] for v in r["validation"]] == list(range(500, 3001, 500))
+
+
+def test_stage1_ran_as_the_plan_says(stage1):
+    """The plan status's six arms, seeds 0-4 (`check_stage`; stage 1 was paused and resumed
+    across sessions, each stretch on the EPYC); each target at weight 0.1 and rate 3e-4; the
+    heads' probe ran on the three target arms."""
+    check_stage(stage1, STAGE1, STAGE1_ARMS, [0, 1, 2, 3, 4])
+    runs = {k.split("/")[-2]: v for k, v in stage1.items() if k.endswith("run.json")}
+    for arm, run in runs.items():
+        if targets_study.target_of(arm)[0] != "none":
+            assert (run["config"]["aux_weight"], run["config"]["learning_rate"]) == (0.1, 3e-4), arm
+    archives = registry.Archives()
     (name,) = [n for n in archives.names(STAGE1) if n.endswith("/targets_probe.json")]
     probe = archives.member(STAGE1, name)
     assert sorted(probe["arms"]) == sorted(a for a in STAGE1_ARMS if "aux_target=" in a)
@@ -129,24 +137,8 @@ def stage2():
 
 def test_stage2_ran_as_the_plan_says(stage2):
     """Stage 2's first step, as the plan's status writes its command: the base and the
-    `compass` target on fresh seeds 5-9, quick, 3000 updates, rooms with priors at range 4,
-    from the pinned worktree's commit (made again on a new machine), on the family-25 EPYC;
-    evaluations every 500 updates. The tables of docs/targets.md are the drift test's."""
-    (sweep,) = [v for k, v in stage2.items() if k.endswith("sweep.json")]
-    assert sweep["methods"] == STAGE2_ARMS
+    `compass` target on fresh seeds 5-9 (`check_stage`; the worktree at 332b3b3 made again on
+    a new machine), both at rate 3e-4. The tables of docs/targets.md are the drift test's."""
+    check_stage(stage2, STAGE2, STAGE2_ARMS, [5, 6, 7, 8, 9])
     runs = {k.split("/")[-2]: v for k, v in stage2.items() if k.endswith("run.json")}
-    assert sorted(runs) == sorted(STAGE2_ARMS)
-    for arm, run in runs.items():
-        assert [c[:7] for c in run["commits"]] == ["332b3b3"], arm
-        assert run["seeds"] == [5, 6, 7, 8, 9] and run["preset"] == "quick"
-        config = run["config"]
-        assert (config["num_updates"], config["priors"], config["perception_range"]) == (3000, True, 4.0)
-        assert config["learning_rate"] == 3e-4
-        assert config["aux_target"] == targets_study.target_of(arm)[0], arm
-    results = registry.Archives().sweep(STAGE2)
-    assert sorted(results) == sorted(STAGE2_ARMS)
-    for per_seed in results.values():
-        assert len(per_seed) == 5
-        for r in per_seed:
-            assert [n["platform"]["cpu"] for n in r["numerics"]] == [EPYC] * len(r["numerics"])
-            assert [v["update"] for v in r["validation"]] == list(range(500, 3001, 500))
+    assert all(run["config"]["learning_rate"] == 3e-4 for run in runs.values())
