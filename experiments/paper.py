@@ -27,7 +27,7 @@ seed's model selected on validation) over the methods of the paper's tables, the
 - learning curves of every method with bands over seeds (one PNG per setup).
 
 `--exclude` leaves methods out (the report says which, and the claims that need them read
-"not run"); on a CPU the MAML rows take hours (docs/results.md). A killed run resumes with
+"not run"); on a CPU the MAML rows take hours (docs/evaluation.md). A killed run resumes with
 `--resume`: finished sweeps and methods are kept, a started one continues from its last
 checkpoint (`experiments.sweep`), and the report is written again from the results.
 `--reuse RUN ...` combines runs: the methods RUN has finished (a paper run of the same

@@ -68,8 +68,8 @@ STUDIES: tuple[Study, ...] = (
         ),
         "tests/studies/test_fair_study_data.py",
         (
-            "docs/results.md#fairness-each-arm-at-its-own-validated-learning-rate-5-seeds-2026-11-27",
-            "docs/results.md#fairness-the-three-arms-at-3e-4-for-3x-the-budget-5-seeds-2026-11-27",
+            "docs/fair.md#fairness-each-arm-at-its-own-validated-learning-rate-5-seeds-2026-11-27",
+            "docs/fair.md#fairness-the-three-arms-at-3e-4-for-3x-the-budget-5-seeds-2026-11-27",
         ),
     ),
     Study(
@@ -79,7 +79,7 @@ STUDIES: tuple[Study, ...] = (
         "commands",
         ("docs/data/replication_3x.tar.xz",),
         "tests/studies/test_replication_data.py",
-        ("docs/results.md#replication-the-3x-pair-on-fresh-seeds-seeds-5-9-2026-11-29",),
+        ("docs/replication.md#replication-the-3x-pair-on-fresh-seeds-seeds-5-9-2026-11-29",),
     ),
     Study(
         "reference_ppo",
@@ -88,7 +88,7 @@ STUDIES: tuple[Study, ...] = (
         "benchmarks/reference_ppo.py",
         ("docs/data/reference_ppo_epyc.json", "docs/data/reference_ppo_h200.json"),
         "tests/studies/test_reference_ppo_data.py",
-        ("docs/results.md#a-reference-row-purejaxrls-ppo-on-the-same-episodes-5-seeds-2026-11-28",),
+        ("docs/reference_ppo.md#a-reference-row-purejaxrls-ppo-on-the-same-episodes-5-seeds-2026-11-28",),
     ),
     Study(
         "priors",
@@ -388,7 +388,8 @@ A3 = "a3c@learning_rate=3e-4"
 F3 = "a3c+foresit@learning_rate=3e-4"
 CRITIC = "a3c+critic@learning_rate=3e-4"
 HEAD_ORACLE = "a3c+oracle@learning_rate=3e-4,sigma2_max=0"
-RESULTS = "docs/results.md"
+FAIR = "docs/fair.md"
+REPLICATION = "docs/replication.md"
 CEILING = "docs/ceiling.md"
 TARGETS_STAGE1 = "docs/targets.md#stage-1-the-three-targets-beside-the-base-seeds-0-4-3000-updates-2026-12-02"
 TARGETS_STAGE2 = "docs/targets.md#stage-2-the-compass-target-on-fresh-seeds-5-9-3000-updates-2026-12-02"
@@ -401,7 +402,7 @@ README_COMPARISONS: tuple[Comparison, ...] = (
         "fair_tune.tar.xz",
         Chosen((A3, "a3c@learning_rate=1e-3")),
         Chosen((F3, "a3c+foresit@learning_rate=1e-3")),
-        section=f"{RESULTS}#fairness-each-arm-at-its-own-validated-learning-rate-5-seeds-2026-11-27",
+        section=f"{FAIR}#fairness-each-arm-at-its-own-validated-learning-rate-5-seeds-2026-11-27",
     ),
     Comparison(
         "a3c+foresit - a3c, both at 3e-4",
@@ -409,7 +410,7 @@ README_COMPARISONS: tuple[Comparison, ...] = (
         "fair_3x.tar.xz",
         A3,
         F3,
-        section=f"{RESULTS}#fairness-the-three-arms-at-3e-4-for-3x-the-budget-5-seeds-2026-11-27",
+        section=f"{FAIR}#fairness-the-three-arms-at-3e-4-for-3x-the-budget-5-seeds-2026-11-27",
     ),
     Comparison(
         "a3c+foresit@3e-4 - a3c at its validated rate",
@@ -417,7 +418,7 @@ README_COMPARISONS: tuple[Comparison, ...] = (
         "replication_3x.tar.xz",
         Chosen((A3, "a3c@learning_rate=1e-3")),
         F3,
-        section=f"{RESULTS}#replication-the-3x-pair-on-fresh-seeds-seeds-5-9-2026-11-29",
+        section=f"{REPLICATION}#replication-the-3x-pair-on-fresh-seeds-seeds-5-9-2026-11-29",
     ),
     Comparison(
         "a3c+foresit - a3c",

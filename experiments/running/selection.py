@@ -5,7 +5,7 @@ episodes per room type, the same episodes (and the same action-sampling draws) a
 chunk: two checkpoints' validation SRs then differ by what the models do, not by which
 episodes were drawn (common random numbers; drawing new episodes each time added a noise of
 about 4.6 SR points at quick's 4 x 25 episodes to every comparison, and the model so selected
-tested 0.8 [0.0, 1.5] SR points below the last one over 18 quick runs: see docs/results.md).
+tested 0.8 [0.0, 1.5] SR points below the last one over 18 quick runs: see docs/evaluation.md).
 The model with the highest validation SR so far is kept, the later one on ties (at these
 budgets training is still improving: a tie is no evidence against the later model), and is
 the one evaluated on the test split at the end.  The keys are functions of the run's seed

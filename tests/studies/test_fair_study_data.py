@@ -2,7 +2,7 @@
 seeds 0-4, quick; ORG's three arms likewise on org; the 3e-4 arms at 3x the budget), kept
 without checkpoints as docs/data/fair_lr3e-4.tar.xz, fair_tune.tar.xz, fair_tune_org.tar.xz,
 fair_3x.tar.xz and others: what its runs record (the arms, seeds, budgets, the rates
-`experiments.tune` chooses, the extension's first 3000 updates). The figures docs/results.md
+`experiments.tune` chooses, the extension's first 3000 updates). The figures docs/fair.md
 quotes are generated blocks (experiments/reporting/pages/results_md.py), held by the drift
 test (tests/experiments/test_regenerate.py)."""
 

@@ -1,4 +1,4 @@
-"""docs/results.md's PPO reference row: what its files record (docs/data/reference_ppo_*.json:
+"""docs/reference_ppo.md's row: what its files record (docs/data/reference_ppo_*.json:
 quick's frames, seeds 0-4, the rate validation chose), and that a3c, its pair, ran on the same
 seeds (docs/data/fair_tune.tar.xz). The row's tables and the pair's words are generated blocks
 (experiments/reporting/pages/results_md.py), held by the drift test

@@ -3,7 +3,7 @@ sweep folder without checkpoints is docs/data/replication_3x.tar.xz): seeds 5-9 
 AMD EPYC, reported apart from seeds 0-4 (the Xeon, docs/data/fair_3x.tar.xz), as the plan says
 for sets on different machines. This checks what its runs record (the plan's arms, seeds,
 budget, commit and processor) and rule 1's choice of a3c's rate on both sets. The figures and
-words docs/results.md and the README quote are generated blocks (rule 2's pair and rule 3's
+words docs/replication.md and the README quote are generated blocks (rule 2's pair and rule 3's
 words by experiments.reporting.verdicts; experiments/reporting/pages/results_md.py), held by
 the drift test (tests/experiments/test_regenerate.py)."""
 

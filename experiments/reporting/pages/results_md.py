@@ -1,7 +1,9 @@
-"""docs/results.md's generated blocks: the tables and verdicts of the `fair`, `replication_3x`
-and `reference_ppo` studies (registry.STUDIES); the "In brief" section's figures that come from
-an archive (the priors and houses rows among them); and the ceiling and channels studies' pairs
-that "The paper's question with power" quotes (docs/ceiling.md is their page).
+"""The generated blocks of docs/results.md and of the pages of its studies: the tables and
+verdicts of the `fair` (docs/fair.md), `replication_3x` (docs/replication.md) and
+`reference_ppo` (docs/reference_ppo.md) studies (registry.STUDIES); results.md's "In brief"
+figures that come from an archive (the priors and houses rows among them); and the ceiling
+and channels studies' pairs that results.md's "The paper's question with power" quotes
+(docs/ceiling.md is their page).
 
 Every pair is B - A paired over the seeds of its arms (`Pair`), judged by the project's one
 rule (`verdicts.verdict`), with Holm's correction over a family (a tuple of `Pair`s) where the
@@ -44,6 +46,7 @@ from experiments.reporting.registry import (
 from experiments.reporting.verdicts import Verdict, verdict
 
 RESULTS = "docs/results.md"
+FAIR_PAGE, REPLICATION_PAGE, PPO_PAGE = "docs/fair.md", "docs/replication.md", "docs/reference_ppo.md"
 AT_3000 = rundir.kept_results(3000)  # an extended run's results at its first budget
 
 A3, A10 = "a3c@learning_rate=3e-4", "a3c@learning_rate=1e-3"
@@ -841,13 +844,14 @@ PRIORS = "priors.md#the-papers-question-there-5-seeds-2026-11-27"  # links from 
 HOUSES_SECTION = "houses.md#does-imagination-help-on-long-paths-in-houses-the-mechanism-study-repeated"
 
 
-def _section(anchor: str) -> str:
-    return f"#{anchor}"
+def _section(anchor: str, page: str = FAIR_PAGE) -> str:
+    """A link from results.md to a section of one of its studies' pages."""
+    return f"{page.removeprefix('docs/')}#{anchor}"
 
 
 TUNED = _section("fairness-each-arm-at-its-own-validated-learning-rate-5-seeds-2026-11-27")
 THREE_X_SECTION = _section("fairness-the-three-arms-at-3e-4-for-3x-the-budget-5-seeds-2026-11-27")
-REPLICATION_SECTION = _section("replication-the-3x-pair-on-fresh-seeds-seeds-5-9-2026-11-29")
+REPLICATION_SECTION = _section("replication-the-3x-pair-on-fresh-seeds-seeds-5-9-2026-11-29", REPLICATION_PAGE)
 ORG_SECTION = _section("fairness-on-org-orgs-arms-at-their-own-validated-learning-rates-5-seeds-2026-11-27")
 BASES_SECTION = _section(
     "fairness-the-base-with-savns-value-head-and-with-the-papers-one-step-td-advantage-5-seeds-2026-11-27"
@@ -994,8 +998,20 @@ def houses_brief(archives: Archives) -> str:
     return table(header, rows) + "\n" + briefs_table(archives, briefs)
 
 
+def _page(name: str) -> str:
+    """The file that holds a block: results.md's own, or its study's page."""
+    for prefix, page in (
+        ("results-fair-", FAIR_PAGE),
+        ("results-replication-", REPLICATION_PAGE),
+        ("results-ppo", PPO_PAGE),
+    ):
+        if name.startswith(prefix):
+            return page
+    return RESULTS
+
+
 BLOCKS = {
-    name: (RESULTS, function)
+    name: (_page(name), function)
     for name, function in {
         "results-in-brief": in_brief,
         "results-in-brief-houses": houses_brief,

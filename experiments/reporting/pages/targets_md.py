@@ -122,7 +122,19 @@ def stage1_heads(archives: Archives, archive: str = STAGE1) -> str:
 # alone; the tables are stage 1's, of this archive.
 STAGE2 = "targets_stage2.tar.xz"
 
+
+def results_answer(archives: Archives) -> str:
+    """docs/results.md's answer: the primary tables of stage 1 and of stage 2's first step."""
+    return (
+        "Stage 1 (seeds 0-4):\n\n"
+        + stage1_primary(archives)
+        + "\nStage 2, the `compass` pair on fresh seeds 5-9:\n\n"
+        + stage1_primary(archives, STAGE2)
+    )
+
+
 BLOCKS = {
+    "results-targets": ("docs/results.md", results_answer),
     "targets-pilot": ("docs/targets.md", targets_pilot),
     "targets-stage1-primary": ("docs/targets.md", stage1_primary),
     "targets-stage1-secondary": ("docs/targets.md", stage1_secondary),
