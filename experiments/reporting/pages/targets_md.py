@@ -10,7 +10,7 @@ import numpy as np
 
 from experiments.reporting import report, targets_study
 from experiments.reporting.pages.common import alone, cells, differences, seed_by_seed, table
-from experiments.reporting.registry import Archives
+from experiments.reporting.registry import Archives, same_seeds
 
 
 def targets_pilot(archives: Archives, archive: str = "targets_pilot.tar.xz") -> str:
@@ -121,6 +121,64 @@ def stage1_heads(archives: Archives, archive: str = STAGE1) -> str:
 # (`compass`): first the same pair on fresh seeds 5-9, same family and machine. One pair, judged
 # alone; the tables are stage 1's, of this archive.
 STAGE2 = "targets_stage2.tar.xz"
+
+
+# The content control (the plan's status, declared before its results): `compass` against the
+# same head trained on the labels of another lane (`aux_permute`), seeds 5-9, each pair judged
+# alone; its base and `compass` arms retrained beside stage 2's, from a worktree at v0.4.0.
+CONTENT = "targets_stage2_content.tar.xz"
+PERMUTED = f"{target_arm('compass')},aux_permute=true"
+CONTENT_PAIRS = (
+    ("`compass` - `compass` permuted (the primary)", PERMUTED, target_arm("compass")),
+    ("`compass` permuted - the base", BASE, PERMUTED),
+    ("`compass` - the base (stage 2's pair, retrained)", BASE, target_arm("compass")),
+)
+
+
+def content_control(archives: Archives, archive: str = CONTENT) -> str:
+    """The content control's arms (each seed's validation SR area) and its three pairs on the
+    primary measure, test SR and test SPL, each judged alone; then, seed by seed, whether the
+    retrained base and `compass` arms give stage 2's numbers."""
+    results = archives.sweep(archive)
+    labels = {
+        BASE: f"the base, `{BASE}`",
+        target_arm("compass"): "`compass` as a target",
+        PERMUTED: "`compass` permuted",
+    }
+    arms = table(
+        ["arm", "validation SR area per seed", "mean"],
+        [
+            [label, seed_by_seed(a := report.values(results[arm], report.VALIDATION_AREA)), f"{np.mean(a):.1f}"]
+            for arm, label in labels.items()
+        ],
+    )
+    rows = []
+    for label, a, b in CONTENT_PAIRS:
+        for metric in (report.VALIDATION_AREA, "SR", "SPL"):
+            v = alone(differences(results, a, b, metric), metric)
+            rows.append(
+                [label, "validation SR area" if metric == report.VALIDATION_AREA else f"test {metric}", *cells(v)]
+            )
+    pairs = table(["B - A", "metric", "mean [95% CI]", "verdict"], rows)
+    return arms + "\n" + pairs + "\n" + repeated_stage2(results, archives.sweep(STAGE2))
+
+
+def repeated_stage2(results: dict[str, list[dict]], stage2: dict[str, list[dict]]) -> str:
+    """One sentence per arm of stage 2: in how many seeds the retrained arm's validation SR
+    area, test SR and SPL equal stage 2's exactly."""
+    out = []
+    for arm in (BASE, target_arm("compass")):
+        measures = (report.VALIDATION_AREA, "SR", "SPL")
+        same_seeds(results[arm], stage2[arm], f"{arm} retrained against stage 2's")
+        same = [
+            all(report.values([new], m)[0] == report.values([old], m)[0] for m in measures)
+            for new, old in zip(results[arm], stage2[arm], strict=True)
+        ]
+        out.append(
+            f"`{arm}` retrained: the validation SR area, test SR and SPL equal stage 2's in "
+            f"{sum(same)} of {len(same)} seeds."
+        )
+    return "\n".join(out) + "\n"
 
 
 def results_answer(archives: Archives) -> str:
