@@ -84,17 +84,17 @@ def stage1():
     return study_data.read_archive_json(STAGE1)
 
 
-def check_stage(files: dict, archive: str, arms: list[str], seeds: list[int]) -> None:
+def check_stage(files: dict, archive: str, arms: list[str], seeds: list[int], commit: str = "332b3b3") -> None:
     """A targets stage's run records: the arms exactly as the plan writes them, `seeds`, quick,
-    3000 updates, rooms with priors at range 4, every run at the pinned worktree's commit
-    (332b3b3) and every stretch of updates on the family-25 EPYC; evaluations every 500
-    updates; each arm's target as its label says."""
+    3000 updates, rooms with priors at range 4, every run at the pinned worktree's `commit`
+    and every stretch of updates on the family-25 EPYC; evaluations every 500 updates; each
+    arm's target as its label says."""
     (sweep,) = [v for k, v in files.items() if k.endswith("sweep.json")]
     assert sweep["methods"] == arms
     runs = {k.split("/")[-2]: v for k, v in files.items() if k.endswith("run.json")}
     assert sorted(runs) == sorted(arms)
     for arm, run in runs.items():
-        assert [c[:7] for c in run["commits"]] == ["332b3b3"], arm
+        assert [c[:7] for c in run["commits"]] == [commit], arm
         assert run["seeds"] == seeds and run["preset"] == "quick"
         config = run["config"]
         assert (config["num_updates"], config["priors"], config["perception_range"]) == (3000, True, 4.0)
@@ -142,3 +142,24 @@ def test_stage2_ran_as_the_plan_says(stage2):
     check_stage(stage2, STAGE2, STAGE2_ARMS, [5, 6, 7, 8, 9])
     runs = {k.split("/")[-2]: v for k, v in stage2.items() if k.endswith("run.json")}
     assert all(run["config"]["learning_rate"] == 3e-4 for run in runs.values())
+
+
+CONTENT = "targets_stage2_content.tar.xz"
+CONTENT_ARMS = [*STAGE2_ARMS, f"{STAGE2_ARMS[1]},aux_permute=true"]
+
+
+@pytest.fixture(scope="module")
+def content():
+    if not (study_data.DATA / CONTENT).exists():
+        pytest.skip(f"{CONTENT}: not run yet")
+    return study_data.read_archive_json(CONTENT)
+
+
+def test_the_content_control_ran_as_the_plan_says(content):
+    """The plan status's three arms on seeds 5-9, from the worktree pinned at v0.4.0 (8d6633f),
+    every arm retrained there (`check_stage`); only the third permutes its labels."""
+    check_stage(content, CONTENT, CONTENT_ARMS, [5, 6, 7, 8, 9], commit="8d6633f")
+    runs = {k.split("/")[-2]: v for k, v in content.items() if k.endswith("run.json")}
+    assert {arm: run["config"]["aux_permute"] for arm, run in runs.items()} == {
+        arm: arm.endswith("aux_permute=true") for arm in CONTENT_ARMS
+    }
