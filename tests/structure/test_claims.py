@@ -410,6 +410,12 @@ def test_results_md_answers_the_questions_in_at_most_400_lines():
     assert lines <= 400, f"docs/results.md has {lines} lines: move a study's sections to its page"
 
 
+def test_design_is_the_design_as_it_is_in_at_most_400_lines():
+    """docs/design.md describes the code as it is; how it came to be is docs/history.md (issue 81)."""
+    lines = len((REPO / "docs" / "design.md").read_text().splitlines())
+    assert lines <= 400, f"docs/design.md has {lines} lines: move what is history to docs/history.md"
+
+
 def test_the_readme_is_a_page_a_newcomer_reads_in_two_minutes():
     """At most 110 lines and 1,000 words (issue 61): everything else lives in docs/."""
     text = (REPO / "README.md").read_text()
