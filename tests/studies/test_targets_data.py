@@ -77,11 +77,16 @@ STAGE1_ARMS = [
 ]
 
 
+def archived_files(archive: str) -> dict:
+    """The JSON files of a stage's archive; the test skips while the stage has not run."""
+    if not (study_data.DATA / archive).exists():
+        pytest.skip(f"{archive}: not run yet")
+    return study_data.read_archive_json(archive)
+
+
 @pytest.fixture(scope="module")
 def stage1():
-    if not (study_data.DATA / STAGE1).exists():
-        pytest.skip(f"{STAGE1}: not run yet")
-    return study_data.read_archive_json(STAGE1)
+    return archived_files(STAGE1)
 
 
 def check_stage(files: dict, archive: str, arms: list[str], seeds: list[int], commit: str = "332b3b3") -> None:
@@ -130,9 +135,7 @@ STAGE2_ARMS = STAGE1_ARMS[:2]  # the base and the compass target, stage 1's only
 
 @pytest.fixture(scope="module")
 def stage2():
-    if not (study_data.DATA / STAGE2).exists():
-        pytest.skip(f"{STAGE2}: not run yet")
-    return study_data.read_archive_json(STAGE2)
+    return archived_files(STAGE2)
 
 
 def test_stage2_ran_as_the_plan_says(stage2):
@@ -150,9 +153,7 @@ CONTENT_ARMS = [*STAGE2_ARMS, f"{STAGE2_ARMS[1]},aux_permute=true"]
 
 @pytest.fixture(scope="module")
 def content():
-    if not (study_data.DATA / CONTENT).exists():
-        pytest.skip(f"{CONTENT}: not run yet")
-    return study_data.read_archive_json(CONTENT)
+    return archived_files(CONTENT)
 
 
 def test_the_content_control_ran_as_the_plan_says(content):
