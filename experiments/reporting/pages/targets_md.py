@@ -112,7 +112,8 @@ def stage1_heads(archives: Archives, archive: str = STAGE1) -> str:
         target, _ = targets_study.target_of(arm)
         measures = [k for k in seeds[0] if k not in ("seed", "learned")]
         means = ", ".join(f"{k} {np.nanmean([s[k] for s in seeds]):.3g}" for k in measures)
-        rows.append([f"`{target}`", f"{sum(bool(s['learned']) for s in seeds)} of {len(seeds)}", means])
+        label = f"`{target}`" + (" permuted" if arm.endswith("aux_permute=true") else "")
+        rows.append([label, f"{sum(bool(s['learned']) for s in seeds)} of {len(seeds)}", means])
     return table(["target", "heads that beat the mean label", "means over the seeds"], rows)
 
 
