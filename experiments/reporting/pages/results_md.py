@@ -1,9 +1,9 @@
 """The generated blocks of docs/results.md and of the pages of its studies: the tables and
 verdicts of the `fair` (docs/fair.md), `replication_3x` (docs/replication.md) and
-`reference_ppo` (docs/reference_ppo.md) studies (registry.STUDIES); results.md's "In brief"
-figures that come from an archive (the priors and houses rows among them); and the ceiling
-and channels studies' pairs that results.md's "The paper's question with power" quotes
-(docs/ceiling.md is their page).
+`reference_ppo` (docs/reference_ppo.md) studies (registry.STUDIES); the figures of results.md's
+"Does ForeSIT beat its base?" that come from an archive (the priors and houses rows among
+them); and the ceiling and channels studies' pairs that results.md's "The paper's question with
+power" quotes (docs/ceiling.md is their page).
 
 Every pair is B - A paired over the seeds of its arms (`Pair`), judged by the project's one
 rule (`verdicts.verdict`), with Holm's correction over a family (a tuple of `Pair`s) where the
