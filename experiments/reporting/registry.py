@@ -171,12 +171,18 @@ STUDIES: tuple[Study, ...] = (
         "Which form of imagining success helps as a training target (issue 79)?",
         "docs/plans/imagination_targets.md",
         "commands",
-        ("docs/data/targets_pilot.tar.xz", "docs/data/targets_stage1.tar.xz", "docs/data/targets_stage2.tar.xz"),
+        (
+            "docs/data/targets_pilot.tar.xz",
+            "docs/data/targets_stage1.tar.xz",
+            "docs/data/targets_stage2.tar.xz",
+            "docs/data/targets_stage2_content.tar.xz",
+        ),
         "tests/studies/test_targets_data.py",
         (
             "docs/targets.md#the-pilot-each-targets-weight-seeds-10-12-1500-updates-2026-12-02",
             "docs/targets.md#stage-1-the-three-targets-beside-the-base-seeds-0-4-3000-updates-2026-12-02",
             "docs/targets.md#stage-2-the-compass-target-on-fresh-seeds-5-9-3000-updates-2026-12-02",
+            "docs/targets.md#stage-2-the-content-control-seeds-5-9-3000-updates-2026-12-02",
         ),
     ),
 )
@@ -497,7 +503,7 @@ README_COMPARISONS: tuple[Comparison, ...] = (
         section=TARGETS_STAGE2,
     ),
     Comparison(
-        "a3c at its validated 1e-3 - a3c at 3e-4 (the targets' reference)",
+        "a3c at its validated 1e-3 - a3c at 3e-4 (a reference)",
         "priors, range 4, 3000, 0-4",
         "targets_stage1.tar.xz",
         A3,

@@ -183,12 +183,15 @@ def repeated_stage2(results: dict[str, list[dict]], stage2: dict[str, list[dict]
 
 
 def results_answer(archives: Archives) -> str:
-    """docs/results.md's answer: the primary tables of stage 1 and of stage 2's first step."""
+    """docs/results.md's answer: the primary tables of stage 1 and of stage 2's first step, and
+    the content control's."""
     return (
         "Stage 1 (seeds 0-4):\n\n"
         + stage1_primary(archives)
         + "\nStage 2, the `compass` pair on fresh seeds 5-9:\n\n"
         + stage1_primary(archives, STAGE2)
+        + "\nStage 2's content control (seeds 5-9; the same head trained on another lane's labels):\n\n"
+        + content_control(archives)
     )
 
 
@@ -200,4 +203,6 @@ BLOCKS = {
     "targets-stage1-heads": ("docs/targets.md", stage1_heads),
     "targets-stage2-primary": ("docs/targets.md", functools.partial(stage1_primary, archive=STAGE2)),
     "targets-stage2-secondary": ("docs/targets.md", functools.partial(stage1_secondary, archive=STAGE2)),
+    "targets-content": ("docs/targets.md", content_control),
+    "targets-content-heads": ("docs/targets.md", functools.partial(stage1_heads, archive=CONTENT)),
 }
