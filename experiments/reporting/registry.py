@@ -176,6 +176,7 @@ STUDIES: tuple[Study, ...] = (
             "docs/data/targets_stage1.tar.xz",
             "docs/data/targets_stage2.tar.xz",
             "docs/data/targets_stage2_content.tar.xz",
+            "docs/data/targets_stage2_rooms.tar.xz",
         ),
         "tests/studies/test_targets_data.py",
         (
@@ -183,6 +184,7 @@ STUDIES: tuple[Study, ...] = (
             "docs/targets.md#stage-1-the-three-targets-beside-the-base-seeds-0-4-3000-updates-2026-12-02",
             "docs/targets.md#stage-2-the-compass-target-on-fresh-seeds-5-9-3000-updates-2026-12-02",
             "docs/targets.md#stage-2-the-content-control-seeds-5-9-3000-updates-2026-12-02",
+            "docs/targets.md#stage-2-the-compass-pair-in-todays-rooms-seeds-5-9-3000-updates-2026-12-02",
         ),
     ),
 )
@@ -503,7 +505,7 @@ README_COMPARISONS: tuple[Comparison, ...] = (
         section=TARGETS_STAGE2,
     ),
     Comparison(
-        "a3c at its validated 1e-3 - a3c at 3e-4 (a reference)",
+        "a3c at its validated 1e-3 - a3c at 3e-4",
         "priors, range 4, 3000, 0-4",
         "targets_stage1.tar.xz",
         A3,

@@ -89,9 +89,17 @@ def stage1():
     return archived_files(STAGE1)
 
 
-def check_stage(files: dict, archive: str, arms: list[str], seeds: list[int], commit: str = "332b3b3") -> None:
+def check_stage(
+    files: dict,
+    archive: str,
+    arms: list[str],
+    seeds: list[int],
+    commit: str = "332b3b3",
+    family: tuple = (True, 4.0),
+) -> None:
     """A targets stage's run records: the arms exactly as the plan writes them, `seeds`, quick,
-    3000 updates, rooms with priors at range 4, every run at the pinned worktree's `commit`
+    3000 updates, the `family` (priors, perception range; rooms with priors at range 4 unless
+    named), every run at the pinned worktree's `commit`
     and every stretch of updates on the family-25 EPYC; evaluations every 500 updates; each
     arm's target as its label says."""
     (sweep,) = [v for k, v in files.items() if k.endswith("sweep.json")]
@@ -102,7 +110,7 @@ def check_stage(files: dict, archive: str, arms: list[str], seeds: list[int], co
         assert [c[:7] for c in run["commits"]] == [commit], arm
         assert run["seeds"] == seeds and run["preset"] == "quick"
         config = run["config"]
-        assert (config["num_updates"], config["priors"], config["perception_range"]) == (3000, True, 4.0)
+        assert (config["num_updates"], config["priors"], config["perception_range"]) == (3000, *family)
         assert config["aux_target"] == targets_study.target_of(arm)[0], arm
     results = registry.Archives().sweep(archive)
     assert sorted(results) == sorted(arms)
@@ -164,3 +172,17 @@ def test_the_content_control_ran_as_the_plan_says(content):
     assert {arm: run["config"]["aux_permute"] for arm, run in runs.items()} == {
         arm: arm.endswith("aux_permute=true") for arm in CONTENT_ARMS
     }
+
+
+ROOMS = "targets_stage2_rooms.tar.xz"
+
+
+@pytest.fixture(scope="module")
+def rooms():
+    return archived_files(ROOMS)
+
+
+def test_the_pair_in_todays_rooms_ran_as_the_plan_says(rooms):
+    """Stage 2's pair in today's rooms (no priors, no perception range), seeds 5-9, from the
+    worktree pinned at v0.4.0 (`check_stage`)."""
+    check_stage(rooms, ROOMS, STAGE2_ARMS, [5, 6, 7, 8, 9], commit="8d6633f", family=(False, None))

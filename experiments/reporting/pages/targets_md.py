@@ -182,6 +182,11 @@ def repeated_stage2(results: dict[str, list[dict]], stage2: dict[str, list[dict]
     return "\n".join(out) + "\n"
 
 
+# The pair in today's rooms (no priors, no perception range), seeds 5-9: stage 2's first step's
+# tables, of this archive.
+ROOMS = "targets_stage2_rooms.tar.xz"
+
+
 def results_answer(archives: Archives) -> str:
     """docs/results.md's answer: the primary tables of stage 1 and of stage 2's first step, and
     the content control's."""
@@ -204,5 +209,7 @@ BLOCKS = {
     "targets-stage2-primary": ("docs/targets.md", functools.partial(stage1_primary, archive=STAGE2)),
     "targets-stage2-secondary": ("docs/targets.md", functools.partial(stage1_secondary, archive=STAGE2)),
     "targets-content": ("docs/targets.md", content_control),
+    "targets-rooms-primary": ("docs/targets.md", functools.partial(stage1_primary, archive=ROOMS)),
+    "targets-rooms-secondary": ("docs/targets.md", functools.partial(stage1_secondary, archive=ROOMS)),
     "targets-content-heads": ("docs/targets.md", functools.partial(stage1_heads, archive=CONTENT)),
 }
