@@ -177,6 +177,7 @@ STUDIES: tuple[Study, ...] = (
             "docs/data/targets_stage2.tar.xz",
             "docs/data/targets_stage2_content.tar.xz",
             "docs/data/targets_stage2_rooms.tar.xz",
+            "docs/data/targets_stage2_9000.tar.xz",
         ),
         "tests/studies/test_targets_data.py",
         (
@@ -185,6 +186,7 @@ STUDIES: tuple[Study, ...] = (
             "docs/targets.md#stage-2-the-compass-target-on-fresh-seeds-5-9-3000-updates-2026-12-02",
             "docs/targets.md#stage-2-the-content-control-seeds-5-9-3000-updates-2026-12-02",
             "docs/targets.md#stage-2-the-compass-pair-in-todays-rooms-seeds-5-9-3000-updates-2026-12-02",
+            "docs/targets.md#stage-2-the-compass-pair-at-9000-updates-seeds-5-9-2026-12-02",
         ),
     ),
 )

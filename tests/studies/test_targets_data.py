@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import study_data
 
+from experiments import rundir
 from experiments.reporting import registry, targets_study
 
 REPO = Path(__file__).resolve().parents[2]
@@ -96,9 +97,10 @@ def check_stage(
     seeds: list[int],
     commit: str = "332b3b3",
     family: tuple = (True, 4.0),
+    updates: int = 3000,
 ) -> None:
     """A targets stage's run records: the arms exactly as the plan writes them, `seeds`, quick,
-    3000 updates, the `family` (priors, perception range; rooms with priors at range 4 unless
+    `updates` updates, the `family` (priors, perception range; rooms with priors at range 4 unless
     named), every run at the pinned worktree's `commit`
     and every stretch of updates on the family-25 EPYC; evaluations every 500 updates; each
     arm's target as its label says."""
@@ -110,7 +112,7 @@ def check_stage(
         assert [c[:7] for c in run["commits"]] == [commit], arm
         assert run["seeds"] == seeds and run["preset"] == "quick"
         config = run["config"]
-        assert (config["num_updates"], config["priors"], config["perception_range"]) == (3000, *family)
+        assert (config["num_updates"], config["priors"], config["perception_range"]) == (updates, *family)
         assert config["aux_target"] == targets_study.target_of(arm)[0], arm
     results = registry.Archives().sweep(archive)
     assert sorted(results) == sorted(arms)
@@ -118,7 +120,7 @@ def check_stage(
         assert len(per_seed) == len(seeds)
         for r in per_seed:
             assert [n["platform"]["cpu"] for n in r["numerics"]] == [EPYC] * len(r["numerics"])
-            assert [v["update"] for v in r["validation"]] == list(range(500, 3001, 500))
+            assert [v["update"] for v in r["validation"]] == list(range(500, updates + 1, 500))
 
 
 def test_stage1_ran_as_the_plan_says(stage1):
@@ -186,3 +188,22 @@ def test_the_pair_in_todays_rooms_ran_as_the_plan_says(rooms):
     """Stage 2's pair in today's rooms (no priors, no perception range), seeds 5-9, from the
     worktree pinned at v0.4.0 (`check_stage`)."""
     check_stage(rooms, ROOMS, STAGE2_ARMS, [5, 6, 7, 8, 9], commit="8d6633f", family=(False, None))
+
+
+NINE = "targets_stage2_9000.tar.xz"
+
+
+@pytest.fixture(scope="module")
+def nine():
+    return archived_files(NINE)
+
+
+def test_the_pair_at_9000_updates_ran_as_the_plan_says(nine):
+    """Stage 2's pair continued from its own checkpoints to 9000 updates, from the worktree at
+    332b3b3 where it trained (`check_stage`); the 3000-update results it kept are stage 2's
+    archive's, seed for seed, file for file."""
+    check_stage(nine, NINE, STAGE2_ARMS, [5, 6, 7, 8, 9], updates=9000)
+    archives = registry.Archives()
+    for arm in STAGE2_ARMS:
+        kept = archives.results(NINE, arm, rundir.kept_results(3000))
+        assert kept == archives.results(STAGE2, arm), arm

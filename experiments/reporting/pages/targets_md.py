@@ -8,6 +8,7 @@ import functools
 
 import numpy as np
 
+from experiments import rundir
 from experiments.reporting import report, targets_study
 from experiments.reporting.pages.common import alone, cells, differences, seed_by_seed, table
 from experiments.reporting.registry import Archives, same_seeds
@@ -66,8 +67,8 @@ def _rows(results) -> list[tuple[str, str, str]]:
 
 
 def stage1_primary(archives: Archives, archive: str = STAGE1) -> str:
-    """The plan's primary measure: each arm's area under the validation SR curve (500 to
-    3000 updates, in %) minus the base's, paired over the seeds; `compass` and `goal_view`
+    """The plan's primary measure: each arm's area under the validation SR curve (500 updates
+    to the run's last, in %) minus the base's, paired over the seeds; `compass` and `goal_view`
     one Holm family, the rest judged alone."""
     results = archives.sweep(archive)
     holm = targets_study.stage1_verdicts(results, BASE, [target_arm(t) for t in FAMILY if target_arm(t) in results])
@@ -164,19 +165,19 @@ def content_control(archives: Archives, archive: str = CONTENT) -> str:
     return arms + "\n" + pairs + "\n" + repeated_stage2(results, archives.sweep(STAGE2))
 
 
-def repeated_stage2(results: dict[str, list[dict]], stage2: dict[str, list[dict]]) -> str:
-    """One sentence per arm of stage 2: in how many seeds the retrained arm's validation SR
-    area, test SR and SPL equal stage 2's exactly."""
+def repeated_stage2(results: dict[str, list[dict]], stage2: dict[str, list[dict]], what: str = "retrained") -> str:
+    """One sentence per arm of stage 2: in how many seeds the arm's validation SR area, test
+    SR and SPL in `results` (`what` they are) equal stage 2's exactly."""
     out = []
     for arm in (BASE, target_arm("compass")):
         measures = (report.VALIDATION_AREA, "SR", "SPL")
-        same_seeds(results[arm], stage2[arm], f"{arm} retrained against stage 2's")
+        same_seeds(results[arm], stage2[arm], f"{arm} {what} against stage 2's")
         same = [
             all(report.values([new], m)[0] == report.values([old], m)[0] for m in measures)
             for new, old in zip(results[arm], stage2[arm], strict=True)
         ]
         out.append(
-            f"`{arm}` retrained: the validation SR area, test SR and SPL equal stage 2's in "
+            f"`{arm}` {what}: the validation SR area, test SR and SPL equal stage 2's in "
             f"{sum(same)} of {len(same)} seeds."
         )
     return "\n".join(out) + "\n"
@@ -187,9 +188,51 @@ def repeated_stage2(results: dict[str, list[dict]], stage2: dict[str, list[dict]
 ROOMS = "targets_stage2_rooms.tar.xz"
 
 
+# The pair extended to 9000 updates (the plan's status, its comparisons fixed before it ran):
+# stage 2's pair continued from its own 3000-update checkpoints, seeds 5-9; the primary and
+# secondary tables of this archive, then each arm's change from its own 3000-update models.
+NINE = "targets_stage2_9000.tar.xz"
+NINE_UPDATES = (3000, 4500, 6000, 7500, 9000)
+
+
+def budget(archives: Archives, archive: str = NINE) -> str:
+    """The pair extended to 9000 updates: each arm's mean validation SR at `NINE_UPDATES`;
+    each arm's 9000-update models minus its own 3000-update ones (test SR and SPL, paired over
+    the seeds, each judged alone); the pair's difference at both budgets; and whether the
+    3000-update results the run kept are stage 2's archive's."""
+    kept = rundir.kept_results(3000)
+    arms = ((BASE, f"the base, `{BASE}`"), (target_arm("compass"), "`compass` as a target"))
+    before = {arm: archives.results(archive, arm, kept) for arm, _ in arms}
+    after = {arm: archives.results(archive, arm) for arm, _ in arms}
+
+    def mean_at(per_seed: list[dict], update: int) -> float:
+        return float(
+            np.mean([report.rate(next(v["SR"] for v in r["validation"] if v["update"] == update)) for r in per_seed])
+        )
+
+    curve = table(
+        ["mean validation SR at update", *map(str, NINE_UPDATES)],
+        [[label, *(f"{mean_at(after[arm], u):.1f}" for u in NINE_UPDATES)] for arm, label in arms],
+    )
+    rows = []
+    for arm, label in arms:
+        same_seeds(before[arm], after[arm], f"{arm} at 3000 and at 9000 updates")
+        row = [f"{label}: 9000 - 3000 updates"]
+        for metric in ("SR", "SPL"):
+            row += cells(alone(report.values(after[arm], metric) - report.values(before[arm], metric), metric))
+        rows.append(row)
+    for name, results in (("3000", before), ("9000", after)):
+        row = [f"`compass` - the base, at {name} updates"]
+        for metric in ("SR", "SPL"):
+            row += cells(alone(differences(results, BASE, target_arm("compass"), metric), metric))
+        rows.append(row)
+    changes = table(["paired over seeds 5-9", "test SR [95% CI]", "verdict", "test SPL [95% CI]", "verdict"], rows)
+    return curve + "\n" + changes + "\n" + repeated_stage2(before, archives.sweep(STAGE2), "at 3000 updates, kept")
+
+
 def results_answer(archives: Archives) -> str:
-    """docs/results.md's answer: the primary tables of stage 1 and of stage 2's first step, and
-    the content control's."""
+    """docs/results.md's answer: the primary tables of stage 1, of stage 2's first step and of
+    the pair at 9000 updates, and the content control's."""
     return (
         "Stage 1 (seeds 0-4):\n\n"
         + stage1_primary(archives)
@@ -197,6 +240,8 @@ def results_answer(archives: Archives) -> str:
         + stage1_primary(archives, STAGE2)
         + "\nStage 2's content control (seeds 5-9; the same head trained on another lane's labels):\n\n"
         + content_control(archives)
+        + "\nStage 2's pair extended to 9000 updates (seeds 5-9; the area over updates 500 to 9000):\n\n"
+        + stage1_primary(archives, NINE)
     )
 
 
@@ -212,4 +257,7 @@ BLOCKS = {
     "targets-rooms-primary": ("docs/targets.md", functools.partial(stage1_primary, archive=ROOMS)),
     "targets-rooms-secondary": ("docs/targets.md", functools.partial(stage1_secondary, archive=ROOMS)),
     "targets-content-heads": ("docs/targets.md", functools.partial(stage1_heads, archive=CONTENT)),
+    "targets-9000-primary": ("docs/targets.md", functools.partial(stage1_primary, archive=NINE)),
+    "targets-9000-secondary": ("docs/targets.md", functools.partial(stage1_secondary, archive=NINE)),
+    "targets-9000-budget": ("docs/targets.md", budget),
 }
