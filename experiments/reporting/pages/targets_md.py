@@ -10,6 +10,7 @@ import numpy as np
 
 from experiments import rundir
 from experiments.reporting import report, targets_study
+from experiments.reporting.pages.ceiling_md import validation_table
 from experiments.reporting.pages.common import alone, cells, differences, seed_by_seed, table
 from experiments.reporting.registry import Archives, same_seeds
 
@@ -205,15 +206,7 @@ def budget(archives: Archives, archive: str = NINE) -> str:
     before = {arm: archives.results(archive, arm, kept) for arm, _ in arms}
     after = {arm: archives.results(archive, arm) for arm, _ in arms}
 
-    def mean_at(per_seed: list[dict], update: int) -> float:
-        return float(
-            np.mean([report.rate(next(v["SR"] for v in r["validation"] if v["update"] == update)) for r in per_seed])
-        )
-
-    curve = table(
-        ["mean validation SR at update", *map(str, NINE_UPDATES)],
-        [[label, *(f"{mean_at(after[arm], u):.1f}" for u in NINE_UPDATES)] for arm, label in arms],
-    )
+    curve = validation_table(archives, archive, arms, digits=1, updates=NINE_UPDATES)
     rows = []
     for arm, label in arms:
         same_seeds(before[arm], after[arm], f"{arm} at 3000 and at 9000 updates")
